@@ -1,0 +1,23 @@
+// Frame ranges and file-name patterns as render farms write them:
+//   ranges   "7", "1-100", "1-100x2" (every 2nd frame), "1-10,20,30-40x5", "-3--1"
+//   patterns "shot.####.mps" (# per digit of zero padding), "shot.%04d.mps" (printf style),
+//            "shot.@.mps" (one @ = unpadded; @@@@ = padded to 4).
+#pragma once
+
+#include <cstdint>
+#include <string>
+#include <vector>
+
+namespace reshutter {
+
+/// Parses a range list; throws Error naming `where` (e.g. "--frames") on bad syntax.
+std::vector<int64_t> parseFrameRange(const std::string& text, const std::string& where = "--frames");
+
+/// True if `pattern` contains a frame placeholder (#, @ or a %d-style conversion).
+bool hasFramePlaceholder(const std::string& pattern);
+
+/// Substitutes `frame` into the placeholder; a pattern without one is returned unchanged.
+/// Negative frames keep their sign in front of the padding ("-001").
+std::string expandFramePattern(const std::string& pattern, int64_t frame);
+
+}  // namespace reshutter

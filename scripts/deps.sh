@@ -1,0 +1,19 @@
+#!/usr/bin/env bash
+# Installs the Debian 12 packages reshutter builds, tests and plots with; a no-op when all are present.
+set -euo pipefail
+packages=(
+  build-essential cmake ninja-build pkg-config clang
+  libopenexr-dev libtbb-dev libglm-dev libzstd-dev libxxhash-dev libcli11-dev zlib1g-dev libpng-dev
+  libgtest-dev libbenchmark-dev
+  openimageio-tools gnuplot-nox jq
+)
+missing=()
+for p in "${packages[@]}"; do
+  dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
+done
+if ((${#missing[@]})); then
+  echo "reshutter: installing ${missing[*]}" >&2
+  SUDO=""; [ "$(id -u)" -eq 0 ] || SUDO="sudo"
+  $SUDO apt-get update -qq
+  DEBIAN_FRONTEND=noninteractive $SUDO apt-get install -y -qq --no-install-recommends "${missing[@]}" >/dev/null
+fi

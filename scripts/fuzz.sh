@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# Builds the libFuzzer targets with clang (ASan + UBSan) and runs one.
+#   scripts/fuzz.sh store [seconds]     fuzz the .mps reader
+#   scripts/fuzz.sh rib [seconds]       fuzz the RIB parser
+# Findings land in build-fuzz/findings-<target>/; minimise them and copy them into
+# tests/corpus/<target>/, where the regression tests replay them on every test run.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+scripts/deps.sh
+target=${1:-store}
+seconds=${2:-300}
+cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DRESHUTTER_FUZZ=ON -DRESHUTTER_BENCH=OFF \
+  -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ >/dev/null
+ninja -C build-fuzz "fuzz_${target}_$( [ "$target" = store ] && echo reader || echo parser )" reshutter >/dev/null
+bin=build-fuzz/fuzz_${target}_$( [ "$target" = store ] && echo reader || echo parser )
+work=build-fuzz/work-$target
+mkdir -p "$work/corpus" "build-fuzz/findings-$target"
+cp tests/corpus/$target/* "$work/corpus/" 2>/dev/null || true
+if [ "$target" = store ]; then
+  # Seeds: small valid stores of several shapes, each behind a mode byte (0x01 = repair checksums).
+  for args in "-n 300 --width 64 --height 48" "-n 600 --knots 3 --width 40 --height 40 --transparent 0.5" \
+              "-n 256 --knots 1 --width 32 --height 32 --color-codec half --opacity-codec unorm16"; do
+    f=$(mktemp "$work/seed-XXXX.mps"); rm -f "$f"
+    build-fuzz/reshutter -q generate $args -o "$f"
+    { printf '\x01'; cat "$f"; } > "$work/corpus/seed-$(basename "$f")"
+    rm -f "$f"
+  done
+fi
+"$bin" -max_total_time="$seconds" -max_len=65536 -timeout=10 -rss_limit_mb=2048 \
+  -artifact_prefix="build-fuzz/findings-$target/" "$work/corpus" 2>&1 | tail -n 5
+echo "findings: $(ls build-fuzz/findings-$target | wc -l) (build-fuzz/findings-$target/)"

@@ -1,0 +1,177 @@
+#include "store/model.h"
+
+#include <cmath>
+#include <set>
+
+#include "common/error.h"
+
+namespace reshutter::store {
+
+int componentCount(AttrType t) { return (t == AttrType::Float || t == AttrType::UInt) ? 1 : 3; }
+
+const char* toString(AttrType t) {
+  switch (t) {
+    case AttrType::Float: return "float";
+    case AttrType::Color: return "color";
+    case AttrType::Point: return "point";
+    case AttrType::Vector: return "vector";
+    case AttrType::Normal: return "normal";
+    case AttrType::UInt: return "uint";
+  }
+  return "?";
+}
+const char* toString(AttrRate r) { return r == AttrRate::Vertex ? "vertex" : "micropolygon"; }
+const char* toString(AttrCodec c) {
+  switch (c) {
+    case AttrCodec::Lossless: return "lossless";
+    case AttrCodec::Half: return "half";
+    case AttrCodec::Unorm16: return "unorm16";
+    case AttrCodec::Oct32: return "oct32";
+  }
+  return "?";
+}
+bool parseAttrType(const std::string& s, AttrType& out) {
+  for (auto t : {AttrType::Float, AttrType::Color, AttrType::Point, AttrType::Vector, AttrType::Normal, AttrType::UInt})
+    if (s == toString(t)) {
+      out = t;
+      return true;
+    }
+  return false;
+}
+bool parseAttrCodec(const std::string& s, AttrCodec& out) {
+  for (auto c : {AttrCodec::Lossless, AttrCodec::Half, AttrCodec::Unorm16, AttrCodec::Oct32})
+    if (s == toString(c)) {
+      out = c;
+      return true;
+    }
+  return false;
+}
+
+int Schema::find(const std::string& name) const {
+  for (size_t i = 0; i < attrs.size(); ++i)
+    if (attrs[i].name == name) return int(i);
+  return -1;
+}
+
+void Camera::effectiveScreenWindow(double out[4]) const {
+  if (screenWindow[0] != screenWindow[1] && screenWindow[2] != screenWindow[3]) {
+    for (int i = 0; i < 4; ++i) out[i] = screenWindow[i];
+    return;
+  }
+  double aspect = double(width) * pixelAspect / double(height);
+  if (aspect >= 1.0) {
+    out[0] = -aspect, out[1] = aspect, out[2] = -1, out[3] = 1;
+  } else {
+    out[0] = -1, out[1] = 1, out[2] = -1 / aspect, out[3] = 1 / aspect;
+  }
+}
+
+bool Camera::operator==(const Camera& o) const {
+  for (int i = 0; i < 4; ++i)
+    if (screenWindow[i] != o.screenWindow[i]) return false;
+  return name == o.name && projection == o.projection && fovDegrees == o.fovDegrees && width == o.width &&
+         height == o.height && pixelAspect == o.pixelAspect && nearClip == o.nearClip && farClip == o.farClip &&
+         worldToCamera == o.worldToCamera;
+}
+
+Projector::Projector(const Camera& cam) {
+  double sw[4];
+  cam.effectiveScreenWindow(sw);
+  perspective = cam.projection == Projection::Perspective;
+  double scale = perspective ? 1.0 / std::tan(cam.fovDegrees * M_PI / 360.0) : 1.0;
+  ax = scale * cam.width / (sw[1] - sw[0]);
+  bx = -sw[0] * cam.width / (sw[1] - sw[0]);
+  ay = -scale * cam.height / (sw[3] - sw[2]);
+  by = sw[3] * cam.height / (sw[3] - sw[2]);
+  nearClip = cam.nearClip;
+}
+
+glm::dvec3 Projector::unproject(const glm::dvec2& r, double z) const {
+  double iz = perspective ? z : 1.0;
+  return {(r.x - bx) / ax * iz, (r.y - by) / ay * iz, z};
+}
+
+bool parseRational(const std::string& s, Rational& out) {
+  if (s == "23.976" || s == "23.98") return out = {24000, 1001}, true;
+  if (s == "29.97") return out = {30000, 1001}, true;
+  if (s == "59.94") return out = {60000, 1001}, true;
+  if (s == "47.952") return out = {48000, 1001}, true;
+  if (s == "119.88") return out = {120000, 1001}, true;
+  auto slash = s.find('/');
+  try {
+    size_t used = 0;
+    if (slash == std::string::npos) {
+      double v = std::stod(s, &used);
+      if (used != s.size() || !(v > 0) || v > 1e6) return false;
+      int64_t den = 1;
+      while (std::abs(v * den - std::round(v * den)) > 1e-9 && den < 1000000) den *= 10;
+      out = {int64_t(std::llround(v * den)), den};
+      return true;
+    }
+    int64_t num = std::stoll(s.substr(0, slash), &used);
+    if (used != slash) return false;
+    std::string d = s.substr(slash + 1);
+    int64_t den = std::stoll(d, &used);
+    if (used != d.size() || num <= 0 || den <= 0) return false;
+    out = {num, den};
+    return true;
+  } catch (const std::exception&) {
+    return false;
+  }
+}
+
+void StoreMeta::validate(const std::string& where) const {
+  if (!std::isfinite(shutterOpen) || !std::isfinite(shutterClose) || shutterClose < shutterOpen)
+    fail(where, "shutter [", shutterOpen, ", ", shutterClose, "] is not an interval");
+  if (fps.num <= 0 || fps.den <= 0) fail(where, "frame rate ", fps.num, "/", fps.den, " is not positive");
+  if (schedules.empty() || schedules[0].size() != 1) fail(where, "schedule 0 must be the static one-knot schedule");
+  for (size_t s = 0; s < schedules.size(); ++s) {
+    const auto& k = schedules[s];
+    if (k.empty() || k.size() > 64) fail(where, "motion schedule ", s, " has ", k.size(), " knots (1 to 64 allowed)");
+    for (size_t i = 0; i < k.size(); ++i) {
+      if (!std::isfinite(k[i])) fail(where, "motion schedule ", s, ": knot time ", i, " is not finite");
+      if (s > 0 && (k[i] < shutterOpen || k[i] > shutterClose))
+        fail(where, "motion schedule ", s, ": knot time ", k[i], " lies outside the shutter [", shutterOpen, ", ", shutterClose, "]");
+      if (i > 0 && !(k[i] > k[i - 1]))
+        fail(where, "motion schedule ", s, ": knot times not strictly increasing (", k[i - 1], " then ", k[i], ")");
+    }
+  }
+  if (cameras.empty()) fail(where, "no camera");
+  for (const auto& c : cameras) {
+    if (c.width <= 0 || c.height <= 0 || c.width > 1 << 20 || c.height > 1 << 20)
+      fail(where, "camera '", c.name, "': resolution ", c.width, "x", c.height, " out of range");
+    if (c.projection == Projection::Perspective && !(c.fovDegrees > 0 && c.fovDegrees < 180))
+      fail(where, "camera '", c.name, "': field of view ", c.fovDegrees, " not in (0, 180)");
+    if (!(c.pixelAspect > 0) || !std::isfinite(c.pixelAspect)) fail(where, "camera '", c.name, "': bad pixel aspect");
+    if (!(c.nearClip > 0) || !(c.farClip > c.nearClip)) fail(where, "camera '", c.name, "': clipping planes ", c.nearClip, " ", c.farClip, " invalid");
+    double sw[4];
+    c.effectiveScreenWindow(sw);
+    for (double v : sw)
+      if (!std::isfinite(v)) fail(where, "camera '", c.name, "': screen window not finite");
+    for (int i = 0; i < 4; ++i)
+      for (int j = 0; j < 4; ++j)
+        if (!std::isfinite(c.worldToCamera[i][j])) fail(where, "camera '", c.name, "': world-to-camera matrix not finite");
+  }
+  if (tileSize < 4 || tileSize > 4096) fail(where, "tile size ", tileSize, " out of range (4 to 4096)");
+  if (schema.attrs.size() > 64) fail(where, "schema has ", schema.attrs.size(), " attributes (at most 64)");
+  std::set<std::string> names;
+  for (const auto& a : schema.attrs) {
+    if (a.name.empty()) fail(where, "attribute with an empty name");
+    if (!names.insert(a.name).second) fail(where, "attribute '", a.name, "' declared twice");
+    if (a.type == AttrType::UInt && a.codec != AttrCodec::Lossless) fail(where, "attribute '", a.name, "': uint attributes are lossless only");
+    if (a.codec == AttrCodec::Oct32 && componentCount(a.type) != 3) fail(where, "attribute '", a.name, "': oct32 needs a 3-component type");
+  }
+  for (const char* required : {"Ci", "Oi"}) {
+    int i = schema.find(required);
+    if (i < 0) fail(where, "schema lacks '", required, "'");
+    if (schema.attrs[size_t(i)].type != AttrType::Color) fail(where, "'", required, "' must be a color");
+  }
+}
+
+size_t TilePart::memoryBytes() const {
+  size_t b = positions.size() * sizeof(glm::vec3) + corners.size() * 4 + objectId.size() * 4 + gridId.size() * 4 + flags.size();
+  for (const auto& a : attrs) b += a.f.size() * 4 + a.u.size() * 4;
+  return b + sizeof(TilePart);
+}
+
+}  // namespace reshutter::store

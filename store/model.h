@@ -1,0 +1,177 @@
+// The micropolygon data model shared by every producer (shade, ingest) and consumer (resample):
+// attribute schema, cameras, motion schedules and store metadata, the grid a producer hands to
+// the writer, and the decoded tile part a reader hands back.
+//
+// Conventions (RenderMan's): camera space looks down +z, x right, y up; raster space has its origin
+// at the top-left pixel corner, x right, y down. Times are in frames relative to the store's frame
+// (`Shutter` semantics). Positions are camera-space points, linear in camera space between knots.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <vector>
+
+#include <glm/mat4x4.hpp>
+#include <glm/vec2.hpp>
+#include <glm/vec3.hpp>
+
+namespace reshutter::store {
+
+// ---------------------------------------------------------------------------------------------
+// Attributes
+
+enum class AttrType : uint8_t { Float = 0, Color = 1, Point = 2, Vector = 3, Normal = 4, UInt = 5 };
+/// How often an attribute is given: once per vertex (RenderMan vertex/varying; interpolated
+/// bilinearly across the micropolygon) or once per micropolygon (uniform/constant).
+enum class AttrRate : uint8_t { Vertex = 0, Micropolygon = 1 };
+/// Payload codec per attribute. Lossless is the default; the others are opt-in with the error
+/// bounds stated in store/codec.h and asserted by tests/store_codec_test.cpp.
+enum class AttrCodec : uint8_t { Lossless = 0, Half = 1, Unorm16 = 2, Oct32 = 3 };
+
+int componentCount(AttrType t);
+const char* toString(AttrType t);
+const char* toString(AttrRate r);
+const char* toString(AttrCodec c);
+bool parseAttrType(const std::string& s, AttrType& out);
+bool parseAttrCodec(const std::string& s, AttrCodec& out);
+
+struct AttrDecl {
+  std::string name;  // "Ci", "Oi", "N", "s", "id", a shader's output variable ...
+  AttrType type = AttrType::Float;
+  AttrRate rate = AttrRate::Vertex;
+  AttrCodec codec = AttrCodec::Lossless;
+  bool operator==(const AttrDecl&) const = default;
+};
+
+/// Every store has "Ci" (premultiplied colour) and "Oi" (per-channel opacity), both colours;
+/// any further attribute is an output variable.
+struct Schema {
+  std::vector<AttrDecl> attrs;
+  int find(const std::string& name) const;  // -1 when absent
+  int ci() const { return find("Ci"); }
+  int oi() const { return find("Oi"); }
+  bool operator==(const Schema&) const = default;
+};
+
+// ---------------------------------------------------------------------------------------------
+// Cameras
+
+enum class Projection : uint8_t { Perspective = 0, Orthographic = 1 };
+
+struct Camera {
+  std::string name = "world";
+  Projection projection = Projection::Perspective;
+  double fovDegrees = 90.0;        // perspective: full angle across the shorter screen axis
+  int width = 640, height = 480;   // raster resolution
+  double pixelAspect = 1.0;
+  double screenWindow[4] = {0, 0, 0, 0};  // left right bottom top; all zero = RenderMan default
+  double nearClip = 1e-4, farClip = 1e30;
+  glm::dmat4 worldToCamera{1.0};
+
+  /// Screen window after applying RenderMan's default (the frame aspect ratio over [-1,1]).
+  void effectiveScreenWindow(double out[4]) const;
+  bool operator==(const Camera&) const;
+};
+
+/// Camera space → raster space for one camera: x_r = ax·x/z + bx (perspective) or ax·x + bx.
+struct Projector {
+  double ax = 1, bx = 0, ay = 1, by = 0;
+  bool perspective = true;
+  double nearClip = 1e-4;
+  explicit Projector(const Camera& cam);
+  Projector() = default;
+  glm::dvec2 project(const glm::dvec3& p) const {
+    double iz = perspective ? 1.0 / p.z : 1.0;
+    return {ax * p.x * iz + bx, ay * p.y * iz + by};
+  }
+  /// Inverse for a point at depth z (used by tests and the demo's framing).
+  glm::dvec3 unproject(const glm::dvec2& raster, double z) const;
+};
+
+// ---------------------------------------------------------------------------------------------
+// Time
+
+/// A frame rate as a rational number of frames per second (24/1, 30000/1001 ...).
+struct Rational {
+  int64_t num = 24, den = 1;
+  double value() const { return double(num) / double(den); }
+  bool operator==(const Rational&) const = default;
+};
+/// Parses "24", "29.97" (→ 30000/1001), "30000/1001", "23.976" (→ 24000/1001).
+bool parseRational(const std::string& s, Rational& out);
+
+/// Motion knot times of a set of micropolygons. Schedule 0 of every store is the static one (one
+/// knot). Each tile part names one schedule; a RIB scene may mix `MotionBegin [0 1]` with
+/// `MotionBegin [0 0.5 1]`, and keeping each schedule exact costs one small table entry instead of
+/// per-micropolygon times or a resampled union.
+using Schedule = std::vector<double>;
+
+// ---------------------------------------------------------------------------------------------
+// Store metadata
+
+struct StoreMeta {
+  int64_t frame = 1;
+  Rational fps{24, 1};
+  double shutterOpen = 0.0, shutterClose = 1.0;  // frame-relative, as RenderMan's Shutter
+  std::vector<Schedule> schedules{Schedule{0.0}};  // [0] is static
+  std::vector<Camera> cameras{Camera{}};           // [0] is the primary: its raster space tiles the store
+  Schema schema;
+  int tileSize = 32;  // pixels of the primary camera's raster
+  std::string provenance;
+
+  /// Throws Error(where, ...) when inconsistent: no cameras, knots not increasing or outside the
+  /// shutter, schema without Ci/Oi, duplicate attribute names, non-finite values.
+  void validate(const std::string& where) const;
+};
+
+// ---------------------------------------------------------------------------------------------
+// Producer input: one grid of micropolygons sharing vertices
+
+/// Per-micropolygon flags.
+enum MpFlag : uint8_t { kMatte = 1, kTwoSided = 2 };
+/// A corner index marking the fourth corner of a triangle.
+constexpr uint32_t kNoCorner = 0xffffffffu;
+
+/// Attribute values for one grid; `f` for float-based types, `u` for UInt. Empty = absent.
+struct AttrValues {
+  std::span<const float> f;
+  std::span<const uint32_t> u;
+  bool present() const { return !f.empty() || !u.empty(); }
+};
+
+/// Corners are in ring order (p0 p1 p2 p3 around the quad); the bilinear quad is
+/// P(u,v) = (1-u)(1-v)·p0 + u(1-v)·p1 + u·v·p2 + (1-u)·v·p3, a triangle is (p0 p1 p2).
+struct GridInput {
+  uint32_t schedule = 0;      // index into StoreMeta::schedules
+  uint32_t numVertices = 0;
+  std::span<const glm::vec3> positions;  // knots × numVertices, knot-major, camera space
+  std::span<const uint32_t> corners;     // 4 per micropolygon; corners[4i+3] == kNoCorner: triangle
+  uint32_t objectId = 0;
+  uint32_t gridId = 0;
+  uint8_t flags = 0;                     // MpFlag bits, for every micropolygon of the grid
+  std::vector<AttrValues> attrs;         // parallel to Schema::attrs
+  size_t numMicropolygons() const { return corners.size() / 4; }
+};
+
+// ---------------------------------------------------------------------------------------------
+// Reader output: one decoded tile part
+
+struct AttrArray {
+  std::vector<float> f;     // components × count, interleaved per element
+  std::vector<uint32_t> u;  // for AttrType::UInt
+  bool present() const { return !f.empty() || !u.empty(); }
+};
+
+struct TilePart {
+  uint32_t numVertices = 0, numMicropolygons = 0, numKnots = 1;
+  std::vector<glm::vec3> positions;  // knots × numVertices, knot-major
+  std::vector<uint32_t> corners;     // 4 per micropolygon
+  std::vector<uint32_t> objectId, gridId;
+  std::vector<uint8_t> flags;
+  std::vector<AttrArray> attrs;      // parallel to Schema::attrs; empty when absent in this part
+  size_t memoryBytes() const;
+  const glm::vec3& position(uint32_t knot, uint32_t vertex) const { return positions[size_t(knot) * numVertices + vertex]; }
+};
+
+}  // namespace reshutter::store

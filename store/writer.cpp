@@ -1,0 +1,509 @@
+#include "store/writer.h"
+
+#include <algorithm>
+#include <cmath>
+#include <unordered_map>
+
+#include <tbb/parallel_for.h>
+
+#include "common/atomic_file.h"
+#include "common/error.h"
+#include "store/codec.h"
+
+namespace reshutter::store {
+namespace {
+
+struct TileKey {
+  int32_t tx, ty;
+  uint32_t schedule;
+  bool operator==(const TileKey&) const = default;
+  auto order() const { return std::tuple(ty, tx, schedule); }
+};
+struct TileKeyHash {
+  size_t operator()(const TileKey& k) const {
+    uint64_t h = (uint64_t(uint32_t(k.tx)) << 32 | uint32_t(k.ty)) ^ (uint64_t(k.schedule) * 0x9E3779B97F4A7C15ull);
+    h ^= h >> 31;
+    h *= 0xBF58476D1CE4E5B9ull;
+    return size_t(h ^ (h >> 29));
+  }
+};
+
+constexpr int32_t kTileCoordLimit = 1 << 30;
+
+struct Builder {
+  TileKey key;
+  uint32_t numKnots = 1;
+  std::vector<std::vector<glm::vec3>> knotPositions;
+  TilePart part;
+  uint64_t presence = 0;
+  uint32_t effects = 0;
+  std::vector<KnotBounds> bounds;
+  uint32_t stamp = 0;
+  size_t bytes = 0;
+
+  // Pads attribute `ai` with zeros up to `count` elements (an earlier grid lacked it).
+  void padAttr(const AttrDecl& a, size_t ai, size_t count) {
+    AttrArray& arr = part.attrs[ai];
+    if (a.type == AttrType::UInt)
+      arr.u.resize(std::max(arr.u.size(), count), 0u);
+    else
+      arr.f.resize(std::max(arr.f.size(), count * componentCount(a.type)), 0.0f);
+  }
+};
+
+// A part ready to be encoded: its index entry (bounds filled) and payload.
+struct PendingPart {
+  TileEntry entry;
+  TilePart part;
+  std::vector<uint8_t> compressed;
+};
+
+}  // namespace
+
+struct StoreWriter::Impl {
+  StoreMeta meta;
+  WriterOptions options;
+  AtomicFile file;
+  uint64_t offset = kHeaderSize;
+  Projector projector;
+  std::unordered_map<TileKey, std::unique_ptr<Builder>, TileKeyHash> builders;
+  std::vector<std::unique_ptr<Builder>> full;
+  std::vector<TileEntry> entries;
+  size_t buffered = 0;
+  bool failed = false, closed = false;
+  WriteStats stats;
+  uint32_t stampCounter = 0;
+  // Per-grid scratch, reused.
+  std::vector<glm::dvec2> raster;  // knot-major
+  std::vector<uint8_t> inFront;    // knot-major
+  std::vector<uint32_t> stamps, local;
+  std::vector<uint32_t> mpSlot, slotStart, slotFill, bySlot;
+  std::vector<TileKey> slotKeys;
+  std::unordered_map<TileKey, uint32_t, TileKeyHash> slotMap;  // used once a grid spans many tiles
+
+  uint32_t slotOf(const TileKey& key) {
+    if (slotKeys.size() <= 8) {
+      for (uint32_t s = 0; s < slotKeys.size(); ++s)
+        if (slotKeys[s] == key) return s;
+      if (slotKeys.size() < 8) {
+        slotKeys.push_back(key);
+        return uint32_t(slotKeys.size() - 1);
+      }
+      for (uint32_t s = 0; s < slotKeys.size(); ++s) slotMap.emplace(slotKeys[s], s);
+    }
+    auto [it, inserted] = slotMap.emplace(key, uint32_t(slotKeys.size()));
+    if (inserted) slotKeys.push_back(key);
+    return it->second;
+  }
+
+  Impl(const std::string& path, StoreMeta m, WriterOptions o) : meta(std::move(m)), options(o), file(path), projector(meta.cameras.at(0)) {
+    char header[kHeaderSize] = {};
+    std::copy(std::begin(kHeaderMagic), std::end(kHeaderMagic), header);
+    uint32_t v = kFormatVersion;
+    std::memcpy(header + 8, &v, 4);
+    writeAll(file.fd(), header, kHeaderSize, file.tempPath());
+    if (options.maxPartMicropolygons == 0 || options.maxPartMicropolygons > kMaxPartMicropolygons)
+      options.maxPartMicropolygons = kMaxPartMicropolygons;
+  }
+
+  std::string where() const { return file.finalPath(); }
+
+  // Stamps mark which grid vertices a builder already holds during the current grid; they only
+  // ever grow, so a stale stamp can never match. On wrap-around the table is cleared.
+  uint32_t nextStamp() {
+    if (stampCounter == 0xffffffffu) {
+      std::fill(stamps.begin(), stamps.end(), 0u);
+      stampCounter = 0;
+    }
+    return ++stampCounter;
+  }
+
+  Builder& builderFor(const TileKey& key) {
+    auto it = builders.find(key);
+    if (it != builders.end()) return *it->second;
+    auto b = std::make_unique<Builder>();
+    b->key = key;
+    b->numKnots = uint32_t(meta.schedules[key.schedule].size());
+    b->knotPositions.resize(b->numKnots);
+    b->part.attrs.resize(meta.schema.attrs.size());
+    b->bounds.resize(b->numKnots);
+    for (auto& kb : b->bounds) {
+      kb.raster[0] = kb.raster[1] = INFINITY, kb.raster[2] = kb.raster[3] = -INFINITY;
+      for (int i = 0; i < 3; ++i) kb.camera[i] = INFINITY, kb.camera[i + 3] = -INFINITY;
+    }
+    b->stamp = nextStamp();
+    return *builders.emplace(key, std::move(b)).first->second;
+  }
+
+  void retire(const TileKey& key) {
+    auto it = builders.find(key);
+    buffered -= it->second->bytes;
+    full.push_back(std::move(it->second));
+    builders.erase(it);
+  }
+
+  void validate(const GridInput& g) const {
+    std::string w = cat(where(), ": grid ", g.gridId, " (object ", g.objectId, ")");
+    if (g.schedule >= meta.schedules.size()) fail(w, "names motion schedule ", g.schedule, " but only ", meta.schedules.size(), " exist");
+    const size_t K = meta.schedules[g.schedule].size();
+    if (g.positions.size() != K * g.numVertices) fail(w, "has ", g.positions.size(), " positions; expected ", K, " knots x ", g.numVertices, " vertices");
+    if (g.corners.size() % 4) fail(w, "corner list length ", g.corners.size(), " is not a multiple of 4");
+    if (g.numVertices > kMaxPartVertices) fail(w, "has ", g.numVertices, " vertices (at most ", kMaxPartVertices, ")");
+    for (size_t i = 0; i < g.positions.size(); ++i) {
+      const auto& p = g.positions[i];
+      if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+        fail(w, "vertex ", i % g.numVertices, " at knot ", i / g.numVertices, " has a non-finite position");
+    }
+    const size_t nMp = g.numMicropolygons();
+    for (size_t i = 0; i < nMp; ++i)
+      for (int j = 0; j < 4; ++j) {
+        uint32_t c = g.corners[i * 4 + j];
+        if (c >= g.numVertices && !(j == 3 && c == kNoCorner))
+          fail(w, "micropolygon ", i, " corner ", j, " names vertex ", c, " of ", g.numVertices);
+      }
+    if (!g.attrs.empty() && g.attrs.size() != meta.schema.attrs.size())
+      fail(w, "gives ", g.attrs.size(), " attribute slots; the schema has ", meta.schema.attrs.size());
+    for (size_t ai = 0; ai < meta.schema.attrs.size(); ++ai) {
+      const auto& a = meta.schema.attrs[ai];
+      bool present = ai < g.attrs.size() && g.attrs[ai].present();
+      if (!present) {
+        if (a.name == "Ci" || a.name == "Oi") fail(w, "lacks '", a.name, "'");
+        continue;
+      }
+      const auto& v = g.attrs[ai];
+      size_t count = a.rate == AttrRate::Vertex ? g.numVertices : nMp;
+      size_t expected = count * componentCount(a.type);
+      size_t given = a.type == AttrType::UInt ? v.u.size() : v.f.size();
+      if (given != expected) fail(w, "attribute '", a.name, "' has ", given, " values; expected ", expected);
+      for (size_t i = 0; i < v.f.size(); ++i)
+        if (!std::isfinite(v.f[i])) fail(w, "attribute '", a.name, "' value ", i, " is not finite");
+    }
+  }
+
+  void addGrid(const GridInput& g) {
+    if (closed || failed) fail(where(), "writer is closed or failed earlier");
+    try {
+      validate(g);
+    } catch (...) {
+      failed = true;
+      throw;
+    }
+    const uint32_t nV = g.numVertices, K = uint32_t(meta.schedules[g.schedule].size());
+    const size_t nMp = g.numMicropolygons();
+    if (nMp == 0) return;
+
+    raster.resize(size_t(K) * nV);
+    inFront.resize(size_t(K) * nV);
+    for (size_t i = 0; i < size_t(K) * nV; ++i) {
+      glm::dvec3 p(g.positions[i]);
+      bool front = !projector.perspective || p.z >= projector.nearClip;
+      inFront[i] = front;
+      raster[i] = front ? projector.project(p) : glm::dvec2(0.0);
+    }
+
+    // Tile of each micropolygon, and the distinct tiles in order of first appearance.
+    mpSlot.resize(nMp);
+    slotKeys.clear();
+    slotMap.clear();
+    const double invTile = 1.0 / meta.tileSize;
+    for (size_t i = 0; i < nMp; ++i) {
+      const uint32_t* c = &g.corners[i * 4];
+      int nc = c[3] == kNoCorner ? 3 : 4;
+      TileKey key{kBehindCameraTile, kBehindCameraTile, g.schedule};
+      for (uint32_t k = 0; k < K; ++k) {
+        size_t base = size_t(k) * nV;
+        bool front = true;
+        for (int j = 0; j < nc; ++j) front = front && inFront[base + c[j]];
+        if (!front) continue;
+        glm::dvec2 centre(0.0);
+        for (int j = 0; j < nc; ++j) centre += raster[base + c[j]];
+        centre /= double(nc);
+        auto coord = [&](double v) {
+          return int32_t(std::clamp(std::floor(v * invTile), double(-kTileCoordLimit), double(kTileCoordLimit)));
+        };
+        key.tx = coord(centre.x), key.ty = coord(centre.y);
+        break;
+      }
+      mpSlot[i] = slotOf(key);
+    }
+    // Group the micropolygons by tile (a counting sort keeps the producer's order in each).
+    slotStart.assign(slotKeys.size() + 1, 0);
+    for (size_t i = 0; i < nMp; ++i) ++slotStart[mpSlot[i] + 1];
+    for (size_t s = 0; s < slotKeys.size(); ++s) slotStart[s + 1] += slotStart[s];
+    bySlot.resize(nMp);
+    {
+      std::vector<uint32_t>& fillPos = slotFill;
+      fillPos.assign(slotStart.begin(), slotStart.end() - 1);
+      for (size_t i = 0; i < nMp; ++i) bySlot[fillPos[mpSlot[i]]++] = uint32_t(i);
+    }
+
+    if (stamps.size() < nV) stamps.resize(nV, 0), local.resize(nV);
+    const auto& schema = meta.schema;
+    const int oi = schema.oi();
+    for (uint32_t slot = 0; slot < slotKeys.size(); ++slot) {
+      Builder* b = &builderFor(slotKeys[slot]);
+      b->stamp = nextStamp();  // vertex indices are per grid: a fresh stamp per (builder, grid)
+      for (uint32_t n = slotStart[slot]; n < slotStart[slot + 1]; ++n) {
+        const uint32_t i = bySlot[n];
+        if (b->part.numMicropolygons >= options.maxPartMicropolygons) {
+          retire(b->key);
+          b = &builderFor(slotKeys[slot]);
+        }
+        addMicropolygon(*b, g, i, K, oi);
+      }
+    }
+    stats.micropolygons += nMp;
+    for (auto it = builders.begin(); it != builders.end();) {
+      auto next = std::next(it);
+      if (it->second->part.numMicropolygons >= options.maxPartMicropolygons) retire(it->first);
+      it = next;
+    }
+    stats.peakBufferedBytes = std::max<uint64_t>(stats.peakBufferedBytes, buffered);
+    if (buffered > options.memoryBudget) spillLargest();
+    if (full.size() >= 32) writeFull();
+  }
+
+  void addMicropolygon(Builder& b, const GridInput& g, size_t i, uint32_t K, int oi) {
+    const auto& schema = meta.schema;
+    const uint32_t nV = g.numVertices;
+    const uint32_t* c = &g.corners[i * 4];
+    uint32_t localCorners[4];
+    for (int j = 0; j < 4; ++j) {
+      uint32_t v = c[j];
+      if (v == kNoCorner) {
+        localCorners[j] = kNoCorner;
+        b.effects |= kEffectTriangles;
+        continue;
+      }
+      if (stamps[v] != b.stamp) {
+        stamps[v] = b.stamp;
+        local[v] = b.part.numVertices;
+        addVertex(b, g, v, K, oi);
+      }
+      localCorners[j] = local[v];
+    }
+    const uint32_t mpIndex = b.part.numMicropolygons++;
+    b.part.corners.insert(b.part.corners.end(), localCorners, localCorners + 4);
+    b.part.objectId.push_back(g.objectId);
+    b.part.gridId.push_back(g.gridId);
+    b.part.flags.push_back(g.flags);
+    if (g.flags & kMatte) b.effects |= kEffectMatte;
+    if (g.flags & kTwoSided) b.effects |= kEffectTwoSided;
+    size_t bytes = 25;
+    for (size_t ai = 0; ai < schema.attrs.size(); ++ai) {
+      const auto& a = schema.attrs[ai];
+      if (a.rate != AttrRate::Micropolygon) continue;
+      bool present = ai < g.attrs.size() && g.attrs[ai].present();
+      if (!present) continue;
+      b.padAttr(a, ai, mpIndex);
+      int nc = componentCount(a.type);
+      if (a.type == AttrType::UInt) {
+        b.part.attrs[ai].u.push_back(g.attrs[ai].u[i]);
+      } else {
+        const float* src = &g.attrs[ai].f[i * nc];
+        b.part.attrs[ai].f.insert(b.part.attrs[ai].f.end(), src, src + nc);
+        if (int(ai) == oi) noteOpacity(b, src);
+      }
+      b.presence |= uint64_t(1) << ai;
+      bytes += size_t(nc) * 4;
+    }
+    b.bytes += bytes;
+    buffered += bytes;
+    (void)nV;
+  }
+
+  static void noteOpacity(Builder& b, const float* o) {
+    if (o[0] < 1.0f || o[1] < 1.0f || o[2] < 1.0f) b.effects |= kEffectTransparent;
+    if (o[0] != o[1] || o[1] != o[2]) b.effects |= kEffectColouredOpacity;
+  }
+
+  void addVertex(Builder& b, const GridInput& g, uint32_t v, uint32_t K, int oi) {
+    const auto& schema = meta.schema;
+    const uint32_t nV = g.numVertices;
+    const uint32_t index = b.part.numVertices++;
+    const glm::vec3& p0 = g.positions[v];
+    for (uint32_t k = 0; k < K; ++k) {
+      const size_t src = size_t(k) * nV + v;
+      const glm::vec3& p = g.positions[src];
+      b.knotPositions[k].push_back(p);
+      if (p != p0) b.effects |= kEffectMoving;
+      KnotBounds& kb = b.bounds[k];
+      for (int a = 0; a < 3; ++a) kb.camera[a] = std::min(kb.camera[a], p[a]), kb.camera[a + 3] = std::max(kb.camera[a + 3], p[a]);
+      if (inFront[src]) {
+        const float rx = float(std::clamp(raster[src].x, -1e30, 1e30)), ry = float(std::clamp(raster[src].y, -1e30, 1e30));
+        kb.raster[0] = std::min(kb.raster[0], rx), kb.raster[1] = std::min(kb.raster[1], ry);
+        kb.raster[2] = std::max(kb.raster[2], rx), kb.raster[3] = std::max(kb.raster[3], ry);
+        // float(r) may round inwards; the exact outward rounding happens when the entry is built.
+      } else {
+        kb.rasterFinite = false;
+        b.effects |= kEffectNearCrossing;
+      }
+    }
+    size_t bytes = size_t(K) * 12;
+    for (size_t ai = 0; ai < schema.attrs.size(); ++ai) {
+      const auto& a = schema.attrs[ai];
+      if (a.rate != AttrRate::Vertex) continue;
+      bool present = ai < g.attrs.size() && g.attrs[ai].present();
+      if (!present) continue;
+      b.padAttr(a, ai, index);
+      int nc = componentCount(a.type);
+      if (a.type == AttrType::UInt) {
+        b.part.attrs[ai].u.push_back(g.attrs[ai].u[v]);
+      } else {
+        const float* src = &g.attrs[ai].f[size_t(v) * nc];
+        b.part.attrs[ai].f.insert(b.part.attrs[ai].f.end(), src, src + nc);
+        if (int(ai) == oi) noteOpacity(b, src);
+      }
+      b.presence |= uint64_t(1) << ai;
+      bytes += size_t(nc) * 4;
+    }
+    b.bytes += bytes;
+    buffered += bytes;
+  }
+
+  void spillLargest() {
+    std::vector<Builder*> order;
+    order.reserve(builders.size());
+    for (auto& [k, b] : builders) order.push_back(b.get());
+    std::sort(order.begin(), order.end(), [](const Builder* a, const Builder* b) {
+      return a->bytes != b->bytes ? a->bytes > b->bytes : a->key.order() < b->key.order();
+    });
+    for (Builder* b : order) {
+      if (buffered <= options.memoryBudget * 3 / 4) break;
+      retire(b->key);
+    }
+    writeFull();
+  }
+
+  PendingPart finishPart(Builder& b) {
+    PendingPart p;
+    TilePart& part = b.part;
+    part.numKnots = b.numKnots;
+    part.positions.clear();
+    part.positions.reserve(size_t(part.numVertices) * b.numKnots);
+    for (auto& kp : b.knotPositions) part.positions.insert(part.positions.end(), kp.begin(), kp.end());
+    b.knotPositions.clear();
+    for (size_t ai = 0; ai < meta.schema.attrs.size(); ++ai)
+      if (b.presence >> ai & 1) {
+        const auto& a = meta.schema.attrs[ai];
+        b.padAttr(a, ai, a.rate == AttrRate::Vertex ? part.numVertices : part.numMicropolygons);
+      }
+    TileEntry& e = p.entry;
+    e.tx = b.key.tx, e.ty = b.key.ty, e.schedule = b.key.schedule;
+    e.numMicropolygons = part.numMicropolygons;
+    e.numVertices = part.numVertices;
+    e.effects = b.effects;
+    e.attrPresence = b.presence;
+    e.knots = b.bounds;
+    // Round the raster boxes outwards by a relative margin: they were accumulated in float from
+    // double projections, and consumers project in float.
+    for (auto& kb : e.knots) {
+      if (!kb.rasterFinite) {
+        for (float& v : kb.raster) v = 0;
+        continue;
+      }
+      for (int i = 0; i < 4; ++i) {
+        float v = kb.raster[i];
+        float margin = 1e-5f * std::max(1.0f, std::abs(v)) + 1e-3f;
+        kb.raster[i] = i < 2 ? v - margin : v + margin;
+      }
+    }
+    p.part = std::move(part);
+    return p;
+  }
+
+  void writeFull() {
+    if (full.empty()) return;
+    std::vector<PendingPart> parts;
+    parts.reserve(full.size());
+    for (auto& b : full) parts.push_back(finishPart(*b));
+    full.clear();
+    const int level = options.zstdLevel;
+    const Schema& schema = meta.schema;
+    tbb::parallel_for(size_t(0), parts.size(), [&](size_t i) {
+      auto& p = parts[i];
+      std::vector<uint8_t> raw;
+      encodeRaw(schema, p.part, p.entry.attrPresence, raw);
+      compress(raw, level, p.compressed);
+      p.entry.rawSize = uint32_t(raw.size());
+      p.entry.compressedSize = uint32_t(p.compressed.size());
+      p.entry.checksum = checksum(p.compressed);
+      p.part = TilePart{};
+    });
+    for (auto& p : parts) {
+      writeAll(file.fd(), p.compressed.data(), p.compressed.size(), file.tempPath());
+      p.entry.offset = offset;
+      offset += p.compressed.size();
+      stats.rawBytes += p.entry.rawSize;
+      stats.vertices += p.entry.numVertices;
+      ++stats.parts;
+      entries.push_back(std::move(p.entry));
+    }
+  }
+
+  WriteStats close() {
+    if (closed) fail(where(), "already closed");
+    if (failed) fail(where(), "an earlier error left the store incomplete; not writing it");
+    std::vector<TileKey> keys;
+    for (auto& [k, b] : builders) keys.push_back(k);
+    std::sort(keys.begin(), keys.end(), [](const TileKey& a, const TileKey& b) { return a.order() < b.order(); });
+    for (const auto& k : keys) retire(k);
+    writeFull();
+    std::stable_sort(entries.begin(), entries.end(), [](const TileEntry& a, const TileEntry& b) {
+      return std::tuple(a.ty, a.tx, a.schedule, a.offset) < std::tuple(b.ty, b.tx, b.schedule, b.offset);
+    });
+    for (size_t i = 0; i < entries.size(); ++i)
+      if (i == 0 || entries[i].tx != entries[i - 1].tx || entries[i].ty != entries[i - 1].ty) ++stats.tiles;
+
+    ByteWriter metaBytes, indexBytes;
+    writeMeta(meta, metaBytes);
+    writeIndex(entries, meta, indexBytes);
+    uint64_t metaOffset = offset, indexOffset = offset + metaBytes.size();
+    writeAll(file.fd(), metaBytes.bytes().data(), metaBytes.size(), file.tempPath());
+    writeAll(file.fd(), indexBytes.bytes().data(), indexBytes.size(), file.tempPath());
+    ByteWriter footer;
+    footer.put<uint64_t>(metaOffset);
+    footer.put<uint64_t>(metaBytes.size());
+    footer.put<uint64_t>(checksum(metaBytes.bytes()));
+    footer.put<uint64_t>(indexOffset);
+    footer.put<uint64_t>(indexBytes.size());
+    footer.put<uint64_t>(checksum(indexBytes.bytes()));
+    footer.putBytes(kFooterMagic, 8);
+    footer.put<uint32_t>(kFormatVersion);
+    footer.put<uint32_t>(0);
+    writeAll(file.fd(), footer.bytes().data(), footer.size(), file.tempPath());
+    stats.fileBytes = indexOffset + indexBytes.size() + footer.size();
+    file.commit();
+    closed = true;
+    return stats;
+  }
+};
+
+StoreWriter::StoreWriter(const std::string& path, StoreMeta meta, WriterOptions options) {
+  meta.validate(path);
+  impl_ = std::make_unique<Impl>(path, std::move(meta), options);
+}
+
+StoreWriter::~StoreWriter() = default;
+
+uint32_t StoreWriter::addSchedule(const Schedule& knots) {
+  auto& m = impl_->meta;
+  if (knots.size() == 1) return 0;
+  for (size_t i = 1; i < m.schedules.size(); ++i)
+    if (m.schedules[i] == knots) return uint32_t(i);
+  StoreMeta probe;
+  probe.shutterOpen = m.shutterOpen;
+  probe.shutterClose = m.shutterClose;
+  probe.schedules = {Schedule{0.0}, knots};
+  probe.cameras = m.cameras;
+  probe.schema = m.schema;
+  probe.validate(impl_->where());
+  m.schedules.push_back(knots);
+  return uint32_t(m.schedules.size() - 1);
+}
+
+void StoreWriter::addGrid(const GridInput& grid) { impl_->addGrid(grid); }
+WriteStats StoreWriter::close() { return impl_->close(); }
+const StoreMeta& StoreWriter::meta() const { return impl_->meta; }
+
+}  // namespace reshutter::store

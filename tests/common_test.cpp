@@ -1,0 +1,79 @@
+#include <filesystem>
+#include <fstream>
+
+#include <gtest/gtest.h>
+
+#include "common/atomic_file.h"
+#include "common/error.h"
+#include "common/frame_range.h"
+#include "tests/test_util.h"
+
+using namespace reshutter;
+
+TEST(FrameRange, SingleRangeStepAndList) {
+  EXPECT_EQ(parseFrameRange("7"), (std::vector<int64_t>{7}));
+  EXPECT_EQ(parseFrameRange("1-5"), (std::vector<int64_t>{1, 2, 3, 4, 5}));
+  EXPECT_EQ(parseFrameRange("1-10x3"), (std::vector<int64_t>{1, 4, 7, 10}));
+  EXPECT_EQ(parseFrameRange("1-3,10,20-24x2"), (std::vector<int64_t>{1, 2, 3, 10, 20, 22, 24}));
+  EXPECT_EQ(parseFrameRange("-3--1"), (std::vector<int64_t>{-3, -2, -1}));
+  EXPECT_EQ(parseFrameRange("1-100").size(), 100u);
+}
+
+TEST(FrameRange, RejectsBadSyntaxWithPosition) {
+  for (const char* bad : {"", "a", "1-", "5-1", "1-10x0", "1-10x-2", "1,,2", "1-3;4"}) {
+    try {
+      parseFrameRange(bad, "--frames");
+      ADD_FAILURE() << "accepted '" << bad << "'";
+    } catch (const Error& e) {
+      EXPECT_EQ(e.where(), "--frames");
+      EXPECT_FALSE(e.problem().empty());
+    }
+  }
+}
+
+TEST(FramePattern, HashesPrintfAndAt) {
+  EXPECT_EQ(expandFramePattern("shot.####.mps", 7), "shot.0007.mps");
+  EXPECT_EQ(expandFramePattern("shot.#.mps", 123), "shot.123.mps");
+  EXPECT_EQ(expandFramePattern("shot.%04d.exr", 42), "shot.0042.exr");
+  EXPECT_EQ(expandFramePattern("shot.%d.exr", 42), "shot.42.exr");
+  EXPECT_EQ(expandFramePattern("shot.@.exr", 5), "shot.5.exr");
+  EXPECT_EQ(expandFramePattern("shot.@@@.exr", 5), "shot.005.exr");
+  EXPECT_EQ(expandFramePattern("shot.####.mps", -12), "shot.-0012.mps");
+  EXPECT_EQ(expandFramePattern("100%%.%03d.exr", 1), "100%%.001.exr");
+  EXPECT_EQ(expandFramePattern("plain.exr", 9), "plain.exr");
+  EXPECT_TRUE(hasFramePlaceholder("a.####.b"));
+  EXPECT_TRUE(hasFramePlaceholder("a.%04d.b"));
+  EXPECT_FALSE(hasFramePlaceholder("a.b"));
+  EXPECT_FALSE(hasFramePlaceholder("100%%.exr"));
+}
+
+TEST(AtomicFile, NothingUnderFinalNameUntilCommit) {
+  test::ScratchDir dir;
+  std::string target = dir.path("out.bin");
+  {
+    AtomicFile f(target);
+    writeAll(f.fd(), "abc", 3, f.tempPath());
+    EXPECT_TRUE(std::filesystem::exists(f.tempPath()));
+    EXPECT_FALSE(std::filesystem::exists(target));
+    // destroyed without commit: discarded
+  }
+  EXPECT_FALSE(std::filesystem::exists(target));
+  EXPECT_TRUE(std::filesystem::is_empty(dir.dir()));
+  {
+    AtomicFile f(target);
+    writeAll(f.fd(), "abc", 3, f.tempPath());
+    f.commit();
+  }
+  EXPECT_EQ(test::readBytes(target).size(), 3u);
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir.dir()), {}), 1);
+}
+
+TEST(AtomicFile, UnwritableDirectoryIsAnError) {
+  EXPECT_THROW(AtomicFile("/nonexistent-dir/x.mps"), Error);
+}
+
+TEST(ErrorModel, WhereAndProblemJoinIntoOneLine) {
+  Error e("scene.rib:12 (Sphere)", "expected 4 numbers");
+  EXPECT_STREQ(e.what(), "scene.rib:12 (Sphere): expected 4 numbers");
+  EXPECT_EQ(e.where(), "scene.rib:12 (Sphere)");
+}

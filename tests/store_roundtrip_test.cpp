@@ -1,0 +1,239 @@
+// Round trips through the .mps writer and reader: every attribute type at both rates, 1 to 8
+// motion knots, random full-entropy data (bit-exact for lossless codecs), spilling under a tiny
+// memory budget, mixed motion schedules, triangles, partial attribute presence, determinism,
+// and concurrent cached reads.
+#include <bit>
+#include <cmath>
+
+#include <glm/geometric.hpp>
+#include <gtest/gtest.h>
+#include <tbb/parallel_for.h>
+
+#include "store/codec.h"
+#include "tests/store_test_util.h"
+#include "tests/test_util.h"
+
+using namespace reshutter;
+using namespace reshutter::store;
+using reshutter::test::FlatStore;
+
+namespace {
+
+void expectBitEqual(float a, float b, const std::string& what) {
+  EXPECT_EQ(std::bit_cast<uint32_t>(a), std::bit_cast<uint32_t>(b)) << what << ": " << a << " vs " << b;
+}
+
+void compareExact(const FlatStore& in, const FlatStore& out, const Schema& schema) {
+  ASSERT_EQ(in.size(), out.size());
+  for (const auto& [id, a] : in) {
+    auto it = out.find(id);
+    ASSERT_NE(it, out.end()) << "micropolygon " << id << " missing";
+    const auto& b = it->second;
+    EXPECT_EQ(a.objectId, b.objectId);
+    EXPECT_EQ(a.gridId, b.gridId);
+    EXPECT_EQ(a.flags, b.flags);
+    EXPECT_EQ(a.corners, b.corners);
+    EXPECT_EQ(a.schedule, b.schedule);
+    ASSERT_EQ(a.positions.size(), b.positions.size());
+    for (size_t i = 0; i < a.positions.size(); ++i)
+      for (int c = 0; c < 3; ++c) expectBitEqual(a.positions[i][c], b.positions[i][c], "position");
+    for (size_t at = 0; at < schema.attrs.size(); ++at) {
+      if (a.attrF[at].empty() && a.attrU[at].empty()) {
+        // Absent in the input: absent in the part, or zero-padded because a neighbour had it.
+        for (float v : b.attrF[at]) EXPECT_EQ(v, 0.0f);
+        for (uint32_t v : b.attrU[at]) EXPECT_EQ(v, 0u);
+        continue;
+      }
+      ASSERT_EQ(a.attrF[at].size(), b.attrF[at].size()) << schema.attrs[at].name;
+      for (size_t i = 0; i < a.attrF[at].size(); ++i) expectBitEqual(a.attrF[at][i], b.attrF[at][i], schema.attrs[at].name);
+      EXPECT_EQ(a.attrU[at], b.attrU[at]) << schema.attrs[at].name;
+    }
+  }
+}
+
+struct Written {
+  FlatStore input;
+  WriteStats stats;
+};
+
+Written writeRandomStore(const std::string& path, const StoreMeta& meta, const std::vector<test::GridSpec>& specs, int gridsEach,
+                         WriterOptions options = {}, uint64_t seed = 7) {
+  Written w;
+  StoreWriter writer(path, meta, options);
+  Rng rng(seed);
+  uint32_t mpid = 0, gridId = 0;
+  for (int n = 0; n < gridsEach; ++n)
+    for (auto spec : specs) {
+      if (spec.knots > 1) {
+        Schedule s;
+        for (int k = 0; k < spec.knots; ++k) s.push_back(double(k) / (spec.knots - 1));
+        spec.schedule = writer.addSchedule(s);
+      }
+      auto g = test::randomGrid(rng, meta.schema, spec, gridId++, mpid);
+      writer.addGrid(g.view());
+      test::flatten(g, meta.schema, w.input);
+    }
+  w.stats = writer.close();
+  return w;
+}
+
+}  // namespace
+
+TEST(StoreRoundTrip, EveryAttributeTypeAndKnotCountIsBitExact) {
+  test::ScratchDir dir;
+  const Schema schema = test::fullSchema();
+  for (int knots = 1; knots <= 8; ++knots) {
+    SCOPED_TRACE("knots " + std::to_string(knots));
+    std::string path = dir.path("k" + std::to_string(knots) + ".mps");
+    test::GridSpec spec;
+    spec.knots = knots;
+    spec.nu = 7, spec.nv = 5;
+    auto w = writeRandomStore(path, test::testMeta(schema), {spec}, 40);
+    StoreReader reader(path);
+    EXPECT_EQ(reader.micropolygonCount(), w.input.size());
+    compareExact(w.input, test::flatten(reader), schema);
+    EXPECT_NO_THROW(reader.verify());
+  }
+}
+
+TEST(StoreRoundTrip, SpillsUnderATinyMemoryBudgetWithoutLosingOrder) {
+  test::ScratchDir dir;
+  const Schema schema = test::fullSchema();
+  test::GridSpec spec;
+  spec.knots = 2;
+  spec.nu = spec.nv = 8;
+  spec.spread = 0.5;  // small grids: many land in the same tiles
+  WriterOptions tiny;
+  tiny.memoryBudget = 16 << 10;
+  tiny.maxPartMicropolygons = 50;
+  auto w = writeRandomStore(dir.path("spill.mps"), test::testMeta(schema), {spec}, 300, tiny);
+  StoreReader reader(dir.path("spill.mps"));
+  EXPECT_GT(reader.entries().size(), w.stats.tiles) << "a tiny budget must split tiles into several parts";
+  EXPECT_LE(w.stats.peakBufferedBytes, tiny.memoryBudget + 64 * 1024u) << "the writer must honour its budget (plus one grid)";
+  compareExact(w.input, test::flatten(reader), schema);
+  reader.verify();
+
+  // Producer order inside a tile: within each (tile, schedule), mpids increase part after part.
+  const int mpid = schema.find("mpid");
+  std::map<std::tuple<int, int, uint32_t>, uint32_t> lastId;
+  for (size_t e = 0; e < reader.entries().size(); ++e) {
+    const auto& en = reader.entries()[e];
+    TilePart p = reader.decode(e);
+    auto key = std::tuple(en.tx, en.ty, en.schedule);
+    for (uint32_t id : p.attrs[size_t(mpid)].u) {
+      auto it = lastId.find(key);
+      if (it != lastId.end()) {
+        EXPECT_LT(it->second, id) << "order broken in tile " << en.tx << "," << en.ty;
+      }
+      lastId[key] = id;
+    }
+  }
+}
+
+TEST(StoreRoundTrip, MixedSchedulesTrianglesAndPartialAttributes) {
+  test::ScratchDir dir;
+  const Schema schema = test::fullSchema();
+  std::vector<test::GridSpec> specs(4);
+  specs[0].knots = 1;
+  specs[1].knots = 2;
+  specs[2].knots = 3, specs[2].triangles = true;
+  specs[3].knots = 2, specs[3].dropOptional = true;
+  auto w = writeRandomStore(dir.path("mixed.mps"), test::testMeta(schema), specs, 50);
+  StoreReader reader(dir.path("mixed.mps"));
+  EXPECT_EQ(reader.meta().schedules.size(), 3u);  // static, [0 1], [0 0.5 1]
+  compareExact(w.input, test::flatten(reader), schema);
+  reader.verify();
+  bool sawTriangles = false;
+  for (const auto& e : reader.entries()) sawTriangles |= (e.effects & kEffectTriangles) != 0;
+  EXPECT_TRUE(sawTriangles);
+}
+
+TEST(StoreRoundTrip, SameInputGivesIdenticalBytes) {
+  test::ScratchDir dir;
+  const Schema schema = test::fullSchema();
+  test::GridSpec spec;
+  spec.knots = 2;
+  writeRandomStore(dir.path("a.mps"), test::testMeta(schema), {spec}, 100);
+  writeRandomStore(dir.path("b.mps"), test::testMeta(schema), {spec}, 100);
+  EXPECT_EQ(test::readBytes(dir.path("a.mps")), test::readBytes(dir.path("b.mps")));
+}
+
+TEST(StoreRoundTrip, LossyCodecsStayWithinTheirStatedBounds) {
+  test::ScratchDir dir;
+  const Schema schema = test::fullSchema(AttrCodec::Half, AttrCodec::Unorm16, AttrCodec::Oct32);
+  test::GridSpec spec;
+  spec.knots = 2;
+  auto w = writeRandomStore(dir.path("lossy.mps"), test::testMeta(schema), {spec}, 60);
+  StoreReader reader(dir.path("lossy.mps"));
+  FlatStore out = test::flatten(reader);
+  ASSERT_EQ(out.size(), w.input.size());
+  size_t checked = 0;
+  for (const auto& [id, a] : w.input) {
+    const auto& b = out.at(id);
+    for (size_t i = 0; i < a.positions.size(); ++i) EXPECT_EQ(a.positions[i], b.positions[i]) << "positions stay lossless";
+    for (size_t at = 0; at < schema.attrs.size(); ++at) {
+      const auto& d = schema.attrs[at];
+      ASSERT_EQ(a.attrF[at].size(), b.attrF[at].size());
+      if (d.codec == AttrCodec::Half) {
+        for (size_t i = 0; i < a.attrF[at].size(); ++i) {
+          float v = a.attrF[at][i];
+          EXPECT_LE(std::abs(b.attrF[at][i] - v), std::max(std::ldexp(std::abs(v), -11), 0x1.0p-25f)) << d.name;
+          ++checked;
+        }
+      } else if (d.codec == AttrCodec::Unorm16) {
+        for (size_t i = 0; i < a.attrF[at].size(); ++i) EXPECT_LE(std::abs(b.attrF[at][i] - a.attrF[at][i]), 0.5f / 65535.0f + 1e-7f) << d.name;
+      } else if (d.codec == AttrCodec::Oct32) {
+        for (size_t i = 0; i + 2 < a.attrF[at].size(); i += 3) {
+          glm::dvec3 x(a.attrF[at][i], a.attrF[at][i + 1], a.attrF[at][i + 2]), y(b.attrF[at][i], b.attrF[at][i + 1], b.attrF[at][i + 2]);
+          EXPECT_LE(std::atan2(glm::length(glm::cross(x, y)), glm::dot(x, y)), 5e-5) << d.name;
+        }
+      }
+    }
+  }
+  EXPECT_GT(checked, 1000u);
+}
+
+TEST(StoreRoundTrip, ConcurrentCachedReadsAgreeAndRespectTheBudget) {
+  test::ScratchDir dir;
+  const Schema schema = test::fullSchema();
+  test::GridSpec spec;
+  spec.knots = 2;
+  spec.nu = spec.nv = 8;
+  writeRandomStore(dir.path("c.mps"), test::testMeta(schema), {spec}, 200);
+  ReaderOptions opt;
+  opt.cacheBytes = 64 << 10;
+  StoreReader reader(dir.path("c.mps"), opt);
+  const size_t n = reader.entries().size();
+  ASSERT_GT(n, 4u);
+  std::vector<TilePart> reference;
+  for (size_t e = 0; e < n; ++e) reference.push_back(reader.decode(e));
+  size_t largest = 0;
+  for (const auto& p : reference) largest = std::max(largest, p.memoryBytes());
+  tbb::parallel_for(size_t(0), n * 20, [&](size_t i) {
+    size_t e = (i * 7919) % n;
+    auto p = reader.part(e);
+    EXPECT_EQ(p->positions, reference[e].positions);
+    EXPECT_EQ(p->corners, reference[e].corners);
+  });
+  CacheStats st = reader.cacheStats();
+  EXPECT_GT(st.hits, 0u);
+  EXPECT_LE(st.peakBytes, opt.cacheBytes + largest);
+}
+
+TEST(StoreRoundTrip, VisitFindsExactlyThePartsWhoseBoundsTouchTheRectangle) {
+  test::ScratchDir dir;
+  const Schema schema = test::fullSchema();
+  test::GridSpec spec;
+  spec.knots = 3;
+  writeRandomStore(dir.path("v.mps"), test::testMeta(schema), {spec}, 100);
+  StoreReader reader(dir.path("v.mps"));
+  RasterRect rect{40, 30, 90, 70, false};
+  std::vector<size_t> visited;
+  reader.visit(rect, 0.25, 0.5, [&](size_t e) { visited.push_back(e); });
+  std::vector<size_t> expected;
+  for (size_t e = 0; e < reader.entries().size(); ++e)
+    if (reader.bounds(e, 0.25, 0.5).overlaps(rect)) expected.push_back(e);
+  EXPECT_EQ(visited, expected);
+  EXPECT_FALSE(expected.empty());
+  EXPECT_LT(expected.size(), reader.entries().size());
+}
