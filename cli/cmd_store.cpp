@@ -174,7 +174,7 @@ void addStoreCommands(CLI::App& app, Registry& registry) {
     auto opt = std::make_shared<SyntheticOptions>();
     auto out = std::make_shared<std::string>();
     auto level = std::make_shared<int>(3);
-    auto budget = std::make_shared<double>(256);
+    auto budget = std::make_shared<double>(64);
     auto colorCodec = std::make_shared<std::string>("lossless"), opacityCodec = std::make_shared<std::string>("lossless");
     sub->add_option("-o,--output", *out, "Output .mps")->required();
     sub->add_option("-n,--micropolygons", opt->micropolygons, "Micropolygon count")->capture_default_str();

@@ -4,6 +4,7 @@
 #include <bit>
 #include <cmath>
 #include <cstring>
+#include <memory>
 
 #include <Imath/half.h>
 #include <xxhash.h>
@@ -108,8 +109,12 @@ size_t rawPayloadSize(const Schema& schema, uint32_t nV, uint32_t nMp, uint32_t 
 void encodeRaw(const Schema& schema, const TilePart& part, uint64_t presence, std::vector<uint8_t>& out) {
   const uint32_t nV = part.numVertices, nMp = part.numMicropolygons, nK = part.numKnots;
   Counts c = countsFor(schema, nV, nMp, nK, presence);
-  std::vector<uint32_t> words(c.words);
-  std::vector<uint16_t> halves(c.halves);
+  // Scratch reused per thread: fresh multi-hundred-KB vectors per part cost more in page faults
+  // than the encoding itself.
+  thread_local std::vector<uint32_t> words;
+  thread_local std::vector<uint16_t> halves;
+  words.resize(c.words);
+  halves.resize(c.halves);
   uint32_t* w = words.data();
   uint16_t* h = halves.data();
 
@@ -174,8 +179,10 @@ void encodeRaw(const Schema& schema, const TilePart& part, uint64_t presence, st
 void decodeRaw(const Schema& schema, std::span<const uint8_t> raw, uint64_t presence, TilePart& part) {
   const uint32_t nV = part.numVertices, nMp = part.numMicropolygons, nK = part.numKnots;
   Counts c = countsFor(schema, nV, nMp, nK, presence);
-  std::vector<uint32_t> words(c.words);
-  std::vector<uint16_t> halves(c.halves);
+  thread_local std::vector<uint32_t> words;
+  thread_local std::vector<uint16_t> halves;
+  words.resize(c.words);
+  halves.resize(c.halves);
   unshuffle<4>(raw.data(), c.words, reinterpret_cast<uint8_t*>(words.data()));
   unshuffle<2>(raw.data() + c.words * 4, c.halves, reinterpret_cast<uint8_t*>(halves.data()));
   const uint32_t* w = words.data();
@@ -241,10 +248,14 @@ void decodeRaw(const Schema& schema, std::span<const uint8_t> raw, uint64_t pres
 }
 
 void compress(std::span<const uint8_t> raw, int level, std::vector<uint8_t>& out) {
-  out.resize(ZSTD_compressBound(raw.size()));
-  size_t n = ZSTD_compress(out.data(), out.size(), raw.data(), raw.size(), level);
+  // One context and one worst-case buffer per thread: ZSTD_compress() would allocate and clear
+  // its tables on every call, and a fresh compressBound()-sized vector costs page faults.
+  thread_local std::unique_ptr<ZSTD_CCtx, size_t (*)(ZSTD_CCtx*)> ctx(ZSTD_createCCtx(), ZSTD_freeCCtx);
+  thread_local std::vector<uint8_t> scratch;
+  if (scratch.size() < ZSTD_compressBound(raw.size())) scratch.resize(ZSTD_compressBound(raw.size()));
+  size_t n = ZSTD_compressCCtx(ctx.get(), scratch.data(), scratch.size(), raw.data(), raw.size(), level);
   if (ZSTD_isError(n)) fail("zstd", ZSTD_getErrorName(n));
-  out.resize(n);
+  out.assign(scratch.begin(), scratch.begin() + long(n));
 }
 
 void decompress(std::span<const uint8_t> compressed, size_t rawSize, std::vector<uint8_t>& out, const std::string& where) {
@@ -252,8 +263,8 @@ void decompress(std::span<const uint8_t> compressed, size_t rawSize, std::vector
   if (declared == ZSTD_CONTENTSIZE_ERROR || declared == ZSTD_CONTENTSIZE_UNKNOWN || declared != rawSize)
     fail(where, "compressed payload is corrupt (frame size does not match the index)");
   out.resize(rawSize);
-  thread_local ZSTD_DCtx* ctx = ZSTD_createDCtx();
-  size_t n = ZSTD_decompressDCtx(ctx, out.data(), out.size(), compressed.data(), compressed.size());
+  thread_local std::unique_ptr<ZSTD_DCtx, size_t (*)(ZSTD_DCtx*)> ctx(ZSTD_createDCtx(), ZSTD_freeDCtx);
+  size_t n = ZSTD_decompressDCtx(ctx.get(), out.data(), out.size(), compressed.data(), compressed.size());
   if (ZSTD_isError(n) || n != rawSize) fail(where, "compressed payload is corrupt (", ZSTD_isError(n) ? ZSTD_getErrorName(n) : "short", ")");
 }
 

@@ -210,23 +210,23 @@ std::vector<TileEntry> readIndex(ByteReader& r, const StoreMeta& meta) {
     e.compressedSize = r.get<uint32_t>();
     e.rawSize = r.get<uint32_t>();
     e.checksum = r.get<uint64_t>();
-    std::string where = cat(r.context(), " entry ", i, " (tile ", e.tx, ",", e.ty, ")");
-    if (e.schedule >= meta.schedules.size()) fail(where, "names motion schedule ", e.schedule, " of ", meta.schedules.size());
+    auto where = [&] { return cat(r.context(), " entry ", i, " (tile ", e.tx, ",", e.ty, ")"); };
+    if (e.schedule >= meta.schedules.size()) fail(where(), "names motion schedule ", e.schedule, " of ", meta.schedules.size());
     if (e.numMicropolygons > kMaxPartMicropolygons || e.numVertices > kMaxPartVertices)
-      fail(where, "implausible counts (", e.numMicropolygons, " micropolygons, ", e.numVertices, " vertices)");
+      fail(where(), "implausible counts (", e.numMicropolygons, " micropolygons, ", e.numVertices, " vertices)");
     if (meta.schema.attrs.size() < 64 && (e.attrPresence >> meta.schema.attrs.size()) != 0)
-      fail(where, "marks attributes the schema does not declare");
+      fail(where(), "marks attributes the schema does not declare");
     e.knots.resize(meta.schedules[e.schedule].size());
     for (auto& k : e.knots) {
       for (float& v : k.raster) v = r.get<float>();
       for (float& v : k.camera) v = r.get<float>();
       uint8_t f = r.get<uint8_t>();
-      if (f > 1) fail(where, "bad bounds flag");
+      if (f > 1) fail(where(), "bad bounds flag");
       k.rasterFinite = f != 0;
       for (float v : k.raster)
-        if (std::isnan(v)) fail(where, "bounds are NaN");
+        if (std::isnan(v)) fail(where(), "bounds are NaN");
       for (float v : k.camera)
-        if (std::isnan(v)) fail(where, "bounds are NaN");
+        if (std::isnan(v)) fail(where(), "bounds are NaN");
     }
   }
   if (!r.atEnd()) fail(r.context(), "unexpected bytes after the index");

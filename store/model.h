@@ -154,6 +154,16 @@ struct GridInput {
   size_t numMicropolygons() const { return corners.size() / 4; }
 };
 
+/// Where producers (the shading pass, dump ingest, synthetic scenes) send their grids. The store
+/// writer is one; tests and benchmarks plug in others.
+class GridSink {
+ public:
+  virtual ~GridSink() = default;
+  /// Registers knot times; returns the index for GridInput::schedule (0 = static).
+  virtual uint32_t addSchedule(const Schedule& knotTimes) = 0;
+  virtual void addGrid(const GridInput& grid) = 0;
+};
+
 // ---------------------------------------------------------------------------------------------
 // Reader output: one decoded tile part
 

@@ -87,6 +87,8 @@ struct StoreReader::Impl {
     ByteReader indexReader(indexBytes, path + ": index");
     entries = readIndex(indexReader, meta);
     payloadEnd = metaOffset;
+    // Tiles are read in bucket order, not file order: no readahead for the payload section.
+    if (options.releasePages) ::madvise(m, size_t(metaOffset) / 4096 * 4096, MADV_RANDOM);
     projector = Projector(meta.cameras[0]);
 
     partNumber.resize(entries.size());
@@ -103,6 +105,20 @@ struct StoreReader::Impl {
     }
   }
 
+  // Drops the mapped pages of a decoded payload so resident memory does not grow with the file.
+  // The kernel maps up to 64 KB around each faulting page ("fault-around"), so neighbours of the
+  // range are dropped too. That is safe even while another thread reads them: the mapping is
+  // private and never written, so a dropped page simply faults in again from the file.
+  void releasePages(uint64_t offset, uint64_t length) const {
+    constexpr uint64_t kFaultAround = 64 << 10;
+    const uint64_t page = uint64_t(::sysconf(_SC_PAGESIZE));
+    uint64_t begin = offset > kFaultAround ? offset - kFaultAround : 0;
+    uint64_t end = std::min<uint64_t>(size, offset + length + kFaultAround);
+    begin = begin / page * page;
+    end = std::min<uint64_t>((end + page - 1) / page * page, (size + page - 1) / page * page);
+    ::madvise(const_cast<uint8_t*>(data) + begin, end - begin, MADV_DONTNEED);
+  }
+
   std::string where(size_t i) const {
     const auto& e = entries[i];
     if (e.tx == kBehindCameraTile && e.ty == kBehindCameraTile) return cat(path, ": tile (behind camera) part ", partNumber[i]);
@@ -116,13 +132,7 @@ struct StoreReader::Impl {
     if (checksum(compressed) != e.checksum) fail(where(i), "checksum mismatch (the file is damaged)");
     thread_local std::vector<uint8_t> raw;
     decompress(compressed, e.rawSize, raw, where(i));
-    if (options.releasePages) {
-      const size_t page = size_t(::sysconf(_SC_PAGESIZE));
-      uintptr_t begin = reinterpret_cast<uintptr_t>(data) + e.offset, end = begin + e.compressedSize;
-      begin = begin / page * page;
-      end = (end + page - 1) / page * page;
-      ::madvise(reinterpret_cast<void*>(begin), end - begin, MADV_DONTNEED);
-    }
+    if (options.releasePages) releasePages(e.offset, e.compressedSize);
     TilePart part;
     part.numVertices = e.numVertices;
     part.numMicropolygons = e.numMicropolygons;

@@ -25,14 +25,14 @@ StoreMeta syntheticMeta(const SyntheticOptions& o) {
   return m;
 }
 
-uint64_t generateSynthetic(const SyntheticOptions& o, StoreWriter& writer) {
+uint64_t generateSynthetic(const SyntheticOptions& o, GridSink& writer) {
   const int g = o.gridSize, gv = g + 1;
   const uint32_t nV = uint32_t(gv * gv);
   const int K = std::max(1, o.knots);
   Schedule knots;
   for (int k = 0; k < K; ++k) knots.push_back(K == 1 ? 0.0 : double(k) / (K - 1));
   const uint32_t schedule = writer.addSchedule(knots);
-  const Projector proj(writer.meta().cameras[0]);
+  const Projector proj(syntheticMeta(o).cameras[0]);
 
   std::vector<uint32_t> corners;
   for (int j = 0; j < g; ++j)

@@ -28,7 +28,8 @@ struct SyntheticOptions {
 };
 
 StoreMeta syntheticMeta(const SyntheticOptions& options);
-/// Emits the grids into `writer` (opened with syntheticMeta); returns the micropolygon count.
-uint64_t generateSynthetic(const SyntheticOptions& options, StoreWriter& writer);
+/// Emits the grids into `sink` (a StoreWriter opened with syntheticMeta, say); returns the
+/// micropolygon count.
+uint64_t generateSynthetic(const SyntheticOptions& options, GridSink& sink);
 
 }  // namespace reshutter::store

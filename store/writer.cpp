@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <unordered_map>
 
 #include <tbb/parallel_for.h>
@@ -30,31 +31,155 @@ struct TileKeyHash {
 
 constexpr int32_t kTileCoordLimit = 1 << 30;
 
+// Fixed-size chunks of 32-bit words, recycled for the writer's lifetime. Tile builders append
+// into chunks instead of growing vectors: thousands of partly filled tiles would otherwise
+// reallocate and copy their arrays, and every fresh allocation costs page faults.
+constexpr size_t kChunkWords = 2048;
+
+class ChunkPool {
+ public:
+  uint32_t* take() {
+    if (free_.empty()) {
+      constexpr size_t kSlabChunks = 64;
+      slabs_.emplace_back(new uint32_t[kChunkWords * kSlabChunks]);
+      for (size_t i = 0; i < kSlabChunks; ++i) free_.push_back(slabs_.back().get() + i * kChunkWords);
+    }
+    uint32_t* c = free_.back();
+    free_.pop_back();
+    ++inUse_;
+    return c;
+  }
+  void give(uint32_t* c) {
+    free_.push_back(c);
+    --inUse_;
+  }
+  size_t bytesInUse() const { return inUse_ * kChunkWords * 4; }
+
+ private:
+  std::vector<std::unique_ptr<uint32_t[]>> slabs_;
+  std::vector<uint32_t*> free_;
+  size_t inUse_ = 0;
+};
+
+// Append-only fixed-size records in pool chunks.
+class RecordLog {
+ public:
+  void reset(uint32_t recordWords) {
+    words_ = recordWords;
+    perChunk_ = uint32_t(kChunkWords / recordWords);
+    count_ = 0;
+  }
+  uint32_t* append(ChunkPool& pool) {
+    if (count_ == chunks_.size() * perChunk_) chunks_.push_back(pool.take());
+    uint32_t* r = chunks_.back() + (count_ % perChunk_) * words_;
+    ++count_;
+    return r;
+  }
+  const uint32_t* record(size_t i) const { return chunks_[i / perChunk_] + (i % perChunk_) * words_; }
+  size_t size() const { return count_; }
+  size_t chunkCount() const { return chunks_.size(); }
+  void release(ChunkPool& pool) {
+    for (uint32_t* c : chunks_) pool.give(c);
+    chunks_.clear();
+    count_ = 0;
+  }
+
+ private:
+  std::vector<uint32_t*> chunks_;
+  uint32_t words_ = 1, perChunk_ = 1;
+  size_t count_ = 0;
+};
+
+// Record layouts. Vertex: K×3 position words, then every vertex-rate attribute of the schema
+// (zeros where a grid lacks it). Micropolygon: 4 corners, object id, grid id, flags, then every
+// micropolygon-rate attribute.
+struct RecordLayout {
+  std::vector<uint32_t> attrOffset;  // per schema attribute, within the vertex or mp record tail
+  uint32_t vertexAttrWords = 0, mpAttrWords = 0;
+  static constexpr uint32_t kMpFixedWords = 7;
+  explicit RecordLayout(const Schema& schema) {
+    for (const auto& a : schema.attrs) {
+      uint32_t& words = a.rate == AttrRate::Vertex ? vertexAttrWords : mpAttrWords;
+      attrOffset.push_back(words);
+      words += uint32_t(componentCount(a.type));
+    }
+  }
+  uint32_t vertexWords(uint32_t knots) const { return 3 * knots + vertexAttrWords; }
+  uint32_t mpWords() const { return kMpFixedWords + mpAttrWords; }
+};
+
 struct Builder {
   TileKey key;
   uint32_t numKnots = 1;
-  std::vector<std::vector<glm::vec3>> knotPositions;
-  TilePart part;
+  RecordLog vertices, mps;
   uint64_t presence = 0;
   uint32_t effects = 0;
   std::vector<KnotBounds> bounds;
   uint32_t stamp = 0;
-  size_t bytes = 0;
 
-  // Pads attribute `ai` with zeros up to `count` elements (an earlier grid lacked it).
-  void padAttr(const AttrDecl& a, size_t ai, size_t count) {
-    AttrArray& arr = part.attrs[ai];
-    if (a.type == AttrType::UInt)
-      arr.u.resize(std::max(arr.u.size(), count), 0u);
-    else
-      arr.f.resize(std::max(arr.f.size(), count * componentCount(a.type)), 0.0f);
+  void reset(const TileKey& k, uint32_t knots, const RecordLayout& layout) {
+    key = k;
+    numKnots = knots;
+    vertices.reset(layout.vertexWords(knots));
+    mps.reset(layout.mpWords());
+    presence = 0;
+    effects = 0;
+    bounds.assign(knots, KnotBounds{});
+    for (auto& kb : bounds) {
+      kb.raster[0] = kb.raster[1] = INFINITY, kb.raster[2] = kb.raster[3] = -INFINITY;
+      for (int i = 0; i < 3; ++i) kb.camera[i] = INFINITY, kb.camera[i + 3] = -INFINITY;
+    }
   }
+  size_t chunks() const { return vertices.chunkCount() + mps.chunkCount(); }
+  uint32_t numMicropolygons() const { return uint32_t(mps.size()); }
 };
 
-// A part ready to be encoded: its index entry (bounds filled) and payload.
+// Unpacks a builder's records into the structure-of-arrays part the codec encodes.
+void unpack(const Builder& b, const Schema& schema, const RecordLayout& layout, TilePart& part) {
+  const uint32_t nV = uint32_t(b.vertices.size()), nMp = uint32_t(b.mps.size()), K = b.numKnots;
+  part.numVertices = nV, part.numMicropolygons = nMp, part.numKnots = K;
+  part.positions.resize(size_t(K) * nV);
+  part.corners.resize(size_t(nMp) * 4);
+  part.objectId.resize(nMp), part.gridId.resize(nMp), part.flags.resize(nMp);
+  part.attrs.resize(schema.attrs.size());
+  for (size_t ai = 0; ai < schema.attrs.size(); ++ai) {
+    const auto& a = schema.attrs[ai];
+    auto& arr = part.attrs[ai];
+    const size_t n = (b.presence >> ai & 1) ? size_t(a.rate == AttrRate::Vertex ? nV : nMp) * componentCount(a.type) : 0;
+    if (a.type == AttrType::UInt) arr.u.resize(n), arr.f.clear();
+    else arr.f.resize(n), arr.u.clear();
+  }
+  for (uint32_t v = 0; v < nV; ++v) {
+    const uint32_t* r = b.vertices.record(v);
+    for (uint32_t k = 0; k < K; ++k) std::memcpy(&part.positions[size_t(k) * nV + v], r + 3 * k, 12);
+    const uint32_t* tail = r + 3 * K;
+    for (size_t ai = 0; ai < schema.attrs.size(); ++ai) {
+      const auto& a = schema.attrs[ai];
+      if (a.rate != AttrRate::Vertex || !(b.presence >> ai & 1)) continue;
+      const int nc = componentCount(a.type);
+      if (a.type == AttrType::UInt) part.attrs[ai].u[v] = tail[layout.attrOffset[ai]];
+      else std::memcpy(&part.attrs[ai].f[size_t(v) * nc], tail + layout.attrOffset[ai], size_t(nc) * 4);
+    }
+  }
+  for (uint32_t m = 0; m < nMp; ++m) {
+    const uint32_t* r = b.mps.record(m);
+    std::memcpy(&part.corners[size_t(m) * 4], r, 16);
+    part.objectId[m] = r[4], part.gridId[m] = r[5], part.flags[m] = uint8_t(r[6]);
+    const uint32_t* tail = r + RecordLayout::kMpFixedWords;
+    for (size_t ai = 0; ai < schema.attrs.size(); ++ai) {
+      const auto& a = schema.attrs[ai];
+      if (a.rate != AttrRate::Micropolygon || !(b.presence >> ai & 1)) continue;
+      const int nc = componentCount(a.type);
+      if (a.type == AttrType::UInt) part.attrs[ai].u[m] = tail[layout.attrOffset[ai]];
+      else std::memcpy(&part.attrs[ai].f[size_t(m) * nc], tail + layout.attrOffset[ai], size_t(nc) * 4);
+    }
+  }
+}
+
+// A part ready to be encoded: its index entry (bounds filled) and its builder.
 struct PendingPart {
   TileEntry entry;
-  TilePart part;
+  std::unique_ptr<Builder> builder;
   std::vector<uint8_t> compressed;
 };
 
@@ -68,8 +193,10 @@ struct StoreWriter::Impl {
   Projector projector;
   std::unordered_map<TileKey, std::unique_ptr<Builder>, TileKeyHash> builders;
   std::vector<std::unique_ptr<Builder>> full;
+  std::vector<std::unique_ptr<Builder>> spareBuilders;
+  ChunkPool chunks;
+  RecordLayout layout;
   std::vector<TileEntry> entries;
-  size_t buffered = 0;
   bool failed = false, closed = false;
   WriteStats stats;
   uint32_t stampCounter = 0;
@@ -96,7 +223,8 @@ struct StoreWriter::Impl {
     return it->second;
   }
 
-  Impl(const std::string& path, StoreMeta m, WriterOptions o) : meta(std::move(m)), options(o), file(path), projector(meta.cameras.at(0)) {
+  Impl(const std::string& path, StoreMeta m, WriterOptions o)
+      : meta(std::move(m)), options(o), file(path), projector(meta.cameras.at(0)), layout(meta.schema) {
     char header[kHeaderSize] = {};
     std::copy(std::begin(kHeaderMagic), std::end(kHeaderMagic), header);
     uint32_t v = kFormatVersion;
@@ -121,23 +249,20 @@ struct StoreWriter::Impl {
   Builder& builderFor(const TileKey& key) {
     auto it = builders.find(key);
     if (it != builders.end()) return *it->second;
-    auto b = std::make_unique<Builder>();
-    b->key = key;
-    b->numKnots = uint32_t(meta.schedules[key.schedule].size());
-    b->knotPositions.resize(b->numKnots);
-    b->part.attrs.resize(meta.schema.attrs.size());
-    b->bounds.resize(b->numKnots);
-    for (auto& kb : b->bounds) {
-      kb.raster[0] = kb.raster[1] = INFINITY, kb.raster[2] = kb.raster[3] = -INFINITY;
-      for (int i = 0; i < 3; ++i) kb.camera[i] = INFINITY, kb.camera[i + 3] = -INFINITY;
+    std::unique_ptr<Builder> b;
+    if (!spareBuilders.empty()) {
+      b = std::move(spareBuilders.back());
+      spareBuilders.pop_back();
+    } else {
+      b = std::make_unique<Builder>();
     }
+    b->reset(key, uint32_t(meta.schedules[key.schedule].size()), layout);
     b->stamp = nextStamp();
     return *builders.emplace(key, std::move(b)).first->second;
   }
 
   void retire(const TileKey& key) {
     auto it = builders.find(key);
-    buffered -= it->second->bytes;
     full.push_back(std::move(it->second));
     builders.erase(it);
   }
@@ -245,7 +370,7 @@ struct StoreWriter::Impl {
       b->stamp = nextStamp();  // vertex indices are per grid: a fresh stamp per (builder, grid)
       for (uint32_t n = slotStart[slot]; n < slotStart[slot + 1]; ++n) {
         const uint32_t i = bySlot[n];
-        if (b->part.numMicropolygons >= options.maxPartMicropolygons) {
+        if (b->numMicropolygons() >= options.maxPartMicropolygons) {
           retire(b->key);
           b = &builderFor(slotKeys[slot]);
         }
@@ -253,19 +378,18 @@ struct StoreWriter::Impl {
       }
     }
     stats.micropolygons += nMp;
-    for (auto it = builders.begin(); it != builders.end();) {
-      auto next = std::next(it);
-      if (it->second->part.numMicropolygons >= options.maxPartMicropolygons) retire(it->first);
-      it = next;
+    // Only the tiles this grid touched can have filled up.
+    for (const TileKey& key : slotKeys) {
+      auto it = builders.find(key);
+      if (it != builders.end() && it->second->numMicropolygons() >= options.maxPartMicropolygons) retire(key);
     }
-    stats.peakBufferedBytes = std::max<uint64_t>(stats.peakBufferedBytes, buffered);
-    if (buffered > options.memoryBudget) spillLargest();
+    stats.peakBufferedBytes = std::max<uint64_t>(stats.peakBufferedBytes, chunks.bytesInUse());
+    if (chunks.bytesInUse() > options.memoryBudget) spillLargest();
     if (full.size() >= 32) writeFull();
   }
 
   void addMicropolygon(Builder& b, const GridInput& g, size_t i, uint32_t K, int oi) {
     const auto& schema = meta.schema;
-    const uint32_t nV = g.numVertices;
     const uint32_t* c = &g.corners[i * 4];
     uint32_t localCorners[4];
     for (int j = 0; j < 4; ++j) {
@@ -277,39 +401,35 @@ struct StoreWriter::Impl {
       }
       if (stamps[v] != b.stamp) {
         stamps[v] = b.stamp;
-        local[v] = b.part.numVertices;
+        local[v] = uint32_t(b.vertices.size());
         addVertex(b, g, v, K, oi);
       }
       localCorners[j] = local[v];
     }
-    const uint32_t mpIndex = b.part.numMicropolygons++;
-    b.part.corners.insert(b.part.corners.end(), localCorners, localCorners + 4);
-    b.part.objectId.push_back(g.objectId);
-    b.part.gridId.push_back(g.gridId);
-    b.part.flags.push_back(g.flags);
+    uint32_t* r = b.mps.append(chunks);
+    std::memcpy(r, localCorners, 16);
+    r[4] = g.objectId, r[5] = g.gridId, r[6] = g.flags;
     if (g.flags & kMatte) b.effects |= kEffectMatte;
     if (g.flags & kTwoSided) b.effects |= kEffectTwoSided;
-    size_t bytes = 25;
+    uint32_t* tail = r + RecordLayout::kMpFixedWords;
     for (size_t ai = 0; ai < schema.attrs.size(); ++ai) {
       const auto& a = schema.attrs[ai];
       if (a.rate != AttrRate::Micropolygon) continue;
-      bool present = ai < g.attrs.size() && g.attrs[ai].present();
-      if (!present) continue;
-      b.padAttr(a, ai, mpIndex);
-      int nc = componentCount(a.type);
+      const int nc = componentCount(a.type);
+      uint32_t* dst = tail + layout.attrOffset[ai];
+      if (ai >= g.attrs.size() || !g.attrs[ai].present()) {
+        std::fill(dst, dst + nc, 0u);
+        continue;
+      }
       if (a.type == AttrType::UInt) {
-        b.part.attrs[ai].u.push_back(g.attrs[ai].u[i]);
+        dst[0] = g.attrs[ai].u[i];
       } else {
         const float* src = &g.attrs[ai].f[i * nc];
-        b.part.attrs[ai].f.insert(b.part.attrs[ai].f.end(), src, src + nc);
+        std::memcpy(dst, src, size_t(nc) * 4);
         if (int(ai) == oi) noteOpacity(b, src);
       }
       b.presence |= uint64_t(1) << ai;
-      bytes += size_t(nc) * 4;
     }
-    b.bytes += bytes;
-    buffered += bytes;
-    (void)nV;
   }
 
   static void noteOpacity(Builder& b, const float* o) {
@@ -320,12 +440,12 @@ struct StoreWriter::Impl {
   void addVertex(Builder& b, const GridInput& g, uint32_t v, uint32_t K, int oi) {
     const auto& schema = meta.schema;
     const uint32_t nV = g.numVertices;
-    const uint32_t index = b.part.numVertices++;
+    uint32_t* r = b.vertices.append(chunks);
     const glm::vec3& p0 = g.positions[v];
     for (uint32_t k = 0; k < K; ++k) {
       const size_t src = size_t(k) * nV + v;
       const glm::vec3& p = g.positions[src];
-      b.knotPositions[k].push_back(p);
+      std::memcpy(r + 3 * k, &p, 12);
       if (p != p0) b.effects |= kEffectMoving;
       KnotBounds& kb = b.bounds[k];
       for (int a = 0; a < 3; ++a) kb.camera[a] = std::min(kb.camera[a], p[a]), kb.camera[a + 3] = std::max(kb.camera[a + 3], p[a]);
@@ -333,32 +453,31 @@ struct StoreWriter::Impl {
         const float rx = float(std::clamp(raster[src].x, -1e30, 1e30)), ry = float(std::clamp(raster[src].y, -1e30, 1e30));
         kb.raster[0] = std::min(kb.raster[0], rx), kb.raster[1] = std::min(kb.raster[1], ry);
         kb.raster[2] = std::max(kb.raster[2], rx), kb.raster[3] = std::max(kb.raster[3], ry);
-        // float(r) may round inwards; the exact outward rounding happens when the entry is built.
+        // float() may round inwards; finishPart() widens every box by a margin that covers it.
       } else {
         kb.rasterFinite = false;
         b.effects |= kEffectNearCrossing;
       }
     }
-    size_t bytes = size_t(K) * 12;
+    uint32_t* tail = r + 3 * K;
     for (size_t ai = 0; ai < schema.attrs.size(); ++ai) {
       const auto& a = schema.attrs[ai];
       if (a.rate != AttrRate::Vertex) continue;
-      bool present = ai < g.attrs.size() && g.attrs[ai].present();
-      if (!present) continue;
-      b.padAttr(a, ai, index);
-      int nc = componentCount(a.type);
+      const int nc = componentCount(a.type);
+      uint32_t* dst = tail + layout.attrOffset[ai];
+      if (ai >= g.attrs.size() || !g.attrs[ai].present()) {
+        std::fill(dst, dst + nc, 0u);
+        continue;
+      }
       if (a.type == AttrType::UInt) {
-        b.part.attrs[ai].u.push_back(g.attrs[ai].u[v]);
+        dst[0] = g.attrs[ai].u[v];
       } else {
         const float* src = &g.attrs[ai].f[size_t(v) * nc];
-        b.part.attrs[ai].f.insert(b.part.attrs[ai].f.end(), src, src + nc);
+        std::memcpy(dst, src, size_t(nc) * 4);
         if (int(ai) == oi) noteOpacity(b, src);
       }
       b.presence |= uint64_t(1) << ai;
-      bytes += size_t(nc) * 4;
     }
-    b.bytes += bytes;
-    buffered += bytes;
   }
 
   void spillLargest() {
@@ -366,32 +485,25 @@ struct StoreWriter::Impl {
     order.reserve(builders.size());
     for (auto& [k, b] : builders) order.push_back(b.get());
     std::sort(order.begin(), order.end(), [](const Builder* a, const Builder* b) {
-      return a->bytes != b->bytes ? a->bytes > b->bytes : a->key.order() < b->key.order();
+      return a->chunks() != b->chunks() ? a->chunks() > b->chunks() : a->key.order() < b->key.order();
     });
+    // Retired builders hold their chunks until written, so count what stays behind.
+    size_t remaining = chunks.bytesInUse();
     for (Builder* b : order) {
-      if (buffered <= options.memoryBudget * 3 / 4) break;
+      if (remaining <= options.memoryBudget * 3 / 4) break;
+      remaining -= b->chunks() * kChunkWords * 4;
       retire(b->key);
     }
     writeFull();
   }
 
-  PendingPart finishPart(Builder& b) {
+  PendingPart finishPart(std::unique_ptr<Builder> owned) {
     PendingPart p;
-    TilePart& part = b.part;
-    part.numKnots = b.numKnots;
-    part.positions.clear();
-    part.positions.reserve(size_t(part.numVertices) * b.numKnots);
-    for (auto& kp : b.knotPositions) part.positions.insert(part.positions.end(), kp.begin(), kp.end());
-    b.knotPositions.clear();
-    for (size_t ai = 0; ai < meta.schema.attrs.size(); ++ai)
-      if (b.presence >> ai & 1) {
-        const auto& a = meta.schema.attrs[ai];
-        b.padAttr(a, ai, a.rate == AttrRate::Vertex ? part.numVertices : part.numMicropolygons);
-      }
+    const Builder& b = *owned;
     TileEntry& e = p.entry;
     e.tx = b.key.tx, e.ty = b.key.ty, e.schedule = b.key.schedule;
-    e.numMicropolygons = part.numMicropolygons;
-    e.numVertices = part.numVertices;
+    e.numMicropolygons = uint32_t(b.mps.size());
+    e.numVertices = uint32_t(b.vertices.size());
     e.effects = b.effects;
     e.attrPresence = b.presence;
     e.knots = b.bounds;
@@ -408,7 +520,7 @@ struct StoreWriter::Impl {
         kb.raster[i] = i < 2 ? v - margin : v + margin;
       }
     }
-    p.part = std::move(part);
+    p.builder = std::move(owned);
     return p;
   }
 
@@ -416,19 +528,20 @@ struct StoreWriter::Impl {
     if (full.empty()) return;
     std::vector<PendingPart> parts;
     parts.reserve(full.size());
-    for (auto& b : full) parts.push_back(finishPart(*b));
+    for (auto& b : full) parts.push_back(finishPart(std::move(b)));
     full.clear();
     const int level = options.zstdLevel;
     const Schema& schema = meta.schema;
     tbb::parallel_for(size_t(0), parts.size(), [&](size_t i) {
       auto& p = parts[i];
-      std::vector<uint8_t> raw;
-      encodeRaw(schema, p.part, p.entry.attrPresence, raw);
+      thread_local std::vector<uint8_t> raw;
+      thread_local TilePart part;
+      unpack(*p.builder, schema, layout, part);
+      encodeRaw(schema, part, p.entry.attrPresence, raw);
       compress(raw, level, p.compressed);
       p.entry.rawSize = uint32_t(raw.size());
       p.entry.compressedSize = uint32_t(p.compressed.size());
       p.entry.checksum = checksum(p.compressed);
-      p.part = TilePart{};
     });
     for (auto& p : parts) {
       writeAll(file.fd(), p.compressed.data(), p.compressed.size(), file.tempPath());
@@ -438,6 +551,9 @@ struct StoreWriter::Impl {
       stats.vertices += p.entry.numVertices;
       ++stats.parts;
       entries.push_back(std::move(p.entry));
+      p.builder->vertices.release(chunks);
+      p.builder->mps.release(chunks);
+      if (spareBuilders.size() < 256) spareBuilders.push_back(std::move(p.builder));
     }
   }
 

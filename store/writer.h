@@ -18,7 +18,9 @@
 namespace reshutter::store {
 
 struct WriterOptions {
-  size_t memoryBudget = size_t(256) << 20;  // bytes of unflushed micropolygon data
+  /// Bytes of unflushed micropolygon data. Each open tile holds at least 16 KB (two 8 KB chunks),
+  /// and a grid is added whole before the budget is enforced.
+  size_t memoryBudget = size_t(64) << 20;
   int zstdLevel = 3;
   uint32_t maxPartMicropolygons = 8192;
 };
@@ -29,20 +31,20 @@ struct WriteStats {
   uint64_t peakBufferedBytes = 0;
 };
 
-class StoreWriter {
+class StoreWriter final : public GridSink {
  public:
   StoreWriter(const std::string& path, StoreMeta meta, WriterOptions options = {});
-  ~StoreWriter();
+  ~StoreWriter() override;
   StoreWriter(const StoreWriter&) = delete;
   StoreWriter& operator=(const StoreWriter&) = delete;
 
   /// Registers a motion schedule (knot times inside the shutter, strictly increasing) and returns
   /// its index for GridInput::schedule; identical schedules share an index. One knot = static (0).
-  uint32_t addSchedule(const Schedule& knotTimes);
+  uint32_t addSchedule(const Schedule& knotTimes) override;
 
   /// Adds a grid. Throws Error (naming the grid id) on inconsistent input or non-finite values;
   /// the store is then unusable and close() will refuse.
-  void addGrid(const GridInput& grid);
+  void addGrid(const GridInput& grid) override;
 
   /// Finishes the file and moves it into place.
   WriteStats close();
