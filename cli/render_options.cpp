@@ -1,0 +1,87 @@
+#include "cli/render_options.h"
+
+#include <cstdio>
+#include <sstream>
+
+#include "common/error.h"
+#include "common/frame_range.h"
+
+namespace reshutter::cli {
+
+void RenderOptions::addTo(CLI::App* app) {
+  auto* s = app->add_option("--spp", spp, "Samples per pixel (default 16), stratified in position and time")->group("Sampling");
+  app->add_option("--samples", samples, "Samples per pixel as a grid, e.g. 4x4")->excludes(s)->group("Sampling");
+  app->add_option("--filter", filter,
+                  "Pixel filter NAME[:WIDTH[xHEIGHT]]: box triangle gaussian catmull-rom sinc blackman-harris mitchell")
+      ->capture_default_str()->group("Sampling");
+  app->add_option("--seed", seed, "Sample pattern seed (same seed, same image, any thread count)")->capture_default_str()->group("Sampling");
+  app->add_option("--aov", aovs,
+                  "Output variable NAME[:FILTER], repeatable: a store variable (N, P, s, Cs ...), id (object id) or z;\n"
+                  "FILTER is a pixel filter or min max average zmin zmax (closest surface only)")
+      ->group("Outputs");
+  app->add_option("--res", res, "Output resolution W H (default: the store camera's)")->expected(2)->group("Outputs");
+  app->add_option("--crop", crop, "Render only pixels x0 <= x < x1, y0 <= y < y1 (the EXR data window)")->expected(4)->group("Outputs");
+  app->add_flag("--half", half, "Write R G B A as half floats")->group("Outputs");
+  app->add_option("--compression", compression, "OpenEXR compression: none rle zips zip piz pxr24 b44 b44a dwaa dwab")
+      ->capture_default_str()->group("Outputs");
+  app->add_option("--preview", previews,
+                  "Also write an 8/16-bit PNG or TIFF: PATH or PATH=CHANNELS (default R,G,B,A; e.g. n.png=N.X,N.Y,N.Z)")
+      ->group("Outputs");
+  app->add_option("--quantize", quantize, "Preview quantisation ZERO,ONE,MIN,MAX (MAX > 255 gives 16 bits)")->capture_default_str()->group("Outputs");
+  app->add_option("--dither", dither, "Preview dither amplitude")->capture_default_str()->group("Outputs");
+  app->add_option("--opacity-threshold", opacityThreshold, "A sample stops once its opacity reaches this")
+      ->capture_default_str()->check(CLI::Range(0.0, 1.0))->group("Compositing");
+  app->add_flag("--backface-cull", backfaceCull, "Knock out micropolygons facing away (unless two-sided)")->group("Compositing");
+  app->add_option("--bucket", bucket, "Bucket size in pixels")->capture_default_str()->group("Performance");
+  app->add_option("--cache-mb", cacheMb, "Decoded tile cache per store, MB")->capture_default_str()->group("Performance");
+  app->add_flag("--stats", stats, "Print sample tests, hits, efficiency and time per phase")->group("Performance");
+}
+
+void RenderOptions::applyTo(resample::RenderSpec& spec) const {
+  int nx = 4, ny = 4;
+  if (!samples.empty()) {
+    if (std::sscanf(samples.c_str(), "%dx%d", &nx, &ny) != 2 || nx < 1 || ny < 1) fail("--samples", "expected NxM, got '", samples, "'");
+  } else if (!spp.empty()) {
+    int n = 0;
+    try {
+      n = std::stoi(spp);
+    } catch (const std::exception&) {
+    }
+    if (n < 1 || n > 4096) fail("--spp", "expected 1 to 4096, got '", spp, "'");
+    resample::SamplePattern::factor(n, nx, ny);
+  }
+  spec.samplesX = nx, spec.samplesY = ny;
+  spec.seed = seed;
+  spec.filter = resample::FilterSpec::parse(filter, "--filter");
+  if (spec.filter.special()) fail("--filter", "min max average zmin zmax are for output variables (--aov NAME:zmin)");
+  for (const auto& a : aovs) spec.aovs.push_back(resample::AovRequest::parse(a, "--aov"));
+  if (res.size() == 2) spec.width = res[0], spec.height = res[1];
+  if (crop.size() == 4) spec.cropX0 = crop[0], spec.cropX1 = crop[1], spec.cropY0 = crop[2], spec.cropY1 = crop[3];
+  spec.bucketSize = bucket;
+  spec.raster.opacityThreshold = float(opacityThreshold);
+  spec.raster.backfaceCull = backfaceCull;
+  spec.halfColor = half;
+  spec.cacheBytes = size_t(cacheMb * 1e6);
+  resample::parseExrCompression(compression, "--compression");
+}
+
+void RenderOptions::writeOutputs(const resample::RenderResult& result, const std::string& exrPath, int64_t frame) const {
+  resample::ExrOptions eo;
+  eo.compression = resample::parseExrCompression(compression, "--compression");
+  if (!exrPath.empty()) resample::writeExr(exrPath, result.image, result.provenance, eo);
+  resample::Quantize q;
+  if (std::sscanf(quantize.c_str(), "%lf,%lf,%lf,%lf", &q.zero, &q.one, &q.min, &q.max) != 4 || !(q.min <= q.max) || q.max > 65535 || q.min < 0)
+    fail("--quantize", "expected ZERO,ONE,MIN,MAX with 0 <= MIN <= MAX <= 65535, got '", quantize, "'");
+  q.dither = dither;
+  for (const auto& p : previews) {
+    std::string path = p, list = "R,G,B,A";
+    if (auto eq = p.find('='); eq != std::string::npos) path = p.substr(0, eq), list = p.substr(eq + 1);
+    std::vector<std::string> channels;
+    std::stringstream ss(list);
+    std::string c;
+    while (std::getline(ss, c, ',')) channels.push_back(c);
+    resample::writePreview(expandFramePattern(path, frame), result.image, channels, q, uint64_t(frame));
+  }
+}
+
+}  // namespace reshutter::cli

@@ -1,0 +1,42 @@
+// Options shared by every command that renders images from stores (resample, fields, retime):
+// sampling, filters, output variables, crop, outputs and their formats. One definition keeps the
+// commands consistent: whatever `resample` accepts, `fields` and `retime` accept too.
+#pragma once
+
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <CLI/CLI.hpp>
+
+#include "resample/resampler.h"
+
+namespace reshutter::cli {
+
+struct RenderOptions {
+  std::string spp;                 // "16"
+  std::string samples;             // "4x4"
+  std::string filter = "gaussian:2x2";
+  std::vector<std::string> aovs;
+  std::vector<int> res;            // W H
+  std::vector<int> crop;           // x0 x1 y0 y1 (pixels, end exclusive)
+  uint64_t seed = 0;
+  int bucket = 32;
+  double opacityThreshold = 0.996;
+  bool backfaceCull = false;
+  bool half = false;
+  std::string compression = "zip";
+  std::vector<std::string> previews;  // PATH or PATH=CHANNELS
+  std::string quantize = "0,255,0,255";
+  double dither = 0.5;
+  bool stats = false;
+  double cacheMb = 256;
+
+  void addTo(CLI::App* app);
+  /// Fills sampling, filter, AOV, crop and raster settings of `spec`.
+  void applyTo(resample::RenderSpec& spec) const;
+  /// Writes the EXR and any previews for one rendered image.
+  void writeOutputs(const resample::RenderResult& result, const std::string& exrPath, int64_t frame) const;
+};
+
+}  // namespace reshutter::cli

@@ -1,0 +1,54 @@
+// Pixel filters. The convolution filters are RenderMan's (box, triangle, gaussian, catmull-rom,
+// windowed sinc) plus blackman-harris and mitchell, all separable: w(dx, dy) = f(dx)·f(dy), with
+// a width per axis (the full support, in pixels). Pixel values are Σ w·v / Σ w over every sample
+// within the support, so filters are normalised by construction; samples exist beyond the image
+// edge (a margin of the filter's radius) so the sum never collapses at borders, and a guard keeps
+// negative-lobed filters from dividing by ~0. The special filters min, max, average, zmin and
+// zmax (the AOV reference's semantics) take one value per sample from the pixel's own samples.
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "resample/sampling.h"
+
+namespace reshutter::resample {
+
+enum class FilterKind { Box, Triangle, Gaussian, CatmullRom, Sinc, BlackmanHarris, Mitchell, Min, Max, Average, ZMin, ZMax };
+
+struct FilterSpec {
+  FilterKind kind = FilterKind::Gaussian;
+  float width = 2.0f, height = 2.0f;  // full support in pixels
+  bool special() const { return kind >= FilterKind::Min; }
+  std::string str() const;
+  /// "gaussian", "gaussian:2", "gaussian:2x3", "box:1", "zmin". Throws Error naming `where`.
+  static FilterSpec parse(const std::string& text, const std::string& where);
+};
+
+const char* filterName(FilterKind k);
+/// Default full width of a filter kind (RenderMan's defaults where it has them).
+float defaultFilterWidth(FilterKind k);
+/// The 1D filter at offset x pixels for a support of `width` pixels (0 outside).
+float filter1D(FilterKind k, float x, float width);
+
+/// Filter weights tabulated per (pattern, neighbour offset, sample): the weight a sample of a
+/// pixel at offset (dx, dy) from the target pixel gets.
+class FilterTable {
+ public:
+  FilterTable(const FilterSpec& spec, const SamplePattern& pattern);
+  int margin() const { return margin_; }   // neighbours each side
+  int span() const { return 2 * margin_ + 1; }
+  /// Weights for `pattern` at neighbour offset (dx, dy) ∈ [-margin, margin]², one per sample.
+  const float* weights(int pattern, int dx, int dy) const {
+    return &weights_[((size_t(pattern) * span() + size_t(dy + margin_)) * span() + size_t(dx + margin_)) * spp_];
+  }
+  float weightSum(int pattern, int dx, int dy) const {
+    return sums_[(size_t(pattern) * span() + size_t(dy + margin_)) * span() + size_t(dx + margin_)];
+  }
+
+ private:
+  int margin_, spp_;
+  std::vector<float> weights_, sums_;
+};
+
+}  // namespace reshutter::resample

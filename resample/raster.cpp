@@ -1,0 +1,810 @@
+#include "resample/raster.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstring>
+
+#include "common/error.h"
+
+namespace reshutter::resample {
+
+using store::kNoCorner;
+using store::TileEntry;
+using store::TilePart;
+
+void RasterStats::add(const RasterStats& o) {
+  sampleTests += o.sampleTests;
+  hits += o.hits;
+  micropolygons += o.micropolygons;
+  parts += o.parts;
+  fragments += o.fragments;
+  staticMicropolygons += o.staticMicropolygons;
+  transparentParts += o.transparentParts;
+}
+
+namespace {
+
+// Edge order of a quad: 01 12 23 30 and the diagonal 02. A triangle uses 01 12 02.
+constexpr int kEdgeVerts[5][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {0, 2}};
+
+inline glm::vec3 cross(const glm::vec3& a, const glm::vec3& b) {
+  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
+}
+
+// Quadratic coefficients of one edge's cross product over a knot segment: E(f) = e0 + f(e1 + f e2).
+struct EdgeQuad {
+  glm::vec3 e0, e1, e2;
+  glm::vec3 at(float f) const { return e0 + f * (e1 + f * e2); }
+};
+
+inline float dotRay(float rx, float ry, const glm::vec3& e) { return rx * e.x + ry * e.y + e.z; }
+
+// A sample exactly on an edge belongs to the triangle for which the orientation-normalised edge
+// vector is lexicographically positive; the neighbour sees the exact negation and declines.
+inline bool ownsTie(const glm::vec3& e, bool flip) {
+  glm::vec3 v = flip ? -e : e;
+  if (v.x != 0) return v.x > 0;
+  if (v.y != 0) return v.y > 0;
+  return v.z > 0;
+}
+
+constexpr uint8_t kHitOpaque = 1, kHitMatte = 2;
+
+struct Fragment {
+  float z;
+  float c[3];
+  float o[3];
+  uint32_t objectId, gridId;
+  uint32_t seq;
+  int32_t next;
+  uint32_t aovOffset, aovUOffset;
+  uint8_t matte;
+};
+
+}  // namespace
+
+struct BucketRasterizer::Impl {
+  const SamplePattern& pattern;
+  const ShutterModel& shutter;
+  View view;
+  const std::vector<AovChannel>& aovs;
+  RasterOptions opt;
+  const int N;
+  int aovFloatCount = 0, aovUIntCount = 0;
+  std::vector<int> aovFloatBase, aovUIntBase;  // per AOV channel: first component slot
+
+  // Region.
+  int x0 = 0, y0 = 0, w = 0, h = 0, P = 0;
+  std::vector<float> sx, sy, st, rayX, rayY;  // stratum-major: [s * P + p]
+  std::vector<uint32_t> slotAt;               // [s * P + p] → p * N + i
+  std::vector<uint8_t> rowGroup;              // per region row
+  std::vector<uint8_t> groupPresent;
+  std::vector<double> stratumLo, stratumHi;   // [g * N + s], absolute frames
+  double tMin = 0, tMax = 0;
+  // Sample times are stored as float offsets from one base shared by every bucket, so a sample's
+  // time (tBase + st) is the same whichever bucket computes it, and precise at any frame number.
+  double tBase = 0;
+
+  // Per-sample results (slot = p * N + i).
+  std::vector<float> zbuf, cr, cg, cb;
+  std::vector<uint8_t> state;
+  std::vector<uint32_t> objectOf, gridOf;
+  std::vector<float> zAov;       // [component * slots + slot]
+  std::vector<uint32_t> zAovU;   // [component * slots + slot]
+  std::vector<int32_t> fragHead;
+  std::vector<Fragment> frags;
+  std::vector<float> fragAov;
+  std::vector<uint32_t> fragAovU;
+  uint32_t fragSeq = 0;
+  bool anyFragments = false;
+
+  ResolvedSamples out;
+  RasterStats stats;
+
+  // Per-part scratch.
+  std::vector<glm::vec3> hom;          // homogeneous vertex coordinates at one time
+  std::vector<double> thetaTimes;      // distinct times the moving path projects vertices at
+  std::vector<float> projX, projY;     // [theta * nV + v]; projX NaN = before the near plane
+  std::vector<int> stratumFirst, stratumLast;  // theta index range per stratum
+  std::vector<EdgeQuad> segEdges;      // [segment * 5 + edge] for the current micropolygon
+  std::vector<uint8_t> segReady;
+  std::vector<uint32_t> thetaSeg;      // knot segment of each theta time
+  std::vector<float> thetaF;           // and the parameter inside it
+  std::vector<float> knotX, knotY;     // [knot * nV + v]; knotX NaN = before the near plane
+  std::vector<uint8_t> vertexStamp;    // theta projections computed for this vertex
+
+  Impl(const SamplePattern& p, const ShutterModel& s, const View& v, const std::vector<AovChannel>& a, const RasterOptions& o)
+      : pattern(p), shutter(s), view(v), aovs(a), opt(o), N(p.spp()), tBase(s.earliest()) {
+    for (const auto& ch : aovs) {
+      if (ch.isUInt) {
+        aovUIntBase.push_back(aovUIntCount);
+        aovFloatBase.push_back(-1);
+        aovUIntCount += 1;
+      } else {
+        aovFloatBase.push_back(aovFloatCount);
+        aovUIntBase.push_back(-1);
+        aovFloatCount += ch.components;
+      }
+    }
+  }
+
+  void begin(int rx0, int ry0, int rw, int rh) {
+    x0 = rx0, y0 = ry0, w = rw, h = rh, P = w * h;
+    const size_t slots = size_t(P) * N;
+    sx.resize(slots), sy.resize(slots), st.resize(slots), rayX.resize(slots), rayY.resize(slots), slotAt.resize(slots);
+    rowGroup.resize(size_t(h));
+    const int G = int(shutter.groups().size());
+    groupPresent.assign(size_t(G), 0);
+    for (int r = 0; r < h; ++r) {
+      rowGroup[size_t(r)] = uint8_t(shutter.groupOfRow(y0 + r));
+      groupPresent[rowGroup[size_t(r)]] = 1;
+    }
+    std::vector<uint16_t> stratumOf(static_cast<size_t>(N));
+    std::vector<float> u(static_cast<size_t>(N));
+    tMin = INFINITY, tMax = -INFINITY;
+    for (int py = 0; py < h; ++py)
+      for (int px = 0; px < w; ++px) {
+        const int p = py * w + px, gx = x0 + px, gy = y0 + py;
+        const int pat = pattern.patternOf(gx, gy);
+        pattern.times(gx, gy, stratumOf.data(), u.data());
+        const int g = rowGroup[size_t(py)];
+        for (int i = 0; i < N; ++i) {
+          const size_t idx = size_t(stratumOf[size_t(i)]) * P + size_t(p);
+          glm::vec2 o = pattern.offset(pat, i);
+          const float x = float(gx) + o.x, y = float(gy) + o.y;
+          sx[idx] = x, sy[idx] = y;
+          const double t = shutter.time(g, y, u[size_t(i)]);
+          st[idx] = float(t - tBase);
+          const double tc = tBase + double(st[idx]);
+          tMin = std::min(tMin, tc), tMax = std::max(tMax, tc);
+          glm::vec2 ray = view.rayXY(x, y);
+          rayX[idx] = ray.x, rayY[idx] = ray.y;
+          slotAt[idx] = uint32_t(p * N + i);
+        }
+      }
+    // Time range of each stratum over this region's rows (rolling shutter widens it).
+    stratumLo.assign(size_t(G) * N, 0.0), stratumHi.assign(size_t(G) * N, 0.0);
+    for (int g = 0; g < G; ++g)
+      for (int s = 0; s < N; ++s) {
+        double lo, hi;
+        shutter.timeRange(g, double(y0), double(y0 + h), double(s) / N, double(s + 1) / N, lo, hi);
+        stratumLo[size_t(g) * N + s] = lo;
+        stratumHi[size_t(g) * N + s] = hi;
+      }
+
+    zbuf.assign(slots, INFINITY);
+    cr.assign(slots, 0.f), cg.assign(slots, 0.f), cb.assign(slots, 0.f);
+    state.assign(slots, 0);
+    objectOf.assign(slots, 0);
+    gridOf.assign(slots, 0);
+    zAov.assign(slots * size_t(aovFloatCount), 0.f);
+    zAovU.assign(slots * size_t(aovUIntCount), 0u);
+    fragHead.assign(slots, -1);
+    frags.clear(), fragAov.clear(), fragAovU.clear();
+    fragSeq = 0;
+    anyFragments = false;
+    stats = RasterStats{};
+  }
+
+  // ------------------------------------------------------------------------------------------
+  // Shading a hit
+
+  // Interpolates attribute `ai` for micropolygon m at barycentrics b over triangle verts v.
+  static void attrAt(const store::TilePart& part, const store::Schema& schema, int ai, uint32_t m, const uint32_t v[3], const float b[3],
+                     float* outv) {
+    const auto& decl = schema.attrs[size_t(ai)];
+    const auto& arr = part.attrs[size_t(ai)];
+    const int nc = store::componentCount(decl.type);
+    if (arr.f.empty()) {
+      for (int c = 0; c < nc; ++c) outv[c] = 0.f;
+      return;
+    }
+    if (decl.rate == store::AttrRate::Micropolygon) {
+      for (int c = 0; c < nc; ++c) outv[c] = arr.f[size_t(m) * nc + c];
+      return;
+    }
+    for (int c = 0; c < nc; ++c)
+      outv[c] = b[0] * arr.f[size_t(v[0]) * nc + c] + b[1] * arr.f[size_t(v[1]) * nc + c] + b[2] * arr.f[size_t(v[2]) * nc + c];
+  }
+
+  void aovValues(const store::TilePart& part, const store::Schema& schema, uint32_t m, const uint32_t v[3], const float b[3], float z,
+                 float* f, uint32_t* u) {
+    for (size_t a = 0; a < aovs.size(); ++a) {
+      const auto& ch = aovs[a];
+      if (ch.isUInt) {
+        uint32_t val = 0;
+        if (ch.builtin == AovChannel::Builtin::ObjectId) val = part.objectId[m];
+        else if (ch.schemaIndex >= 0 && !part.attrs[size_t(ch.schemaIndex)].u.empty()) {
+          const auto& arr = part.attrs[size_t(ch.schemaIndex)].u;
+          if (schema.attrs[size_t(ch.schemaIndex)].rate == store::AttrRate::Micropolygon) val = arr[m];
+          else val = arr[v[b[1] > b[0] ? (b[2] > b[1] ? 2 : 1) : (b[2] > b[0] ? 2 : 0)]];  // nearest vertex
+        }
+        u[aovUIntBase[a]] = val;
+      } else if (ch.builtin == AovChannel::Builtin::Depth) {
+        f[aovFloatBase[a]] = z;
+      } else {
+        attrAt(part, schema, ch.schemaIndex, m, v, b, f + aovFloatBase[a]);
+      }
+    }
+  }
+
+  struct HitContext {
+    const store::TilePart* part;
+    const store::Schema* schema;
+    int ci, oi;
+    bool transparentPart;
+  };
+
+  void recordHit(const HitContext& hc, uint32_t slot, uint32_t m, const uint32_t v[3], const float b[3], float z) {
+    ++stats.hits;
+    const store::TilePart& part = *hc.part;
+    const bool matte = part.flags[m] & store::kMatte;
+    float o[3] = {1.f, 1.f, 1.f};
+    if (hc.transparentPart) attrAt(part, *hc.schema, hc.oi, m, v, b, o);
+    const bool opaque = o[0] >= 1.f && o[1] >= 1.f && o[2] >= 1.f;
+    if (opaque) {
+      if (!(z < zbuf[slot])) return;  // ties keep the earlier surface: deterministic by store order
+      zbuf[slot] = z;
+      float c[3];
+      attrAt(part, *hc.schema, hc.ci, m, v, b, c);
+      cr[slot] = c[0], cg[slot] = c[1], cb[slot] = c[2];
+      state[slot] = kHitOpaque | (matte ? kHitMatte : 0);
+      objectOf[slot] = part.objectId[m];
+      gridOf[slot] = part.gridId[m];
+      if (aovFloatCount || aovUIntCount) {
+        float fv[64];
+        uint32_t uv[16];
+        aovValues(part, *hc.schema, m, v, b, z, fv, uv);
+        const size_t slots = size_t(P) * N;
+        for (int c2 = 0; c2 < aovFloatCount; ++c2) zAov[size_t(c2) * slots + slot] = fv[c2];
+        for (int c2 = 0; c2 < aovUIntCount; ++c2) zAovU[size_t(c2) * slots + slot] = uv[c2];
+      }
+      return;
+    }
+    if (!(z < zbuf[slot])) return;  // hidden behind an opaque surface already found
+    for (float& x : o) x = std::clamp(x, 0.f, 1.f);
+    Fragment f;
+    f.z = z;
+    attrAt(part, *hc.schema, hc.ci, m, v, b, f.c);
+    std::copy(o, o + 3, f.o);
+    f.objectId = part.objectId[m];
+    f.gridId = part.gridId[m];
+    f.seq = fragSeq++;
+    f.matte = matte;
+    f.next = fragHead[slot];
+    f.aovOffset = uint32_t(fragAov.size());
+    f.aovUOffset = uint32_t(fragAovU.size());
+    if (aovFloatCount || aovUIntCount) {
+      float fv[64];
+      uint32_t uv[16];
+      aovValues(part, *hc.schema, m, v, b, z, fv, uv);
+      fragAov.insert(fragAov.end(), fv, fv + aovFloatCount);
+      fragAovU.insert(fragAovU.end(), uv, uv + aovUIntCount);
+    }
+    fragHead[slot] = int32_t(frags.size());
+    frags.push_back(f);
+    anyFragments = true;
+    ++stats.fragments;
+  }
+
+  // ------------------------------------------------------------------------------------------
+  // Coverage
+
+  // Given the edge values e[5] (edges 01 12 23 30 02) and vectors E[5] at the sample's time,
+  // decides coverage: triangle A (p0 p1 p2) first, then B (p0 p2 p3). On a hit, returns which
+  // triangle and the perspective-correct barycentrics of its three vertices.
+  inline bool inside(const float e[5], const glm::vec3 E[5], bool triangle, uint8_t flags, int& triOut, float bOut[3]) const {
+    {
+      const float a0 = e[1], a1 = -e[4], a2 = e[0];
+      const float S = a0 + a1 + a2;
+      if (S != 0.f && !(opt.backfaceCull && S > 0.f && !(flags & store::kTwoSided))) {
+        const bool flip = S < 0.f;
+        const bool in0 = a0 == 0.f ? ownsTie(E[1], flip) : (flip ? a0 < 0.f : a0 > 0.f);
+        const bool in1 = a1 == 0.f ? ownsTie(-E[4], flip) : (flip ? a1 < 0.f : a1 > 0.f);
+        const bool in2 = a2 == 0.f ? ownsTie(E[0], flip) : (flip ? a2 < 0.f : a2 > 0.f);
+        if (in0 && in1 && in2) {
+          const float inv = 1.f / S;
+          triOut = 0, bOut[0] = a0 * inv, bOut[1] = a1 * inv, bOut[2] = a2 * inv;
+          return true;
+        }
+      }
+    }
+    if (triangle) return false;
+    const float a0 = e[2], a1 = e[3], a2 = e[4];
+    const float S = a0 + a1 + a2;
+    if (S == 0.f || (opt.backfaceCull && S > 0.f && !(flags & store::kTwoSided))) return false;
+    const bool flip = S < 0.f;
+    const bool in0 = a0 == 0.f ? ownsTie(E[2], flip) : (flip ? a0 < 0.f : a0 > 0.f);
+    const bool in1 = a1 == 0.f ? ownsTie(E[3], flip) : (flip ? a1 < 0.f : a1 > 0.f);
+    const bool in2 = a2 == 0.f ? ownsTie(E[4], flip) : (flip ? a2 < 0.f : a2 > 0.f);
+    if (!(in0 && in1 && in2)) return false;
+    const float inv = 1.f / S;
+    triOut = 1, bOut[0] = a0 * inv, bOut[1] = a1 * inv, bOut[2] = a2 * inv;
+    return true;
+  }
+
+  glm::vec3 homogeneous(const glm::vec3& p) const { return view.perspective ? p : glm::vec3(p.x, p.y, 1.f); }
+
+  // Raster bounds of a set of camera-space points; false if one lies before the near plane.
+  bool project(const glm::vec3& p, float& x, float& y) const {
+    if (view.perspective) {
+      if (!(p.z >= view.nearClip)) return false;
+      x = float(view.ax * (double(p.x) / p.z) + view.bx);
+      y = float(view.ay * (double(p.y) / p.z) + view.by);
+    } else {
+      x = float(view.ax * p.x + view.bx);
+      y = float(view.ay * p.y + view.by);
+    }
+    return std::isfinite(x) && std::isfinite(y);
+  }
+
+  // Pixel range of a raster box, clipped to the region; false if empty.
+  bool pixelRange(float bx0, float by0, float bx1, float by1, int& px0, int& py0, int& px1, int& py1) const {
+    // A sample at x lies in pixel floor(x); a small margin absorbs float rounding of projections.
+    const float m = 1e-3f;
+    px0 = std::max(x0, int(std::floor(std::max(bx0 - m, float(x0)))));
+    py0 = std::max(y0, int(std::floor(std::max(by0 - m, float(y0)))));
+    px1 = std::min(x0 + w - 1, int(std::floor(std::min(bx1 + m, float(x0 + w)))));
+    py1 = std::min(y0 + h - 1, int(std::floor(std::min(by1 + m, float(y0 + h)))));
+    return px0 <= px1 && py0 <= py1;
+  }
+
+  // ------------------------------------------------------------------------------------------
+  // Static micropolygons: one set of positions for every sample time.
+
+  void rasterizeStatic(const Source& src, const TilePart& part, const HitContext& hc, const glm::vec3* pos, int onlyGroup) {
+    const double covLo = src.coverStart(), covHi = src.coverEnd();
+    const bool checkCover = tMin < covLo || tMax > covHi;
+    hom.resize(part.numVertices);
+    for (size_t i = 0; i < part.numVertices; ++i) hom[i] = homogeneous(pos[i]);
+    for (uint32_t m = 0; m < part.numMicropolygons; ++m) {
+      const uint32_t* c = &part.corners[size_t(m) * 4];
+      const bool tri = c[3] == kNoCorner;
+      const int nc = tri ? 3 : 4;
+      glm::vec3 E[5] = {};
+      for (int k = 0; k < 5; ++k) {
+        if (tri && (k == 2 || k == 3)) continue;
+        E[k] = cross(hom[c[kEdgeVerts[k][0]]], hom[c[kEdgeVerts[k][1]]]);
+      }
+      float zv[4];
+      float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
+      bool bounded = true;
+      for (int j = 0; j < nc; ++j) {
+        zv[j] = pos[c[j]].z;
+        float x, y;
+        if (!project(pos[c[j]], x, y)) bounded = false;
+        else bx0 = std::min(bx0, x), by0 = std::min(by0, y), bx1 = std::max(bx1, x), by1 = std::max(by1, y);
+      }
+      if (tri) zv[3] = zv[2];
+      int px0, py0, px1, py1;
+      if (!bounded) px0 = x0, py0 = y0, px1 = x0 + w - 1, py1 = y0 + h - 1;
+      else if (!pixelRange(bx0, by0, bx1, by1, px0, py0, px1, py1)) continue;
+      ++stats.staticMicropolygons;
+      for (int py = py0; py <= py1; ++py) {
+        if (onlyGroup >= 0 && rowGroup[size_t(py - y0)] != onlyGroup) continue;
+        for (int px = px0; px <= px1; ++px) {
+          const size_t p = size_t(py - y0) * w + size_t(px - x0);
+          for (int s = 0; s < N; ++s) {
+            const size_t idx = size_t(s) * P + p;
+            if (checkCover && !(tBase + st[idx] >= covLo && tBase + st[idx] <= covHi)) continue;
+            ++stats.sampleTests;
+            float e[5] = {0, 0, 0, 0, 0};
+            for (int k = 0; k < 5; ++k)
+              if (!tri || k == 0 || k == 1 || k == 4) e[k] = dotRay(rayX[idx], rayY[idx], E[k]);
+            float b[3];
+            int t;
+            if (!inside(e, E, tri, part.flags[m], t, b)) continue;
+            const float z = t == 0 ? b[0] * zv[0] + b[1] * zv[1] + b[2] * zv[2] : b[0] * zv[0] + b[1] * zv[2] + b[2] * zv[3];
+            if (!(z >= view.nearClip && z <= view.farClip)) continue;
+            const uint32_t tv[3] = {c[0], c[t == 0 ? 1 : 2], c[t == 0 ? 2 : 3]};
+            recordHit(hc, slotAt[idx], m, tv, b, z);
+          }
+        }
+      }
+    }
+  }
+
+  // ------------------------------------------------------------------------------------------
+  // Moving micropolygons, one shutter group at a time.
+
+  // Position of vertex v at local time tau: linear between knots, constant outside them.
+  static glm::vec3 positionAt(const TilePart& part, const store::Schedule& knots, uint32_t v, double tau) {
+    const uint32_t K = part.numKnots;
+    if (K == 1 || tau <= knots[0]) return part.position(0, v);
+    if (tau >= knots[K - 1]) return part.position(K - 1, v);
+    uint32_t k = 0;
+    while (k + 2 < K && knots[k + 1] <= tau) ++k;
+    const float f = float((tau - knots[k]) / (knots[k + 1] - knots[k]));
+    const glm::vec3& a = part.position(k, v);
+    return a + f * (part.position(k + 1, v) - a);
+  }
+
+  // Knot segment and parameter for a local time (general schedules; two-knot schedules take a
+  // precomputed linear map instead).
+  static void segmentAt(const store::Schedule& knots, double tau, uint32_t& k, float& f) {
+    const uint32_t K = uint32_t(knots.size());
+    k = 0;
+    if (tau <= knots[0]) {
+      f = 0.f;
+      return;
+    }
+    if (tau >= knots[K - 1]) {
+      k = K - 2, f = 1.f;
+      return;
+    }
+    while (k + 2 < K && knots[k + 1] <= tau) ++k;
+    f = float((tau - knots[k]) / (knots[k + 1] - knots[k]));
+  }
+
+  void rasterizeMoving(const Source& src, const TilePart& part, const store::Schedule& knots, const HitContext& hc, int g) {
+    const uint32_t nV = part.numVertices, K = part.numKnots;
+    const double F = double(src.frame);
+    const double toLocal = tBase - F;  // local time = st + toLocal
+    const double covLo = src.coverStart() - tBase, covHi = src.coverEnd() - tBase;  // in st units
+    const double* lo = &stratumLo[size_t(g) * N];
+    const double* hi = &stratumHi[size_t(g) * N];
+
+    // Distinct local times to project vertices at: strata boundaries and the knots between them.
+    thetaTimes.clear();
+    for (int s = 0; s < N; ++s) thetaTimes.push_back(lo[s] - F), thetaTimes.push_back(hi[s] - F);
+    for (uint32_t k = 0; k < K; ++k)
+      if (knots[k] > lo[0] - F && knots[k] < hi[N - 1] - F) thetaTimes.push_back(knots[k]);
+    std::sort(thetaTimes.begin(), thetaTimes.end());
+    thetaTimes.erase(std::unique(thetaTimes.begin(), thetaTimes.end()), thetaTimes.end());
+    const size_t T = thetaTimes.size();
+    stratumFirst.resize(size_t(N)), stratumLast.resize(size_t(N));
+    for (int s = 0; s < N; ++s) {
+      stratumFirst[size_t(s)] = int(std::lower_bound(thetaTimes.begin(), thetaTimes.end(), lo[s] - F) - thetaTimes.begin());
+      stratumLast[size_t(s)] = int(std::upper_bound(thetaTimes.begin(), thetaTimes.end(), hi[s] - F) - thetaTimes.begin()) - 1;
+    }
+    thetaSeg.resize(T), thetaF.resize(T);
+    for (size_t ti = 0; ti < T; ++ti) segmentAt(knots, thetaTimes[ti], thetaSeg[ti], thetaF[ti]);
+
+    // Knots whose segments the group's time range touches, and every vertex projected at them:
+    // a cheap cull of micropolygons that cannot reach this bucket before any per-stratum work.
+    uint32_t kFirst, kLast;
+    {
+      float f;
+      segmentAt(knots, lo[0] - F, kFirst, f);
+      if (f == 1.f && kFirst + 1 < K) ++kFirst;
+      segmentAt(knots, hi[N - 1] - F, kLast, f);
+      if (f > 0.f || kLast + 1 < K) ++kLast;
+      kLast = std::min(kLast, K - 1);
+    }
+    knotX.resize(size_t(K) * nV), knotY.resize(size_t(K) * nV);
+    for (uint32_t k = kFirst; k <= kLast; ++k)
+      for (uint32_t v = 0; v < nV; ++v) {
+        float x, y;
+        if (project(part.position(k, v), x, y)) knotX[size_t(k) * nV + v] = x, knotY[size_t(k) * nV + v] = y;
+        else knotX[size_t(k) * nV + v] = NAN;
+      }
+    projX.resize(T * nV), projY.resize(T * nV);
+    vertexStamp.assign(nV, 0u);
+
+    // Two-knot schedules (the common case): the segment parameter is a linear map of st.
+    const bool twoKnots = K == 2;
+    const float fScale = twoKnots ? float(1.0 / (knots[1] - knots[0])) : 0.f;
+    const float fOffset = twoKnots ? float(toLocal - knots[0]) : 0.f;
+
+    const uint32_t segments = K - 1;
+    segEdges.resize(size_t(segments) * 5);
+    segReady.resize(segments);
+    const float m = 1e-3f;
+    for (uint32_t mi = 0; mi < part.numMicropolygons; ++mi) {
+      const uint32_t* c = &part.corners[size_t(mi) * 4];
+      const bool tri = c[3] == kNoCorner;
+      const int nc = tri ? 3 : 4;
+      // Cull against the region over the knots in range.
+      {
+        float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
+        bool bounded = true;
+        for (uint32_t k = kFirst; k <= kLast && bounded; ++k)
+          for (int j = 0; j < nc; ++j) {
+            const float x = knotX[size_t(k) * nV + c[j]];
+            if (std::isnan(x)) {
+              bounded = false;
+              break;
+            }
+            const float y = knotY[size_t(k) * nV + c[j]];
+            bx0 = std::min(bx0, x), by0 = std::min(by0, y), bx1 = std::max(bx1, x), by1 = std::max(by1, y);
+          }
+        if (bounded && (bx1 + m < float(x0) || bx0 - m >= float(x0 + w) || by1 + m < float(y0) || by0 - m >= float(y0 + h))) continue;
+      }
+      // Corner projections at the strata boundaries, computed once per vertex.
+      for (int j = 0; j < nc; ++j) {
+        const uint32_t v = c[j];
+        if (vertexStamp[v]) continue;
+        vertexStamp[v] = 1;
+        for (size_t ti = 0; ti < T; ++ti) {
+          const uint32_t k = thetaSeg[ti];
+          const glm::vec3& a = part.position(k, v);
+          const glm::vec3 p = a + thetaF[ti] * (part.position(k + 1, v) - a);
+          float x, y;
+          if (project(p, x, y)) projX[ti * nV + v] = x, projY[ti * nV + v] = y;
+          else projX[ti * nV + v] = NAN;
+        }
+      }
+      std::fill(segReady.begin(), segReady.end(), 0);
+      const uint8_t flags = part.flags[mi];
+
+      for (int s = 0; s < N; ++s) {
+        float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
+        bool bounded = true;
+        for (int ti = stratumFirst[size_t(s)]; ti <= stratumLast[size_t(s)] && bounded; ++ti)
+          for (int j = 0; j < nc; ++j) {
+            const float x = projX[size_t(ti) * nV + c[j]];
+            if (std::isnan(x)) {
+              bounded = false;
+              break;
+            }
+            const float y = projY[size_t(ti) * nV + c[j]];
+            bx0 = std::min(bx0, x), by0 = std::min(by0, y), bx1 = std::max(bx1, x), by1 = std::max(by1, y);
+          }
+        int px0, py0, px1, py1;
+        if (!bounded) px0 = x0, py0 = y0, px1 = x0 + w - 1, py1 = y0 + h - 1;
+        else if (!pixelRange(bx0, by0, bx1, by1, px0, py0, px1, py1)) continue;
+        for (int py = py0; py <= py1; ++py) {
+          if (rowGroup[size_t(py - y0)] != g) continue;
+          const size_t rowBase = size_t(s) * P + size_t(py - y0) * w;
+          for (int px = px0; px <= px1; ++px) {
+            const size_t idx = rowBase + size_t(px - x0);
+            const float t = st[idx];
+            if (double(t) < covLo || double(t) > covHi) continue;
+            ++stats.sampleTests;
+            uint32_t k = 0;
+            float f;
+            if (twoKnots) f = std::clamp((t + fOffset) * fScale, 0.f, 1.f);
+            else segmentAt(knots, double(t) + toLocal, k, f);
+            EdgeQuad* q = &segEdges[size_t(k) * 5];
+            if (!segReady[k]) {
+              prepareEdges(part, c, tri, k, q);
+              segReady[k] = 1;
+            }
+            glm::vec3 E[5];
+            float e[5];
+            for (int ei = 0; ei < 5; ++ei) {
+              if (tri && (ei == 2 || ei == 3)) {
+                E[ei] = glm::vec3(0.f), e[ei] = 0.f;
+                continue;
+              }
+              E[ei] = q[ei].at(f);
+              e[ei] = dotRay(rayX[idx], rayY[idx], E[ei]);
+            }
+            int tr;
+            float b[3];
+            if (!inside(e, E, tri, flags, tr, b)) continue;
+            const float* zk = nullptr;
+            (void)zk;
+            float zv[3];
+            const uint32_t tv[3] = {c[0], c[tr == 0 ? 1 : 2], c[tr == 0 ? 2 : 3]};
+            for (int j = 0; j < 3; ++j) {
+              const float za = part.position(k, tv[j]).z, zb = part.position(k + 1, tv[j]).z;
+              zv[j] = za + f * (zb - za);
+            }
+            const float z = b[0] * zv[0] + b[1] * zv[1] + b[2] * zv[2];
+            if (!(z >= view.nearClip && z <= view.farClip)) continue;
+            recordHit(hc, slotAt[idx], mi, tv, b, z);
+          }
+        }
+      }
+    }
+  }
+
+  void prepareEdges(const TilePart& part, const uint32_t* c, bool tri, uint32_t k, EdgeQuad* q) const {
+    glm::vec3 A[4], D[4];
+    const int nc = tri ? 3 : 4;
+    for (int j = 0; j < nc; ++j) {
+      A[j] = homogeneous(part.position(k, c[j]));
+      D[j] = homogeneous(part.position(k + 1, c[j])) - A[j];
+      if (!view.perspective) D[j].z = 0.f;
+    }
+    for (int e = 0; e < 5; ++e) {
+      if (tri && (e == 2 || e == 3)) continue;
+      const int a = kEdgeVerts[e][0], b = kEdgeVerts[e][1];
+      q[e].e0 = cross(A[a], A[b]);
+      q[e].e1 = cross(A[a], D[b]) + cross(D[a], A[b]);
+      q[e].e2 = cross(D[a], D[b]);
+    }
+  }
+
+  void rasterize(const Source& src, const TileEntry& entry, const TilePart& part) {
+    const auto& meta = src.store->meta();
+    const auto& knots = meta.schedules[entry.schedule];
+    HitContext hc{&part, &meta.schema, meta.schema.ci(), meta.schema.oi(), (entry.effects & store::kEffectTransparent) != 0};
+    ++stats.parts;
+    stats.micropolygons += part.numMicropolygons;
+    if (hc.transparentPart) ++stats.transparentParts;
+    const bool moving = (entry.effects & store::kEffectMoving) && part.numKnots > 1;
+    if (!moving) {
+      // Knot 0 holds every knot's positions: one pass serves all samples, all groups.
+      rasterizeStatic(src, part, hc, part.positions.data(), -1);
+      return;
+    }
+    const int G = int(shutter.groups().size());
+    for (int g = 0; g < G; ++g) {
+      if (!groupPresent[size_t(g)]) continue;
+      if (shutter.instantaneous(g)) {
+        // A zero-length shutter: the exact instantaneous image, no time sampling.
+        const double tau = shutter.groups()[size_t(g)].open - double(src.frame);
+        std::vector<glm::vec3> pos(part.numVertices);
+        for (uint32_t v = 0; v < part.numVertices; ++v) pos[v] = positionAt(part, knots, v, tau);
+        rasterizeStatic(src, part, hc, pos.data(), G > 1 ? g : -1);
+      } else {
+        rasterizeMoving(src, part, knots, hc, g);
+      }
+    }
+  }
+
+  // ------------------------------------------------------------------------------------------
+  // Resolve
+
+  const ResolvedSamples& resolve() {
+    const size_t slots = size_t(P) * N;
+    out.x0 = x0, out.y0 = y0, out.width = w, out.height = h, out.spp = N;
+    out.r.resize(slots), out.g.resize(slots), out.b.resize(slots), out.a.resize(slots), out.z.resize(slots);
+    out.ar.resize(slots), out.ag.resize(slots), out.ab.resize(slots);
+    out.aov.resize(size_t(aovFloatCount));
+    for (auto& v : out.aov) v.assign(slots, 0.f);
+    out.aovU.resize(size_t(aovUIntCount));
+    for (auto& v : out.aovU) v.assign(slots, 0u);
+    out.aovZ.assign(slots, INFINITY);
+    const float far = view.farClip;
+    const float stopT = 1.f - opt.opacityThreshold;
+    std::vector<const Fragment*> list;
+    for (size_t slot = 0; slot < slots; ++slot) {
+      const uint8_t s = state[slot];
+      const float zo = zbuf[slot];
+      if (!anyFragments || fragHead[slot] < 0) {
+        const bool visible = (s & kHitOpaque) && !(s & kHitMatte);
+        out.r[slot] = visible ? cr[slot] : 0.f;
+        out.g[slot] = visible ? cg[slot] : 0.f;
+        out.b[slot] = visible ? cb[slot] : 0.f;
+        const float a = visible ? 1.f : 0.f;
+        out.a[slot] = out.ar[slot] = out.ag[slot] = out.ab[slot] = a;
+        out.z[slot] = (s & kHitOpaque) ? zo : far;
+        if (s & kHitOpaque) {
+          out.aovZ[slot] = zo;
+          for (int c = 0; c < aovFloatCount; ++c) out.aov[size_t(c)][slot] = zAov[size_t(c) * slots + slot];
+          for (int c = 0; c < aovUIntCount; ++c) out.aovU[size_t(c)][slot] = zAovU[size_t(c) * slots + slot];
+        }
+        // Composited AOVs of a matte surface are zero like its colour.
+        if ((s & kHitMatte)) zeroCompositedAovs(slot);
+        continue;
+      }
+      // Transparent surfaces in front of the nearest opaque one, front to back.
+      list.clear();
+      for (int32_t f = fragHead[slot]; f >= 0; f = frags[size_t(f)].next)
+        if (frags[size_t(f)].z < zo) list.push_back(&frags[size_t(f)]);
+      std::sort(list.begin(), list.end(), [](const Fragment* a, const Fragment* b) { return a->z != b->z ? a->z < b->z : a->seq < b->seq; });
+      float T[3] = {1.f, 1.f, 1.f}, C[3] = {0.f, 0.f, 0.f}, A[3] = {0.f, 0.f, 0.f};
+      float closestZ = INFINITY;
+      bool closestChosen = false;
+      float aovAcc[64] = {};
+      bool opaqueReached = false;
+      auto takeSingle = [&](const float* fv, const uint32_t* uv, float z) {
+        closestChosen = true;
+        closestZ = z;
+        out.aovZ[slot] = z;
+        for (size_t a = 0; a < aovs.size(); ++a) {
+          if (aovs[a].isUInt) out.aovU[size_t(aovUIntBase[a])][slot] = uv[aovUIntBase[a]];
+          else if (!aovs[a].composited())
+            for (int c = 0; c < aovs[a].components; ++c) out.aov[size_t(aovFloatBase[a] + c)][slot] = fv[aovFloatBase[a] + c];
+        }
+      };
+      for (const Fragment* f : list) {
+        const float oAvg = (f->o[0] + f->o[1] + f->o[2]) / 3.f;
+        const float tAvg = (T[0] + T[1] + T[2]) / 3.f;
+        const float* fv = fragAov.data() + f->aovOffset;
+        const uint32_t* uv = fragAovU.data() + f->aovUOffset;
+        if (!f->matte) {
+          for (int c = 0; c < 3; ++c) C[c] += T[c] * f->c[c], A[c] += T[c] * f->o[c];
+          for (size_t a = 0; a < aovs.size(); ++a)
+            if (!aovs[a].isUInt && aovs[a].composited())
+              for (int c = 0; c < aovs[a].components; ++c) aovAcc[aovFloatBase[a] + c] += tAvg * oAvg * fv[aovFloatBase[a] + c];
+        }
+        if (!closestChosen && oAvg >= opt.opacityThreshold) takeSingle(fv, uv, f->z);
+        for (int c = 0; c < 3; ++c) T[c] *= 1.f - f->o[c];
+        if (T[0] <= stopT && T[1] <= stopT && T[2] <= stopT) {
+          opaqueReached = true;
+          break;
+        }
+      }
+      if (!opaqueReached && (s & kHitOpaque)) {
+        const float tAvg = (T[0] + T[1] + T[2]) / 3.f;
+        if (!(s & kHitMatte)) {
+          C[0] += T[0] * cr[slot], C[1] += T[1] * cg[slot], C[2] += T[2] * cb[slot];
+          for (int c = 0; c < 3; ++c) A[c] += T[c];
+          for (size_t a = 0; a < aovs.size(); ++a)
+            if (!aovs[a].isUInt && aovs[a].composited())
+              for (int c = 0; c < aovs[a].components; ++c) aovAcc[aovFloatBase[a] + c] += tAvg * zAov[size_t(aovFloatBase[a] + c) * slots + slot];
+        }
+        if (!closestChosen) {
+          float fv[64];
+          uint32_t uv[16];
+          for (int c = 0; c < aovFloatCount; ++c) fv[c] = zAov[size_t(c) * slots + slot];
+          for (int c = 0; c < aovUIntCount; ++c) uv[c] = zAovU[size_t(c) * slots + slot];
+          takeSingle(fv, uv, zo);
+        }
+      }
+      out.r[slot] = C[0], out.g[slot] = C[1], out.b[slot] = C[2];
+      out.ar[slot] = A[0], out.ag[slot] = A[1], out.ab[slot] = A[2];
+      out.a[slot] = (A[0] + A[1] + A[2]) / 3.f;
+      out.z[slot] = closestChosen ? closestZ : far;
+      for (size_t a = 0; a < aovs.size(); ++a)
+        if (!aovs[a].isUInt && aovs[a].composited())
+          for (int c = 0; c < aovs[a].components; ++c) out.aov[size_t(aovFloatBase[a] + c)][slot] = aovAcc[aovFloatBase[a] + c];
+    }
+    return out;
+  }
+
+  void visitFragments(const std::function<void(size_t, const SampleFragment*, size_t)>& fn) {
+    const size_t slots = size_t(P) * N;
+    const float stopT = 1.f - opt.opacityThreshold;
+    std::vector<const Fragment*> list;
+    std::vector<SampleFragment> outList;
+    std::vector<float> opaqueAov(static_cast<size_t>(aovFloatCount));
+    std::vector<uint32_t> opaqueAovU(static_cast<size_t>(aovUIntCount));
+    for (size_t slot = 0; slot < slots; ++slot) {
+      const uint8_t s = state[slot];
+      const float zo = zbuf[slot];
+      list.clear();
+      outList.clear();
+      if (anyFragments)
+        for (int32_t f = fragHead[slot]; f >= 0; f = frags[size_t(f)].next)
+          if (frags[size_t(f)].z < zo) list.push_back(&frags[size_t(f)]);
+      std::sort(list.begin(), list.end(), [](const Fragment* a, const Fragment* b) { return a->z != b->z ? a->z < b->z : a->seq < b->seq; });
+      float T[3] = {1.f, 1.f, 1.f};
+      bool opaqueReached = false;
+      for (const Fragment* f : list) {
+        SampleFragment sf;
+        sf.z = f->z;
+        for (int c = 0; c < 3; ++c) sf.c[c] = f->matte ? 0.f : f->c[c], sf.o[c] = f->o[c];
+        sf.objectId = f->objectId, sf.gridId = f->gridId, sf.matte = f->matte;
+        sf.aov = fragAov.data() + f->aovOffset;
+        sf.aovU = fragAovU.data() + f->aovUOffset;
+        outList.push_back(sf);
+        for (int c = 0; c < 3; ++c) T[c] *= 1.f - f->o[c];
+        if (T[0] <= stopT && T[1] <= stopT && T[2] <= stopT) {
+          opaqueReached = true;
+          break;
+        }
+      }
+      if (!opaqueReached && (s & kHitOpaque)) {
+        SampleFragment sf;
+        sf.z = zo;
+        const bool matte = s & kHitMatte;
+        sf.c[0] = matte ? 0.f : cr[slot], sf.c[1] = matte ? 0.f : cg[slot], sf.c[2] = matte ? 0.f : cb[slot];
+        sf.objectId = objectOf[slot], sf.gridId = gridOf[slot], sf.matte = matte;
+        for (int c = 0; c < aovFloatCount; ++c) opaqueAov[size_t(c)] = zAov[size_t(c) * slots + slot];
+        for (int c = 0; c < aovUIntCount; ++c) opaqueAovU[size_t(c)] = zAovU[size_t(c) * slots + slot];
+        sf.aov = opaqueAov.data(), sf.aovU = opaqueAovU.data();
+        outList.push_back(sf);
+      }
+      fn(slot, outList.data(), outList.size());
+    }
+  }
+
+  void zeroCompositedAovs(size_t slot) {
+    for (size_t a = 0; a < aovs.size(); ++a)
+      if (!aovs[a].isUInt && aovs[a].composited())
+        for (int c = 0; c < aovs[a].components; ++c) out.aov[size_t(aovFloatBase[a] + c)][slot] = 0.f;
+  }
+};
+
+BucketRasterizer::BucketRasterizer(const SamplePattern& pattern, const ShutterModel& shutter, const View& view,
+                                   const std::vector<AovChannel>& aovs, const RasterOptions& options)
+    : impl_(std::make_unique<Impl>(pattern, shutter, view, aovs, options)) {
+  int floats = 0, uints = 0;
+  for (const auto& a : aovs) (a.isUInt ? uints : floats) += a.isUInt ? 1 : a.components;
+  if (floats > 64 || uints > 16) fail("--aov", "too many output variables (at most 64 float components and 16 ids)");
+}
+BucketRasterizer::~BucketRasterizer() = default;
+void BucketRasterizer::begin(int x0, int y0, int w, int h) { impl_->begin(x0, y0, w, h); }
+double BucketRasterizer::earliestTime() const { return impl_->tMin; }
+double BucketRasterizer::latestTime() const { return impl_->tMax; }
+void BucketRasterizer::rasterize(const Source& source, const TileEntry& entry, const TilePart& part) { impl_->rasterize(source, entry, part); }
+const ResolvedSamples& BucketRasterizer::resolve() { return impl_->resolve(); }
+void BucketRasterizer::visitFragments(const std::function<void(size_t, const SampleFragment*, size_t)>& fn) { impl_->visitFragments(fn); }
+const RasterStats& BucketRasterizer::stats() const { return impl_->stats; }
+
+}  // namespace reshutter::resample

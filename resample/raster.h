@@ -1,0 +1,134 @@
+// The bucket rasterizer: takes the samples of one bucket (plus the filter margin) and the tile
+// parts whose bounds touch it, and finds every sample each micropolygon covers.
+//
+// Coverage is tested with homogeneous 2D edge functions: for a sample's view ray d and camera-
+// space vertices V_j(t), V_k(t), the edge value is e = d · (V_j(t) × V_k(t)). Between knots the
+// vertices move linearly, so each edge's cross product is a quadratic in the segment parameter,
+// precomputed per micropolygon. The normalised edge values are the perspective-correct
+// barycentrics of the hit, and the hit depth follows from them, so micropolygons crossing the
+// eye plane need no clipping: a hit behind the near plane is simply rejected. Quads are tested as
+// the two triangles (p0 p1 p2) and (p0 p2 p3); attributes interpolate linearly on each.
+//
+// Watertightness: an edge shared by two micropolygons is evaluated from the same vertex values in
+// opposite order, which yields exactly the negated value (cross products and sums are computed so
+// that negation is exact), and a sample exactly on an edge belongs to the side for which the
+// orientation-normalised edge vector is lexicographically positive - exactly one of the two.
+// The build uses -ffp-contract=off so no compiler contraction breaks that symmetry.
+//
+// Per-time-stratum bounds: each micropolygon is bounded separately for each of the N time strata
+// of the bucket (its vertices projected at the strata's boundary times), and tested only against
+// the one sample per pixel whose time falls in that stratum (Pixar's INTERVAL idea). A shorter
+// shutter gives smaller bounds and proportionally fewer tests.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <vector>
+
+#include <glm/vec3.hpp>
+
+#include "resample/filter.h"
+#include "resample/sampling.h"
+#include "resample/shutter.h"
+#include "store/model.h"
+#include "store/reader.h"
+
+namespace reshutter::resample {
+
+/// The output camera's projection as the rasterizer needs it.
+struct View {
+  double ax = 1, bx = 0, ay = 1, by = 0;  // raster = a·(x/z) + b (perspective) or a·x + b
+  bool perspective = true;
+  float nearClip = 1e-4f, farClip = 1e30f;
+  /// Normalised view-ray direction of a raster position: (x', y', 1).
+  glm::vec2 rayXY(float rx, float ry) const { return {float((rx - bx) / ax), float((ry - by) / ay)}; }
+};
+
+/// One store contributing to the render: its micropolygons cover [frame + open, frame + close]
+/// in absolute frames (neighbouring frames' stores for intervals that cross frame boundaries).
+struct Source {
+  std::shared_ptr<const store::StoreReader> store;
+  int64_t frame = 0;
+  double coverStart() const { return double(frame) + store->meta().shutterOpen; }
+  double coverEnd() const { return double(frame) + store->meta().shutterClose; }
+};
+
+/// An output variable requested on the image, resolved against the stores' schema.
+struct AovChannel {
+  std::string name;      // attribute name in the store ("N", "s", "Cs") or "id" / "z"
+  FilterSpec filter;
+  int components = 1;
+  bool isUInt = false;   // object ids
+  int schemaIndex = -1;  // -1: built-in ("id", "z")
+  enum class Builtin { None, ObjectId, Depth } builtin = Builtin::None;
+  /// Composited outputs blend every surface with its opacity, like colour; special filters
+  /// (min max average zmin zmax) sample only the closest surface above the opacity threshold.
+  bool composited() const { return !filter.special(); }
+};
+
+struct RasterOptions {
+  float opacityThreshold = 0.996f;  // a sample stops once every channel's opacity reaches this
+  bool backfaceCull = false;        // knock out back-facing micropolygons unless two-sided
+};
+
+/// Counters for --stats; summed over buckets.
+struct RasterStats {
+  uint64_t sampleTests = 0, hits = 0, micropolygons = 0, parts = 0, fragments = 0;
+  uint64_t staticMicropolygons = 0, transparentParts = 0;
+  void add(const RasterStats& o);
+};
+
+/// The resolved samples of one bucket region (interior + margin), ready to be filtered:
+/// per sample R G B A Z and the requested AOV components, indexed [pixel * spp + i].
+struct ResolvedSamples {
+  int x0 = 0, y0 = 0, width = 0, height = 0, spp = 1;
+  std::vector<float> r, g, b, a, z;
+  std::vector<float> ar, ag, ab;     // per-channel alpha (coloured opacity), for deep output
+  std::vector<std::vector<float>> aov;      // per AOV component
+  std::vector<std::vector<uint32_t>> aovU;  // per uint AOV
+  std::vector<float> aovZ;                  // depth of the surface the single-closest AOVs took
+};
+
+/// One surface a sample saw, for deep output: fragments come front to back, transparent ones
+/// first and the nearest opaque surface last (nothing behind an opaque surface is kept).
+/// `aov`/`aovU` point at the fragment's output-variable values in the layout of ResolvedSamples
+/// (float components of every non-uint AOV in request order; one uint per uint AOV).
+struct SampleFragment {
+  float z = 0;
+  float c[3] = {0, 0, 0};  // premultiplied colour (zero for matte surfaces)
+  float o[3] = {1, 1, 1};  // per-channel opacity
+  uint32_t objectId = 0, gridId = 0;
+  bool matte = false;
+  const float* aov = nullptr;
+  const uint32_t* aovU = nullptr;
+};
+
+class BucketRasterizer {
+ public:
+  BucketRasterizer(const SamplePattern& pattern, const ShutterModel& shutter, const View& view, const std::vector<AovChannel>& aovs,
+                   const RasterOptions& options);
+  ~BucketRasterizer();
+
+  /// Prepares the samples of region [x0, x0+w) × [y0, y0+h) (raster pixels).
+  void begin(int x0, int y0, int w, int h);
+  /// Earliest and latest sample time of the prepared region (for gathering parts).
+  double earliestTime() const;
+  double latestTime() const;
+  /// Rasterizes one decoded part of `source` (entry flags tell which shortcuts apply).
+  void rasterize(const Source& source, const store::TileEntry& entry, const store::TilePart& part);
+  /// Composites each sample's surfaces front to back and returns the region's samples.
+  const ResolvedSamples& resolve();
+  /// For deep output, after rasterize(): calls fn(slot, fragments, count) for every sample of the
+  /// region (slot = pixel * spp + i, pixel row-major in the region) with the surfaces it saw
+  /// front to back, cut after the first that makes it opaque (opacity threshold). Depth ties keep
+  /// store order, so the lists are deterministic.
+  void visitFragments(const std::function<void(size_t slot, const SampleFragment* fragments, size_t count)>& fn);
+  const RasterStats& stats() const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+}  // namespace reshutter::resample

@@ -1,0 +1,67 @@
+// The re-sampler: renders the motion-blurred image a renderer would have produced for a shutter
+// (any sub-interval, per-row intervals, rolling read-out) from one or more stores, without
+// shading anything again. Buckets are processed in parallel (TBB); each gathers only the tile
+// parts whose bounds over its time range touch it, rasterizes them (raster.h), composites each
+// sample and filters the samples into pixels. Output is bit-identical for any thread count and
+// bucket size.
+#pragma once
+
+#include <cstdint>
+#include <functional>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "resample/filter.h"
+#include "resample/image.h"
+#include "resample/raster.h"
+#include "resample/shutter.h"
+
+namespace reshutter::resample {
+
+struct AovRequest {
+  std::string name;                  // a store attribute, "id" (object id) or "z" (camera depth)
+  std::optional<FilterSpec> filter;  // default: the pixel filter, or zmin for ids
+  /// "N", "N:gaussian:2x2", "id:zmin". Throws Error naming `where`.
+  static AovRequest parse(const std::string& text, const std::string& where);
+};
+
+struct RenderSpec {
+  std::vector<Source> sources;   // stores in time order; sources[0] sets camera and schema
+  ShutterModel shutter;          // absolute frames
+  int width = 0, height = 0;     // 0: the store camera's resolution
+  /// Data window [x0, x1) × [y0, y1) in output pixels; empty = the whole image.
+  int cropX0 = 0, cropX1 = 0, cropY0 = 0, cropY1 = 0;
+  int samplesX = 4, samplesY = 4;
+  uint64_t seed = 0;
+  FilterSpec filter;             // for R G B A (Z always takes zmin)
+  std::vector<AovRequest> aovs;
+  RasterOptions raster;
+  int bucketSize = 32;
+  size_t cacheBytes = size_t(256) << 20;  // decoded-part cache per store
+  bool progress = true;
+  bool halfColor = false;        // write R G B A as half
+};
+
+struct RenderStats {
+  RasterStats raster;
+  int buckets = 0;
+  double gatherSeconds = 0, rasterSeconds = 0, resolveSeconds = 0, filterSeconds = 0;  // summed over threads
+  double wallSeconds = 0;
+  uint64_t samples = 0;
+  std::string report() const;  // the --stats text
+};
+
+struct RenderResult {
+  FlatImage image;
+  RenderStats stats;
+  ImageProvenance provenance;
+};
+
+/// Checks that every time the shutter asks for is covered by a source; throws Error naming the
+/// uncovered times otherwise ("frames 12.5 to 12.75 are not covered").
+void checkCoverage(const std::vector<Source>& sources, const ShutterModel& shutter);
+
+RenderResult render(const RenderSpec& spec);
+
+}  // namespace reshutter::resample

@@ -1,0 +1,45 @@
+// Sample patterns. Each pixel takes N samples: positions from one of a fixed set of stratified
+// (jittered nx×ny grid) patterns chosen per pixel by hash, and times from a per-pixel permutation
+// of N time strata with jitter inside each stratum, so time is decorrelated from position. Every
+// value is a pure function of (pixel, sample index, seed): images are bit-identical whatever the
+// thread count, bucket size or farm split.
+//
+// Why a fixed pattern set instead of fresh positions per pixel: pixel-filter weights then depend
+// only on (pattern, neighbour offset, sample), so they are tabulated once and the resolve becomes
+// short dot products (see filter.h). 64 patterns, picked by hash, show no visible structure.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include <glm/vec2.hpp>
+
+namespace reshutter::resample {
+
+class SamplePattern {
+ public:
+  static constexpr int kPatterns = 64;
+  /// `nx`×`ny` samples per pixel (stratified positions), `seed` selects the patterns and jitter.
+  SamplePattern(int nx, int ny, uint64_t seed);
+  /// Chooses nx×ny for `spp` samples: the most square factorisation.
+  static void factor(int spp, int& nx, int& ny);
+
+  int spp() const { return spp_; }
+  int nx() const { return nx_; }
+  int ny() const { return ny_; }
+  uint64_t seed() const { return seed_; }
+
+  int patternOf(int px, int py) const;
+  /// Position of sample i inside its pixel, in [0, 1)².
+  glm::vec2 offset(int pattern, int i) const { return offsets_[size_t(pattern) * spp_ + i]; }
+  /// Time strata of the pixel's samples: stratumOf[i] is a permutation of 0..N-1; u[i] is the
+  /// time variate (stratumOf[i] + jitter) / N ∈ [0, 1).
+  void times(int px, int py, uint16_t* stratumOf, float* u) const;
+
+ private:
+  int nx_, ny_, spp_;
+  uint64_t seed_;
+  std::vector<glm::vec2> offsets_;
+};
+
+}  // namespace reshutter::resample
