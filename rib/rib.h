@@ -107,6 +107,9 @@ class Reader {
   void parseBuffer(std::string_view bytes, const std::string& name, RequestHandler& handler);
   /// Looks up a parameter name: inline declaration or `Declare`d or predeclared standard name.
   bool lookup(std::string_view token, ParamDecl& out) const;
+  /// Declares `name` as `Declare` would ("varying point"); throws Error on a malformed class/type.
+  /// Ingest uses it for names a dump writer uses without declaring (blurP).
+  void declare(const std::string& name, const std::string& declaration);
   /// Bytes read so far (decompressed), for progress and throughput.
   uint64_t bytesRead() const;
 
