@@ -1,0 +1,173 @@
+#include "tests/resample_test_util.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <gtest/gtest.h>
+
+namespace reshutter::test {
+
+using namespace reshutter::store;
+using namespace reshutter::resample;
+
+glm::dvec3 TestScene::cam(double rx, double ry, double z) const { return Projector(meta.cameras[0]).unproject({rx, ry}, z); }
+
+std::array<glm::dvec3, 4> TestScene::rect(double x0, double y0, double x1, double y1, double z) const {
+  return {cam(x0, y0, z), cam(x1, y0, z), cam(x1, y1, z), cam(x0, y1, z)};
+}
+
+TestScene makeScene(int width, int height, std::vector<double> knotTimes) {
+  TestScene s;
+  s.meta.frame = 1;
+  s.meta.cameras[0].width = width;
+  s.meta.cameras[0].height = height;
+  s.meta.cameras[0].fovDegrees = 50;
+  s.meta.cameras[0].nearClip = 0.5;
+  s.meta.tileSize = 16;
+  s.meta.schema.attrs = {{"Ci", AttrType::Color, AttrRate::Vertex, AttrCodec::Lossless},
+                         {"Oi", AttrType::Color, AttrRate::Vertex, AttrCodec::Lossless},
+                         {"N", AttrType::Normal, AttrRate::Vertex, AttrCodec::Lossless}};
+  s.meta.provenance = "resample test";
+  s.knotTimes = std::move(knotTimes);
+  return s;
+}
+
+std::shared_ptr<const StoreReader> writeScene(const TestScene& scene, const std::string& path) {
+  {
+    StoreWriter w(path, scene.meta);
+    const uint32_t schedule = w.addSchedule(scene.knotTimes);
+    const size_t K = scene.knotTimes.size();
+    for (size_t i = 0; i < scene.mps.size(); ++i) {
+      const TestMp& mp = scene.mps[i];
+      EXPECT_EQ(mp.knots.size(), K);
+      const int nc = mp.triangle ? 3 : 4;
+      std::vector<glm::vec3> pos;
+      for (size_t k = 0; k < K; ++k)
+        for (int j = 0; j < nc; ++j) pos.push_back(glm::vec3(mp.knots[k][size_t(j)]));
+      std::vector<uint32_t> corners{0, 1, 2, mp.triangle ? kNoCorner : 3u};
+      std::vector<float> ci, oi, n;
+      for (int j = 0; j < nc; ++j) {
+        ci.insert(ci.end(), {mp.ci.x, mp.ci.y, mp.ci.z});
+        oi.insert(oi.end(), {mp.oi.x, mp.oi.y, mp.oi.z});
+        n.insert(n.end(), {0.f, 0.f, -1.f});
+      }
+      GridInput g;
+      g.schedule = schedule;
+      g.numVertices = uint32_t(nc);
+      g.positions = pos;
+      g.corners = corners;
+      g.objectId = mp.objectId;
+      g.gridId = mp.gridId ? mp.gridId : uint32_t(i);
+      g.flags = mp.flags;
+      g.attrs = {AttrValues{ci, {}}, AttrValues{oi, {}}, AttrValues{n, {}}};
+      w.addGrid(g);
+    }
+    w.close();
+  }
+  return std::make_shared<const StoreReader>(path);
+}
+
+RenderSpec specFor(std::shared_ptr<const StoreReader> reader, double open, double close, int nx, int ny, uint64_t seed) {
+  RenderSpec spec;
+  const double F = double(reader->meta().frame);
+  spec.sources = {Source{reader, reader->meta().frame}};
+  spec.shutter = ShutterModel::progressive(F + open, F + close);
+  spec.samplesX = nx, spec.samplesY = ny;
+  spec.seed = seed;
+  spec.filter = FilterSpec::parse("box:1", "test");
+  spec.progress = false;
+  return spec;
+}
+
+namespace {
+
+glm::dvec3 positionAt(const TestMp& mp, const std::vector<double>& knots, int corner, double tau) {
+  const size_t K = knots.size();
+  if (K == 1 || tau <= knots[0]) return mp.knots[0][size_t(corner)];
+  if (tau >= knots[K - 1]) return mp.knots[K - 1][size_t(corner)];
+  size_t k = 0;
+  while (k + 2 < K && knots[k + 1] <= tau) ++k;
+  const double f = (tau - knots[k]) / (knots[k + 1] - knots[k]);
+  return glm::mix(mp.knots[k][size_t(corner)], mp.knots[k + 1][size_t(corner)], f);
+}
+
+// Ray from the eye along d = (dx, dy, 1) against triangle (a, b, c): depth of the hit or NaN.
+double hitTriangle(const glm::dvec3& d, const glm::dvec3& a, const glm::dvec3& b, const glm::dvec3& c) {
+  const double e0 = glm::dot(d, glm::cross(a, b)), e1 = glm::dot(d, glm::cross(b, c)), e2 = glm::dot(d, glm::cross(c, a));
+  const bool pos = e0 >= 0 && e1 >= 0 && e2 >= 0, neg = e0 <= 0 && e1 <= 0 && e2 <= 0;
+  if (!(pos || neg) || (e0 == 0 && e1 == 0 && e2 == 0)) return NAN;
+  const glm::dvec3 n = glm::cross(b - a, c - a);
+  const double nd = glm::dot(n, d);
+  if (nd == 0) return NAN;
+  return glm::dot(n, a) / nd;
+}
+
+}  // namespace
+
+Reference rayCast(const TestScene& scene, const RenderSpec& spec, int W, int H) {
+  const Camera& camera = scene.meta.cameras[0];
+  Projector proj(camera);
+  SamplePattern pattern(spec.samplesX, spec.samplesY, spec.seed);
+  const int N = pattern.spp();
+  ShutterModel shutter = spec.shutter;
+  RollingShutter rolling = shutter.rolling();
+  rolling.height = H;
+  shutter.setRolling(rolling);
+  const double tBase = shutter.earliest();
+  const double F = double(scene.meta.frame);
+  Reference ref;
+  ref.r.assign(size_t(W) * H, 0), ref.g = ref.r, ref.b = ref.r, ref.a = ref.r;
+  std::vector<uint16_t> stratumOf(static_cast<size_t>(N));
+  std::vector<float> u(static_cast<size_t>(N));
+  struct Hit {
+    double z;
+    size_t mp;
+  };
+  std::vector<Hit> hits;
+  for (int py = 0; py < H; ++py)
+    for (int px = 0; px < W; ++px) {
+      const int pat = pattern.patternOf(px, py);
+      pattern.times(px, py, stratumOf.data(), u.data());
+      const int g = shutter.groupOfRow(py);
+      double acc[4] = {0, 0, 0, 0};
+      for (int i = 0; i < N; ++i) {
+        const glm::vec2 o = pattern.offset(pat, i);
+        const float x = float(px) + o.x, y = float(py) + o.y;
+        const double t = tBase + double(float(shutter.time(g, y, u[size_t(i)]) - tBase));
+        const glm::dvec3 d((double(x) - proj.bx) / proj.ax, (double(y) - proj.by) / proj.ay, 1.0);
+        hits.clear();
+        for (size_t m = 0; m < scene.mps.size(); ++m) {
+          const TestMp& mp = scene.mps[m];
+          glm::dvec3 c[4];
+          for (int j = 0; j < (mp.triangle ? 3 : 4); ++j) c[j] = positionAt(mp, scene.knotTimes, j, t - F);
+          double z = hitTriangle(d, c[0], c[1], c[2]);
+          if (!(z >= camera.nearClip && z <= camera.farClip) && !mp.triangle) z = hitTriangle(d, c[0], c[2], c[3]);
+          if (z >= camera.nearClip && z <= camera.farClip) hits.push_back({z, m});
+        }
+        std::stable_sort(hits.begin(), hits.end(), [](const Hit& a, const Hit& b) { return a.z < b.z; });
+        double T[3] = {1, 1, 1}, C[3] = {0, 0, 0}, A[3] = {0, 0, 0};
+        for (const Hit& h : hits) {
+          const TestMp& mp = scene.mps[h.mp];
+          const double ci[3] = {mp.ci.x, mp.ci.y, mp.ci.z}, oi[3] = {mp.oi.x, mp.oi.y, mp.oi.z};
+          const bool matte = mp.flags & kMatte;
+          for (int k = 0; k < 3; ++k) {
+            if (!matte) C[k] += T[k] * ci[k], A[k] += T[k] * oi[k];
+            T[k] *= 1 - oi[k];
+          }
+          if (T[0] <= 1 - spec.raster.opacityThreshold && T[1] <= 1 - spec.raster.opacityThreshold && T[2] <= 1 - spec.raster.opacityThreshold) break;
+        }
+        acc[0] += C[0], acc[1] += C[1], acc[2] += C[2], acc[3] += (A[0] + A[1] + A[2]) / 3;
+      }
+      const size_t p = size_t(py) * W + size_t(px);
+      ref.r[p] = acc[0] / N, ref.g[p] = acc[1] / N, ref.b[p] = acc[2] / N, ref.a[p] = acc[3] / N;
+    }
+  return ref;
+}
+
+const ImageChannel& channel(const RenderResult& r, const std::string& name) {
+  const ImageChannel* c = r.image.find(name);
+  if (!c) throw std::runtime_error("no channel " + name);
+  return *c;
+}
+
+}  // namespace reshutter::test

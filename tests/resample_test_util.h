@@ -1,0 +1,58 @@
+// Scenes for re-sampler tests, built micropolygon by micropolygon in raster terms, and an
+// independent reference: a brute-force ray caster that intersects every sample's ray with every
+// micropolygon (as two triangles, like the rasterizer) at the sample's own time, in double
+// precision, with no bounds, buckets or edge-function tricks.
+#pragma once
+
+#include <array>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "resample/resampler.h"
+#include "store/model.h"
+#include "store/reader.h"
+#include "store/writer.h"
+
+namespace reshutter::test {
+
+/// One micropolygon as the tests think of it: camera-space corners per knot, constant colour.
+struct TestMp {
+  std::vector<std::array<glm::dvec3, 4>> knots;  // corners p0 p1 p2 p3 per knot
+  bool triangle = false;
+  glm::vec3 ci{1, 1, 1}, oi{1, 1, 1};             // Ci premultiplied
+  uint32_t objectId = 1, gridId = 0;
+  uint8_t flags = 0;
+};
+
+struct TestScene {
+  store::StoreMeta meta;
+  std::vector<double> knotTimes{0.0};  // frame-relative, one schedule for every micropolygon
+  std::vector<TestMp> mps;
+  /// Raster position (rx, ry) at camera depth z → camera-space point.
+  glm::dvec3 cam(double rx, double ry, double z) const;
+  /// An axis-aligned raster rectangle at depth z as a quad (corner order p0..p3 around it).
+  std::array<glm::dvec3, 4> rect(double x0, double y0, double x1, double y1, double z) const;
+};
+
+/// A scene of `width`×`height` with a perspective camera (fov 50, near 0.5), frame 1, shutter
+/// [0, 1], schema Ci, Oi (vertex colours) plus a vertex normal "N".
+TestScene makeScene(int width, int height, std::vector<double> knotTimes = {0.0, 1.0});
+
+/// Writes the scene as a store (each micropolygon its own grid: no shared vertices).
+std::shared_ptr<const store::StoreReader> writeScene(const TestScene& scene, const std::string& path);
+
+/// A render spec for one store over [open, close] (frame-relative), box filter 1×1.
+resample::RenderSpec specFor(std::shared_ptr<const store::StoreReader> reader, double open, double close, int nx, int ny, uint64_t seed = 0);
+
+/// The reference alpha per pixel (box filter over the pixel's own samples) of an opaque or
+/// transparent scene: per sample, the front-to-back composite of every surface the ray hits at
+/// the sample's time, using the same sample positions and times as `spec`.
+struct Reference {
+  std::vector<double> r, g, b, a;  // per pixel of the spec's full image
+};
+Reference rayCast(const TestScene& scene, const resample::RenderSpec& spec, int width, int height);
+
+const resample::ImageChannel& channel(const resample::RenderResult& r, const std::string& name);
+
+}  // namespace reshutter::test
