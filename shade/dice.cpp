@@ -1,0 +1,337 @@
+// Dicing: surface evaluation, screen-size driven splitting, eye-plane handling, grid building.
+#include "shade/dice.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <glm/geometric.hpp>
+#include <glm/gtc/matrix_inverse.hpp>
+#include <glm/mat3x3.hpp>
+
+#include "common/log.h"
+
+namespace reshutter::shade {
+
+namespace {
+constexpr double kDeg = M_PI / 180.0;
+double sgn(double x) { return x < 0 ? -1.0 : 1.0; }
+
+double sphereLat(double r, double z) { return std::asin(std::clamp(z / r, -1.0, 1.0)); }
+
+glm::dvec3 bilinear(const std::array<glm::dvec3, 4>& c, double u, double v) {
+  return (1 - u) * (1 - v) * c[0] + u * (1 - v) * c[1] + (1 - u) * v * c[2] + u * v * c[3];
+}
+}  // namespace
+
+glm::dvec3 evalP(PrimKind kind, const Shape& s, double u, double v) {
+  const auto& q = s.q;
+  switch (kind) {
+    case PrimKind::Sphere: {
+      const double r = q[0], phi = u * q[3] * kDeg;
+      const double lat0 = sphereLat(r, q[1]), lat1 = sphereLat(r, q[2]);
+      const double lat = lat0 + v * (lat1 - lat0);
+      return {r * std::cos(lat) * std::cos(phi), r * std::cos(lat) * std::sin(phi), r * std::sin(lat)};
+    }
+    case PrimKind::Cylinder: {
+      const double phi = u * q[3] * kDeg;
+      return {q[0] * std::cos(phi), q[0] * std::sin(phi), q[1] + v * (q[2] - q[1])};
+    }
+    case PrimKind::Cone: {
+      const double phi = u * q[2] * kDeg, r = q[1] * (1 - v);
+      return {r * std::cos(phi), r * std::sin(phi), v * q[0]};
+    }
+    case PrimKind::Disk: {
+      const double phi = u * q[2] * kDeg, r = q[1] * (1 - v);
+      return {r * std::cos(phi), r * std::sin(phi), q[0]};
+    }
+    case PrimKind::Torus: {
+      const double theta = u * q[4] * kDeg, phi = (q[2] + v * (q[3] - q[2])) * kDeg;
+      const double ring = q[0] + q[1] * std::cos(phi);
+      return {ring * std::cos(theta), ring * std::sin(theta), q[1] * std::sin(phi)};
+    }
+    case PrimKind::Patch: return bilinear(s.P, u, v);
+  }
+  return glm::dvec3(0.0);
+}
+
+glm::dvec3 evalNg(PrimKind kind, const Shape& s, double u, double v, bool triangle) {
+  const auto& q = s.q;
+  switch (kind) {
+    case PrimKind::Sphere: {
+      const double r = q[0], phi = u * q[3] * kDeg;
+      const double lat0 = sphereLat(r, q[1]), lat1 = sphereLat(r, q[2]);
+      const double lat = lat0 + v * (lat1 - lat0);
+      const double k = sgn(q[3]) * sgn(lat1 - lat0);
+      return k * glm::dvec3(std::cos(lat) * std::cos(phi), std::cos(lat) * std::sin(phi), std::sin(lat));
+    }
+    case PrimKind::Cylinder: {
+      const double phi = u * q[3] * kDeg, k = sgn(q[3]) * sgn(q[0]) * sgn(q[2] - q[1]);
+      return k * glm::dvec3(std::cos(phi), std::sin(phi), 0.0);
+    }
+    case PrimKind::Cone: {
+      const double phi = u * q[2] * kDeg, k = sgn(q[2]) * sgn(q[1]);
+      return k * glm::dvec3(q[0] * std::cos(phi), q[0] * std::sin(phi), q[1]);
+    }
+    case PrimKind::Disk: return glm::dvec3(0.0, 0.0, sgn(q[2]));
+    case PrimKind::Torus: {
+      const double theta = u * q[4] * kDeg, phi = (q[2] + v * (q[3] - q[2])) * kDeg;
+      const double k = sgn(q[4]) * sgn(q[3] - q[2]) * sgn(q[1]) * sgn(q[0] + q[1] * std::cos(phi));
+      return k * glm::dvec3(std::cos(phi) * std::cos(theta), std::cos(phi) * std::sin(theta), std::sin(phi));
+    }
+    case PrimKind::Patch: {
+      const auto& P = s.P;
+      if (triangle) return glm::cross(P[1] - P[0], P[2] - P[0]);
+      const glm::dvec3 dPdu = (1 - v) * (P[1] - P[0]) + v * (P[3] - P[2]);
+      const glm::dvec3 dPdv = (1 - u) * (P[2] - P[0]) + u * (P[3] - P[1]);
+      glm::dvec3 n = glm::cross(dPdu, dPdv);
+      const double scale = glm::length(P[3] - P[0]) + glm::length(P[2] - P[1]);
+      if (glm::length(n) <= 1e-12 * scale * scale) n = glm::cross(P[3] - P[0], P[2] - P[1]);  // collapsed corner
+      return n;
+    }
+  }
+  return glm::dvec3(0, 0, 1);
+}
+
+std::vector<double> clipKnots(const Primitive& p, double open, double close) {
+  std::vector<double> all = p.knotTimes();
+  if (all.empty() || !(close > open)) return {open};
+  std::vector<double> out{open};
+  for (double t : all)
+    if (t > open && t < close) out.push_back(t);
+  out.push_back(close);
+  return out;
+}
+
+namespace {
+
+struct Estimate {
+  bool allBehind = true, straddle = false, offscreen = false, beyondFar = true;
+  double lu = 0, lv = 0, motion = 0;  // raster lengths in pixels
+  double cu = 0, cv = 0;              // camera-space lengths (for eye splits)
+};
+
+class Splitter {
+ public:
+  Splitter(const Primitive& p, const std::vector<double>& knots, const store::Camera& cam, const DiceOptions& o, std::vector<Leaf>& out,
+           DiceStats& stats)
+      : p_(p), proj_(cam), cam_(cam), o_(o), out_(out), stats_(stats) {
+    for (double t : knots) {
+      shapes_.push_back(p.shapeAt(t));
+      mats_.push_back(p.xform->at(t));
+    }
+    const Attributes& a = *p.attrs;
+    const double mf = o.motionFactor ? *o.motionFactor : a.motionFactor;
+    motionFactor_ = mf;
+    rate_ = a.shadingRate * o.shadingRateScale;
+    const double mx = o.cullMargin * cam.width, my = o.cullMargin * cam.height;
+    window_[0] = -mx, window_[1] = cam.width + mx, window_[2] = -my, window_[3] = cam.height + my;
+  }
+
+  void run() { split(0, 1, 0, 1, 0, 0); }
+
+ private:
+  static constexpr int kTest = 5;
+
+  Estimate estimate(double u0, double u1, double v0, double v1) const {
+    Estimate e;
+    const size_t K = shapes_.size();
+    glm::dvec2 r[kTest][kTest], prev[kTest][kTest];
+    bool fr[kTest][kTest], prevFront[kTest][kTest];
+    double bb[4] = {1e300, -1e300, 1e300, -1e300};
+    for (size_t k = 0; k < K; ++k) {
+      glm::dvec3 c[kTest][kTest];
+      int nFront = 0;
+      for (int j = 0; j < kTest; ++j)
+        for (int i = 0; i < kTest; ++i) {
+          const double u = u0 + (u1 - u0) * i / (kTest - 1), v = v0 + (v1 - v0) * j / (kTest - 1);
+          c[j][i] = glm::dvec3(mats_[k] * glm::dvec4(evalP(p_.kind, shapes_[k], u, v), 1.0));
+          fr[j][i] = !proj_.perspective || c[j][i].z >= proj_.nearClip;
+          if (c[j][i].z <= cam_.farClip) e.beyondFar = false;
+          r[j][i] = glm::dvec2(0.0);
+          if (fr[j][i]) {
+            ++nFront;
+            r[j][i] = proj_.project(c[j][i]);
+            bb[0] = std::min(bb[0], r[j][i].x), bb[1] = std::max(bb[1], r[j][i].x);
+            bb[2] = std::min(bb[2], r[j][i].y), bb[3] = std::max(bb[3], r[j][i].y);
+          }
+        }
+      if (nFront) e.allBehind = false;
+      if (nFront && nFront < kTest * kTest) e.straddle = true;
+      for (int j = 0; j < kTest; ++j) {
+        double lu = 0, lv = 0, cu = 0, cv = 0;
+        for (int i = 0; i + 1 < kTest; ++i) {
+          if (fr[j][i] && fr[j][i + 1]) lu += glm::length(r[j][i + 1] - r[j][i]);
+          if (fr[i][j] && fr[i + 1][j]) lv += glm::length(r[i + 1][j] - r[i][j]);
+          cu += glm::length(c[j][i + 1] - c[j][i]);
+          cv += glm::length(c[i + 1][j] - c[i][j]);
+        }
+        e.lu = std::max(e.lu, lu), e.lv = std::max(e.lv, lv);
+        e.cu = std::max(e.cu, cu), e.cv = std::max(e.cv, cv);
+      }
+      if (k > 0)
+        for (int j = 0; j < kTest; ++j)
+          for (int i = 0; i < kTest; ++i)
+            if (fr[j][i] && prevFront[j][i]) e.motion = std::max(e.motion, glm::length(r[j][i] - prev[j][i]));
+      for (int j = 0; j < kTest; ++j)
+        for (int i = 0; i < kTest; ++i) prev[j][i] = r[j][i], prevFront[j][i] = fr[j][i];
+    }
+    if (!e.allBehind) {
+      // Curved pieces bulge between test points: pad the bound by a tenth of its size.
+      const double px = 0.1 * (bb[1] - bb[0]) + 1, py = 0.1 * (bb[3] - bb[2]) + 1;
+      e.offscreen = bb[1] + px < window_[0] || bb[0] - px > window_[1] || bb[3] + py < window_[2] || bb[2] - py > window_[3];
+    }
+    return e;
+  }
+
+  void split(double u0, double u1, double v0, double v1, int depth, int eyeDepth) {
+    const Estimate e = estimate(u0, u1, v0, v1);
+    if (e.allBehind || e.beyondFar || e.offscreen) {
+      ++stats_.culledPieces;
+      return;
+    }
+    if (e.straddle) {
+      if (eyeDepth >= o_.maxEyeSplits || depth >= o_.maxSplitDepth) {
+        ++stats_.culledPieces;
+        return;
+      }
+      ++stats_.eyeSplits;
+      if (e.cu >= e.cv) {
+        const double um = 0.5 * (u0 + u1);
+        split(u0, um, v0, v1, depth + 1, eyeDepth + 1);
+        split(um, u1, v0, v1, depth + 1, eyeDepth + 1);
+      } else {
+        const double vm = 0.5 * (v0 + v1);
+        split(u0, u1, v0, vm, depth + 1, eyeDepth + 1);
+        split(u0, u1, vm, v1, depth + 1, eyeDepth + 1);
+      }
+      return;
+    }
+    const double rate = rate_ * (1.0 + motionFactor_ * e.motion / 16.0);
+    const double edge = std::sqrt(rate);
+    const double G = o_.maxGridSize;
+    const double nu = std::max(1.0, std::ceil(e.lu / edge)), nv = std::max(1.0, std::ceil(e.lv / edge));
+    if ((nu > G || nv > G) && depth < o_.maxSplitDepth) {
+      // Cut the dimension that overflows most into pieces of at most G (re-measured below).
+      if (nu / G >= nv / G) {
+        const int k = int(std::min(64.0, std::ceil(nu / G)));
+        for (int i = 0; i < k; ++i) split(u0 + (u1 - u0) * i / k, i + 1 == k ? u1 : u0 + (u1 - u0) * (i + 1) / k, v0, v1, depth + 1, eyeDepth);
+      } else {
+        const int k = int(std::min(64.0, std::ceil(nv / G)));
+        for (int i = 0; i < k; ++i) split(u0, u1, v0 + (v1 - v0) * i / k, i + 1 == k ? v1 : v0 + (v1 - v0) * (i + 1) / k, depth + 1, eyeDepth);
+      }
+      return;
+    }
+    Leaf leaf{u0, u1, v0, v1, int(std::min(nu, G)), int(std::min(nv, G))};
+    out_.push_back(leaf);
+    ++stats_.leaves;
+  }
+
+  const Primitive& p_;
+  store::Projector proj_;
+  const store::Camera& cam_;
+  const DiceOptions& o_;
+  std::vector<Leaf>& out_;
+  DiceStats& stats_;
+  std::vector<Shape> shapes_;
+  std::vector<glm::dmat4> mats_;
+  double rate_ = 1, motionFactor_ = 0;
+  double window_[4];
+};
+
+}  // namespace
+
+void splitPrimitive(const Primitive& p, const std::vector<double>& knots, const store::Camera& camera, const DiceOptions& options,
+                    std::vector<Leaf>& out, DiceStats& stats) {
+  Splitter(p, knots, camera, options, out, stats).run();
+}
+
+void diceLeaf(const Primitive& p, const Leaf& leaf, const std::vector<double>& knots, double shadeAt, double nearClip, bool perspective,
+              DicedGrid& g) {
+  const int nu = leaf.nu, nv = leaf.nv, row = nu + 1;
+  const uint32_t nV = uint32_t(row * (nv + 1));
+  const size_t K = knots.size();
+  g.nu = nu, g.nv = nv, g.numVertices = nV;
+  g.positions.resize(K * nV);
+  // Parameters at the grid lines; the last is the piece's edge exactly, so neighbouring grids
+  // evaluate identical points on their shared edge.
+  std::vector<double> us(size_t(nu) + 1), vs(size_t(nv) + 1);
+  for (int i = 0; i <= nu; ++i) us[size_t(i)] = i == nu ? leaf.u1 : leaf.u0 + (leaf.u1 - leaf.u0) * i / nu;
+  for (int j = 0; j <= nv; ++j) vs[size_t(j)] = j == nv ? leaf.v1 : leaf.v0 + (leaf.v1 - leaf.v0) * j / nv;
+
+  for (size_t k = 0; k < K; ++k) {
+    const Shape s = p.shapeAt(knots[k]);
+    const glm::dmat4 m = p.xform->at(knots[k]);
+    glm::vec3* out = g.positions.data() + k * nV;
+    for (int j = 0; j <= nv; ++j)
+      for (int i = 0; i <= nu; ++i) out[j * row + i] = glm::vec3(m * glm::dvec4(evalP(p.kind, s, us[size_t(i)], vs[size_t(j)]), 1.0));
+  }
+
+  // Geometry at the shading time.
+  const Shape s = p.shapeAt(shadeAt);
+  const glm::dmat4 m = p.xform->at(shadeAt);
+  const glm::dmat3 nm = glm::inverseTranspose(glm::dmat3(m));
+  const double flip = p.flipNormals ? -1.0 : 1.0;
+  g.P.resize(nV), g.N.resize(nV), g.Ng.resize(nV), g.u.resize(nV), g.v.resize(nV), g.s.resize(nV), g.t.resize(nV);
+  for (int j = 0; j <= nv; ++j)
+    for (int i = 0; i <= nu; ++i) {
+      const size_t idx = size_t(j * row + i);
+      const double u = us[size_t(i)], v = vs[size_t(j)];
+      g.P[idx] = glm::dvec3(m * glm::dvec4(evalP(p.kind, s, u, v), 1.0));
+      glm::dvec3 ng = nm * evalNg(p.kind, s, u, v, p.triangle);
+      double len = glm::length(ng);
+      ng = len > 0 ? flip * ng / len : glm::dvec3(0, 0, -1);
+      g.Ng[idx] = ng;
+      if (p.hasN) {
+        glm::dvec3 n = nm * bilinear(p.N, u, v);
+        double l = glm::length(n);
+        g.N[idx] = l > 0 ? n / l : ng;
+      } else {
+        g.N[idx] = ng;
+      }
+      g.u[idx] = u, g.v[idx] = v;
+      if (p.hasST) {
+        const auto& st = p.st;
+        g.s[idx] = (1 - u) * (1 - v) * st[0].x + u * (1 - v) * st[1].x + (1 - u) * v * st[2].x + u * v * st[3].x;
+        g.t[idx] = (1 - u) * (1 - v) * st[0].y + u * (1 - v) * st[1].y + (1 - u) * v * st[2].y + u * v * st[3].y;
+      } else {
+        g.s[idx] = u, g.t[idx] = v;
+      }
+    }
+
+  // Ring order counter-clockwise around N: the parametric order when the transform keeps
+  // handedness and the orientation is not flipped, reversed otherwise.
+  const bool reverse = (glm::determinant(m) < 0) != p.flipNormals;
+  g.corners.clear();
+  g.corners.reserve(size_t(nu) * nv * 4);
+  g.droppedMicropolygons = 0;
+  for (int j = 0; j < nv; ++j)
+    for (int i = 0; i < nu; ++i) {
+      const uint32_t p0 = uint32_t(j * row + i), p1 = p0 + 1, p2 = p0 + 1 + uint32_t(row), p3 = p0 + uint32_t(row);
+      uint32_t c[4];
+      const bool tri = p.triangle && j == nv - 1;  // the collapsed last row of a triangle
+      if (tri) {
+        c[0] = p0, c[1] = reverse ? p3 : p1, c[2] = reverse ? p1 : p2, c[3] = store::kNoCorner;
+      } else if (reverse) {
+        c[0] = p0, c[1] = p3, c[2] = p2, c[3] = p1;
+      } else {
+        c[0] = p0, c[1] = p1, c[2] = p2, c[3] = p3;
+      }
+      if (perspective) {
+        const int nc = tri ? 3 : 4;
+        bool straddles = false, everInFront = false;
+        for (size_t k = 0; k < K && !straddles; ++k) {
+          int behind = 0;
+          for (int n = 0; n < nc; ++n) behind += g.positions[k * nV + c[n]].z < nearClip;
+          straddles = behind > 0 && behind < nc;
+          everInFront = everInFront || behind == 0;
+        }
+        if (straddles || !everInFront) {
+          ++g.droppedMicropolygons;
+          continue;
+        }
+      }
+      g.corners.insert(g.corners.end(), c, c + 4);
+    }
+}
+
+}  // namespace reshutter::shade

@@ -1,0 +1,675 @@
+// The RenderMan-style scene builder: graphics state, motion blocks, primitives → FrameScene.
+#include "shade/scene.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <glm/gtc/matrix_transform.hpp>
+#include <glm/gtc/matrix_inverse.hpp>
+
+#include "common/error.h"
+#include "common/log.h"
+
+namespace reshutter::shade {
+
+namespace {
+
+std::vector<double> unionTimes(const std::vector<double>& a, const std::vector<double>& b) {
+  std::vector<double> t(a);
+  t.insert(t.end(), b.begin(), b.end());
+  std::sort(t.begin(), t.end());
+  t.erase(std::unique(t.begin(), t.end()), t.end());
+  return t;
+}
+
+// Segment and weight of `t` in increasing `times` (clamped at the ends: RenderMan holds the first
+// and last knot's values outside the block).
+void locate(const std::vector<double>& times, double t, size_t& i, double& w) {
+  if (t <= times.front()) {
+    i = 0, w = 0;
+    return;
+  }
+  if (t >= times.back()) {
+    i = times.size() - 2, w = 1;
+    return;
+  }
+  i = size_t(std::upper_bound(times.begin(), times.end(), t) - times.begin()) - 1;
+  w = (t - times[i]) / (times[i + 1] - times[i]);
+}
+
+glm::dvec3 lerpValue(const glm::dvec3& a, const glm::dvec3& b, double w) { return a + (b - a) * w; }
+SurfaceShader lerpValue(const SurfaceShader& a, const SurfaceShader& b, double w) { return a.lerp(b, w); }
+
+bool csIsRightHanded(const MotionXform& x) { return glm::determinant(x.mats[0]) < 0; }
+
+}  // namespace
+
+// ---------------------------------------------------------------------------------------------
+
+glm::dmat4 MotionXform::at(double t) const {
+  if (mats.size() == 1) return mats[0];
+  size_t i;
+  double w;
+  locate(times, t, i, w);
+  if (w == 0) return mats[i];
+  if (w == 1) return mats[i + 1];
+  return mats[i] * (1.0 - w) + mats[i + 1] * w;
+}
+
+MotionXform MotionXform::then(const MotionXform& rhs) const {
+  if (!moving() && !rhs.moving()) return MotionXform(mats[0] * rhs.mats[0]);
+  std::vector<double> t = unionTimes(times, rhs.times);
+  std::vector<glm::dmat4> m;
+  m.reserve(t.size());
+  for (double ti : t) m.push_back(at(ti) * rhs.at(ti));
+  return MotionXform(std::move(t), std::move(m));
+}
+
+template <typename T>
+T Animated<T>::at(double t) const {
+  if (values.size() == 1) return values[0];
+  size_t i;
+  double w;
+  locate(times, t, i, w);
+  return lerpValue(values[i], values[i + 1], w);
+}
+template struct Animated<glm::dvec3>;
+template struct Animated<SurfaceShader>;
+
+bool SurfaceShader::named(const std::string& name, SurfaceShader& s) {
+  s = SurfaceShader{};
+  if (name == "constant") {
+    s.kind = SurfaceKind::Constant;
+  } else if (name == "matte") {
+    s.kind = SurfaceKind::Matte, s.Ka = 1, s.Kd = 1;
+  } else if (name == "metal") {
+    s.kind = SurfaceKind::Metal, s.Ka = 1, s.Ks = 1, s.roughness = 0.1;
+  } else if (name == "plastic") {
+    s.kind = SurfaceKind::Plastic, s.Ka = 1, s.Kd = 0.5, s.Ks = 0.5, s.roughness = 0.1;
+  } else if (name == "defaultsurface") {
+    s.kind = SurfaceKind::DefaultSurface, s.Ka = 0.2, s.Kd = 0.8;
+  } else {
+    s.kind = SurfaceKind::DefaultSurface, s.Ka = 0.2, s.Kd = 0.8;
+    return false;
+  }
+  return true;
+}
+
+SurfaceShader SurfaceShader::lerp(const SurfaceShader& b, double w) const {
+  SurfaceShader r = w < 0.5 ? *this : b;  // the kind cannot blend: the nearer key's
+  r.Ka = Ka + (b.Ka - Ka) * w;
+  r.Kd = Kd + (b.Kd - Kd) * w;
+  r.Ks = Ks + (b.Ks - Ks) * w;
+  r.roughness = roughness + (b.roughness - roughness) * w;
+  r.specularColor = specularColor + (b.specularColor - specularColor) * w;
+  return r;
+}
+
+bool Light::named(const std::string& name, Light& l) {
+  l = Light{};
+  if (name == "ambientlight") l.kind = LightKind::Ambient;
+  else if (name == "distantlight") l.kind = LightKind::Distant;
+  else if (name == "pointlight") l.kind = LightKind::Point;
+  else if (name == "spotlight") l.kind = LightKind::Spot;
+  else return false;
+  return true;
+}
+
+namespace {
+bool get1(const ParamMap& p, const char* name, double& out) {
+  auto it = p.find(name);
+  if (it == p.end() || it->second.empty()) return false;
+  out = it->second[0];
+  return true;
+}
+bool get3(const ParamMap& p, const char* name, glm::dvec3& out) {
+  auto it = p.find(name);
+  if (it == p.end() || it->second.empty()) return false;
+  const auto& v = it->second;
+  out = v.size() >= 3 ? glm::dvec3(v[0], v[1], v[2]) : glm::dvec3(v[0]);
+  return true;
+}
+}  // namespace
+
+void applyParams(SurfaceShader& s, const ParamMap& p) {
+  get1(p, "Ka", s.Ka);
+  get1(p, "Kd", s.Kd);
+  get1(p, "Ks", s.Ks);
+  get1(p, "roughness", s.roughness);
+  get3(p, "specularcolor", s.specularColor);
+}
+
+void applyParams(Light& l, const ParamMap& p) {
+  get1(p, "intensity", l.intensity);
+  get3(p, "lightcolor", l.color);
+  get3(p, "from", l.from);
+  get3(p, "to", l.to);
+  get1(p, "coneangle", l.coneAngle);
+  get1(p, "conedeltaangle", l.coneDeltaAngle);
+  get1(p, "beamdistribution", l.beamDistribution);
+}
+
+Shape Primitive::shapeAt(double t) const {
+  if (keys.size() == 1) return keys[0];
+  size_t i;
+  double w;
+  locate(times, t, i, w);
+  Shape s;
+  for (size_t k = 0; k < s.q.size(); ++k) s.q[k] = keys[i].q[k] + (keys[i + 1].q[k] - keys[i].q[k]) * w;
+  for (size_t k = 0; k < 4; ++k) s.P[k] = keys[i].P[k] + (keys[i + 1].P[k] - keys[i].P[k]) * w;
+  return s;
+}
+
+std::vector<double> Primitive::knotTimes() const { return unionTimes(times, xform->times); }
+
+const std::vector<OutputVar>& knownOutputVars() {
+  using store::AttrType;
+  static const std::vector<OutputVar> vars = {
+      {"P", AttrType::Point},   {"N", AttrType::Normal},  {"Ng", AttrType::Normal}, {"s", AttrType::Float},
+      {"t", AttrType::Float},   {"u", AttrType::Float},   {"v", AttrType::Float},   {"Cs", AttrType::Color},
+      {"Os", AttrType::Color},  {"depth", AttrType::Float}, {"specular", AttrType::Color}};
+  return vars;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Scene
+
+Scene::Scene(FrameCallback onWorldEnd) : onWorldEnd_(std::move(onWorldEnd)) {
+  cur_.attrs = std::make_shared<Attributes>();
+  // RenderMan's default projection is orthographic; its default near plane is RI_EPSILON.
+  options_.camera.projection = store::Projection::Orthographic;
+  options_.camera.nearClip = 1e-4;
+  options_.camera.farClip = 1e30;
+}
+
+void Scene::error(const std::string& what) const { fail(where, what); }
+
+Attributes& Scene::mutableAttrs() {
+  if (cur_.attrs.use_count() > 1) cur_.attrs = std::make_shared<Attributes>(*cur_.attrs);
+  return *cur_.attrs;
+}
+
+void Scene::format(int w, int h, double pa) {
+  if (w <= 0 || h <= 0 || w > (1 << 20) || h > (1 << 20)) error(cat("resolution ", w, "x", h, " out of range"));
+  options_.camera.width = w, options_.camera.height = h;
+  options_.camera.pixelAspect = pa > 0 ? pa : 1.0;
+}
+void Scene::frameAspectRatio(double a) {
+  if (!(a > 0)) error("frame aspect ratio must be positive");
+  options_.frameAspectRatio = a;
+}
+void Scene::screenWindow(double l, double r, double b, double t) {
+  if (l == r || b == t) error("screen window is empty");
+  double* sw = options_.camera.screenWindow;
+  sw[0] = l, sw[1] = r, sw[2] = b, sw[3] = t;
+}
+void Scene::perspective(double fov) {
+  if (!(fov > 0 && fov < 180)) error(cat("field of view ", fov, " not in (0, 180)"));
+  options_.camera.projection = store::Projection::Perspective;
+  options_.camera.fovDegrees = fov;
+}
+void Scene::orthographic() { options_.camera.projection = store::Projection::Orthographic; }
+void Scene::clipping(double n, double f) {
+  if (!(n > 0) || !(f > n)) error(cat("clipping planes ", n, " ", f, " invalid"));
+  options_.camera.nearClip = n, options_.camera.farClip = std::min(f, 1e30);
+}
+void Scene::shutter(double open, double close) {
+  if (!std::isfinite(open) || !std::isfinite(close) || close < open) error(cat("shutter [", open, ", ", close, "] is not an interval"));
+  options_.shutterOpen = open, options_.shutterClose = close;
+}
+void Scene::pixelSamples(int x, int y) {
+  options_.pixelSamples[0] = std::max(1, x);
+  options_.pixelSamples[1] = std::max(1, y);
+}
+
+void Scene::display(const std::string& name, const std::string& mode) {
+  (void)name;
+  // Each comma-separated token of the mode is a variable; "color rightCi"-style declarations
+  // name it last. The primary colour and alpha, depth and ids need no extra store attribute.
+  size_t start = 0;
+  while (start <= mode.size()) {
+    size_t comma = mode.find(',', start);
+    std::string tok = mode.substr(start, comma == std::string::npos ? std::string::npos : comma - start);
+    start = comma == std::string::npos ? mode.size() + 1 : comma + 1;
+    auto sp = tok.find_last_of(" \t");
+    if (sp != std::string::npos) tok = tok.substr(sp + 1);
+    if (tok.empty()) continue;
+    static const char* builtin[] = {"rgb", "rgba", "rgbz", "rgbaz", "a", "z", "r", "g", "b", "Ci", "Oi", "id", "Z", "A"};
+    if (std::find_if(std::begin(builtin), std::end(builtin), [&](const char* b) { return tok == b; }) != std::end(builtin)) continue;
+    const auto& known = knownOutputVars();
+    if (std::none_of(known.begin(), known.end(), [&](const OutputVar& v) { return v.name == tok; })) {
+      warnOnce(cat("outputvar:", tok), cat(where, ": output variable '", tok, "' is not computed by the built-in shaders; skipped"));
+      continue;
+    }
+    if (std::find(options_.outputs.begin(), options_.outputs.end(), tok) == options_.outputs.end()) options_.outputs.push_back(tok);
+  }
+}
+
+void Scene::camera(const std::string& name) {
+  if (inWorld_) error("Camera is an option: it must come before WorldBegin");
+  if (name == "world" || name == "frame") error(cat("camera name '", name, "' is reserved"));
+  store::Camera c = options_.camera;
+  c.name = name;
+  c.worldToCamera = cur_.ctm.at(options_.shutterOpen);
+  auto& cams = options_.namedCameras;
+  cams.erase(std::remove_if(cams.begin(), cams.end(), [&](const store::Camera& o) { return o.name == name; }), cams.end());
+  cams.push_back(c);
+  coordSystems_[name] = cur_.ctm;
+}
+
+void Scene::push(Block b) {
+  stack_.push_back(cur_);
+  stack_.back().block = b;
+}
+
+Scene::State Scene::pop(Block b, const char* request) {
+  // World and frame ends close whatever the scene left open (with a warning); attribute and
+  // transform ends must match exactly.
+  if (b == Block::World || b == Block::Frame) {
+    size_t open = 0;
+    while (!stack_.empty() && stack_.back().block != b && stack_.back().block != Block::World && stack_.back().block != Block::Frame)
+      stack_.pop_back(), ++open;
+    if (open) warn(cat(where, ": ", open, " AttributeBegin/TransformBegin without End at ", request));
+  }
+  if (stack_.empty() || stack_.back().block != b) error(cat(request, " without a matching begin"));
+  State s = std::move(stack_.back());
+  stack_.pop_back();
+  ctmShared_.reset();
+  return s;
+}
+
+void Scene::frameBegin(int64_t n) {
+  if (inFrame_ || inWorld_) error("FrameBegin inside a frame or world block");
+  savedFrameOptions_ = options_;
+  push(Block::Frame);
+  options_.frame = n;
+  inFrame_ = true;
+}
+
+void Scene::frameEnd() {
+  if (!inFrame_ || inWorld_) error("FrameEnd without FrameBegin");
+  options_ = savedFrameOptions_;
+  cur_ = pop(Block::Frame, "FrameEnd");
+  inFrame_ = false;
+}
+
+void Scene::worldBegin() {
+  if (inWorld_) error("WorldBegin inside a world block");
+  if (motion_.active) error("WorldBegin inside a motion block");
+  frame_.options = options_;
+  store::Camera& cam = frame_.options.camera;
+  if (options_.frameAspectRatio > 0 && cam.screenWindow[0] == cam.screenWindow[1]) {
+    double a = options_.frameAspectRatio;
+    double* sw = cam.screenWindow;
+    if (a >= 1) sw[0] = -a, sw[1] = a, sw[2] = -1, sw[3] = 1;
+    else sw[0] = -1, sw[1] = 1, sw[2] = -1 / a, sw[3] = 1 / a;
+  }
+  cam.name = "world";
+  cam.worldToCamera = cur_.ctm.at(options_.shutterOpen);
+  frame_.worldToCamera = cur_.ctm;
+  push(Block::World);
+  coordSystems_["world"] = cur_.ctm;
+  coordSystems_["camera"] = MotionXform();
+  inWorld_ = true;
+}
+
+void Scene::worldEnd() {
+  if (!inWorld_) error("WorldEnd without WorldBegin");
+  if (motion_.active) error("WorldEnd inside a motion block");
+  cur_ = pop(Block::World, "WorldEnd");
+  inWorld_ = false;
+  FrameScene done = std::move(frame_);
+  frame_ = FrameScene{};
+  lightHandles_.clear();
+  objectIds_.clear();
+  // Light indices point into this frame's list, which is gone now.
+  if (!cur_.attrs->lights.empty()) mutableAttrs().lights.clear();
+  if (onWorldEnd_) onWorldEnd_(done);
+  ++framesDone_;
+}
+
+void Scene::attributeBegin() { push(Block::Attribute); }
+void Scene::attributeEnd() { cur_ = pop(Block::Attribute, "AttributeEnd"); }
+void Scene::transformBegin() { push(Block::Transform); }
+void Scene::transformEnd() { cur_.ctm = pop(Block::Transform, "TransformEnd").ctm; }
+
+bool Scene::motionTake(Pending kind) {
+  if (!motion_.active) return false;
+  bool concatLike = (kind == Pending::Concat || kind == Pending::Set);
+  bool sameClass = motion_.kind == kind || (concatLike && (motion_.kind == Pending::Concat || motion_.kind == Pending::Set) && kind == motion_.kind);
+  if (motion_.kind != Pending::None && !sameClass) error("a motion block must hold requests of one kind");
+  motion_.kind = kind;
+  size_t have = motion_.mats.size() + motion_.colors.size() + motion_.surfaces.size() + motion_.prims.size();
+  if (have >= motion_.times.size()) error(cat("motion block has more requests than its ", motion_.times.size(), " times"));
+  return true;
+}
+
+void Scene::applyTransform(const glm::dmat4& m, bool set) {
+  if (motionTake(set ? Pending::Set : Pending::Concat)) {
+    motion_.mats.push_back(m);
+    return;
+  }
+  if (set) cur_.ctm = (inWorld_ ? frame_.worldToCamera : MotionXform()).then(MotionXform(m));
+  else cur_.ctm = cur_.ctm.then(MotionXform(m));
+  ctmShared_.reset();
+}
+
+void Scene::identity() { applyTransform(glm::dmat4(1.0), true); }
+void Scene::transform(const glm::dmat4& m) { applyTransform(m, true); }
+void Scene::concatTransform(const glm::dmat4& m) { applyTransform(m, false); }
+void Scene::translate(double x, double y, double z) { applyTransform(glm::translate(glm::dmat4(1.0), glm::dvec3(x, y, z)), false); }
+void Scene::rotate(double deg, double x, double y, double z) {
+  glm::dvec3 axis(x, y, z);
+  if (glm::dot(axis, axis) == 0) error("Rotate about a zero axis");
+  applyTransform(glm::rotate(glm::dmat4(1.0), glm::radians(deg), axis), false);
+}
+void Scene::scale(double x, double y, double z) { applyTransform(glm::scale(glm::dmat4(1.0), glm::dvec3(x, y, z)), false); }
+void Scene::coordinateSystem(const std::string& name) { coordSystems_[name] = cur_.ctm; }
+void Scene::coordSysTransform(const std::string& name) {
+  auto it = coordSystems_.find(name);
+  if (it == coordSystems_.end()) error(cat("unknown coordinate system '", name, "'"));
+  cur_.ctm = it->second;
+  ctmShared_.reset();
+}
+void Scene::orientation(const std::string& o) {
+  bool rh = csIsRightHanded(cur_.ctm);
+  if (o == "lh") mutableAttrs().orientationRH = false;
+  else if (o == "rh") mutableAttrs().orientationRH = true;
+  else if (o == "outside") mutableAttrs().orientationRH = rh;
+  else if (o == "inside") mutableAttrs().orientationRH = !rh;
+  else error(cat("unknown orientation '", o, "'"));
+}
+void Scene::reverseOrientation() { mutableAttrs().orientationRH = !cur_.attrs->orientationRH; }
+void Scene::sides(int n) {
+  if (n != 1 && n != 2) error(cat("Sides ", n, ": must be 1 or 2"));
+  mutableAttrs().twoSided = n == 2;
+}
+
+void Scene::color(const glm::dvec3& c) {
+  if (motionTake(Pending::Color)) return motion_.colors.push_back(c);
+  mutableAttrs().color = Animated<glm::dvec3>(c);
+}
+void Scene::opacity(const glm::dvec3& o) {
+  if (motionTake(Pending::Opacity)) return motion_.colors.push_back(o);
+  mutableAttrs().opacity = Animated<glm::dvec3>(o);
+}
+void Scene::surface(const std::string& name, const ParamMap& params) {
+  SurfaceShader s;
+  if (!SurfaceShader::named(name, s))
+    warnOnce(cat("surface:", name), cat(where, ": surface shader '", name, "' is not built in; using defaultsurface"));
+  applyParams(s, params);
+  if (motionTake(Pending::Surface)) return motion_.surfaces.push_back(s);
+  mutableAttrs().surface = Animated<SurfaceShader>(s);
+}
+
+void Scene::lightSource(const std::string& name, const std::string& handle, const ParamMap& params) {
+  Light l;
+  if (!Light::named(name, l)) {
+    warnOnce(cat("light:", name), cat(where, ": light shader '", name, "' is not built in; skipped"));
+    return;
+  }
+  applyParams(l, params);
+  l.xform = cur_.ctm;
+  uint32_t idx = uint32_t(frame_.lights.size());
+  frame_.lights.push_back(l);
+  if (!handle.empty()) lightHandles_[handle] = idx;
+  mutableAttrs().lights.push_back(idx);
+}
+
+void Scene::illuminate(const std::string& handle, bool on) {
+  auto it = lightHandles_.find(handle);
+  if (it == lightHandles_.end()) {
+    warnOnce("illuminate", cat(where, ": Illuminate names unknown light '", handle, "'"));
+    return;
+  }
+  auto& ls = mutableAttrs().lights;
+  auto pos = std::find(ls.begin(), ls.end(), it->second);
+  if (on && pos == ls.end()) ls.push_back(it->second);
+  if (!on && pos != ls.end()) ls.erase(pos);
+}
+
+void Scene::shadingRate(double r) {
+  if (!(r > 0) || !std::isfinite(r)) error(cat("shading rate ", r, " must be positive"));
+  mutableAttrs().shadingRate = r;
+}
+void Scene::motionFactor(double f) {
+  if (!(f >= 0) || !std::isfinite(f)) error(cat("motion factor ", f, " must be non-negative"));
+  mutableAttrs().motionFactor = f;
+}
+void Scene::matte(bool on) { mutableAttrs().matte = on; }
+void Scene::identifier(const std::string& name) {
+  auto [it, fresh] = objectIds_.try_emplace(name, uint32_t(frame_.objectNames.size() + 1));
+  if (fresh) frame_.objectNames.push_back(name);
+  mutableAttrs().objectId = it->second;
+}
+
+void Scene::motionBegin(const std::vector<double>& times) {
+  if (motion_.active) error("MotionBegin inside a motion block");
+  if (times.empty() || times.size() > 64) error(cat("MotionBegin with ", times.size(), " times (1 to 64 allowed)"));
+  for (size_t i = 0; i < times.size(); ++i) {
+    if (!std::isfinite(times[i])) error("MotionBegin time is not finite");
+    if (i && !(times[i] > times[i - 1])) error("MotionBegin times must increase");
+  }
+  motion_ = Motion{};
+  motion_.active = true;
+  motion_.times = times;
+}
+
+void Scene::motionEnd() {
+  if (!motion_.active) error("MotionEnd without MotionBegin");
+  Motion m = std::move(motion_);
+  motion_ = Motion{};
+  if (m.kind == Pending::None) return;
+  size_t n = m.mats.size() + m.colors.size() + m.surfaces.size() + m.prims.size();
+  if (n != m.times.size()) error(cat("motion block has ", n, " requests for ", m.times.size(), " times"));
+  // A one-time block is a plain request at that time.
+  std::vector<double> times = m.times.size() > 1 ? m.times : std::vector<double>{};
+  switch (m.kind) {
+    case Pending::Concat:
+      cur_.ctm = cur_.ctm.then(MotionXform(times, m.times.size() > 1 ? m.mats : std::vector<glm::dmat4>{m.mats[0]}));
+      ctmShared_.reset();
+      break;
+    case Pending::Set:
+      cur_.ctm = (inWorld_ ? frame_.worldToCamera : MotionXform())
+                     .then(MotionXform(times, m.times.size() > 1 ? m.mats : std::vector<glm::dmat4>{m.mats[0]}));
+      ctmShared_.reset();
+      break;
+    case Pending::Color:
+    case Pending::Opacity: {
+      Animated<glm::dvec3> a;
+      a.times = times;
+      a.values = times.empty() ? std::vector<glm::dvec3>{m.colors[0]} : m.colors;
+      (m.kind == Pending::Color ? mutableAttrs().color : mutableAttrs().opacity) = a;
+      break;
+    }
+    case Pending::Surface: {
+      Animated<SurfaceShader> a;
+      a.times = times;
+      a.values = times.empty() ? std::vector<SurfaceShader>{m.surfaces[0]} : m.surfaces;
+      mutableAttrs().surface = a;
+      break;
+    }
+    case Pending::Prim: {
+      std::vector<Primitive> out = std::move(m.prims[0]);
+      for (size_t k = 1; k < m.prims.size(); ++k) {
+        if (m.prims[k].size() != out.size()) error("deformation keys of a motion block differ in topology");
+        for (size_t i = 0; i < out.size(); ++i) {
+          if (m.prims[k][i].kind != out[i].kind || m.prims[k][i].triangle != out[i].triangle)
+            error("deformation keys of a motion block are different primitives");
+          out[i].keys.push_back(m.prims[k][i].keys[0]);
+        }
+      }
+      for (auto& p : out) p.times = times;
+      frame_.prims.insert(frame_.prims.end(), std::make_move_iterator(out.begin()), std::make_move_iterator(out.end()));
+      break;
+    }
+    case Pending::None: break;
+  }
+}
+
+Primitive Scene::basePrim(PrimKind kind) const {
+  Primitive p;
+  p.kind = kind;
+  p.attrs = cur_.attrs;
+  p.xform = ctmShared_;
+  p.flipNormals = cur_.attrs->orientationRH != csIsRightHanded(cur_.ctm);
+  return p;
+}
+
+void Scene::addPrims(std::vector<Primitive> prims) {
+  if (!inWorld_) {
+    warnOnce("prim-outside-world", cat(where, ": geometry outside WorldBegin/WorldEnd; skipped"));
+    return;
+  }
+  if (motionTake(Pending::Prim)) {
+    motion_.prims.push_back(std::move(prims));
+    return;
+  }
+  frame_.prims.insert(frame_.prims.end(), std::make_move_iterator(prims.begin()), std::make_move_iterator(prims.end()));
+}
+
+namespace {
+void checkFinite(const Scene& s, std::initializer_list<double> v) {
+  for (double x : v)
+    if (!std::isfinite(x)) fail(s.where, "primitive parameter is not finite");
+}
+}  // namespace
+
+#define RESHUTTER_PRIM_PROLOGUE \
+  if (!ctmShared_) ctmShared_ = std::make_shared<const MotionXform>(cur_.ctm)
+
+void Scene::sphere(double radius, double zmin, double zmax, double thetamax) {
+  checkFinite(*this, {radius, zmin, zmax, thetamax});
+  RESHUTTER_PRIM_PROLOGUE;
+  Primitive p = basePrim(PrimKind::Sphere);
+  Shape s;
+  s.q = {radius, zmin, zmax, thetamax, 0};
+  p.keys = {s};
+  addPrims({std::move(p)});
+}
+void Scene::cylinder(double radius, double zmin, double zmax, double thetamax) {
+  checkFinite(*this, {radius, zmin, zmax, thetamax});
+  RESHUTTER_PRIM_PROLOGUE;
+  Primitive p = basePrim(PrimKind::Cylinder);
+  Shape s;
+  s.q = {radius, zmin, zmax, thetamax, 0};
+  p.keys = {s};
+  addPrims({std::move(p)});
+}
+void Scene::cone(double height, double radius, double thetamax) {
+  checkFinite(*this, {height, radius, thetamax});
+  RESHUTTER_PRIM_PROLOGUE;
+  Primitive p = basePrim(PrimKind::Cone);
+  Shape s;
+  s.q = {height, radius, thetamax, 0, 0};
+  p.keys = {s};
+  addPrims({std::move(p)});
+}
+void Scene::disk(double height, double radius, double thetamax) {
+  checkFinite(*this, {height, radius, thetamax});
+  RESHUTTER_PRIM_PROLOGUE;
+  Primitive p = basePrim(PrimKind::Disk);
+  Shape s;
+  s.q = {height, radius, thetamax, 0, 0};
+  p.keys = {s};
+  addPrims({std::move(p)});
+}
+void Scene::torus(double rmajor, double rminor, double phimin, double phimax, double thetamax) {
+  checkFinite(*this, {rmajor, rminor, phimin, phimax, thetamax});
+  RESHUTTER_PRIM_PROLOGUE;
+  Primitive p = basePrim(PrimKind::Torus);
+  Shape s;
+  s.q = {rmajor, rminor, phimin, phimax, thetamax};
+  p.keys = {s};
+  addPrims({std::move(p)});
+}
+
+void Scene::patch(const std::array<glm::dvec3, 4>& P, const VertexData& vd) {
+  for (const auto& c : P) checkFinite(*this, {c.x, c.y, c.z});
+  RESHUTTER_PRIM_PROLOGUE;
+  Primitive p = basePrim(PrimKind::Patch);
+  Shape s;
+  s.P = P;
+  p.keys = {s};
+  auto take = [](const std::vector<glm::dvec3>& src, bool& has, std::array<glm::dvec3, 4>& dst) {
+    if (src.size() != 4) return;
+    has = true;
+    for (int i = 0; i < 4; ++i) dst[i] = src[i];
+  };
+  take(vd.N, p.hasN, p.N);
+  take(vd.Cs, p.hasCs, p.Cs);
+  take(vd.Os, p.hasOs, p.Os);
+  if (vd.st.size() == 4) {
+    p.hasST = true;
+    for (int i = 0; i < 4; ++i) p.st[i] = vd.st[i];
+  }
+  addPrims({std::move(p)});
+}
+
+void Scene::emitFaces(const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P,
+                      const VertexData& vd, std::vector<Primitive>& out) {
+  size_t total = 0;
+  for (int n : nverts) {
+    if (n < 0) error("negative vertex count");
+    total += size_t(n);
+  }
+  if (total != verts.size()) error(cat("polygons name ", verts.size(), " vertex indices; their counts add up to ", total));
+  for (int v : verts)
+    if (v < 0 || size_t(v) >= P.size()) error(cat("vertex index ", v, " out of range (", P.size(), " points)"));
+  for (const auto& c : P) checkFinite(*this, {c.x, c.y, c.z});
+  const size_t nFaces = nverts.size();
+  // Vertex data is per vertex (vertex/varying) or per face (uniform).
+  auto value = [&](const std::vector<glm::dvec3>& src, size_t face, int vertex, glm::dvec3& dst) {
+    if (src.size() == P.size()) return dst = src[size_t(vertex)], true;
+    if (src.size() == nFaces) return dst = src[face], true;
+    return false;
+  };
+  size_t first = 0;
+  for (size_t f = 0; f < nFaces; ++f) {
+    const int n = nverts[f];
+    const int* idx = verts.data() + first;
+    first += size_t(n);
+    if (n < 3) continue;
+    // A fan of quads (and a closing triangle) from vertex 0; exact for convex planar polygons.
+    for (int i = 1; i + 1 < n; i += 2) {
+      const bool tri = i + 2 >= n;
+      const int ring[4] = {idx[0], idx[i], idx[i + 1], tri ? idx[i + 1] : idx[i + 2]};
+      const int rib[4] = {ring[0], ring[1], ring[3], ring[2]};  // ring → P00 P10 P01 P11
+      Primitive p = basePrim(PrimKind::Patch);
+      p.triangle = tri;
+      Shape s;
+      for (int c = 0; c < 4; ++c) s.P[c] = P[size_t(rib[c])];
+      p.keys = {s};
+      bool okN = true, okCs = true, okOs = true;
+      for (int c = 0; c < 4; ++c) {
+        okN = okN && value(vd.N, f, rib[c], p.N[c]);
+        okCs = okCs && value(vd.Cs, f, rib[c], p.Cs[c]);
+        okOs = okOs && value(vd.Os, f, rib[c], p.Os[c]);
+      }
+      p.hasN = okN && !vd.N.empty();
+      p.hasCs = okCs && !vd.Cs.empty();
+      p.hasOs = okOs && !vd.Os.empty();
+      if (vd.st.size() == P.size()) {
+        p.hasST = true;
+        for (int c = 0; c < 4; ++c) p.st[c] = vd.st[size_t(rib[c])];
+      }
+      out.push_back(std::move(p));
+    }
+  }
+}
+
+void Scene::pointsPolygons(const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P,
+                           const VertexData& vd) {
+  RESHUTTER_PRIM_PROLOGUE;
+  std::vector<Primitive> out;
+  emitFaces(nverts, verts, P, vd, out);
+  addPrims(std::move(out));
+}
+
+void Scene::polygon(const std::vector<glm::dvec3>& P, const VertexData& vd) {
+  std::vector<int> idx(P.size());
+  for (size_t i = 0; i < P.size(); ++i) idx[i] = int(i);
+  pointsPolygons({int(P.size())}, idx, P, vd);
+}
+
+}  // namespace reshutter::shade

@@ -1,0 +1,282 @@
+// The scene description the shading pass consumes, and the RenderMan-style builder that makes it.
+// Owns the graphics state (attributes, transforms that move, motion blocks, cameras, lights,
+// displays) and turns every primitive call into a Primitive that carries its own moving
+// object→camera transform, deformation keys and attribute snapshot. Both the RIB handler
+// (shade/rib_scene.h) and the built-in demo (shade/demo_scene.h) drive this one builder, so the
+// two cannot disagree about RenderMan semantics.
+//
+// Spaces: the builder's current transform always maps object space to camera space (RenderMan's
+// CTM); WorldBegin records it as world→camera. Camera motion (motion blocks before WorldBegin)
+// is therefore folded into every primitive's transform, and positions come out in the camera
+// space of their own knot time.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <functional>
+#include <map>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <glm/mat4x4.hpp>
+#include <glm/vec2.hpp>
+#include <glm/vec3.hpp>
+
+#include "store/model.h"
+
+namespace reshutter::shade {
+
+/// A transform that may move: matrices at strictly increasing times, linear in between (element
+/// by element, so transformed points move linearly between knots, as the store assumes).
+struct MotionXform {
+  std::vector<double> times;     // empty: static
+  std::vector<glm::dmat4> mats;  // one per time, or one when static
+
+  MotionXform() : mats{glm::dmat4(1.0)} {}
+  explicit MotionXform(const glm::dmat4& m) : mats{m} {}
+  MotionXform(std::vector<double> t, std::vector<glm::dmat4> m) : times(std::move(t)), mats(std::move(m)) {}
+  bool moving() const { return mats.size() > 1; }
+  glm::dmat4 at(double t) const;
+  /// this · rhs (rhs applies first); the times are the union of both.
+  MotionXform then(const MotionXform& rhs) const;
+};
+
+/// A value given at knot times (Color, Opacity and shader parameters inside motion blocks).
+template <typename T>
+struct Animated {
+  std::vector<double> times;  // empty: constant
+  std::vector<T> values;      // one per time, or one
+  Animated() = default;
+  explicit Animated(T v) : values{v} {}
+  T at(double t) const;
+};
+
+/// The built-in surface shaders (RenderMan standard shaders; shade/shaders.h has the formulas).
+enum class SurfaceKind : uint8_t { Constant, Matte, Metal, Plastic, DefaultSurface };
+
+struct SurfaceShader {
+  SurfaceKind kind = SurfaceKind::DefaultSurface;
+  double Ka = 1, Kd = 0.5, Ks = 0.5, roughness = 0.1;
+  glm::dvec3 specularColor{1.0};
+  /// RenderMan's defaults for `name`; false (and defaultsurface) for a shader not built in.
+  static bool named(const std::string& name, SurfaceShader& out);
+  SurfaceShader lerp(const SurfaceShader& b, double w) const;
+};
+
+enum class LightKind : uint8_t { Ambient, Distant, Point, Spot };
+
+/// A light source as declared (parameters in its shader space; `xform` maps that to camera space).
+struct Light {
+  LightKind kind = LightKind::Point;
+  double intensity = 1;
+  glm::dvec3 color{1.0};
+  glm::dvec3 from{0.0}, to{0.0, 0.0, 1.0};
+  double coneAngle = 0.5235987755982988;        // radians(30)
+  double coneDeltaAngle = 0.08726646259971647;  // radians(5)
+  double beamDistribution = 2;
+  MotionXform xform;
+  /// RenderMan's defaults for `name`; false for a light not built in.
+  static bool named(const std::string& name, Light& out);
+};
+
+/// Numeric shader/light parameters by bare name ("Kd", "intensity", "from", "lightcolor").
+using ParamMap = std::map<std::string, std::vector<double>>;
+void applyParams(SurfaceShader& s, const ParamMap& params);
+void applyParams(Light& l, const ParamMap& params);
+
+/// Attributes captured by each primitive when it is declared.
+struct Attributes {
+  Animated<glm::dvec3> color{glm::dvec3(1.0)}, opacity{glm::dvec3(1.0)};
+  Animated<SurfaceShader> surface{SurfaceShader{}};
+  std::vector<uint32_t> lights;  // indices into FrameScene::lights that illuminate
+  double shadingRate = 1.0;
+  double motionFactor = 0.0;     // GeometricApproximation "motionfactor"
+  bool matte = false, twoSided = true;
+  bool orientationRH = false;    // Orientation: "lh" (RenderMan's default, "outside") or "rh"
+  uint32_t objectId = 0;         // 0: unnamed; otherwise 1 + index into FrameScene::objectNames
+};
+
+enum class PrimKind : uint8_t { Sphere, Cylinder, Cone, Disk, Torus, Patch };
+
+/// One deformation key of a primitive's shape.
+struct Shape {
+  /// Quadric parameters in RenderMan argument order (Sphere: radius zmin zmax thetamax;
+  /// Cylinder: radius zmin zmax thetamax; Cone: height radius thetamax; Disk: height radius
+  /// thetamax; Torus: rmajor rminor phimin phimax thetamax). Angles in degrees.
+  std::array<double, 5> q{};
+  /// Bilinear patch corners P00 P10 P01 P11 (RIB order); a triangle repeats P01 as P11.
+  std::array<glm::dvec3, 4> P{};
+};
+
+/// A parametric surface over (u, v) ∈ [0,1]², ready to dice. Polygons become patches (quads, and
+/// triangles as patches whose last edge is collapsed).
+struct Primitive {
+  PrimKind kind = PrimKind::Patch;
+  std::vector<double> times;  // deformation knot times; empty: one key
+  std::vector<Shape> keys;
+  bool triangle = false;
+  bool hasN = false, hasCs = false, hasOs = false, hasST = false;
+  std::array<glm::dvec3, 4> N{}, Cs{}, Os{};  // per corner (patches), object space for N
+  std::array<glm::dvec2, 4> st{};
+  std::shared_ptr<const MotionXform> xform;  // object → camera
+  std::shared_ptr<const Attributes> attrs;
+  bool flipNormals = false;  // orientation differs from the coordinate system's handedness
+
+  Shape shapeAt(double t) const;
+  /// Every knot time of the primitive (transform and deformation), sorted, unique.
+  std::vector<double> knotTimes() const;
+};
+
+/// Output variables the shading pass can compute, and their store types.
+struct OutputVar {
+  std::string name;
+  store::AttrType type;
+};
+/// The known output variables ("P", "N", "Ng", "s", "t", "u", "v", "Cs", "Os", "depth",
+/// "specular"); "id"/"z" are the store's own object ids and depths.
+const std::vector<OutputVar>& knownOutputVars();
+
+/// Options and camera of one frame (RenderMan options, frozen at WorldBegin).
+struct FrameOptions {
+  int64_t frame = 1;
+  store::Camera camera;          // the primary ("world") camera; worldToCamera at shutter open
+  double frameAspectRatio = 0;   // 0: from Format
+  double shutterOpen = 0, shutterClose = 0;
+  std::vector<store::Camera> namedCameras;
+  std::vector<std::string> outputs;  // requested output variables, in request order, unique
+  int pixelSamples[2] = {1, 1};
+};
+
+/// Everything WorldEnd hands to the shading pass.
+struct FrameScene {
+  FrameOptions options;
+  MotionXform worldToCamera;
+  std::vector<Light> lights;
+  std::vector<Primitive> prims;
+  std::vector<std::string> objectNames;
+  std::string source;  // "scene.rib", "built-in demo"
+};
+
+/// The RenderMan-style builder. Calls mirror the RI; inside motionBegin/motionEnd every call of
+/// the block is collected and combined at motionEnd (transforms into a moving coordinate
+/// system, primitives into deformation keys, Color/Opacity/Surface into animated values).
+/// Errors are reshutter::Error naming `where()`, which the RIB handler sets per request.
+class Scene {
+ public:
+  using FrameCallback = std::function<void(FrameScene&)>;
+  explicit Scene(FrameCallback onWorldEnd);
+
+  std::string where = "scene";  // prefix for errors and warnings
+
+  // Options
+  void format(int width, int height, double pixelAspect);
+  void frameAspectRatio(double a);
+  void screenWindow(double l, double r, double b, double t);
+  void perspective(double fovDegrees);
+  void orthographic();
+  void clipping(double nearClip, double farClip);
+  void shutter(double open, double close);
+  void pixelSamples(int x, int y);
+  void display(const std::string& name, const std::string& mode);
+  void camera(const std::string& name);
+  void frameBegin(int64_t n);
+  void frameEnd();
+  void worldBegin();
+  void worldEnd();
+
+  // Attributes and transforms
+  void attributeBegin();
+  void attributeEnd();
+  void transformBegin();
+  void transformEnd();
+  void identity();
+  void transform(const glm::dmat4& m);
+  void concatTransform(const glm::dmat4& m);
+  void translate(double x, double y, double z);
+  void rotate(double degrees, double x, double y, double z);
+  void scale(double x, double y, double z);
+  void coordinateSystem(const std::string& name);
+  void coordSysTransform(const std::string& name);
+  void orientation(const std::string& o);
+  void reverseOrientation();
+  void sides(int n);
+  void color(const glm::dvec3& c);
+  void opacity(const glm::dvec3& o);
+  void surface(const std::string& name, const ParamMap& params);
+  void lightSource(const std::string& name, const std::string& handle, const ParamMap& params);
+  void illuminate(const std::string& handle, bool on);
+  void shadingRate(double r);
+  void motionFactor(double f);
+  void matte(bool on);
+  void identifier(const std::string& name);
+
+  // Motion
+  void motionBegin(const std::vector<double>& times);
+  void motionEnd();
+  bool inMotion() const { return motion_.active; }
+
+  // Primitives
+  void sphere(double radius, double zmin, double zmax, double thetamax);
+  void cylinder(double radius, double zmin, double zmax, double thetamax);
+  void cone(double height, double radius, double thetamax);
+  void disk(double height, double radius, double thetamax);
+  void torus(double rmajor, double rminor, double phimin, double phimax, double thetamax);
+  /// Bilinear patch, corners in RIB order P00 P10 P01 P11; optional per-corner Cs/Os/N.
+  struct VertexData {
+    std::vector<glm::dvec3> N, Cs, Os;
+    std::vector<glm::dvec2> st;
+  };
+  void patch(const std::array<glm::dvec3, 4>& P, const VertexData& vd = {});
+  /// General polygons: `nverts` per face, `verts` indices into P (and the vertex data).
+  void pointsPolygons(const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P,
+                      const VertexData& vd = {});
+  void polygon(const std::vector<glm::dvec3>& P, const VertexData& vd = {});
+
+  const FrameOptions& options() const { return options_; }
+  int framesShaded() const { return framesDone_; }
+
+ private:
+  enum class Pending : uint8_t { None, Concat, Set, Color, Opacity, Surface, Prim };
+  struct Motion {
+    bool active = false;
+    std::vector<double> times;
+    Pending kind = Pending::None;
+    std::vector<glm::dmat4> mats;
+    std::vector<glm::dvec3> colors;
+    std::vector<SurfaceShader> surfaces;
+    std::vector<std::vector<Primitive>> prims;  // per key: the primitives one call made
+  };
+  enum class Block : uint8_t { Attribute, Transform, Frame, World };
+  struct State {
+    std::shared_ptr<Attributes> attrs;
+    MotionXform ctm;
+    Block block = Block::Attribute;  // the block whose Begin pushed this state
+  };
+  void push(Block b);
+  State pop(Block b, const char* request);
+
+  Attributes& mutableAttrs();
+  void applyTransform(const glm::dmat4& m, bool set);
+  void addPrims(std::vector<Primitive> prims);
+  void emitFaces(const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P,
+                 const VertexData& vd, std::vector<Primitive>& out);
+  Primitive basePrim(PrimKind kind) const;
+  bool motionTake(Pending kind);
+  [[noreturn]] void error(const std::string& what) const;
+
+  FrameCallback onWorldEnd_;
+  FrameOptions options_, savedFrameOptions_;
+  bool inFrame_ = false, inWorld_ = false;
+  std::vector<State> stack_;
+  State cur_;
+  std::shared_ptr<const MotionXform> ctmShared_;
+  std::map<std::string, MotionXform> coordSystems_;
+  std::map<std::string, uint32_t> lightHandles_;
+  std::map<std::string, uint32_t> objectIds_;
+  FrameScene frame_;
+  Motion motion_;
+  int framesDone_ = 0;
+};
+
+}  // namespace reshutter::shade

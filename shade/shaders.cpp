@@ -1,0 +1,141 @@
+// Built-in RenderMan standard shaders and lights (formulas and conventions in shaders.h).
+#include "shade/shaders.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <glm/geometric.hpp>
+#include <glm/mat3x3.hpp>
+
+namespace reshutter::shade {
+
+namespace {
+double smoothstep(double e0, double e1, double x) {
+  if (e0 == e1) return x < e0 ? 0.0 : 1.0;
+  double t = std::clamp((x - e0) / (e1 - e0), 0.0, 1.0);
+  return t * t * (3 - 2 * t);
+}
+}  // namespace
+
+LitLight resolveLight(const Light& l, double time) {
+  LitLight r;
+  r.kind = l.kind;
+  r.Cl0 = l.intensity * l.color;
+  const glm::dmat4 m = l.xform.at(time);
+  const glm::dvec3 from = glm::dvec3(m * glm::dvec4(l.from, 1.0));
+  const glm::dvec3 to = glm::dvec3(m * glm::dvec4(l.to, 1.0));
+  r.position = from;
+  glm::dvec3 axis = to - from;
+  double len = glm::length(axis);
+  r.axis = len > 0 ? axis / len : glm::dvec3(0, 0, 1);
+  r.cosOuter = std::cos(l.coneAngle);
+  r.cosInner = std::cos(l.coneAngle - l.coneDeltaAngle);
+  r.beam = l.beamDistribution;
+  return r;
+}
+
+bool illuminate(const LitLight& l, const glm::dvec3& P, glm::dvec3& L, glm::dvec3& Cl) {
+  switch (l.kind) {
+    case LightKind::Ambient: return false;
+    case LightKind::Distant:
+      L = -l.axis;
+      Cl = l.Cl0;
+      return true;
+    case LightKind::Point: {
+      L = l.position - P;
+      double d2 = glm::dot(L, L);
+      if (!(d2 > 0)) return false;
+      Cl = l.Cl0 / d2;
+      return true;
+    }
+    case LightKind::Spot: {
+      L = l.position - P;
+      double d2 = glm::dot(L, L);
+      if (!(d2 > 0)) return false;
+      // spotlight.sl: illuminate(from, A, coneangle) with cosangle = (P - from)·A / |P - from|.
+      double cosangle = glm::dot(-L, l.axis) / std::sqrt(d2);
+      if (cosangle < l.cosOuter) return false;
+      double atten = std::pow(std::max(cosangle, 0.0), l.beam) / d2 * smoothstep(l.cosOuter, l.cosInner, cosangle);
+      Cl = l.Cl0 * atten;
+      return true;
+    }
+  }
+  return false;
+}
+
+glm::dvec3 ambient(std::span<const LitLight> lights) {
+  glm::dvec3 c(0.0);
+  for (const auto& l : lights)
+    if (l.kind == LightKind::Ambient) c += l.Cl0;
+  return c;
+}
+
+glm::dvec3 diffuse(const glm::dvec3& P, const glm::dvec3& Nn, std::span<const LitLight> lights) {
+  glm::dvec3 c(0.0), L, Cl;
+  for (const auto& l : lights) {
+    if (!illuminate(l, P, L, Cl)) continue;
+    double cosine = glm::dot(glm::normalize(L), Nn);
+    if (cosine > 0) c += Cl * cosine;
+  }
+  return c;
+}
+
+glm::dvec3 specular(const glm::dvec3& P, const glm::dvec3& Nn, const glm::dvec3& V, double roughness,
+                    std::span<const LitLight> lights) {
+  glm::dvec3 c(0.0), L, Cl;
+  const double exponent = 1.0 / std::max(roughness, 1e-6);
+  for (const auto& l : lights) {
+    if (!illuminate(l, P, L, Cl)) continue;
+    glm::dvec3 Ln = glm::normalize(L);
+    if (glm::dot(Ln, Nn) <= 0) continue;  // illuminance cone: the hemisphere around Nn
+    glm::dvec3 H = Ln + V;
+    double hl = glm::length(H);
+    if (!(hl > 0)) continue;
+    double nh = glm::dot(Nn, H / hl);
+    if (nh > 0) c += Cl * std::pow(nh, exponent);
+  }
+  return c;
+}
+
+SurfaceOutput shadeSurface(const SurfaceShader& s, const SurfaceInput& in, std::span<const LitLight> lights) {
+  SurfaceOutput out;
+  out.Oi = in.Os;
+  const double nl = glm::length(in.N);
+  const glm::dvec3 Nn = nl > 0 ? in.N / nl : glm::dvec3(0, 0, -1);
+  // faceforward(N, I) uses Ng to decide the side.
+  const glm::dvec3 Nf = glm::dot(in.I, in.Ng) > 0 ? -Nn : Nn;
+  const double il = glm::length(in.I);
+  const glm::dvec3 V = il > 0 ? -in.I / il : glm::dvec3(0, 0, -1);
+  switch (s.kind) {
+    case SurfaceKind::Constant:
+      out.Ci = in.Os * in.Cs;
+      break;
+    case SurfaceKind::Matte:
+      out.Ci = in.Os * in.Cs * (s.Ka * ambient(lights) + s.Kd * diffuse(in.P, Nf, lights));
+      break;
+    case SurfaceKind::Metal: {
+      glm::dvec3 spec = in.Os * in.Cs * s.Ks * specular(in.P, Nf, V, s.roughness, lights);
+      out.Ci = in.Os * in.Cs * s.Ka * ambient(lights) + spec;
+      out.viewDependent = spec;
+      break;
+    }
+    case SurfaceKind::Plastic: {
+      glm::dvec3 spec = in.Os * s.specularColor * s.Ks * specular(in.P, Nf, V, s.roughness, lights);
+      out.Ci = in.Os * in.Cs * (s.Ka * ambient(lights) + s.Kd * diffuse(in.P, Nf, lights)) + spec;
+      out.viewDependent = spec;
+      break;
+    }
+    case SurfaceKind::DefaultSurface: {
+      // defaultsurface.sl: a headlight, (I·N)² / (I·I · N·N).
+      double in2 = glm::dot(in.I, in.I) * glm::dot(in.N, in.N);
+      double d = in2 > 0 ? glm::dot(in.I, in.N) * glm::dot(in.I, in.N) / in2 : 0.0;
+      glm::dvec3 head = in.Os * in.Cs * s.Kd * d;
+      out.Ci = in.Os * in.Cs * s.Ka + head;
+      out.viewDependent = head;
+      break;
+    }
+  }
+  return out;
+}
+
+}  // namespace reshutter::shade

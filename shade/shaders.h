@@ -1,0 +1,62 @@
+// The built-in surface and light shaders, with the formulas of the RenderMan Interface
+// Specification 3.2's standard shaders (constant, matte, metal, plastic, defaultsurface;
+// ambientlight, distantlight, pointlight, spotlight), evaluated in camera space at one time.
+//
+// Specular exponent convention: `specular(N, V, roughness)` sums
+//   Cl · max(0, N·H)^(1/roughness),  H = normalize(normalize(L) + V),
+// over the lights in the hemisphere around N — the RI Spec's and PRMan's definition. (BMRT,
+// Aqsis and 3Delight use 8/roughness instead, which gives tighter highlights for the same
+// roughness: scenes tuned for those renderers look broader here.)
+//
+// Surfaces use faceforward(normalize(N), I) as the standard shaders do, so that one-sided
+// scenes light correctly from either side. The view-dependent part of each result (the
+// specular term, or defaultsurface's headlight term) is returned separately as well, so that
+// another camera can subtract it from Ci and add its own (the multi-camera reference's
+// "view independent color first" rule).
+#pragma once
+
+#include <span>
+#include <vector>
+
+#include <glm/vec3.hpp>
+
+#include "shade/scene.h"
+
+namespace reshutter::shade {
+
+/// A light resolved into camera space at the shading time.
+struct LitLight {
+  LightKind kind = LightKind::Point;
+  glm::dvec3 position{0.0};  // point, spot
+  glm::dvec3 axis{0, 0, 1};  // distant: direction the light travels; spot: cone axis (unit)
+  glm::dvec3 Cl0{1.0};       // intensity · lightcolor
+  double cosOuter = 0, cosInner = 0, beam = 2;
+};
+
+LitLight resolveLight(const Light& light, double time);
+
+/// Light arriving at P from one light: `L` points from P towards the light (unnormalised for
+/// local lights, unit for distant ones), `Cl` is its colour there. False for ambient lights and
+/// points outside a spot's cone.
+bool illuminate(const LitLight& light, const glm::dvec3& P, glm::dvec3& L, glm::dvec3& Cl);
+
+glm::dvec3 ambient(std::span<const LitLight> lights);
+/// Σ Cl · (normalize(L)·Nn) over lights with L in the hemisphere of Nn (unit).
+glm::dvec3 diffuse(const glm::dvec3& P, const glm::dvec3& Nn, std::span<const LitLight> lights);
+/// Σ Cl · max(0, Nn·H)^(1/roughness), over lights in the hemisphere of Nn; V is the unit vector
+/// towards the eye.
+glm::dvec3 specular(const glm::dvec3& P, const glm::dvec3& Nn, const glm::dvec3& V, double roughness,
+                    std::span<const LitLight> lights);
+
+struct SurfaceInput {
+  glm::dvec3 P{0.0}, N{0, 0, -1}, Ng{0, 0, -1}, I{0, 0, 1};
+  glm::dvec3 Cs{1.0}, Os{1.0};
+};
+struct SurfaceOutput {
+  glm::dvec3 Ci{0.0}, Oi{1.0};
+  glm::dvec3 viewDependent{0.0};  // the part of Ci that depends on I (included in Ci)
+};
+
+SurfaceOutput shadeSurface(const SurfaceShader& shader, const SurfaceInput& in, std::span<const LitLight> lights);
+
+}  // namespace reshutter::shade

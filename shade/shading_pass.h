@@ -1,0 +1,47 @@
+// The single shading pass: every primitive of a FrameScene is split, diced, shaded once at one
+// time and streamed as grids into a GridSink (the store writer), positions at every motion knot.
+//
+// Parallel with TBB: splitting runs per primitive, dicing and shading per batch of grids in a
+// pipeline whose last stage hands grids to the sink in scene order (primitive order, then
+// dicing order), so the output is identical for any thread count and the memory in flight is
+// bounded by the pipeline's token count, not by the scene.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <utility>
+
+#include "shade/dice.h"
+#include "shade/scene.h"
+#include "store/model.h"
+
+namespace reshutter::shade {
+
+struct ShadeOptions {
+  /// Time at which every vertex is shaded; default: the store interval's open (the reference
+  /// workflow shades at shutter open). Outside a primitive's motion it sees the nearest knot.
+  std::optional<double> shadeAt;
+  /// Restricts the store to [first, second] instead of the scene's Shutter (reference mode:
+  /// "shade again at the target interval"); positions at its ends are interpolated exactly.
+  std::optional<std::pair<double, double>> interval;
+  DiceOptions dice;
+  store::Rational fps{24, 1};
+  int tileSize = 32;
+};
+
+struct ShadeStats {
+  uint64_t primitives = 0, grids = 0, micropolygons = 0, vertices = 0, movingGrids = 0;
+  uint64_t culledPieces = 0, droppedMicropolygons = 0, eyeSplits = 0;
+  double shadeAt = 0;
+  double seconds = 0;
+};
+
+/// The store metadata for `scene` under `options`: frame, shutter (or interval), cameras, and
+/// the schema (Ci, Oi and the requested output variables).
+store::StoreMeta storeMeta(const FrameScene& scene, const ShadeOptions& options);
+
+/// Runs the pass. Grids go to `sink` from the calling thread only.
+ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& options, store::GridSink& sink);
+
+}  // namespace reshutter::shade
