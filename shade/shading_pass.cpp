@@ -250,4 +250,12 @@ ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::Gri
   return stats;
 }
 
+StoreResult shadeToStore(const FrameScene& scene, const ShadeOptions& options, const std::string& path) {
+  StoreResult r;
+  store::StoreWriter writer(path, storeMeta(scene, options));
+  r.shade = shadeFrame(scene, options, writer);
+  r.write = writer.close();
+  return r;
+}
+
 }  // namespace reshutter::shade

@@ -15,6 +15,7 @@
 #include "shade/dice.h"
 #include "shade/scene.h"
 #include "store/model.h"
+#include "store/writer.h"
 
 namespace reshutter::shade {
 
@@ -43,5 +44,13 @@ store::StoreMeta storeMeta(const FrameScene& scene, const ShadeOptions& options)
 
 /// Runs the pass. Grids go to `sink` from the calling thread only.
 ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& options, store::GridSink& sink);
+
+struct StoreResult {
+  ShadeStats shade;
+  store::WriteStats write;
+};
+/// Shades `scene` into a new store at `path` (written atomically: nothing appears there unless
+/// the whole pass succeeds).
+StoreResult shadeToStore(const FrameScene& scene, const ShadeOptions& options, const std::string& path);
 
 }  // namespace reshutter::shade

@@ -1,0 +1,268 @@
+// RIB requests → Scene builder calls (the subset and its policy are in rib_scene.h).
+#include "shade/rib_scene.h"
+
+#include <cmath>
+
+#include <glm/gtc/type_ptr.hpp>
+
+#include "common/error.h"
+#include "common/log.h"
+
+namespace reshutter::shade {
+
+namespace {
+
+using rib::Args;
+using rib::Param;
+using rib::ParamType;
+using rib::StorageClass;
+using rib::Value;
+
+ParamMap numericParams(const std::vector<Param>& params) {
+  ParamMap m;
+  for (const Param& p : params) {
+    if (!p.value) continue;
+    if (p.value->kind == Value::Kind::Number) m[p.decl.name] = {p.value->number};
+    else if (p.value->kind == Value::Kind::NumberArray) m[p.decl.name] = p.value->numbers;
+  }
+  return m;
+}
+
+const std::vector<double>* numbersOf(const Param& p) {
+  if (!p.value || p.value->kind != Value::Kind::NumberArray) return nullptr;
+  return &p.value->numbers;
+}
+
+// A point-like parameter as dvec3s ("P", "N", "Cs", "Os"; "Pw" divides by w).
+std::vector<glm::dvec3> triples(const Args& args, const Param& p) {
+  const auto* v = numbersOf(p);
+  std::vector<glm::dvec3> out;
+  if (!v) {
+    if (p.value && p.value->kind == Value::Kind::Number && p.decl.components() == 1) return out;
+    args.fail(cat("parameter '", p.decl.name, "' must be an array of numbers"));
+  }
+  const int n = p.decl.type == ParamType::HPoint ? 4 : 3;
+  if (v->size() % size_t(n)) args.fail(cat("parameter '", p.decl.name, "' has ", v->size(), " numbers, not a multiple of ", n));
+  for (size_t i = 0; i + size_t(n) <= v->size(); i += size_t(n)) {
+    glm::dvec3 q((*v)[i], (*v)[i + 1], (*v)[i + 2]);
+    if (n == 4) {
+      const double w = (*v)[i + 3];
+      if (w == 0) args.fail(cat("parameter '", p.decl.name, "' has w = 0"));
+      q /= w;
+    }
+    out.push_back(q);
+  }
+  return out;
+}
+
+struct Geometry {
+  std::vector<glm::dvec3> P;
+  Scene::VertexData vd;
+};
+
+Geometry geometry(const Args& args, size_t first) {
+  Geometry g;
+  std::vector<double> s, t;
+  for (const Param& p : args.params(first)) {
+    const std::string& n = p.decl.name;
+    if (n == "P" || n == "Pw") g.P = triples(args, p);
+    else if (n == "N") g.vd.N = triples(args, p);
+    else if (n == "Cs") g.vd.Cs = triples(args, p);
+    else if (n == "Os") g.vd.Os = triples(args, p);
+    else if (n == "st" && numbersOf(p)) {
+      const auto& v = *numbersOf(p);
+      for (size_t i = 0; i + 1 < v.size(); i += 2) g.vd.st.emplace_back(v[i], v[i + 1]);
+    } else if (n == "s" && numbersOf(p)) s = *numbersOf(p);
+    else if (n == "t" && numbersOf(p)) t = *numbersOf(p);
+    else if (n == "Pz") args.fail("\"Pz\" height fields are not supported");
+    else warnOnce(cat("rib-primvar:", n), cat("primitive variable '", n, "' is not used by the built-in shaders; ignored"));
+  }
+  if (g.vd.st.empty() && !s.empty() && s.size() == t.size())
+    for (size_t i = 0; i < s.size(); ++i) g.vd.st.emplace_back(s[i], t[i]);
+  if (g.P.empty()) args.fail("primitive has no \"P\"");
+  return g;
+}
+
+glm::dvec3 colorArg(const Args& args) {
+  if (args.count() >= 3) return {args.number(0), args.number(1), args.number(2)};
+  const auto& v = args.numbers(0);
+  if (v.size() == 1) return glm::dvec3(v[0]);
+  if (v.size() < 3) args.fail("expects a colour of 3 numbers");
+  return {v[0], v[1], v[2]};
+}
+
+glm::dmat4 matrixArg(const Args& args) {
+  std::vector<double> v;
+  if (args.count() >= 16) {
+    for (size_t i = 0; i < 16; ++i) v.push_back(args.number(i));
+  } else {
+    v = args.numbers(0);
+  }
+  if (v.size() != 16) args.fail(cat("expects a 4x4 matrix (16 numbers), has ", v.size()));
+  for (double x : v)
+    if (!std::isfinite(x)) args.fail("matrix element is not finite");
+  // RIB matrices are row-major for row vectors: read column-major they are the column-vector
+  // matrix glm wants.
+  return glm::make_mat4(v.data());
+}
+
+std::string handleArg(const rib::Request& r, size_t i) {
+  if (i >= r.values.size()) return {};
+  const Value& v = r.values[i];
+  if (v.kind == Value::Kind::String) return v.string;
+  if (v.kind == Value::Kind::Number) return cat(v.number);
+  if (v.kind == Value::Kind::NumberArray && v.numbers.size() == 1) return cat(v.numbers[0]);
+  if (v.kind == Value::Kind::StringArray && v.strings.size() == 1) return v.strings[0];
+  return {};
+}
+
+std::vector<int> intArray(const Args& args, size_t i) {
+  std::vector<int> out;
+  for (double d : args.numbers(i)) {
+    if (d != std::floor(d) || std::abs(d) > 2e9) args.fail(cat("expects integers, got ", d));
+    out.push_back(int(d));
+  }
+  return out;
+}
+
+}  // namespace
+
+bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
+  Scene& s = scene_;
+  const std::string_view n = r.name;
+  s.where = cat(r.where.str(), " (", n, ")");
+
+  // Options
+  if (n == "Format") return s.format(int(a.number(0)), int(a.number(1)), a.count() > 2 ? a.number(2) : 1.0), true;
+  if (n == "FrameAspectRatio") return s.frameAspectRatio(a.number(0)), true;
+  if (n == "ScreenWindow") {
+    if (a.count() == 1) {
+      const auto& v = a.numbers(0);
+      if (v.size() != 4) a.fail("expects 4 numbers");
+      return s.screenWindow(v[0], v[1], v[2], v[3]), true;
+    }
+    return s.screenWindow(a.number(0), a.number(1), a.number(2), a.number(3)), true;
+  }
+  if (n == "Projection") {
+    const std::string& type = a.string(0);
+    if (type == "orthographic") return s.orthographic(), true;
+    if (type == "perspective") {
+      double fov = 90;
+      for (const Param& p : a.params(1))
+        if (p.decl.name == "fov") {
+          if (p.value->kind == Value::Kind::Number) fov = p.value->number;
+          else if (numbersOf(p) && !numbersOf(p)->empty()) fov = numbersOf(p)->front();
+        }
+      return s.perspective(fov), true;
+    }
+    warnOnce(cat("projection:", type), cat(s.where, ": projection '", type, "' is not supported; using perspective"));
+    return s.perspective(90), true;
+  }
+  if (n == "Clipping") return s.clipping(a.number(0), a.number(1)), true;
+  if (n == "Shutter") return s.shutter(a.number(0), a.number(1)), true;
+  if (n == "PixelSamples") return s.pixelSamples(int(a.number(0)), int(a.number(1))), true;
+  if (n == "PixelFilter") return true;  // a re-sampling choice: `reshutter resample --filter`
+  if (n == "ShadingRate") return s.shadingRate(a.number(0)), true;
+  if (n == "Display") {
+    if (a.count() >= 3) s.display(a.string(0), a.string(2));
+    return true;
+  }
+  if (n == "DisplayChannel") return true;  // declarations only; Display's mode selects variables
+  if (n == "Camera") return s.camera(a.string(0)), true;
+  if (n == "FrameBegin") return s.frameBegin(a.count() ? int64_t(a.number(0)) : 1), true;
+  if (n == "FrameEnd") return s.frameEnd(), true;
+  if (n == "WorldBegin") return s.worldBegin(), true;
+  if (n == "WorldEnd") return s.worldEnd(), true;
+
+  // Attributes and transforms
+  if (n == "AttributeBegin") return s.attributeBegin(), true;
+  if (n == "AttributeEnd") return s.attributeEnd(), true;
+  if (n == "TransformBegin") return s.transformBegin(), true;
+  if (n == "TransformEnd") return s.transformEnd(), true;
+  if (n == "Identity") return s.identity(), true;
+  if (n == "Transform") return s.transform(matrixArg(a)), true;
+  if (n == "ConcatTransform") return s.concatTransform(matrixArg(a)), true;
+  if (n == "Translate") return s.translate(a.number(0), a.number(1), a.number(2)), true;
+  if (n == "Rotate") return s.rotate(a.number(0), a.number(1), a.number(2), a.number(3)), true;
+  if (n == "Scale") return s.scale(a.number(0), a.number(1), a.number(2)), true;
+  if (n == "CoordinateSystem") return s.coordinateSystem(a.string(0)), true;
+  if (n == "CoordSysTransform") return s.coordSysTransform(a.string(0)), true;
+  if (n == "Orientation") return s.orientation(a.string(0)), true;
+  if (n == "ReverseOrientation") return s.reverseOrientation(), true;
+  if (n == "Sides") return s.sides(int(a.number(0))), true;
+  if (n == "Color") return s.color(colorArg(a)), true;
+  if (n == "Opacity") return s.opacity(colorArg(a)), true;
+  if (n == "Surface") return s.surface(a.string(0), numericParams(a.params(1))), true;
+  if (n == "LightSource") {
+    // The handle is a number (RI 3.2) or a string (3.3+); the parameter list follows it.
+    return s.lightSource(a.string(0), handleArg(r, 1), numericParams(a.params(2))), true;
+  }
+  if (n == "Illuminate") return s.illuminate(handleArg(r, 0), a.number(1) != 0), true;
+  if (n == "Matte") return s.matte(a.number(0) != 0), true;
+  if (n == "GeometricApproximation") {
+    const std::string& type = a.string(0);
+    if (type == "motionfactor") return s.motionFactor(a.number(1)), true;
+    warnOnce(cat("geomapprox:", type), cat(s.where, ": GeometricApproximation '", type, "' is not supported; ignored"));
+    return true;
+  }
+  if (n == "Attribute") {
+    const std::string& cls = a.string(0);
+    if (cls == "identifier") {
+      for (const Param& p : a.params(1))
+        if (p.decl.name == "name" && p.value) {
+          if (p.value->kind == Value::Kind::String) s.identifier(p.value->string);
+          else if (p.value->kind == Value::Kind::StringArray && !p.value->strings.empty()) s.identifier(p.value->strings[0]);
+        }
+      return true;
+    }
+    warnOnce(cat("attribute:", cls), cat(s.where, ": Attribute \"", cls, "\" has no effect on the shading pass; ignored"));
+    return true;
+  }
+  if (n == "MotionBegin") {
+    if (a.count() == 1) return s.motionBegin(a.numbers(0)), true;
+    std::vector<double> t;
+    for (size_t i = 0; i < a.count(); ++i) t.push_back(a.number(i));
+    return s.motionBegin(t), true;
+  }
+  if (n == "MotionEnd") return s.motionEnd(), true;
+  if (n == "SolidBegin" || n == "SolidEnd") {
+    warnOnce("rib-csg", cat(s.where, ": solid modelling (CSG) is not supported; the solids' primitives are shaded as a union"));
+    return true;
+  }
+
+  // Primitives
+  if (n == "Sphere") return s.sphere(a.number(0), a.number(1), a.number(2), a.number(3)), true;
+  if (n == "Cylinder") return s.cylinder(a.number(0), a.number(1), a.number(2), a.number(3)), true;
+  if (n == "Cone") return s.cone(a.number(0), a.number(1), a.number(2)), true;
+  if (n == "Disk") return s.disk(a.number(0), a.number(1), a.number(2)), true;
+  if (n == "Torus") return s.torus(a.number(0), a.number(1), a.number(2), a.number(3), a.number(4)), true;
+  if (n == "Patch") {
+    const std::string& type = a.string(0);
+    if (type != "bilinear") {
+      warnOnce(cat("patch:", type), cat(s.where, ": Patch \"", type, "\" is not supported; skipped"));
+      return true;
+    }
+    Geometry g = geometry(a, 1);
+    if (g.P.size() != 4) a.fail(cat("bilinear patch needs 4 points, has ", g.P.size()));
+    return s.patch({g.P[0], g.P[1], g.P[2], g.P[3]}, g.vd), true;
+  }
+  if (n == "Polygon") {
+    Geometry g = geometry(a, 0);
+    return s.polygon(g.P, g.vd), true;
+  }
+  if (n == "PointsPolygons") {
+    const auto nverts = intArray(a, 0);
+    const auto verts = intArray(a, 1);
+    Geometry g = geometry(a, 2);
+    return s.pointsPolygons(nverts, verts, g.P, g.vd), true;
+  }
+  return false;
+}
+
+void readRibScene(const std::string& path, Scene& scene) {
+  RibSceneHandler handler(scene);
+  rib::Reader reader;
+  reader.parseFile(path, handler);
+}
+
+}  // namespace reshutter::shade
