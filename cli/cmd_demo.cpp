@@ -1,62 +1,52 @@
-// `reshutter demo`: the main job on built-in content, no files needed. Writes its outputs to a
-// directory and reports where they are and how long each stage took.
+// `reshutter demo`: the main job on built-in content, no files needed. Shades the built-in demo
+// scene (shade/demo_scene.h) into a store, and reports where the outputs are and how long each
+// stage took.
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 
 #include "cli/commands.h"
 #include "common/error.h"
-#include "store/reader.h"
-#include "store/synthetic.h"
-#include "store/writer.h"
+#include "shade/demo_scene.h"
+#include "shade/shading_pass.h"
 
 namespace reshutter::cli {
 namespace {
 
-double secondsSince(std::chrono::steady_clock::time_point t) {
-  return std::chrono::duration<double>(std::chrono::steady_clock::now() - t).count();
-}
+struct DemoCommand {
+  std::string outDir = "demo-output";
+  std::vector<int> res{shade::kDemoWidth, shade::kDemoHeight};
 
-int runDemo(const std::string& outDir, uint64_t micropolygons) {
-  std::error_code ec;
-  std::filesystem::create_directories(outDir, ec);
-  if (ec) fail(outDir, "cannot create the output directory: ", ec.message());
-  store::SyntheticOptions opt;
-  opt.micropolygons = micropolygons;
-  opt.width = 1280;
-  opt.height = 720;
-  const std::string storePath = outDir + "/demo.mps";
+  int run() const {
+    if (res.size() != 2 || res[0] <= 0 || res[1] <= 0 || res[0] > 16384 || res[1] > 16384)
+      fail("--res", "expected a width and a height, e.g. --res 1920 1080");
+    std::error_code ec;
+    std::filesystem::create_directories(outDir, ec);
+    if (ec) fail(outDir, "cannot create the output directory: ", ec.message());
+    const std::string storePath = outDir + "/demo.mps";
 
-  auto t0 = std::chrono::steady_clock::now();
-  store::StoreWriter writer(storePath, store::syntheticMeta(opt));
-  uint64_t n = store::generateSynthetic(opt, writer);
-  store::WriteStats ws = writer.close();
-  double writeSeconds = secondsSince(t0);
+    shade::FrameScene frame = shade::demoFrame(res[0], res[1]);
+    shade::StoreResult r = shade::shadeToStore(frame, shade::ShadeOptions{}, storePath);
 
-  auto t1 = std::chrono::steady_clock::now();
-  store::StoreReader reader(storePath);
-  store::VerifyReport rep = reader.verify();
-  double verifySeconds = secondsSince(t1);
-
-  std::printf("reshutter demo\n");
-  std::printf("  store     %s\n", storePath.c_str());
-  std::printf("            %s micropolygons, %s (%.1f bytes/micropolygon), %s tiles\n", grouped(n).c_str(), humanBytes(double(ws.fileBytes)).c_str(),
-              double(ws.fileBytes) / double(n), grouped(ws.tiles).c_str());
-  std::printf("  timings   generate+write %.2f s, decode+verify %.2f s (%s micropolygons checked)\n", writeSeconds, verifySeconds,
-              grouped(rep.micropolygons).c_str());
-  std::printf("  next      reshutter info %s\n", storePath.c_str());
-  return 0;
-}
+    std::printf("reshutter demo (%dx%d)\n", res[0], res[1]);
+    std::printf("  store     %s\n", storePath.c_str());
+    std::printf("            %s micropolygons in %s grids (%s moving), %s (%.1f bytes/micropolygon)\n",
+                grouped(r.shade.micropolygons).c_str(), grouped(r.shade.grids).c_str(), grouped(r.shade.movingGrids).c_str(),
+                humanBytes(double(r.write.fileBytes)).c_str(), r.shade.micropolygons ? double(r.write.fileBytes) / double(r.shade.micropolygons) : 0.0);
+    std::printf("  timings   shading %.2f s (shaded once at t=%g, every motion knot kept)\n", r.shade.seconds, r.shade.shadeAt);
+    std::printf("  next      reshutter info %s\n", storePath.c_str());
+    return 0;
+  }
+};
 
 }  // namespace
 
 void addDemoCommand(CLI::App& app, Registry& registry) {
+  auto cmd = std::make_shared<DemoCommand>();
   auto* sub = app.add_subcommand("demo", "Run the main job on built-in content (no input files needed)");
-  auto out = std::make_shared<std::string>("demo-output");
-  auto n = std::make_shared<uint64_t>(1'000'000);
-  sub->add_option("-o,--output", *out, "Directory for the outputs")->capture_default_str();
-  sub->add_option("-n,--micropolygons", *n, "Size of the synthetic scene")->capture_default_str();
-  registry.add(sub, [=] { return runDemo(*out, *n); });
+  sub->add_option("-o,--output", cmd->outDir, "Directory for the outputs")->capture_default_str();
+  sub->add_option("--res", cmd->res, "Resolution W H of the demo (e.g. 1920 1080)")->expected(2)->capture_default_str();
+  registry.add(sub, [cmd] { return cmd->run(); });
 }
 
 }  // namespace reshutter::cli

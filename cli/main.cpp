@@ -29,6 +29,7 @@ int main(int argc, char** argv) {
 
   cli::Registry registry;
   cli::addDemoCommand(app, registry);
+  cli::addShadeCommand(app, registry);
   cli::addResampleCommand(app, registry);
   cli::addStoreCommands(app, registry);
 

@@ -157,11 +157,13 @@ class Splitter {
         }
       if (nFront) e.allBehind = false;
       if (nFront && nFront < kTest * kTest) e.straddle = true;
+      // The longest test segment times the segment count: dicing steps are uniform in the
+      // parameter, so the fastest-moving stretch (near a silhouette fold, say) sets the step.
       for (int j = 0; j < kTest; ++j) {
         double lu = 0, lv = 0, cu = 0, cv = 0;
         for (int i = 0; i + 1 < kTest; ++i) {
-          if (fr[j][i] && fr[j][i + 1]) lu += glm::length(r[j][i + 1] - r[j][i]);
-          if (fr[i][j] && fr[i + 1][j]) lv += glm::length(r[i + 1][j] - r[i][j]);
+          if (fr[j][i] && fr[j][i + 1]) lu = std::max(lu, (kTest - 1) * glm::length(r[j][i + 1] - r[j][i]));
+          if (fr[i][j] && fr[i + 1][j]) lv = std::max(lv, (kTest - 1) * glm::length(r[i + 1][j] - r[i][j]));
           cu += glm::length(c[j][i + 1] - c[j][i]);
           cv += glm::length(c[i + 1][j] - c[i][j]);
         }
