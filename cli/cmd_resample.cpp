@@ -17,6 +17,7 @@ struct ResampleCommand {
   RenderOptions render;
 
   int run() const {
+    if (output.empty() && render.deep.empty()) fail("resample", "nothing to write: give -o OUT.exr, --deep DEEP.exr or both");
     store::ReaderOptions ro;
     ro.cacheBytes = size_t(render.cacheMb * 1e6);
     auto reader = std::make_shared<const store::StoreReader>(input, ro);
@@ -38,7 +39,8 @@ struct ResampleCommand {
     resample::RenderResult result = resample::render(spec);
     render.writeOutputs(result, output, meta.frame);
     const auto& img = result.image;
-    note(cat("wrote ", output, ": ", img.width, "x", img.height, ", ", spec.samplesX * spec.samplesY, " spp, shutter [", open, ", ", close,
+    const std::string wrote = output.empty() ? render.deep : render.deep.empty() ? output : output + " and " + render.deep;
+    note(cat("wrote ", wrote, ": ", img.width, "x", img.height, ", ", spec.samplesX * spec.samplesY, " spp, shutter [", open, ", ", close,
              "] in ", result.stats.wallSeconds, " s"));
     if (render.stats) std::printf("%s", result.stats.report().c_str());
     return 0;
@@ -51,7 +53,7 @@ void addResampleCommand(CLI::App& app, Registry& registry) {
   auto cmd = std::make_shared<ResampleCommand>();
   auto* sub = app.add_subcommand("resample", "Render a store for any shutter sub-interval into a flat OpenEXR, without re-shading");
   sub->add_option("store", cmd->input, "The .mps store")->required();
-  sub->add_option("-o,--output", cmd->output, "Output OpenEXR")->required();
+  sub->add_option("-o,--output", cmd->output, "Output OpenEXR (optional with --deep)");
   sub->add_option("--shutter", cmd->shutter, "Interval OPEN:CLOSE in frames relative to the store's frame (default: the store's shutter);\n"
                                              "OPEN = CLOSE gives the exact instantaneous image");
   sub->add_option("--shutter-shape", cmd->shape, "Shutter opening: box, trapezoid:A:B (RenderMan shutteropening), curve:F:W,F:W,...")
@@ -63,7 +65,8 @@ void addResampleCommand(CLI::App& app, Registry& registry) {
       "  reshutter resample frame.mps -o field1.exr --shutter 0:0.25      # a quarter of it\n"
       "  reshutter resample frame.mps -o still.exr --shutter 0.5:0.5      # the instant at mid-frame\n"
       "  reshutter resample frame.mps -o aov.exr --aov N --aov id:zmin --spp 64 --filter catmull-rom\n"
-      "  reshutter resample frame.mps -o out.exr --preview out.png --stats");
+      "  reshutter resample frame.mps -o out.exr --preview out.png --stats\n"
+      "  reshutter resample frame.mps -o flat.exr --deep deep.exr         # flat and deep (docs/deep.md)");
   registry.add(sub, [cmd] { return cmd->run(); });
 }
 

@@ -27,6 +27,12 @@ void RenderOptions::addTo(CLI::App* app) {
   app->add_option("--preview", previews,
                   "Also write an 8/16-bit PNG or TIFF: PATH or PATH=CHANNELS (default R,G,B,A; e.g. n.png=N.X,N.Y,N.Z)")
       ->group("Outputs");
+  app->add_option("--deep", deep, "Also write a deep OpenEXR (scanline, tidy; see docs/deep.md); %04d-style frame patterns expand")
+      ->group("Outputs");
+  app->add_option("--deep-compression", deepCompression, "Deep OpenEXR compression: zips rle none")->capture_default_str()->group("Outputs");
+  app->add_option("--deep-tolerance", deepTolerance,
+                  "Relative depth gap below which one object's fragments form one deep sample (larger: fewer samples, less separation)")
+      ->capture_default_str()->check(CLI::Range(0.0, 1e3))->group("Outputs");
   app->add_option("--quantize", quantize, "Preview quantisation ZERO,ONE,MIN,MAX (MAX > 255 gives 16 bits)")->capture_default_str()->group("Outputs");
   app->add_option("--dither", dither, "Preview dither amplitude")->capture_default_str()->group("Outputs");
   app->add_option("--opacity-threshold", opacityThreshold, "A sample stops once its opacity reaches this")
@@ -63,12 +69,20 @@ void RenderOptions::applyTo(resample::RenderSpec& spec) const {
   spec.halfColor = half;
   spec.cacheBytes = size_t(cacheMb * 1e6);
   resample::parseExrCompression(compression, "--compression");
+  spec.deep = !deep.empty();
+  spec.deepOptions.tolerance = float(deepTolerance);
+  resample::parseDeepCompression(deepCompression, "--deep-compression");
 }
 
 void RenderOptions::writeOutputs(const resample::RenderResult& result, const std::string& exrPath, int64_t frame) const {
   resample::ExrOptions eo;
   eo.compression = resample::parseExrCompression(compression, "--compression");
   if (!exrPath.empty()) resample::writeExr(exrPath, result.image, result.provenance, eo);
+  if (!deep.empty()) {
+    resample::DeepExrOptions deo;
+    deo.compression = resample::parseDeepCompression(deepCompression, "--deep-compression");
+    resample::writeDeepExr(expandFramePattern(deep, frame), result.deep, result.provenance, deo);
+  }
   resample::Quantize q;
   if (std::sscanf(quantize.c_str(), "%lf,%lf,%lf,%lf", &q.zero, &q.one, &q.min, &q.max) != 4 || !(q.min <= q.max) || q.max > 65535 || q.min < 0)
     fail("--quantize", "expected ZERO,ONE,MIN,MAX with 0 <= MIN <= MAX <= 65535, got '", quantize, "'");

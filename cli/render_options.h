@@ -31,11 +31,14 @@ struct RenderOptions {
   double dither = 0.5;
   bool stats = false;
   double cacheMb = 256;
+  std::string deep;                   // deep OpenEXR path ("" = none)
+  std::string deepCompression = "zips";
+  double deepTolerance = 0.01;
 
   void addTo(CLI::App* app);
   /// Fills sampling, filter, AOV, crop and raster settings of `spec`.
   void applyTo(resample::RenderSpec& spec) const;
-  /// Writes the EXR and any previews for one rendered image.
+  /// Writes the EXR (when exrPath is set), the deep EXR (when --deep is) and any previews.
   void writeOutputs(const resample::RenderResult& result, const std::string& exrPath, int64_t frame) const;
 };
 

@@ -21,6 +21,7 @@
 #include "common/atomic_file.h"
 #include "common/error.h"
 #include "common/random.h"
+#include "resample/exr_header.h"
 
 namespace reshutter::resample {
 
@@ -83,6 +84,18 @@ Imath::M44f toImath(const glm::dmat4& m) {
 
 }  // namespace
 
+void addProvenanceAttributes(Imf::Header& header, const ImageProvenance& info) {
+  Imf::addWorldToCamera(header, toImath(info.worldToCamera));
+  Imf::addWorldToNDC(header, toImath(info.worldToNdc));
+  Imf::addFramesPerSecond(header, Imf::Rational(int(info.fpsNum), unsigned(info.fpsDen)));
+  if (info.fpsNum > 0) Imf::addExpTime(header, float((info.shutterClose - info.shutterOpen) * double(info.fpsDen) / double(info.fpsNum)));
+  header.insert("software", Imf::StringAttribute(info.software));
+  header.insert("reshutter/frame", Imf::IntAttribute(int(info.frame)));
+  header.insert("reshutter/shutter", Imf::StringAttribute(info.shutter));
+  header.insert("reshutter/shutterInterval", Imf::V2dAttribute(Imath::V2d(info.shutterOpen, info.shutterClose)));
+  if (!info.comments.empty()) Imf::addComments(header, info.comments);
+}
+
 void writeExr(const std::string& path, const FlatImage& image, const ImageProvenance& info, const ExrOptions& options) {
   if (image.width <= 0 || image.height <= 0) fail(path, "empty image");
   Imath::Box2i display(Imath::V2i(0, 0), Imath::V2i(image.fullWidth - 1, image.fullHeight - 1));
@@ -113,15 +126,7 @@ void writeExr(const std::string& path, const FlatImage& image, const ImageProven
     base -= (ptrdiff_t(image.x0) * ptrdiff_t(xs) + ptrdiff_t(image.y0) * ptrdiff_t(ys)) * ptrdiff_t(elem);
     fb.insert(c.name, Imf::Slice(type, base, elem * xs, elem * ys));
   }
-  Imf::addWorldToCamera(header, toImath(info.worldToCamera));
-  Imf::addWorldToNDC(header, toImath(info.worldToNdc));
-  Imf::addFramesPerSecond(header, Imf::Rational(int(info.fpsNum), unsigned(info.fpsDen)));
-  if (info.fpsNum > 0) Imf::addExpTime(header, float((info.shutterClose - info.shutterOpen) * double(info.fpsDen) / double(info.fpsNum)));
-  header.insert("software", Imf::StringAttribute(info.software));
-  header.insert("reshutter/frame", Imf::IntAttribute(int(info.frame)));
-  header.insert("reshutter/shutter", Imf::StringAttribute(info.shutter));
-  header.insert("reshutter/shutterInterval", Imf::V2dAttribute(Imath::V2d(info.shutterOpen, info.shutterClose)));
-  if (!info.comments.empty()) Imf::addComments(header, info.comments);
+  addProvenanceAttributes(header, info);
 
   AtomicFile file(path);
   try {

@@ -238,6 +238,23 @@ RenderResult render(const RenderSpec& spec) {
       img.add(n, aovs[a].isUInt);
     }
 
+  // Deep output: the same output variables as the flat image; the object id is always there.
+  std::unique_ptr<DeepFormer> deepFormer;
+  DeepLayout deepLayout;
+  if (spec.deep) {
+    for (size_t a = 0; a < aovs.size(); ++a) {
+      const auto names = channelNames(aovs[a], meta0.schema);
+      if (aovs[a].isUInt) {
+        if (aovs[a].builtin != AovChannel::Builtin::ObjectId) deepLayout.uints.push_back({names[0], deepLayout.sourceUInts, false});
+        ++deepLayout.sourceUInts;
+        continue;
+      }
+      for (int c = 0; c < aovs[a].components; ++c)
+        deepLayout.floats.push_back({names[size_t(c)], deepLayout.sourceFloats + c, aovs[a].composited()});
+      deepLayout.sourceFloats += aovs[a].components;
+    }
+  }
+
   // Buckets over the data window, row-major.
   struct Bucket {
     int x0, y0, x1, y1;
@@ -246,6 +263,11 @@ RenderResult render(const RenderSpec& spec) {
   for (int y = cy0; y < cy1; y += spec.bucketSize)
     for (int x = cx0; x < cx1; x += spec.bucketSize)
       buckets.push_back({x, y, std::min(cx1, x + spec.bucketSize), std::min(cy1, y + spec.bucketSize)});
+  if (spec.deep) {
+    result.deep.reset(cx0, cy0, cx1 - cx0, cy1 - cy0, W, H, deepLayout, buckets.size());  // one block per bucket
+    result.deep.objectNames = spec.objectNames;
+    deepFormer = std::make_unique<DeepFormer>(result.deep, mainTable, pattern, spec.deepOptions);
+  }
 
   tbb::enumerable_thread_specific<ThreadState> threads;
   Progress progress("resample", buckets.size());
@@ -363,6 +385,7 @@ RenderResult render(const RenderSpec& spec) {
         }
       }
     // DEEP HOOK: deep output forms its samples here from r.visitFragments() (resample/deep.h).
+    if (deepFormer) deepFormer->formBucket(r, size_t(&bk - buckets.data()), bk.x0, bk.y0, bk.x1, bk.y1, rx0, ry0, rw, rh);
     auto t4 = clock::now();
     ts.stats.gatherSeconds += std::chrono::duration<double>(t1 - t0).count() + gather;
     ts.stats.rasterSeconds += raster;

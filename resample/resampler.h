@@ -8,10 +8,12 @@
 
 #include <cstdint>
 #include <functional>
+#include <map>
 #include <optional>
 #include <string>
 #include <vector>
 
+#include "resample/deep.h"
 #include "resample/filter.h"
 #include "resample/image.h"
 #include "resample/raster.h"
@@ -41,6 +43,10 @@ struct RenderSpec {
   size_t cacheBytes = size_t(256) << 20;  // decoded-part cache per store
   bool progress = true;
   bool halfColor = false;        // write R G B A as half
+  /// Deep output (resample/deep.h): formed alongside the flat image when set.
+  bool deep = false;
+  DeepFormOptions deepOptions;
+  std::map<uint32_t, std::string> objectNames;  // object id → name, for the deep idManifest
 };
 
 struct RenderStats {
@@ -56,6 +62,7 @@ struct RenderResult {
   FlatImage image;
   RenderStats stats;
   ImageProvenance provenance;
+  DeepImage deep;  // when RenderSpec::deep
 };
 
 /// Checks that every time the shutter asks for is covered by a source; throws Error naming the
