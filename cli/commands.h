@@ -18,6 +18,7 @@ void addStoreCommands(CLI::App& app, Registry& registry);  // info, verify, gene
 void addDemoCommand(CLI::App& app, Registry& registry);
 void addResampleCommand(CLI::App& app, Registry& registry);
 void addShadeCommand(CLI::App& app, Registry& registry);
+void addIngestCommand(CLI::App& app, Registry& registry);
 
 /// Formats 1234567 as "1,234,567".
 std::string grouped(uint64_t n);

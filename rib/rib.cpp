@@ -415,7 +415,7 @@ void Reader::Impl::dispatch(const Request& req, RequestHandler& handler, Reader&
     return;
   }
   if (!handler.handle(req, args) && options.warnUnsupported) {
-    std::string kind = cat("rib-request:", n);
+    std::string kind = cat("RIB request '", n, "' skipped");
     warnOnce(kind, cat(req.where.str(), ": RIB request '", n, "' is not supported here; skipped"));
   }
 }

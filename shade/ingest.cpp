@@ -151,6 +151,22 @@ bool convex(const std::vector<Vec2>& q) {
   return sign != 0 && std::fabs(std::fabs(turning) - 2 * M_PI) < 1e-6;
 }
 
+bool segmentsCross(Vec2 a, Vec2 b, Vec2 c, Vec2 d) {
+  double d1 = cross2(a, b, c), d2 = cross2(a, b, d), d3 = cross2(c, d, a), d4 = cross2(c, d, b);
+  return ((d1 > 0 && d2 < 0) || (d1 < 0 && d2 > 0)) && ((d3 > 0 && d4 < 0) || (d3 < 0 && d4 > 0));
+}
+
+/// No two non-adjacent edges cross (ear clipping would make garbage of a polygon that does).
+bool simple(const std::vector<Vec2>& q) {
+  const size_t n = q.size();
+  for (size_t i = 0; i < n; ++i)
+    for (size_t j = i + 2; j < n; ++j) {
+      if (i == 0 && j == n - 1) continue;
+      if (segmentsCross(q[i], q[(i + 1) % n], q[j], q[(j + 1) % n])) return false;
+    }
+  return true;
+}
+
 /// Ear clipping; false if the polygon is not simple enough to clip.
 bool earClip(const std::vector<Vec2>& q, std::vector<std::array<uint32_t, 3>>& tris) {
   const size_t n = q.size();
@@ -721,7 +737,7 @@ void DumpHandler::split(const Args& a, Prim& p) {
       if (stats_) ++stats_->fannedPolygons;
     } else {
       std::vector<std::array<uint32_t, 3>> tris;
-      if (!earClip(q, tris)) a.fail(cat("polygon ", f, " (", n, " vertices) is self-intersecting or degenerate; ingest cannot triangulate it"));
+      if (!simple(q) || !earClip(q, tris)) a.fail(cat("polygon ", f, " (", n, " vertices) is self-intersecting or degenerate; ingest cannot triangulate it"));
       for (auto& t : tris) add(f, {b + t[0], b + t[1], b + t[2]});
       if (stats_) ++stats_->earClippedPolygons;
     }
