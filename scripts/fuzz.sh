@@ -11,11 +11,15 @@ target=${1:-store}
 seconds=${2:-300}
 cmake -S . -B build-fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DRESHUTTER_FUZZ=ON -DRESHUTTER_BENCH=OFF \
   -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ >/dev/null
-ninja -C build-fuzz "fuzz_${target}_$( [ "$target" = store ] && echo reader || echo parser )" reshutter >/dev/null
-bin=build-fuzz/fuzz_${target}_$( [ "$target" = store ] && echo reader || echo parser )
+ninja -C build-fuzz "fuzz_${target}_reader" $( [ "$target" = store ] && echo reshutter ) >/dev/null
+bin=build-fuzz/fuzz_${target}_reader
 work=build-fuzz/work-$target
 mkdir -p "$work/corpus" "build-fuzz/findings-$target"
 cp tests/corpus/$target/* "$work/corpus/" 2>/dev/null || true
+if [ "$target" = rib ]; then
+  # Seeds: the real RIB files (read in place, never copied into the repository).
+  cp ../shared/data/rib/*.rib "$work/corpus/" 2>/dev/null || true
+fi
 if [ "$target" = store ]; then
   # Seeds: small valid stores of several shapes, each behind a mode byte (0x01 = repair checksums).
   for args in "-n 300 --width 64 --height 48" "-n 600 --knots 3 --width 40 --height 40 --transparent 0.5" \
