@@ -10,10 +10,10 @@ namespace {
 using glm::dvec3;
 
 void checkerFloor(Scene& s) {
-  // 16 × 14 tiles, one colour per face (uniform Cs), so the blur of moving objects reads against
-  // a sharp static pattern.
-  const int nx = 16, nz = 14;
-  const double x0 = -8, x1 = 8, z0 = -5, z1 = 16;
+  // 1-unit tiles, one colour per face (uniform Cs), so the blur of moving objects reads against
+  // a sharp static pattern; wide enough to fill the frame up to the backdrop.
+  const int nx = 36, nz = 22;
+  const double x0 = -18, x1 = 18, z0 = -6, z1 = 16;
   std::vector<dvec3> P;
   for (int j = 0; j <= nz; ++j)
     for (int i = 0; i <= nx; ++i) P.emplace_back(x0 + (x1 - x0) * i / nx, 0.0, z0 + (z1 - z0) * j / nz);
@@ -42,7 +42,7 @@ void backdrop(Scene& s) {
   Scene::VertexData vd;
   const dvec3 low(0.62, 0.55, 0.5), high(0.08, 0.12, 0.28);
   vd.Cs = {low, low, high, high};  // P00 P10 P01 P11: bottom edge, then top edge
-  s.patch({dvec3(-30, 0, 16), dvec3(30, 0, 16), dvec3(-30, 16, 16), dvec3(30, 16, 16)}, vd);
+  s.patch({dvec3(-18, 0, 16), dvec3(18, 0, 16), dvec3(-18, 12, 16), dvec3(18, 12, 16)}, vd);
   s.attributeEnd();
 }
 
@@ -52,8 +52,8 @@ void flyingBall(Scene& s) {
   s.color({0.85, 0.12, 0.08});
   s.surface("plastic", {{"roughness", {0.08}}, {"Ks", {0.7}}});
   s.motionBegin({0, 1});
-  s.translate(-4.2, 0.65, 1.5);
-  s.translate(-1.6, 0.95, 1.5);
+  s.translate(-4.0, 0.65, 1.5);
+  s.translate(-2.2, 0.9, 1.5);
   s.motionEnd();
   s.sphere(0.65, -0.65, 0.65, 360);
   s.attributeEnd();
@@ -63,10 +63,10 @@ void spinningCube(Scene& s) {
   s.attributeBegin();
   s.identifier("spinning cube");
   s.surface("plastic", {{"roughness", {0.12}}, {"Ks", {0.5}}});
-  s.translate(0.4, 1.0, 4.0);
-  s.rotate(20, 1, 0, 0);
+  s.translate(0.4, 1.1, 4.0);
+  s.rotate(-22, 1, 0, 0);
   s.motionBegin({0, 0.25, 0.5, 0.75, 1});
-  for (int k = 0; k < 5; ++k) s.rotate(22.5 * k, 0, 1, 0);
+  for (int k = 0; k < 5; ++k) s.rotate(30 + 15 * k, 0, 1, 0);
   s.motionEnd();
   const std::vector<dvec3> P = {{-1, -1, -1}, {1, -1, -1}, {-1, 1, -1}, {1, 1, -1}, {-1, -1, 1}, {1, -1, 1}, {-1, 1, 1}, {1, 1, 1}};
   std::vector<dvec3> scaled;
@@ -83,15 +83,14 @@ void tumblingTorus(Scene& s) {
   s.attributeBegin();
   s.identifier("tumbling torus");
   s.color({1.0, 0.76, 0.33});
-  s.surface("metal", {{"roughness", {0.06}}, {"Ks", {0.9}}, {"Ka", {0.35}}});
+  s.surface("metal", {{"roughness", {0.12}}, {"Ks", {1.0}}, {"Ka", {1.0}}});
   s.translate(3.3, 1.45, 3.2);
   s.motionBegin({0, 0.5, 1});
-  s.rotate(0, 1, 0, 0);
-  s.rotate(35, 1, 0, 0);
-  s.rotate(70, 1, 0, 0);
+  s.rotate(-10, 1, 0, 0);
+  s.rotate(25, 1, 0, 0);
+  s.rotate(60, 1, 0, 0);
   s.motionEnd();
-  s.rotate(90, 0, 1, 0);
-  s.torus(0.9, 0.3, 0, 360, 360);
+  s.torus(0.8, 0.28, 0, 360, 360);
   s.attributeEnd();
 }
 
@@ -196,9 +195,9 @@ void buildDemoScene(Scene& s, int width, int height) {
   s.worldBegin();
 
   s.lightSource("ambientlight", "ambient", {{"intensity", {0.12}}, {"lightcolor", {0.8, 0.85, 1.0}}});
-  s.lightSource("distantlight", "key", {{"intensity", {0.95}}, {"lightcolor", {1.0, 0.93, 0.82}}, {"from", {-6, 9, -5}}, {"to", {0, 0, 4}}});
+  s.lightSource("distantlight", "key", {{"intensity", {0.8}}, {"lightcolor", {1.0, 0.93, 0.82}}, {"from", {-6, 9, -5}}, {"to", {0, 0, 4}}});
   s.lightSource("spotlight", "spot",
-                {{"intensity", {70}}, {"lightcolor", {1.0, 0.95, 0.9}}, {"from", {3, 8, 0}}, {"to", {0.5, 0, 4}}, {"coneangle", {0.55}},
+                {{"intensity", {45}}, {"lightcolor", {1.0, 0.95, 0.9}}, {"from", {3, 8, 0}}, {"to", {0.5, 0, 4}}, {"coneangle", {0.55}},
                  {"conedeltaangle", {0.2}}});
   s.lightSource("pointlight", "fill", {{"intensity", {12}}, {"lightcolor", {0.55, 0.65, 1.0}}, {"from", {-3, 3, -6}}});
 

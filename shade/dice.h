@@ -29,7 +29,7 @@ struct DiceOptions {
   int maxGridSize = 16;
   double shadingRateScale = 1.0;       // multiplies every ShadingRate (quality knob)
   std::optional<double> motionFactor;  // overrides GeometricApproximation "motionfactor"
-  double cullMargin = 0.25;            // kept beyond the screen edges, as a fraction of the resolution
+  double cullMargin = 0.1;             // kept beyond the screen edges, as a fraction of the resolution
   int maxEyeSplits = 12;
   int maxSplitDepth = 30;
 };
