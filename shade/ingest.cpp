@@ -9,6 +9,7 @@
 #include <cmath>
 #include <filesystem>
 #include <map>
+#include <memory>
 #include <optional>
 #include <set>
 
@@ -227,12 +228,24 @@ struct SchemaEntry {
   bool perVertex;
 };
 
+/// Thrown in the optimistic single pass when a primitive needs a variable (or a per-vertex rate)
+/// the store's schema, fixed at the first primitive, lacks: ingest then falls back to two passes.
+struct SchemaGrew {};
+
+/// Modes: scan (collect the schema, no grids), emit (grids against a given schema), optimistic
+/// (schema from the first primitive, grids at once; SchemaGrew if a later primitive needs more).
+enum class Mode { Scan, Emit, Optimistic };
+
 class DumpHandler final : public rib::RequestHandler {
  public:
-  DumpHandler(bool emit, const IngestOptions& opt, const StoreMeta* meta, GridSink* sink, IngestStats* stats)
-      : emit_(emit), opt_(opt), meta_(meta), sink_(sink), stats_(stats) {
+  DumpHandler(Mode mode, const std::string& file, const IngestOptions& opt, const StoreMeta* meta, GridSink* sink, IngestStats* stats)
+      : collect_(mode != Mode::Emit), emit_(mode != Mode::Scan), optimistic_(mode == Mode::Optimistic), file_(file), opt_(opt), meta_(meta),
+        sink_(sink), stats_(stats) {
     attrs_.emplace_back();
   }
+  /// Optimistic mode: opens the sink once the schema is known.
+  std::function<GridSink*(const StoreMeta&)> openSink;
+  bool sinkOpen() const { return sink_ != nullptr; }
 
   bool handle(const Request& r, const Args& a) override;
   void finish(const std::string& file);
@@ -276,8 +289,10 @@ class DumpHandler final : public rib::RequestHandler {
   std::vector<std::string> schemaOrder_;
   std::map<std::string, SchemaEntry> schema_;
 
-  // Pass 2
-  bool emit_;
+  // Output
+  bool collect_, emit_, optimistic_;
+  std::string file_;
+  StoreMeta ownMeta_;
   const IngestOptions& opt_;
   const StoreMeta* meta_;
   GridSink* sink_;
@@ -565,7 +580,7 @@ bool DumpHandler::polygons(const Request& r, const Args& a) {
   bool differs = copy.vars.size() != prim_.vars.size();
   for (size_t i = 0; !differs && i < copy.vars.size(); ++i)
     differs = copy.vars[i].decl.name != prim_.vars[i].decl.name || copy.vars[i].values != prim_.vars[i].values;
-  if (differs && !emit_)
+  if (differs && collect_)
     warnOnce("ingest-appearance-knots", cat(r.where.str(), " (", r.name, "): variables other than P change between motion copies; ingest keeps the first knot's"));
   prim_.P.push_back(std::move(copy.P[0]));
   return true;
@@ -678,7 +693,7 @@ void DumpHandler::readPolygons(const Request& r, const Args& a, Prim& p, bool fi
     }
     if (have != want) a.fail(cat("\"", name, "\" has ", have, " values; a ", p.request, " with ", nFaces, " faces and ", p.nP, " vertices needs ", want));
     if (outputsFor(q.decl).empty()) {
-      if (!emit_) warnOnce(cat("ingest-skip:", name), cat(r.where.str(), " (", r.name, "): variable \"", name, "\" of this type is not stored"));
+      if (collect_) warnOnce(cat("ingest-skip:", name), cat(r.where.str(), " (", r.name, "): variable \"", name, "\" of this type is not stored"));
       continue;
     }
     Var v;
@@ -745,44 +760,52 @@ void DumpHandler::split(const Args& a, Prim& p) {
 }
 
 void DumpHandler::registerVars(const Args& a, Prim& p) {
-  // Per-vertex storage of per-face values needs a vertex per face corner. The second pass decides
-  // by the finished schema; the first builds that schema.
-  auto perVertexAttr = [&](const std::string& name) {
-    if (emit_) {
-      int i = meta_->schema.find(name);
-      return i >= 0 && meta_->schema.attrs[size_t(i)].rate == AttrRate::Vertex;
-    }
-    return schema_.at(name).perVertex;
-  };
-  if (emit_) {
-    p.unshare = false;
+  bool grew = false;
+  if (collect_) {
     for (const auto& v : p.vars) {
-      if (faceVaryingClass(v.decl.storage)) p.unshare = true;
-      if (v.decl.storage == StorageClass::Uniform)
-        for (const auto& o : outputsFor(v.decl)) p.unshare = p.unshare || perVertexAttr(o.name);
-    }
-    return;
-  }
-  for (const auto& v : p.vars) {
-    for (const auto& o : outputsFor(v.decl)) {
-      const bool perVertex = perVertexClass(v.decl.storage);
-      auto it = schema_.find(o.name);
-      if (it == schema_.end()) {
-        schema_.emplace(o.name, SchemaEntry{o.type, perVertex});
-        schemaOrder_.push_back(o.name);
-      } else {
-        if (it->second.type != o.type)
-          a.fail(cat("\"", v.decl.name, "\" is a ", toString(o.type), " here and a ", toString(it->second.type), " elsewhere"));
-        it->second.perVertex |= perVertex;
+      for (const auto& o : outputsFor(v.decl)) {
+        const bool perVertex = perVertexClass(v.decl.storage);
+        auto it = schema_.find(o.name);
+        if (it == schema_.end()) {
+          schema_.emplace(o.name, SchemaEntry{o.type, perVertex});
+          schemaOrder_.push_back(o.name);
+          grew = true;
+        } else {
+          if (it->second.type != o.type)
+            a.fail(cat("\"", v.decl.name, "\" is a ", toString(o.type), " here and a ", toString(it->second.type), " elsewhere"));
+          grew |= perVertex && !it->second.perVertex;
+          it->second.perVertex |= perVertex;
+        }
       }
     }
+    // Ci/Oi from Color/Opacity are constant: per micropolygon unless a primitive gives them per vertex.
+    for (const char* n : {"Ci", "Oi"})
+      if (!schema_.count(n)) {
+        schema_.emplace(n, SchemaEntry{AttrType::Color, false});
+        schemaOrder_.push_back(n);
+        grew = true;
+      }
   }
-  // Ci/Oi from Color/Opacity are constant: per micropolygon unless a primitive gives them per vertex.
-  for (const char* n : {"Ci", "Oi"})
-    if (!schema_.count(n)) {
-      schema_.emplace(n, SchemaEntry{AttrType::Color, false});
-      schemaOrder_.push_back(n);
+  if (!emit_) return;
+  if (optimistic_) {
+    if (!sink_) {
+      ownMeta_ = scannedMeta(file_);
+      meta_ = &ownMeta_;
+      sink_ = openSink(ownMeta_);
+    } else if (grew) {
+      throw SchemaGrew{};
     }
+  }
+  // Per-vertex storage of per-face values needs a vertex per face corner.
+  p.unshare = false;
+  for (const auto& v : p.vars) {
+    if (faceVaryingClass(v.decl.storage)) p.unshare = true;
+    if (v.decl.storage == StorageClass::Uniform)
+      for (const auto& o : outputsFor(v.decl)) {
+        int i = meta_->schema.find(o.name);
+        p.unshare = p.unshare || (i >= 0 && meta_->schema.attrs[size_t(i)].rate == AttrRate::Vertex);
+      }
+  }
 }
 
 void DumpHandler::emitPrim(const Prim& p) {
@@ -958,9 +981,9 @@ StoreMeta DumpHandler::scannedMeta(const std::string& file) const {
   return m;
 }
 
-void runPass(const std::string& path, DumpHandler& h, int pass, const IngestOptions& opt, uint64_t& bytes) {
+void runPass(const std::string& path, DumpHandler& h, int pass, bool warn, const IngestOptions& opt, uint64_t& bytes) {
   rib::ReaderOptions ro;
-  ro.warnUnsupported = pass == 1;  // the second pass meets the same requests
+  ro.warnUnsupported = warn;  // a second pass meets the same requests
   rib::Reader reader(ro);
   reader.declare("blurP", "vertex point");  // dump writers use it without declaring it
   struct Progressing : rib::RequestHandler {
@@ -983,29 +1006,52 @@ void runPass(const std::string& path, DumpHandler& h, int pass, const IngestOpti
 }  // namespace
 
 StoreMeta scanDump(const std::string& ribPath, const IngestOptions& options) {
-  DumpHandler h(false, options, nullptr, nullptr, nullptr);
+  DumpHandler h(Mode::Scan, ribPath, options, nullptr, nullptr, nullptr);
   uint64_t bytes = 0;
-  runPass(ribPath, h, 1, options, bytes);
+  runPass(ribPath, h, 1, true, options, bytes);
   return h.scannedMeta(ribPath);
 }
 
 void ingestDumpInto(const std::string& ribPath, const StoreMeta& meta, GridSink& sink, IngestStats& stats, const IngestOptions& options) {
-  DumpHandler h(true, options, &meta, &sink, &stats);
-  runPass(ribPath, h, 2, options, stats.ribBytes);
+  DumpHandler h(Mode::Emit, ribPath, options, &meta, &sink, &stats);
+  runPass(ribPath, h, 2, false, options, stats.ribBytes);
 }
 
 IngestStats ingestDump(const std::string& ribPath, const std::string& storePath, const IngestOptions& options) {
   using Clock = std::chrono::steady_clock;
-  IngestStats stats;
   auto t0 = Clock::now();
-  StoreMeta meta = scanDump(ribPath, options);
+  {
+    // One pass when the first primitive's variables are every primitive's (dumps are uniform).
+    IngestStats stats;
+    std::unique_ptr<StoreWriter> writer;
+    try {
+      DumpHandler h(Mode::Optimistic, ribPath, options, nullptr, nullptr, &stats);
+      h.openSink = [&](const StoreMeta& m) {
+        writer = std::make_unique<StoreWriter>(storePath, m, options.writer);
+        return writer.get();
+      };
+      runPass(ribPath, h, 2, true, options, stats.ribBytes);
+      if (!writer) writer = std::make_unique<StoreWriter>(storePath, h.scannedMeta(ribPath), options.writer);
+      stats.write = writer->close();
+      stats.passes = 1;
+      stats.ingestSeconds = std::chrono::duration<double>(Clock::now() - t0).count();
+      return stats;
+    } catch (const SchemaGrew&) {
+      writer.reset();  // removes its temporary file
+      note(cat(ribPath, ": later primitives carry more variables than the first; reading the dump twice"));
+    }
+  }
+  IngestStats stats;
+  stats.passes = 2;
   auto t1 = Clock::now();
+  StoreMeta meta = scanDump(ribPath, options);
+  auto t2 = Clock::now();
   StoreWriter writer(storePath, meta, options.writer);
   ingestDumpInto(ribPath, meta, writer, stats, options);
   stats.write = writer.close();
-  auto t2 = Clock::now();
-  stats.scanSeconds = std::chrono::duration<double>(t1 - t0).count();
-  stats.ingestSeconds = std::chrono::duration<double>(t2 - t1).count();
+  stats.scanSeconds = std::chrono::duration<double>(t2 - t0).count();  // includes the abandoned first try
+  stats.ingestSeconds = std::chrono::duration<double>(Clock::now() - t2).count();
+  (void)t1;
   return stats;
 }
 

@@ -3,9 +3,12 @@
 // shutter-close position "blurP", under CoordSysTransform "camera") and streams it into a store
 // without shading: Ci = Cs, Oi = Os.
 //
-// Two passes over the RIB: the first finds the camera, shutter and the variables the store's
-// schema must hold (a store's schema is fixed before its first grid); the second streams grids.
-// Memory is the reader's chunk plus one request plus the store writer's budget, whatever the size.
+// A store's schema is fixed before its first grid. Ingest reads the dump once, taking the schema
+// from the camera and the first primitive's variables (every grid of a dump carries the same
+// ones); if a later primitive brings another variable (or gives per vertex what was per
+// micropolygon), it drops that store and reads the dump twice: a scan for camera, shutter and
+// every variable, then the grids. Memory is the reader's chunk plus one request plus the store
+// writer's budget, whatever the dump's size.
 //
 // Semantics and the choices made where RenderMan leaves room:
 // - Geometry: PointsPolygons, PointsGeneralPolygons, Polygon, GeneralPolygon. Triangles and quads
@@ -55,6 +58,7 @@ struct IngestStats {
   uint64_t micropolygons = 0, quads = 0, triangles = 0;
   uint64_t fannedPolygons = 0, earClippedPolygons = 0;
   uint64_t movingMicropolygons = 0;
+  int passes = 1;                   // 2 when the schema grew after the first primitive
   double scanSeconds = 0, ingestSeconds = 0;
   store::WriteStats write;
 };
@@ -66,7 +70,7 @@ store::StoreMeta scanDump(const std::string& ribPath, const IngestOptions& optio
 void ingestDumpInto(const std::string& ribPath, const store::StoreMeta& meta, store::GridSink& sink, IngestStats& stats,
                     const IngestOptions& options = {});
 
-/// Both passes into a new store at `storePath` (written atomically).
+/// Into a new store at `storePath` (written atomically): one pass, or two when needed (above).
 IngestStats ingestDump(const std::string& ribPath, const std::string& storePath, const IngestOptions& options = {});
 
 }  // namespace reshutter::shade

@@ -393,6 +393,29 @@ TEST(IngestTest, CameraShutterAndFramesComeFromTheRib) {
   EXPECT_EQ(r.grids.size(), 2u);
 }
 
+TEST(IngestTest, OnePassUnlessALaterPrimitiveBringsNewVariables) {
+  test::ScratchDir dir;
+  // Same variables throughout: one pass.
+  writeFile(dir.path("same.rib"), kHeader + "Polygon " + kSquare + " \"s\" [0 1 2 3]\nPolygon " + kSquare + " \"s\" [4 5 6 7]\n");
+  auto st = shade::ingestDump(dir.path("same.rib"), dir.path("same.mps"));
+  EXPECT_EQ(st.passes, 1);
+  EXPECT_EQ(st.micropolygons, 2u);
+  // A variable first seen in the second primitive, and Cs turning per-vertex: two passes, and the
+  // store's schema holds both.
+  writeFile(dir.path("grow.rib"), kHeader + "Polygon " + kSquare + "\nPolygon " + kSquare + " \"t\" [4 5 6 7] \"Cs\" [1 0 0 1 0 0 1 0 0 1 0 0]\n");
+  st = shade::ingestDump(dir.path("grow.rib"), dir.path("grow.mps"));
+  EXPECT_EQ(st.passes, 2);
+  EXPECT_EQ(st.micropolygons, 2u);
+  StoreReader reader(dir.path("grow.mps"));
+  const Schema& s = reader.meta().schema;
+  ASSERT_GE(s.find("t"), 0);
+  EXPECT_EQ(s.attrs[size_t(s.ci())].rate, AttrRate::Vertex);
+  EXPECT_EQ(reader.micropolygonCount(), 2u);
+  size_t files = 0;
+  for (const auto& e : std::filesystem::directory_iterator(dir.dir())) files += e.path().extension() == ".mps" || e.path().string().find(".tmp") != std::string::npos;
+  EXPECT_EQ(files, 2u);  // no temporary left behind by the abandoned first pass
+}
+
 TEST(IngestHardTest, BadDumpsGiveOneClearError) {
   struct Case {
     std::string rib, where, what;
