@@ -12,19 +12,25 @@
 //    depth: fragments chain into one deep sample while the gap to the next depth is at most
 //    tolerance · depth (single linkage), so a tilted or moving surface stays one sample however
 //    far its depth drifts across the pixel and the shutter, while two layers of one object further
-//    apart than the tolerance stay separate. Fragments of one group within one sample composite
-//    with `over` (a fold cannot exceed the sample's coverage); across samples the weighted values
-//    add: α = Σ w·o, C = Σ w·c. Two halves of an opaque surface therefore give α = 1, and a
-//    surface covering a fraction f of the pixel gives α = f·o.
+//    apart than the tolerance stay separate. Two halves of an opaque surface are one sample.
+//  - Values. Each group gets what it adds to the flat pixel: its visible colour V = Σ w·T·c and
+//    visible alpha a = Σ w·T·o over its fragments, T being the transmittance in front of the
+//    fragment in its own pixel sample (per channel). In depth order, the deep sample then stores
+//    α = a / T_deep and C = V / T_deep, T_deep the transmittance of the deep samples in front
+//    (T_deep = 1 − Σ a of those in front). `over` of the samples gives back Σ V and Σ a: the
+//    flat image, to float rounding. Where the surfaces of a pixel cover it independently of each
+//    other (a translucent card over a background that fills the pixel), a/T_deep is simply
+//    coverage · opacity, the textbook deep alpha; where coverages are correlated (disjoint
+//    motion-blur streaks, a surface hidden behind part of another) plain coverage alphas would
+//    flatten wrong (the over-versus-sum error); this form is exact for flattening, and also
+//    right in those cases when another deep image is merged in between or behind, at the price
+//    that deleting the samples in front of a surface does not reveal its true coverage. Sample
+//    alphas never exceed 1 because Σ a ≤ 1.
 //  - Depth. Z and ZBack are the group's nearest and farthest fragment depth: a group whose
 //    fragments all lie at one depth is a point sample, otherwise a volume sample. Where volume
-//    samples of different surfaces overlap, tidying splits and merges them.
-//  - Flattening the result front to back reproduces the flat image exactly wherever the surfaces
-//    of a pixel cover it independently of each other (full coverage behind partial coverage, the
-//    usual case); where two partially covering surfaces overlap in the pixel the deep image cannot
-//    know their correlation and `over` of the pixel-wide alphas differs from the sum of per-sample
-//    composites (the over-versus-sum approximation every deep renderer makes).
-//  - Matte objects become samples with RGB = 0 and A = their coverage·opacity, so a deep merge
+//    samples of different surfaces overlap (surfaces passing through each other within one
+//    pixel), tidying splits and merges them per Hillman; only those pixels flatten inexactly.
+//  - Matte objects become samples like any surface but with RGB = 0 (A as above), so a deep merge
 //    cuts out whatever lies behind them, and carry the OpenDCX matte flag internally. The flat
 //    image leaves matte coverage out of alpha; flattenDeepPixel(matteAware = true) does the same.
 //  - Output variables: composited ones (pixel-filtered) are premultiplied like colour; special-
