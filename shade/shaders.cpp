@@ -55,7 +55,8 @@ bool illuminate(const LitLight& l, const glm::dvec3& P, glm::dvec3& L, glm::dvec
       // spotlight.sl: illuminate(from, A, coneangle) with cosangle = (P - from)·A / |P - from|.
       double cosangle = glm::dot(-L, l.axis) / std::sqrt(d2);
       if (cosangle < l.cosOuter) return false;
-      double atten = std::pow(std::max(cosangle, 0.0), l.beam) / d2 * smoothstep(l.cosOuter, l.cosInner, cosangle);
+      const double c = std::max(cosangle, 0.0);
+      double atten = (l.beam == 2 ? c * c : std::pow(c, l.beam)) / d2 * smoothstep(l.cosOuter, l.cosInner, cosangle);
       Cl = l.Cl0 * atten;
       return true;
     }
@@ -97,6 +98,28 @@ glm::dvec3 specular(const glm::dvec3& P, const glm::dvec3& Nn, const glm::dvec3&
   return c;
 }
 
+namespace {
+// diffuse() and specular() in one pass over the lights: each light is evaluated once.
+void diffuseSpecular(const glm::dvec3& P, const glm::dvec3& Nn, const glm::dvec3& V, double roughness, std::span<const LitLight> lights,
+                     glm::dvec3& diff, glm::dvec3& spec) {
+  glm::dvec3 L, Cl;
+  diff = spec = glm::dvec3(0.0);
+  const double exponent = 1.0 / std::max(roughness, 1e-6);
+  for (const auto& l : lights) {
+    if (!illuminate(l, P, L, Cl)) continue;
+    const glm::dvec3 Ln = glm::normalize(L);
+    const double cosine = glm::dot(Ln, Nn);
+    if (cosine <= 0) continue;
+    diff += Cl * cosine;
+    glm::dvec3 H = Ln + V;
+    const double hl = glm::length(H);
+    if (!(hl > 0)) continue;
+    const double nh = glm::dot(Nn, H / hl);
+    if (nh > 0) spec += Cl * std::pow(nh, exponent);
+  }
+}
+}  // namespace
+
 SurfaceOutput shadeSurface(const SurfaceShader& s, const SurfaceInput& in, std::span<const LitLight> lights) {
   SurfaceOutput out;
   out.Oi = in.Os;
@@ -120,8 +143,10 @@ SurfaceOutput shadeSurface(const SurfaceShader& s, const SurfaceInput& in, std::
       break;
     }
     case SurfaceKind::Plastic: {
-      glm::dvec3 spec = in.Os * s.specularColor * s.Ks * specular(in.P, Nf, V, s.roughness, lights);
-      out.Ci = in.Os * in.Cs * (s.Ka * ambient(lights) + s.Kd * diffuse(in.P, Nf, lights)) + spec;
+      glm::dvec3 diff, specular;
+      diffuseSpecular(in.P, Nf, V, s.roughness, lights, diff, specular);
+      glm::dvec3 spec = in.Os * s.specularColor * s.Ks * specular;
+      out.Ci = in.Os * in.Cs * (s.Ka * ambient(lights) + s.Kd * diff) + spec;
       out.viewDependent = spec;
       break;
     }

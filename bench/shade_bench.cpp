@@ -1,0 +1,83 @@
+// Shading-pass benchmark (issue 4): throughput of split + dice + shade for the built-in demo
+// scene at its default resolution and at 1920x1080 (≥ 5 M micropolygons), on 1 thread and on
+// every core, into a null sink (the pass alone) and into a StoreWriter (the pass plus
+// compression and I/O, what `reshutter shade` costs).
+// Usage: shade_bench [--quick] [--dir DIR]      (one line of results per configuration)
+#include <cinttypes>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <string>
+#include <thread>
+
+#include <tbb/global_control.h>
+
+#include "bench/bench_util.h"
+#include "shade/demo_scene.h"
+#include "shade/shading_pass.h"
+#include "store/writer.h"
+
+using namespace reshutter;
+using reshutter::bench::Stopwatch;
+
+namespace {
+
+struct NullSink final : store::GridSink {
+  uint32_t addSchedule(const store::Schedule&) override { return 1; }
+  void addGrid(const store::GridInput&) override {}
+};
+
+void run(const char* label, int w, int h, double rateScale, int threads, const std::string& storePath) {
+  tbb::global_control gc(tbb::global_control::max_allowed_parallelism, size_t(threads));
+  shade::ShadeOptions o;
+  o.dice.shadingRateScale = rateScale;
+  Stopwatch build;
+  shade::FrameScene f = shade::demoFrame(w, h);
+  const double buildSeconds = build.seconds();
+  Stopwatch sw;
+  shade::ShadeStats st;
+  uint64_t bytes = 0;
+  if (storePath.empty()) {
+    NullSink sink;
+    st = shade::shadeFrame(f, o, sink);
+  } else {
+    auto r = shade::shadeToStore(f, o, storePath);
+    st = r.shade;
+    bytes = r.write.fileBytes;
+  }
+  const double s = sw.seconds();
+  const double mps = double(st.micropolygons) / s;
+  std::printf("%-8s %5dx%-5d rate x%-4g %2d thr  %10" PRIu64 " mp  %7" PRIu64 " grids  %7.3f s  %6.2f M mp/s  %6.2f M mp/s/core  %s  scene %.3f s  peak RSS %.0f MB\n",
+              label, w, h, rateScale, threads, st.micropolygons, st.grids, s, mps / 1e6, mps / 1e6 / threads,
+              storePath.empty() ? "null sink" : (std::to_string(bytes / 1000000) + " MB store").c_str(), buildSeconds,
+              bench::peakRssBytes() / 1e6);
+  std::fflush(stdout);
+}
+
+}  // namespace
+
+int main(int argc, char** argv) {
+  bool quick = false;
+  std::string dir = std::filesystem::temp_directory_path().string();
+  for (int i = 1; i < argc; ++i) {
+    if (!std::strcmp(argv[i], "--quick")) quick = true;
+    else if (!std::strcmp(argv[i], "--dir") && i + 1 < argc) dir = argv[++i];
+    else {
+      std::fprintf(stderr, "usage: shade_bench [--quick] [--dir DIR]\n");
+      return 2;
+    }
+  }
+  const int cores = int(std::max(1u, std::thread::hardware_concurrency()));
+  std::printf("shade_bench: %s\n", bench::machineLine().c_str());
+  const std::string store = dir + "/shade_bench.mps";
+  run("demo", 640, 360, 1, 1, "");
+  run("demo", 640, 360, 1, cores, "");
+  run("demo", 640, 360, 1, cores, store);
+  if (!quick) {
+    run("demo", 1920, 1080, 1, 1, "");
+    run("demo", 1920, 1080, 1, cores, "");
+    run("demo", 1920, 1080, 1, cores, store);
+  }
+  std::filesystem::remove(store);
+  return 0;
+}
