@@ -18,7 +18,7 @@ namespace {
 
 struct ShadeCommand {
   std::string scene, output, interval, frames, fps = "24";
-  double shadeAt = NAN, motionFactor = NAN, rateScale = 1.0;
+  double shadeAt = NAN, motionFactor = NAN, rateScale = 1.0, overscan = 0.1;
   int gridSize = 16;
 
   int run() const {
@@ -38,6 +38,8 @@ struct ShadeCommand {
     opt.dice.shadingRateScale = rateScale;
     if (gridSize < 1 || gridSize > 64) fail("--grid-size", "must be 1 to 64");
     opt.dice.maxGridSize = gridSize;
+    if (!(overscan >= 0) || overscan > 10) fail("--overscan", "must be 0 to 10 (a fraction of the resolution)");
+    opt.dice.cullMargin = overscan;
     if (!store::parseRational(fps, opt.fps)) fail("--fps", "expected a frame rate such as 24, 25, 29.97 or 30000/1001, got '", fps, "'");
     std::vector<int64_t> wanted;
     if (!frames.empty()) wanted = parseFrameRange(frames, "--frame-range");
@@ -82,6 +84,9 @@ void addShadeCommand(CLI::App& app, Registry& registry) {
                   "Override GeometricApproximation \"motionfactor\": shading rate x (1 + F x motion in pixels / 16)");
   sub->add_option("--rate-scale", cmd->rateScale, "Multiply every ShadingRate (quality knob)")->capture_default_str();
   sub->add_option("--grid-size", cmd->gridSize, "Largest grid, in micropolygons per side")->capture_default_str();
+  sub->add_option("--overscan", cmd->overscan,
+                  "Keep geometry this far beyond the screen edges (fraction of the resolution), for re-framing and other cameras")
+      ->capture_default_str();
   registry.add(sub, [cmd] { return cmd->run(); });
 }
 
