@@ -116,7 +116,9 @@ std::unique_ptr<ByteSource> memorySource(std::string_view bytes, const std::stri
   return std::make_unique<PlainMemorySource>(bytes);
 }
 
-Lexer::Lexer(std::unique_ptr<ByteSource> source, std::string name) : source_(std::move(source)), name_(std::move(name)), buf_(kChunk) {}
+// The buffer starts small and grows to kChunk over the first reads: small archives (and fuzz
+// inputs) do not pay for zeroing a full chunk.
+Lexer::Lexer(std::unique_ptr<ByteSource> source, std::string name) : source_(std::move(source)), name_(std::move(name)), buf_(4096) {}
 
 void Lexer::fail(const std::string& problem, bool binary) const {
   std::string where = binary ? cat(name_, ": byte ", base_ + pos_) : cat(name_, ":", line_);
@@ -132,6 +134,7 @@ bool Lexer::more() {
     base_ += pos_;
     pos_ = 0;
   }
+  if (buf_.size() < kChunk) buf_.resize(std::min(kChunk, buf_.size() * 4));
   if (end_ == buf_.size()) buf_.resize(buf_.size() * 2);  // a long token; span() caps atoms
   size_t got = source_->read(buf_.data() + end_, buf_.size() - end_);
   if (got == 0) {
