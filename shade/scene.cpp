@@ -335,9 +335,7 @@ void Scene::transformEnd() { cur_.ctm = pop(Block::Transform, "TransformEnd").ct
 
 bool Scene::motionTake(Pending kind) {
   if (!motion_.active) return false;
-  bool concatLike = (kind == Pending::Concat || kind == Pending::Set);
-  bool sameClass = motion_.kind == kind || (concatLike && (motion_.kind == Pending::Concat || motion_.kind == Pending::Set) && kind == motion_.kind);
-  if (motion_.kind != Pending::None && !sameClass) error("a motion block must hold requests of one kind");
+  if (motion_.kind != Pending::None && motion_.kind != kind) error("a motion block must hold requests of one kind");
   motion_.kind = kind;
   size_t have = motion_.mats.size() + motion_.colors.size() + motion_.surfaces.size() + motion_.prims.size();
   if (have >= motion_.times.size()) error(cat("motion block has more requests than its ", motion_.times.size(), " times"));

@@ -419,6 +419,45 @@ TEST(ShadeMotion, StaticPrimitivesGetOneKnotAndMovingCameraMovesEverything) {
   }
 }
 
+TEST(ShadeMotion, NestedMovingCoordinateSystemsUnionTheirKnots) {
+  // A moving camera (knots 0, 1) and a rotating object (knots 0, 0.25, 1): the object gets the
+  // union of the knots, each the product of both transforms at that time.
+  FrameScene f = frameOf(
+      [](Scene& s) {
+        s.translate(0, 0, 6);
+        s.motionBegin({0, 0.25, 1});
+        s.rotate(0, 0, 0, 1);
+        s.rotate(20, 0, 0, 1);
+        s.rotate(40, 0, 0, 1);
+        s.motionEnd();
+        s.patch({dvec3(-1, -1, 0), dvec3(1, -1, 0), dvec3(-1, 1, 0), dvec3(1, 1, 0)});
+      },
+      320, 240, 40, {}, [](Scene& s) {
+        s.motionBegin({0, 1});
+        s.translate(0, 0, 0);
+        s.translate(-1, 0, 0);
+        s.motionEnd();
+      });
+  CaptureSink sink = shadeCapture(f);
+  ASSERT_EQ(sink.schedules.size(), 2u);
+  EXPECT_EQ(sink.schedules[1], (store::Schedule{0, 0.25, 1}));
+  // The patch corner (1, 1, 0) is a grid vertex whatever the dicing rate.
+  const double rot[3] = {0, 20, 40}, camX[3] = {0, -0.25, -1};
+  bool found = false;
+  for (const auto& g : sink.grids)
+    for (uint32_t v = 0; v < g.numVertices; ++v) {
+      const glm::dvec4 corner = glm::rotate(glm::dmat4(1.0), glm::radians(rot[0]), dvec3(0, 0, 1)) * glm::dvec4(1, 1, 0, 1);
+      if (glm::length(dvec3(g.positions[v]) - dvec3(corner.x + camX[0], corner.y, 6)) > 1e-6) continue;
+      found = true;
+      for (int k = 1; k < 3; ++k) {
+        const glm::dvec4 c = glm::rotate(glm::dmat4(1.0), glm::radians(rot[k]), dvec3(0, 0, 1)) * glm::dvec4(1, 1, 0, 1);
+        EXPECT_NEAR(g.positions[size_t(k) * g.numVertices + v].x, c.x + camX[k], 1e-6);
+        EXPECT_NEAR(g.positions[size_t(k) * g.numVertices + v].y, c.y, 1e-6);
+      }
+    }
+  EXPECT_TRUE(found);
+}
+
 TEST(ShadeMotion, DeformingSphereScalesBetweenKeys) {
   FrameScene f = frameOf([](Scene& s) {
     s.translate(0, 0, 8);
