@@ -1,8 +1,10 @@
 // `reshutter resample`: one store, one shutter interval, one image.
+#include <cmath>
 #include <cstdio>
 
 #include "cli/commands.h"
 #include "cli/render_options.h"
+#include "cli/shutter_options.h"
 #include "common/error.h"
 #include "common/log.h"
 #include "store/reader.h"
@@ -12,8 +14,7 @@ namespace {
 
 struct ResampleCommand {
   std::string input, output;
-  std::string shutter;  // "A:B" frame-relative
-  std::string shape = "box";
+  ShutterOptions shutter;
   RenderOptions render;
 
   int run() const {
@@ -22,19 +23,15 @@ struct ResampleCommand {
     ro.cacheBytes = size_t(render.cacheMb * 1e6);
     auto reader = std::make_shared<const store::StoreReader>(input, ro);
     const auto& meta = reader->meta();
-    double open = meta.shutterOpen, close = meta.shutterClose;
-    if (!shutter.empty()) {
-      if (std::sscanf(shutter.c_str(), "%lf:%lf", &open, &close) != 2 || !std::isfinite(open) || !std::isfinite(close))
-        fail("--shutter", "expected OPEN:CLOSE in frames, got '", shutter, "'");
-      if (close < open) fail("--shutter", "the interval ", open, ":", close, " closes before it opens");
-    }
+    double open, close;
+    shutter.interval(open, close, meta.shutterOpen, meta.shutterClose);
     if (open < meta.shutterOpen - 1e-12 || close > meta.shutterClose + 1e-12)
-      fail("--shutter", "the interval [", open, ", ", close, "] lies outside the store's shutter [", meta.shutterOpen, ", ", meta.shutterClose,
-           "] (", input, "); intervals across frames need the neighbouring stores: see `reshutter retime`");
+      fail(shutter.shutter.empty() ? "--shutter-angle" : "--shutter", "the interval [", open, ", ", close, "] lies outside the store's shutter [",
+           meta.shutterOpen, ", ", meta.shutterClose, "] (", input, "); intervals across frames need the neighbouring stores: see `reshutter retime`");
     resample::RenderSpec spec;
     spec.sources = {resample::Source{reader, meta.frame}};
-    spec.shutter = resample::ShutterModel::progressive(double(meta.frame) + open, double(meta.frame) + close,
-                                                       resample::ShutterShape::parse(shape, "--shutter-shape"));
+    spec.shutter = resample::ShutterModel::progressive(double(meta.frame) + open, double(meta.frame) + close, shutter.parsedShape());
+    shutter.applyRolling(spec.shutter, 1.0);
     render.applyTo(spec);
     resample::RenderResult result = resample::render(spec);
     render.writeOutputs(result, output, meta.frame);
@@ -54,10 +51,7 @@ void addResampleCommand(CLI::App& app, Registry& registry) {
   auto* sub = app.add_subcommand("resample", "Render a store for any shutter sub-interval into a flat OpenEXR, without re-shading");
   sub->add_option("store", cmd->input, "The .mps store")->required();
   sub->add_option("-o,--output", cmd->output, "Output OpenEXR (optional with --deep)");
-  sub->add_option("--shutter", cmd->shutter, "Interval OPEN:CLOSE in frames relative to the store's frame (default: the store's shutter);\n"
-                                             "OPEN = CLOSE gives the exact instantaneous image");
-  sub->add_option("--shutter-shape", cmd->shape, "Shutter opening: box, trapezoid:A:B (RenderMan shutteropening), curve:F:W,F:W,...")
-      ->capture_default_str();
+  cmd->shutter.addTo(sub, true);
   cmd->render.addTo(sub);
   sub->footer(
       "Examples:\n"

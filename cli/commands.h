@@ -17,8 +17,9 @@ struct Registry {
 void addStoreCommands(CLI::App& app, Registry& registry);  // info, verify, generate
 void addDemoCommand(CLI::App& app, Registry& registry);
 void addResampleCommand(CLI::App& app, Registry& registry);
-void addShadeCommand(CLI::App& app, Registry& registry);
+void addRetimeCommands(CLI::App& app, Registry& registry);  // fields, retime
 void addIngestCommand(CLI::App& app, Registry& registry);
+void addShadeCommand(CLI::App& app, Registry& registry);
 
 /// Formats 1234567 as "1,234,567".
 std::string grouped(uint64_t n);

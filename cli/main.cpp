@@ -31,6 +31,7 @@ int main(int argc, char** argv) {
   cli::addDemoCommand(app, registry);
   cli::addShadeCommand(app, registry);
   cli::addResampleCommand(app, registry);
+  cli::addRetimeCommands(app, registry);
   cli::addIngestCommand(app, registry);
   cli::addStoreCommands(app, registry);
 

@@ -83,6 +83,8 @@ struct BucketRasterizer::Impl {
   double tMin = 0, tMax = 0;
   // Sample times are stored as float offsets from one base shared by every bucket, so a sample's
   // time (tBase + st) is the same whichever bucket computes it, and precise at any frame number.
+  // The base is the whole frame before the earliest time, not the earliest time itself, so a
+  // field rendered alone and the same field inside an interlaced frame get bit-identical times.
   double tBase = 0;
 
   // Per-sample results (slot = p * N + i).
@@ -114,7 +116,7 @@ struct BucketRasterizer::Impl {
   std::vector<uint8_t> vertexStamp;    // theta projections computed for this vertex
 
   Impl(const SamplePattern& p, const ShutterModel& s, const View& v, const std::vector<AovChannel>& a, const RasterOptions& o)
-      : pattern(p), shutter(s), view(v), aovs(a), opt(o), N(p.spp()), tBase(s.earliest()) {
+      : pattern(p), shutter(s), view(v), aovs(a), opt(o), N(p.spp()), tBase(std::floor(s.earliest())) {
     for (const auto& ch : aovs) {
       if (ch.isUInt) {
         aovUIntBase.push_back(aovUIntCount);
@@ -162,7 +164,9 @@ struct BucketRasterizer::Impl {
           slotAt[idx] = uint32_t(p * N + i);
         }
       }
-    // Time range of each stratum over this region's rows (rolling shutter widens it).
+    // Time range of each stratum over this region's rows (rolling shutter widens it), widened to
+    // the samples' stored times: a time rounded to float may leave its stratum's exact range, and
+    // a bound that missed it would drop the hit.
     stratumLo.assign(size_t(G) * N, 0.0), stratumHi.assign(size_t(G) * N, 0.0);
     for (int g = 0; g < G; ++g)
       for (int s = 0; s < N; ++s) {
@@ -170,6 +174,15 @@ struct BucketRasterizer::Impl {
         shutter.timeRange(g, double(y0), double(y0 + h), double(s) / N, double(s + 1) / N, lo, hi);
         stratumLo[size_t(g) * N + s] = lo;
         stratumHi[size_t(g) * N + s] = hi;
+      }
+    for (int s = 0; s < N; ++s)
+      for (int py = 0; py < h; ++py) {
+        const size_t gs = size_t(rowGroup[size_t(py)]) * N + size_t(s);
+        for (int px = 0; px < w; ++px) {
+          const double t = tBase + double(st[size_t(s) * P + size_t(py) * w + size_t(px)]);
+          stratumLo[gs] = std::min(stratumLo[gs], t);
+          stratumHi[gs] = std::max(stratumHi[gs], t);
+        }
       }
 
     zbuf.assign(slots, INFINITY);
@@ -341,7 +354,8 @@ struct BucketRasterizer::Impl {
   // Pixel range of a raster box, clipped to the region; false if empty.
   bool pixelRange(float bx0, float by0, float bx1, float by1, int& px0, int& py0, int& px1, int& py1) const {
     // A sample at x lies in pixel floor(x); a small margin absorbs float rounding of projections.
-    const float m = 1e-3f;
+    const float mag = std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1)));
+    const float m = 1e-3f + 1e-6f * mag;
     px0 = std::max(x0, int(std::floor(std::max(bx0 - m, float(x0)))));
     py0 = std::max(y0, int(std::floor(std::max(by0 - m, float(y0)))));
     px1 = std::min(x0 + w - 1, int(std::floor(std::min(bx1 + m, float(x0 + w)))));
@@ -441,6 +455,7 @@ struct BucketRasterizer::Impl {
     const double F = double(src.frame);
     const double toLocal = tBase - F;  // local time = st + toLocal
     const double covLo = src.coverStart() - tBase, covHi = src.coverEnd() - tBase;  // in st units
+    const bool checkCover = tMin < src.coverStart() || tMax > src.coverEnd();
     const double* lo = &stratumLo[size_t(g) * N];
     const double* hi = &stratumHi[size_t(g) * N];
 
@@ -510,19 +525,14 @@ struct BucketRasterizer::Impl {
           }
         if (bounded && (bx1 + m < float(x0) || bx0 - m >= float(x0 + w) || by1 + m < float(y0) || by0 - m >= float(y0 + h))) continue;
       }
-      // Corner projections at the strata boundaries, computed once per vertex.
+      // Corner projections at the strata boundaries, computed once per vertex. Vertex-major and
+      // branch-free per knot segment so the compiler vectorises it: this is the per-micropolygon
+      // cost that remains when the shutter (and so the number of sample tests) shrinks.
       for (int j = 0; j < nc; ++j) {
         const uint32_t v = c[j];
         if (vertexStamp[v]) continue;
         vertexStamp[v] = 1;
-        for (size_t ti = 0; ti < T; ++ti) {
-          const uint32_t k = thetaSeg[ti];
-          const glm::vec3& a = part.position(k, v);
-          const glm::vec3 p = a + thetaF[ti] * (part.position(k + 1, v) - a);
-          float x, y;
-          if (project(p, x, y)) projX[ti * nV + v] = x, projY[ti * nV + v] = y;
-          else projX[ti * nV + v] = NAN;
-        }
+        projectVertexPath(part, v, T);
       }
       std::fill(segReady.begin(), segReady.end(), 0);
       const uint8_t flags = part.flags[mi];
@@ -532,24 +542,32 @@ struct BucketRasterizer::Impl {
         bool bounded = true;
         for (int ti = stratumFirst[size_t(s)]; ti <= stratumLast[size_t(s)] && bounded; ++ti)
           for (int j = 0; j < nc; ++j) {
-            const float x = projX[size_t(ti) * nV + c[j]];
+            const float x = projX[size_t(c[j]) * T + size_t(ti)];
             if (std::isnan(x)) {
               bounded = false;
               break;
             }
-            const float y = projY[size_t(ti) * nV + c[j]];
+            const float y = projY[size_t(c[j]) * T + size_t(ti)];
             bx0 = std::min(bx0, x), by0 = std::min(by0, y), bx1 = std::max(bx1, x), by1 = std::max(by1, y);
           }
         int px0, py0, px1, py1;
+        // The sample itself must lie in the stratum's bound (not just its pixel): a cheap
+        // rejection before the edge functions. Unbounded micropolygons skip it.
+        float sbx0 = -INFINITY, sby0 = -INFINITY, sbx1 = INFINITY, sby1 = INFINITY;
         if (!bounded) px0 = x0, py0 = y0, px1 = x0 + w - 1, py1 = y0 + h - 1;
         else if (!pixelRange(bx0, by0, bx1, by1, px0, py0, px1, py1)) continue;
+        else {
+          const float sm = 1e-3f + 1e-6f * std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1)));
+          if (!getenv("NOSB")) sbx0 = bx0 - sm, sby0 = by0 - sm, sbx1 = bx1 + sm, sby1 = by1 + sm;
+        }
         for (int py = py0; py <= py1; ++py) {
           if (rowGroup[size_t(py - y0)] != g) continue;
           const size_t rowBase = size_t(s) * P + size_t(py - y0) * w;
           for (int px = px0; px <= px1; ++px) {
             const size_t idx = rowBase + size_t(px - x0);
+            if (sx[idx] < sbx0 || sx[idx] > sbx1 || sy[idx] < sby0 || sy[idx] > sby1) continue;
             const float t = st[idx];
-            if (double(t) < covLo || double(t) > covHi) continue;
+            if (checkCover && (double(t) < covLo || double(t) > covHi)) continue;
             ++stats.sampleTests;
             uint32_t k = 0;
             float f;
@@ -588,6 +606,51 @@ struct BucketRasterizer::Impl {
         }
       }
     }
+  }
+
+  // Raster positions of vertex v at every theta time (projX/projY[v * T + ti]); NaN x marks a
+  // position before the near plane. Float arithmetic: pixelRange() widens by the relative error.
+  void projectVertexPath(const TilePart& part, uint32_t v, size_t T) {
+    float* __restrict xs = &projX[size_t(v) * T];
+    float* __restrict ys = &projY[size_t(v) * T];
+    const float* __restrict fs = thetaF.data();
+    const float ax = float(view.ax), bx = float(view.bx), ay = float(view.ay), by = float(view.by), nearZ = view.nearClip;
+    size_t ti = 0;
+    if (getenv("DOUBLEPROJ")) {
+      for (size_t i = 0; i < T; ++i) {
+        const uint32_t k = thetaSeg[i];
+        const glm::vec3& a = part.position(k, v);
+        const glm::vec3 p = a + thetaF[i] * (part.position(k + 1, v) - a);
+        float x, y;
+        if (project(p, x, y)) xs[i] = x, ys[i] = y;
+        else xs[i] = NAN;
+      }
+      return;
+    }
+    while (ti < T) {
+      const uint32_t k = thetaSeg[ti];
+      size_t end = ti;
+      while (end < T && thetaSeg[end] == k) ++end;
+      const glm::vec3 a = part.position(k, v), d = part.position(k + 1, v) - a;
+      if (view.perspective) {
+        for (size_t i = ti; i < end; ++i) {
+          const float px = a.x + fs[i] * d.x, py = a.y + fs[i] * d.y, pz = a.z + fs[i] * d.z;
+          const float iz = 1.0f / pz;
+          const float x = ax * (px * iz) + bx, y = ay * (py * iz) + by;
+          xs[i] = pz >= nearZ ? x : NAN;
+          ys[i] = y;
+        }
+      } else {
+        for (size_t i = ti; i < end; ++i) {
+          xs[i] = ax * (a.x + fs[i] * d.x) + bx;
+          ys[i] = ay * (a.y + fs[i] * d.y) + by;
+        }
+      }
+      ti = end;
+    }
+    // Infinite or NaN results (a vertex exactly at the eye) count as unbounded.
+    for (size_t i = 0; i < T; ++i)
+      if (!std::isfinite(xs[i]) || !std::isfinite(ys[i])) xs[i] = NAN;
   }
 
   void prepareEdges(const TilePart& part, const uint32_t* c, bool tri, uint32_t k, EdgeQuad* q) const {

@@ -113,7 +113,7 @@ Reference rayCast(const TestScene& scene, const RenderSpec& spec, int W, int H) 
   RollingShutter rolling = shutter.rolling();
   rolling.height = H;
   shutter.setRolling(rolling);
-  const double tBase = shutter.earliest();
+  const double tBase = std::floor(shutter.earliest());
   const double F = double(scene.meta.frame);
   Reference ref;
   ref.r.assign(size_t(W) * H, 0), ref.g = ref.r, ref.b = ref.r, ref.a = ref.r;
@@ -162,6 +162,40 @@ Reference rayCast(const TestScene& scene, const RenderSpec& spec, int W, int H) 
       ref.r[p] = acc[0] / N, ref.g[p] = acc[1] / N, ref.b[p] = acc[2] / N, ref.a[p] = acc[3] / N;
     }
   return ref;
+}
+
+double analyticCoverage(int px, int py, double x0, double y0, double w, double h, double vx, double vy, double a, double b,
+                        const std::vector<double>& shapeTimes, const std::vector<double>& shapeWeights) {
+  auto overlap = [](double lo, double hi, double p) { return std::max(0.0, std::min(hi, p + 1) - std::max(lo, p)); };
+  auto area = [&](double t) { return overlap(x0 + vx * t, x0 + w + vx * t, px) * overlap(y0 + vy * t, y0 + h + vy * t, py); };
+  auto weight = [&](double t) {
+    if (shapeTimes.empty()) return 1.0;
+    if (t <= shapeTimes.front()) return shapeWeights.front();
+    for (size_t i = 1; i < shapeTimes.size(); ++i)
+      if (t <= shapeTimes[i]) return shapeWeights[i - 1] + (t - shapeTimes[i - 1]) / (shapeTimes[i] - shapeTimes[i - 1]) * (shapeWeights[i] - shapeWeights[i - 1]);
+    return shapeWeights.back();
+  };
+  if (a == b) return area(a);
+  std::vector<double> ts{a, b};
+  auto crossing = [&](double start, double v, double edge) {
+    if (v != 0) {
+      const double t = (edge - start) / v;
+      if (t > a && t < b) ts.push_back(t);
+    }
+  };
+  for (double e : {double(px), double(px + 1)}) crossing(x0, vx, e), crossing(x0 + w, vx, e);
+  for (double e : {double(py), double(py + 1)}) crossing(y0, vy, e), crossing(y0 + h, vy, e);
+  for (double t : shapeTimes)
+    if (t > a && t < b) ts.push_back(t);
+  std::sort(ts.begin(), ts.end());
+  double sum = 0, norm = 0;
+  for (size_t i = 0; i + 1 < ts.size(); ++i) {
+    const double t0 = ts[i], t1 = ts[i + 1], tm = (t0 + t1) / 2;
+    // area·weight is at most cubic on a piece: Simpson is exact.
+    sum += (t1 - t0) / 6 * (area(t0) * weight(t0) + 4 * area(tm) * weight(tm) + area(t1) * weight(t1));
+    norm += (t1 - t0) / 6 * (weight(t0) + 4 * weight(tm) + weight(t1));
+  }
+  return sum / norm;
 }
 
 const ImageChannel& channel(const RenderResult& r, const std::string& name) {

@@ -53,6 +53,15 @@ struct Reference {
 };
 Reference rayCast(const TestScene& scene, const resample::RenderSpec& spec, int width, int height);
 
+/// Exact time-averaged coverage of pixel (px, py) by the raster rectangle
+/// [x0 + vx·t, x0 + w + vx·t] × [y0 + vy·t, y0 + h + vy·t] over t ∈ [a, b], weighted by a shutter
+/// opening that is linear between `shapeTimes` (absolute, with weights `shapeWeights`; empty: box).
+/// The overlap is a product of two piecewise-linear functions of t and the weight is piecewise
+/// linear, so Simpson's rule is exact on each piece between the times where an edge crosses a
+/// pixel boundary or the weight changes slope.
+double analyticCoverage(int px, int py, double x0, double y0, double w, double h, double vx, double vy, double a, double b,
+                        const std::vector<double>& shapeTimes = {}, const std::vector<double>& shapeWeights = {});
+
 const resample::ImageChannel& channel(const resample::RenderResult& r, const std::string& name);
 
 }  // namespace reshutter::test
