@@ -367,6 +367,33 @@ void formDeepPixel(const WeightedSample* samples, size_t n, const DeepLayout& L,
       T[g] *= 1.0 - double(r[al]);
     }
   }
+  // Keep that order through tidying: a volume sample ends where the next sample starts (only
+  // surfaces passing through each other inside the pixel are affected), and samples at one
+  // depth combine with `over` in the order used above, so nothing is left to split or merge.
+  for (size_t i = 0; i + 1 < out.size(); ++i) {
+    float* r = out.at(i);
+    r[kDeepZBack] = std::min(r[kDeepZBack], std::max(r[kDeepZ], out.at(i + 1)[kDeepZ]));
+  }
+  size_t kept = 0;
+  for (size_t i = 0; i < out.size(); ++i) {
+    if (kept > 0 && out.at(i)[kDeepZ] == out.at(kept - 1)[kDeepZ] && out.at(i)[kDeepZBack] == out.at(kept - 1)[kDeepZBack]) {
+      float* front = out.at(kept - 1);
+      const float* back = out.at(i);
+      if (back[kDeepA] > front[kDeepA]) std::copy(out.uat(i), out.uat(i) + out.nu, out.uat(kept - 1));
+      for (const auto& [al, cs] : groups.groups) {
+        const float t = 1.f - front[al];
+        for (int c : cs) front[c] += t * back[c];
+        front[al] += t * back[al];
+      }
+      continue;
+    }
+    if (kept != i) {
+      std::copy(out.at(i), out.at(i) + out.nf, out.at(kept));
+      std::copy(out.uat(i), out.uat(i) + out.nu, out.uat(kept));
+    }
+    ++kept;
+  }
+  out.f.resize(kept * size_t(out.nf)), out.u.resize(kept * size_t(out.nu));
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -508,6 +535,30 @@ void DeepFormer::formBucket(BucketRasterizer& r, size_t b, int bx0, int by0, int
       tidyDeepPixel(s.pixel, L);
       m.image.setPixel(b, px, py, s.pixel);
     }
+}
+
+std::map<uint32_t, std::string> objectNamesFromProvenance(const std::string& provenance) {
+  std::map<uint32_t, std::string> names;
+  const auto at = provenance.find("objects:");
+  if (at == std::string::npos) return names;
+  size_t p = at + 8;
+  while (p < provenance.size()) {
+    while (p < provenance.size() && provenance[p] == ' ') ++p;
+    const size_t eq = provenance.find("=\"", p);
+    if (eq == std::string::npos || eq == p) break;
+    const size_t close = provenance.find('"', eq + 2);
+    if (close == std::string::npos) break;
+    uint32_t id = 0;
+    bool digits = true;
+    for (size_t i = p; i < eq; ++i) {
+      if (provenance[i] < '0' || provenance[i] > '9') digits = false;
+      else id = id * 10 + uint32_t(provenance[i] - '0');
+    }
+    if (!digits) break;
+    names[id] = provenance.substr(eq + 2, close - eq - 2);
+    p = close + 1;
+  }
+  return names;
 }
 
 // ---------------------------------------------------------------------------------------------

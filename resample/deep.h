@@ -27,9 +27,12 @@
 //    that deleting the samples in front of a surface does not reveal its true coverage. Sample
 //    alphas never exceed 1 because Σ a ≤ 1.
 //  - Depth. Z and ZBack are the group's nearest and farthest fragment depth: a group whose
-//    fragments all lie at one depth is a point sample, otherwise a volume sample. Where volume
-//    samples of different surfaces overlap (surfaces passing through each other within one
-//    pixel), tidying splits and merges them per Hillman; only those pixels flatten inexactly.
+//    fragments all lie at one depth is a point sample, otherwise a volume sample. Where surfaces
+//    pass through each other inside a pixel their depth ranges overlap; the front sample's ZBack
+//    is then cut back to where the next one starts, so the image is tidy in exactly the order the
+//    alphas were computed in and flattens exactly (Hillman's split-and-merge would redistribute
+//    alpha by depth and undo that). Samples at one depth combine with `over`. tidyDeepPixel
+//    (split and merge) still runs on every pixel and is what any other input gets.
 //  - Matte objects become samples like any surface but with RGB = 0 (A as above), so a deep merge
 //    cuts out whatever lies behind them, and carry the OpenDCX matte flag internally. The flat
 //    image leaves matte coverage out of alpha; flattenDeepPixel(matteAware = true) does the same.
@@ -186,6 +189,10 @@ class DeepFormer {
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };
+
+/// Object names recorded by the shading pass in a store's provenance ("...; objects: 1=\"floor\"
+/// 2=\"ball\""); empty when there are none. Feeds the deep idManifest.
+std::map<uint32_t, std::string> objectNamesFromProvenance(const std::string& provenance);
 
 // ---------------------------------------------------------------------------------------------
 // Writer

@@ -265,7 +265,7 @@ RenderResult render(const RenderSpec& spec) {
       buckets.push_back({x, y, std::min(cx1, x + spec.bucketSize), std::min(cy1, y + spec.bucketSize)});
   if (spec.deep) {
     result.deep.reset(cx0, cy0, cx1 - cx0, cy1 - cy0, W, H, deepLayout, buckets.size());  // one block per bucket
-    result.deep.objectNames = spec.objectNames;
+    result.deep.objectNames = spec.objectNames.empty() ? objectNamesFromProvenance(meta0.provenance) : spec.objectNames;
     deepFormer = std::make_unique<DeepFormer>(result.deep, mainTable, pattern, spec.deepOptions);
   }
 
