@@ -558,7 +558,7 @@ struct BucketRasterizer::Impl {
         else if (!pixelRange(bx0, by0, bx1, by1, px0, py0, px1, py1)) continue;
         else {
           const float sm = 1e-3f + 1e-6f * std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1)));
-          if (!getenv("NOSB")) sbx0 = bx0 - sm, sby0 = by0 - sm, sbx1 = bx1 + sm, sby1 = by1 + sm;
+          sbx0 = bx0 - sm, sby0 = by0 - sm, sbx1 = bx1 + sm, sby1 = by1 + sm;
         }
         for (int py = py0; py <= py1; ++py) {
           if (rowGroup[size_t(py - y0)] != g) continue;
@@ -616,17 +616,6 @@ struct BucketRasterizer::Impl {
     const float* __restrict fs = thetaF.data();
     const float ax = float(view.ax), bx = float(view.bx), ay = float(view.ay), by = float(view.by), nearZ = view.nearClip;
     size_t ti = 0;
-    if (getenv("DOUBLEPROJ")) {
-      for (size_t i = 0; i < T; ++i) {
-        const uint32_t k = thetaSeg[i];
-        const glm::vec3& a = part.position(k, v);
-        const glm::vec3 p = a + thetaF[i] * (part.position(k + 1, v) - a);
-        float x, y;
-        if (project(p, x, y)) xs[i] = x, ys[i] = y;
-        else xs[i] = NAN;
-      }
-      return;
-    }
     while (ti < T) {
       const uint32_t k = thetaSeg[ti];
       size_t end = ti;
