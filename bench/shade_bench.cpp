@@ -3,12 +3,15 @@
 // every core, into a null sink (the pass alone) and into a StoreWriter (the pass plus
 // compression and I/O, what `reshutter shade` costs).
 // Usage: shade_bench [--quick] [--dir DIR]      (one line of results per configuration)
+//        shade_bench --motion-factors DIR          (demo stores for motion factor 0, 0.5, 1, 2, 4 in DIR,
+//                                                   for the accuracy study in bench/RESULTS.md)
 #include <cinttypes>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <string>
 #include <thread>
+#include <sys/resource.h>
 
 #include <tbb/global_control.h>
 
@@ -22,19 +25,29 @@ using reshutter::bench::Stopwatch;
 
 namespace {
 
+// CPU seconds of this process (all threads): on a shared machine, throughput per CPU-second is
+// the per-core figure that other tenants' load does not distort as much as wall time does.
+double cpuSeconds() {
+  rusage u{};
+  getrusage(RUSAGE_SELF, &u);
+  return double(u.ru_utime.tv_sec + u.ru_stime.tv_sec) + 1e-6 * double(u.ru_utime.tv_usec + u.ru_stime.tv_usec);
+}
+
 struct NullSink final : store::GridSink {
   uint32_t addSchedule(const store::Schedule&) override { return 1; }
   void addGrid(const store::GridInput&) override {}
 };
 
-void run(const char* label, int w, int h, double rateScale, int threads, const std::string& storePath) {
+void run(const char* label, int w, int h, double rateScale, int threads, const std::string& storePath, double motionFactor = 0) {
   tbb::global_control gc(tbb::global_control::max_allowed_parallelism, size_t(threads));
   shade::ShadeOptions o;
   o.dice.shadingRateScale = rateScale;
+  o.dice.motionFactor = motionFactor;
   Stopwatch build;
   shade::FrameScene f = shade::demoFrame(w, h);
   const double buildSeconds = build.seconds();
   Stopwatch sw;
+  const double cpu0 = cpuSeconds();
   shade::ShadeStats st;
   uint64_t bytes = 0;
   if (storePath.empty()) {
@@ -45,10 +58,10 @@ void run(const char* label, int w, int h, double rateScale, int threads, const s
     st = r.shade;
     bytes = r.write.fileBytes;
   }
-  const double s = sw.seconds();
+  const double s = sw.seconds(), cpu = cpuSeconds() - cpu0;
   const double mps = double(st.micropolygons) / s;
-  std::printf("%-8s %5dx%-5d rate x%-4g %2d thr  %10" PRIu64 " mp  %7" PRIu64 " grids  %7.3f s  %6.2f M mp/s  %6.2f M mp/s/core  %s  scene %.3f s  peak RSS %.0f MB\n",
-              label, w, h, rateScale, threads, st.micropolygons, st.grids, s, mps / 1e6, mps / 1e6 / threads,
+  std::printf("%-6s %4dx%-4d rate x%-3g %2d thr %9" PRIu64 " mp (%" PRIu64 " moving) %6" PRIu64 " grids %7.3f s wall %7.3f s cpu  %5.2f M mp/s  %5.2f M mp/s per cpu-s  %s  scene %.3f s  peak RSS %.0f MB\n",
+              label, w, h, rateScale, threads, st.micropolygons, st.movingMicropolygons, st.grids, s, cpu, mps / 1e6, double(st.micropolygons) / cpu / 1e6,
               storePath.empty() ? "null sink" : (std::to_string(bytes / 1000000) + " MB store").c_str(), buildSeconds,
               bench::peakRssBytes() / 1e6);
   std::fflush(stdout);
@@ -58,9 +71,10 @@ void run(const char* label, int w, int h, double rateScale, int threads, const s
 
 int main(int argc, char** argv) {
   bool quick = false;
-  std::string dir = std::filesystem::temp_directory_path().string();
+  std::string dir = std::filesystem::temp_directory_path().string(), mfDir;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--quick")) quick = true;
+    else if (!std::strcmp(argv[i], "--motion-factors") && i + 1 < argc) mfDir = argv[++i];
     else if (!std::strcmp(argv[i], "--dir") && i + 1 < argc) dir = argv[++i];
     else {
       std::fprintf(stderr, "usage: shade_bench [--quick] [--dir DIR]\n");
@@ -69,6 +83,15 @@ int main(int argc, char** argv) {
   }
   const int cores = int(std::max(1u, std::thread::hardware_concurrency()));
   std::printf("shade_bench: %s\n", bench::machineLine().c_str());
+  if (!mfDir.empty()) {
+    std::filesystem::create_directories(mfDir);
+    for (double mf : {0.0, 0.5, 1.0, 2.0, 4.0}) {
+      char label[16];
+      std::snprintf(label, sizeof label, "mf%g", mf);
+      run(label, 640, 360, 1, cores, mfDir + "/demo-" + label + ".mps", mf);
+    }
+    return 0;
+  }
   const std::string store = dir + "/shade_bench.mps";
   run("demo", 640, 360, 1, 1, "");
   run("demo", 640, 360, 1, cores, "");

@@ -244,6 +244,7 @@ ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::Gri
               stats.micropolygons += in.numMicropolygons();
               stats.vertices += go.numVertices;
               stats.movingGrids += schedule != 0;
+              stats.movingMicropolygons += schedule != 0 ? in.numMicropolygons() : 0;
             }
           }));
   stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();

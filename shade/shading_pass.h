@@ -32,7 +32,7 @@ struct ShadeOptions {
 };
 
 struct ShadeStats {
-  uint64_t primitives = 0, grids = 0, micropolygons = 0, vertices = 0, movingGrids = 0;
+  uint64_t primitives = 0, grids = 0, micropolygons = 0, vertices = 0, movingGrids = 0, movingMicropolygons = 0;
   uint64_t culledPieces = 0, droppedMicropolygons = 0, eyeSplits = 0;
   double shadeAt = 0;
   double seconds = 0;
