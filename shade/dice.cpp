@@ -99,7 +99,16 @@ std::vector<double> clipKnots(const Primitive& p, double open, double close) {
   for (double t : all)
     if (t > open && t < close) out.push_back(t);
   out.push_back(close);
-  return out;
+  // Motion that stands still inside the interval (identical keys, or moving only outside it) is
+  // static: one knot, schedule 0, and no motion cost downstream.
+  const glm::dmat4 m0 = p.xform->at(open);
+  const Shape s0 = p.shapeAt(open);
+  for (double t : out) {
+    if (p.xform->at(t) != m0) return out;
+    const Shape s = p.shapeAt(t);
+    if (s.q != s0.q || s.P != s0.P) return out;
+  }
+  return {open};
 }
 
 namespace {

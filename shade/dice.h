@@ -50,8 +50,9 @@ struct DiceStats {
   uint64_t leaves = 0, culledPieces = 0, eyeSplits = 0;
 };
 
-/// The knot times of `p` inside [open, close]: empty for a static primitive (or a zero-length
-/// interval), otherwise open, every knot strictly inside, and close.
+/// The knot times of `p` inside [open, close]: just `open` for a static primitive, a zero-length
+/// interval or motion that does not move inside the interval; otherwise open, every knot
+/// strictly inside, and close.
 std::vector<double> clipKnots(const Primitive& p, double open, double close);
 
 /// Splits `p` into leaves for `camera` (positions at `knots`, or its only shape when empty).

@@ -458,6 +458,29 @@ TEST(ShadeMotion, NestedMovingCoordinateSystemsUnionTheirKnots) {
   EXPECT_TRUE(found);
 }
 
+TEST(ShadeMotion, MotionThatStandsStillIsStatic) {
+  FrameScene f = frameOf([](Scene& s) {
+    s.motionBegin({0, 1});
+    s.translate(0, 0, 5);
+    s.translate(0, 0, 5);
+    s.motionEnd();
+    s.sphere(1, -1, 1, 360);
+    s.motionBegin({0, 0.5});  // moves only before the interval below
+    s.translate(1, 0, 0);
+    s.translate(2, 0, 0);
+    s.motionEnd();
+    s.sphere(0.5, -0.5, 0.5, 360);
+  });
+  ShadeOptions o;
+  o.interval = std::make_pair(0.5, 1.0);
+  CaptureSink sink = shadeCapture(f, o);
+  ASSERT_FALSE(sink.grids.empty());
+  for (const auto& g : sink.grids) EXPECT_EQ(g.schedule, 0u);
+  o.interval = std::make_pair(0.0, 1.0);
+  CaptureSink moving = shadeCapture(f, o);
+  EXPECT_EQ(moving.schedules.size(), 2u);  // the second sphere moves over [0, 0.5]
+}
+
 TEST(ShadeMotion, DeformingSphereScalesBetweenKeys) {
   FrameScene f = frameOf([](Scene& s) {
     s.translate(0, 0, 8);
