@@ -27,22 +27,27 @@ namespace {
 // Edge order of a quad: 01 12 23 30 and the diagonal 02. A triangle uses 01 12 02.
 constexpr int kEdgeVerts[5][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {0, 2}};
 
-inline glm::vec3 cross(const glm::vec3& a, const glm::vec3& b) {
+// Edge functions are evaluated in double precision: for a one-pixel micropolygon the cross
+// product of two nearly parallel vertex vectors cancels ~3 digits, and in float that moved edges
+// by up to 0.01 px near the image corners (measured against the vertex bounds). Double keeps the
+// test exact to ~1e-9 px at scalar cost; the exact-negation argument for shared edges holds
+// in any precision.
+inline glm::dvec3 cross(const glm::dvec3& a, const glm::dvec3& b) {
   return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
 }
 
 // Quadratic coefficients of one edge's cross product over a knot segment: E(f) = e0 + f(e1 + f e2).
 struct EdgeQuad {
-  glm::vec3 e0, e1, e2;
-  glm::vec3 at(float f) const { return e0 + f * (e1 + f * e2); }
+  glm::dvec3 e0, e1, e2;
+  glm::dvec3 at(double f) const { return e0 + f * (e1 + f * e2); }
 };
 
-inline float dotRay(float rx, float ry, const glm::vec3& e) { return rx * e.x + ry * e.y + e.z; }
+inline double dotRay(double rx, double ry, const glm::dvec3& e) { return rx * e.x + ry * e.y + e.z; }
 
 // A sample exactly on an edge belongs to the triangle for which the orientation-normalised edge
 // vector is lexicographically positive; the neighbour sees the exact negation and declines.
-inline bool ownsTie(const glm::vec3& e, bool flip) {
-  glm::vec3 v = flip ? -e : e;
+inline bool ownsTie(const glm::dvec3& e, bool flip) {
+  glm::dvec3 v = flip ? -e : e;
   if (v.x != 0) return v.x > 0;
   if (v.y != 0) return v.y > 0;
   return v.z > 0;
@@ -104,7 +109,7 @@ struct BucketRasterizer::Impl {
   RasterStats stats;
 
   // Per-part scratch.
-  std::vector<glm::vec3> hom;          // homogeneous vertex coordinates at one time
+  std::vector<glm::dvec3> hom;         // homogeneous vertex coordinates at one time
   std::vector<double> thetaTimes;      // distinct times the moving path projects vertices at
   std::vector<float> projX, projY;     // [theta * nV + v]; projX NaN = before the near plane
   std::vector<int> stratumFirst, stratumLast;  // theta index range per stratum
@@ -306,37 +311,37 @@ struct BucketRasterizer::Impl {
   // Given the edge values e[5] (edges 01 12 23 30 02) and vectors E[5] at the sample's time,
   // decides coverage: triangle A (p0 p1 p2) first, then B (p0 p2 p3). On a hit, returns which
   // triangle and the perspective-correct barycentrics of its three vertices.
-  inline bool inside(const float e[5], const glm::vec3 E[5], bool triangle, uint8_t flags, int& triOut, float bOut[3]) const {
+  inline bool inside(const double e[5], const glm::dvec3 E[5], bool triangle, uint8_t flags, int& triOut, float bOut[3]) const {
     {
-      const float a0 = e[1], a1 = -e[4], a2 = e[0];
-      const float S = a0 + a1 + a2;
-      if (S != 0.f && !(opt.backfaceCull && S > 0.f && !(flags & store::kTwoSided))) {
-        const bool flip = S < 0.f;
-        const bool in0 = a0 == 0.f ? ownsTie(E[1], flip) : (flip ? a0 < 0.f : a0 > 0.f);
-        const bool in1 = a1 == 0.f ? ownsTie(-E[4], flip) : (flip ? a1 < 0.f : a1 > 0.f);
-        const bool in2 = a2 == 0.f ? ownsTie(E[0], flip) : (flip ? a2 < 0.f : a2 > 0.f);
+      const double a0 = e[1], a1 = -e[4], a2 = e[0];
+      const double S = a0 + a1 + a2;
+      if (S != 0.0 && !(opt.backfaceCull && S > 0.0 && !(flags & store::kTwoSided))) {
+        const bool flip = S < 0.0;
+        const bool in0 = a0 == 0.0 ? ownsTie(E[1], flip) : (flip ? a0 < 0.0 : a0 > 0.0);
+        const bool in1 = a1 == 0.0 ? ownsTie(-E[4], flip) : (flip ? a1 < 0.0 : a1 > 0.0);
+        const bool in2 = a2 == 0.0 ? ownsTie(E[0], flip) : (flip ? a2 < 0.0 : a2 > 0.0);
         if (in0 && in1 && in2) {
-          const float inv = 1.f / S;
-          triOut = 0, bOut[0] = a0 * inv, bOut[1] = a1 * inv, bOut[2] = a2 * inv;
+          const double inv = 1.0 / S;
+          triOut = 0, bOut[0] = float(a0 * inv), bOut[1] = float(a1 * inv), bOut[2] = float(a2 * inv);
           return true;
         }
       }
     }
     if (triangle) return false;
-    const float a0 = e[2], a1 = e[3], a2 = e[4];
-    const float S = a0 + a1 + a2;
-    if (S == 0.f || (opt.backfaceCull && S > 0.f && !(flags & store::kTwoSided))) return false;
-    const bool flip = S < 0.f;
-    const bool in0 = a0 == 0.f ? ownsTie(E[2], flip) : (flip ? a0 < 0.f : a0 > 0.f);
-    const bool in1 = a1 == 0.f ? ownsTie(E[3], flip) : (flip ? a1 < 0.f : a1 > 0.f);
-    const bool in2 = a2 == 0.f ? ownsTie(E[4], flip) : (flip ? a2 < 0.f : a2 > 0.f);
+    const double a0 = e[2], a1 = e[3], a2 = e[4];
+    const double S = a0 + a1 + a2;
+    if (S == 0.0 || (opt.backfaceCull && S > 0.0 && !(flags & store::kTwoSided))) return false;
+    const bool flip = S < 0.0;
+    const bool in0 = a0 == 0.0 ? ownsTie(E[2], flip) : (flip ? a0 < 0.0 : a0 > 0.0);
+    const bool in1 = a1 == 0.0 ? ownsTie(E[3], flip) : (flip ? a1 < 0.0 : a1 > 0.0);
+    const bool in2 = a2 == 0.0 ? ownsTie(E[4], flip) : (flip ? a2 < 0.0 : a2 > 0.0);
     if (!(in0 && in1 && in2)) return false;
-    const float inv = 1.f / S;
-    triOut = 1, bOut[0] = a0 * inv, bOut[1] = a1 * inv, bOut[2] = a2 * inv;
+    const double inv = 1.0 / S;
+    triOut = 1, bOut[0] = float(a0 * inv), bOut[1] = float(a1 * inv), bOut[2] = float(a2 * inv);
     return true;
   }
 
-  glm::vec3 homogeneous(const glm::vec3& p) const { return view.perspective ? p : glm::vec3(p.x, p.y, 1.f); }
+  glm::dvec3 homogeneous(const glm::vec3& p) const { return view.perspective ? glm::dvec3(p) : glm::dvec3(p.x, p.y, 1.0); }
 
   // Raster bounds of a set of camera-space points; false if one lies before the near plane.
   bool project(const glm::vec3& p, float& x, float& y) const {
@@ -375,7 +380,7 @@ struct BucketRasterizer::Impl {
       const uint32_t* c = &part.corners[size_t(m) * 4];
       const bool tri = c[3] == kNoCorner;
       const int nc = tri ? 3 : 4;
-      glm::vec3 E[5] = {};
+      glm::dvec3 E[5] = {};
       for (int k = 0; k < 5; ++k) {
         if (tri && (k == 2 || k == 3)) continue;
         E[k] = cross(hom[c[kEdgeVerts[k][0]]], hom[c[kEdgeVerts[k][1]]]);
@@ -402,7 +407,7 @@ struct BucketRasterizer::Impl {
             const size_t idx = size_t(s) * P + p;
             if (checkCover && !(tBase + st[idx] >= covLo && tBase + st[idx] <= covHi)) continue;
             ++stats.sampleTests;
-            float e[5] = {0, 0, 0, 0, 0};
+            double e[5] = {0, 0, 0, 0, 0};
             for (int k = 0; k < 5; ++k)
               if (!tri || k == 0 || k == 1 || k == 4) e[k] = dotRay(rayX[idx], rayY[idx], E[k]);
             float b[3];
@@ -578,11 +583,11 @@ struct BucketRasterizer::Impl {
               prepareEdges(part, c, tri, k, q);
               segReady[k] = 1;
             }
-            glm::vec3 E[5];
-            float e[5];
+            glm::dvec3 E[5];
+            double e[5];
             for (int ei = 0; ei < 5; ++ei) {
               if (tri && (ei == 2 || ei == 3)) {
-                E[ei] = glm::vec3(0.f), e[ei] = 0.f;
+                E[ei] = glm::dvec3(0.0), e[ei] = 0.0;
                 continue;
               }
               E[ei] = q[ei].at(f);
@@ -591,8 +596,6 @@ struct BucketRasterizer::Impl {
             int tr;
             float b[3];
             if (!inside(e, E, tri, flags, tr, b)) continue;
-            const float* zk = nullptr;
-            (void)zk;
             float zv[3];
             const uint32_t tv[3] = {c[0], c[tr == 0 ? 1 : 2], c[tr == 0 ? 2 : 3]};
             for (int j = 0; j < 3; ++j) {
@@ -643,12 +646,12 @@ struct BucketRasterizer::Impl {
   }
 
   void prepareEdges(const TilePart& part, const uint32_t* c, bool tri, uint32_t k, EdgeQuad* q) const {
-    glm::vec3 A[4], D[4];
+    glm::dvec3 A[4], D[4];
     const int nc = tri ? 3 : 4;
     for (int j = 0; j < nc; ++j) {
       A[j] = homogeneous(part.position(k, c[j]));
       D[j] = homogeneous(part.position(k + 1, c[j])) - A[j];
-      if (!view.perspective) D[j].z = 0.f;
+      if (!view.perspective) D[j].z = 0.0;
     }
     for (int e = 0; e < 5; ++e) {
       if (tri && (e == 2 || e == 3)) continue;

@@ -1,6 +1,7 @@
 #include "store/format.h"
 
 #include <algorithm>
+#include <vector>
 #include <cmath>
 
 namespace reshutter::store {
@@ -69,6 +70,22 @@ void knotRange(const Schedule& s, double t0, double t1, size_t& first, size_t& l
   while (last > first && s[last - 1] >= t1) --last;
 }
 
+namespace {
+// The camera-space box of a part at time t inside knot segment [k, k + 1]: positions are linear
+// in camera space there, so the box lerped between the knots' boxes holds every vertex at t.
+// Widened by a relative 1e-6 for the float arithmetic that interpolates positions downstream.
+void lerpedBox(const TileEntry& e, const Schedule& s, size_t k, double t, float out[6]) {
+  const float* a = e.knots[k].camera;
+  const float* b = e.knots[k + 1].camera;
+  const double f = std::clamp((t - s[k]) / (s[k + 1] - s[k]), 0.0, 1.0);
+  for (int i = 0; i < 6; ++i) {
+    const double v = double(a[i]) + f * (double(b[i]) - double(a[i]));
+    const double pad = 1e-6 * std::abs(v) + 1e-30;
+    out[i] = i < 3 ? down(v - pad) : up(v + pad);
+  }
+}
+}  // namespace
+
 RasterRect boundsOver(const TileEntry& e, const Schedule& s, const Projector& p, double t0, double t1) {
   size_t first, last;
   knotRange(s, t0, t1, first, last);
@@ -80,15 +97,45 @@ RasterRect boundsOver(const TileEntry& e, const Schedule& s, const Projector& p,
       const float* b = e.knots[k].raster;
       r.extend(RasterRect{b[0], b[1], b[2], b[3], false});
     }
-    return r;
+  } else {
+    float box[6] = {INFINITY, INFINITY, INFINITY, -INFINITY, -INFINITY, -INFINITY};
+    for (size_t k = first; k <= last; ++k)
+      for (int i = 0; i < 3; ++i) {
+        box[i] = std::min(box[i], e.knots[k].camera[i]);
+        box[i + 3] = std::max(box[i + 3], e.knots[k].camera[i + 3]);
+      }
+    r = projectCameraBox(box, p);
   }
-  float box[6] = {INFINITY, INFINITY, INFINITY, -INFINITY, -INFINITY, -INFINITY};
-  for (size_t k = first; k <= last; ++k)
-    for (int i = 0; i < 3; ++i) {
-      box[i] = std::min(box[i], e.knots[k].camera[i]);
-      box[i + 3] = std::max(box[i + 3], e.knots[k].camera[i + 3]);
-    }
-  return projectCameraBox(box, p);
+  if (s.size() < 2 || r.empty || t0 > t1) return r;
+  // A sub-interval that ends inside a segment: bound it by the boxes at t0 and t1 and at the
+  // knots between. Each vertex's path over [t0, t1] is a polyline through points of those boxes,
+  // so while they all lie in front of the eye its projection stays in their projections' union;
+  // otherwise the union of the boxes, near-clipped, is projected. Intersected with the knot bound
+  // above (both hold), so it is never looser than before.
+  const bool innerStart = t0 > s[first] && first + 1 < s.size(), innerEnd = t1 < s[last] && last > 0;
+  if (!innerStart && !innerEnd) return r;
+  float b0[6], b1[6];
+  if (innerStart) lerpedBox(e, s, first, t0, b0);
+  else std::copy(e.knots[first].camera, e.knots[first].camera + 6, b0);
+  if (innerEnd) lerpedBox(e, s, last - 1, t1, b1);
+  else std::copy(e.knots[last].camera, e.knots[last].camera + 6, b1);
+  std::vector<const float*> boxes{b0, b1};
+  for (size_t k = first + 1; k < last; ++k) boxes.push_back(e.knots[k].camera);
+  RasterRect tight;
+  bool inFront = true;
+  for (const float* b : boxes) inFront = inFront && (!p.perspective || b[2] >= p.nearClip);
+  if (inFront) {
+    for (const float* b : boxes) tight.extend(projectCameraBox(b, p));
+  } else {
+    float box[6] = {INFINITY, INFINITY, INFINITY, -INFINITY, -INFINITY, -INFINITY};
+    for (const float* b : boxes)
+      for (int i = 0; i < 3; ++i) box[i] = std::min(box[i], b[i]), box[i + 3] = std::max(box[i + 3], b[i + 3]);
+    tight = projectCameraBox(box, p);
+  }
+  if (tight.empty) return tight;
+  RasterRect out{std::max(r.x0, tight.x0), std::max(r.y0, tight.y0), std::min(r.x1, tight.x1), std::min(r.y1, tight.y1), false};
+  if (out.x0 > out.x1 || out.y0 > out.y1) return RasterRect{};
+  return out;
 }
 
 void writeMeta(const StoreMeta& m, ByteWriter& w) {
