@@ -49,13 +49,13 @@ void backdrop(Scene& s) {
 void flyingBall(Scene& s) {
   s.attributeBegin();
   s.identifier("flying ball");
-  s.color({0.85, 0.12, 0.08});
-  s.surface("plastic", {{"roughness", {0.08}}, {"Ks", {0.7}}});
+  s.color({1.0, 0.2, 0.1});
+  s.surface("plastic", {{"roughness", {0.08}}, {"Ks", {0.8}}, {"Kd", {0.8}}});
   s.motionBegin({0, 1});
-  s.translate(-4.0, 0.65, 1.5);
-  s.translate(-2.2, 0.9, 1.5);
+  s.translate(-4.0, 0.7, 1.5);
+  s.translate(-2.3, 0.95, 1.5);
   s.motionEnd();
-  s.sphere(0.65, -0.65, 0.65, 360);
+  s.sphere(0.7, -0.7, 0.7, 360);
   s.attributeEnd();
 }
 
