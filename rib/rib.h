@@ -1,7 +1,8 @@
 // RIB reader: streams RenderMan Interface Bytestream files (ASCII, binary encoding per the RISpec
 // 3.2 appendix C, mixed; gzip-compressed, detected by content) into requests, one at a time, with
 // memory independent of file size. The reader resolves `ReadArchive` (paths relative to the
-// including file), tracks `Declare`d and inline parameter declarations, and hands every other
+// including file) and `version`, tracks `Declare`d and inline parameter declarations (a Declare
+// is applied, then shown to the handler, whose answer is ignored), and hands every other
 // request to a RequestHandler. Requests a handler does not take are warned about once per kind and
 // skipped. Errors are reshutter::Error naming file:line (or file:byte N inside binary data) and
 // the request.
