@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <numeric>
+#include <thread>
 
 #include <OpenEXR/ImfChannelList.h>
 #include <OpenEXR/ImfDeepFrameBuffer.h>
@@ -620,7 +621,8 @@ void writeDeepExr(const std::string& path, const DeepImage& image, const ImagePr
   static float dummy[64];
   AtomicFile file(path);
   try {
-    Imf::DeepScanLineOutputFile out(file.tempPath().c_str(), header);
+    // zlib dominates the write (ZIPS compresses every scanline separately): use every core.
+    Imf::DeepScanLineOutputFile out(file.tempPath().c_str(), header, int(std::max(1u, std::thread::hardware_concurrency())));
     for (int ys = image.y0; ys < image.y0 + image.height; ys += chunk) {
       const int rows = std::min(chunk, image.y0 + image.height - ys);
       for (int y = ys; y < ys + rows; ++y)
