@@ -557,6 +557,65 @@ TEST(ShadeAttributes, MatteSidesAndIdentifiers) {
   EXPECT_NE(storeMeta(f, {}).provenance.find("2=\"ground\""), std::string::npos);
 }
 
+TEST(ShadeAttributes, OrientationFlipsNormalsAndWindingFollowsThem) {
+  // Outward normals by default (and under a mirroring Scale with Orientation "outside"); inward
+  // after ReverseOrientation. Micropolygon rings always turn counter-clockwise around N.
+  for (int mode = 0; mode < 3; ++mode) {
+    FrameScene f = frameOf(
+        [&](Scene& s) {
+          s.translate(0, 0, 5);
+          if (mode == 1) s.reverseOrientation();
+          if (mode == 2) {
+            s.scale(1, -1, 1);
+            s.orientation("outside");
+          }
+          s.sphere(1, -1, 1, 360);
+        },
+        160, 120, 40, {"N"});
+    CaptureSink sink = shadeCapture(f);
+    const double expect = mode == 1 ? -1 : 1;
+    uint64_t n = 0;
+    for (const auto& g : sink.grids)
+      for (size_t m = 0; m < g.mps(); ++m) {
+        const uint32_t* c = &g.corners[m * 4];
+        const dvec3 p0(g.positions[c[0]]), p1(g.positions[c[1]]), p3(g.positions[c[3]]);
+        const dvec3 N(g.attrs[2][c[0] * 3], g.attrs[2][c[0] * 3 + 1], g.attrs[2][c[0] * 3 + 2]);
+        const dvec3 outward = glm::normalize(p0 - dvec3(0, 0, 5));
+        ASSERT_GT(expect * glm::dot(N, outward), 0.99) << "mode " << mode;
+        const dvec3 ring = glm::cross(p1 - p0, p3 - p0);
+        if (glm::length(ring) > 1e-9) {
+          ASSERT_GT(glm::dot(ring, N), 0) << "mode " << mode;
+        }
+        ++n;
+      }
+    EXPECT_GT(n, 100u);
+  }
+}
+
+TEST(ShadeAttributes, NamedCamerasAndIlluminateReachTheStore) {
+  FrameScene f = frameOf(
+      [](Scene& s) {
+        s.lightSource("pointlight", "key", {{"from", {0, 0, 0}}, {"intensity", {20}}});
+        s.illuminate("key", false);
+        s.surface("matte", {});
+        s.translate(0, 0, 5);
+        s.sphere(1, -1, 1, 360);
+      },
+      160, 120, 40, {}, [](Scene& s) {
+        s.transformBegin();
+        s.translate(-1, 0, 0);
+        s.camera("right");
+        s.transformEnd();
+      });
+  const store::StoreMeta m = storeMeta(f, {});
+  ASSERT_EQ(m.cameras.size(), 2u);
+  EXPECT_EQ(m.cameras[1].name, "right");
+  EXPECT_EQ(m.cameras[1].worldToCamera[3][0], -1.0);
+  CaptureSink sink = shadeCapture(f);
+  for (const auto& g : sink.grids)
+    for (float c : g.attrs[0]) ASSERT_EQ(c, 0.f);  // the only light is off: matte is black
+}
+
 TEST(ShadeOutputs, OnlyRequestedVariablesAreStored) {
   FrameScene plain = frameOf([](Scene& s) { s.sphere(1, -1, 1, 360); });
   EXPECT_EQ(storeMeta(plain, {}).schema.attrs.size(), 2u);
