@@ -138,6 +138,9 @@ struct FieldsCommand {
       out.provenance.shutter = "two-pass fields: " + out.provenance.shutter + " / " + fields[1].provenance.shutter;
       out.provenance.shutterClose = fields[1].provenance.shutterClose;
       render.writeOutputs(out, output.empty() ? "" : expandFramePattern(output, f), f);
+      if (render.stats)
+        std::printf("frame %lld, field 1\n%sframe %lld, field 2\n%s", static_cast<long long>(f), fields[0].stats.report().c_str(),
+                    static_cast<long long>(f), fields[1].stats.report().c_str());
       progress.advance();
     }
     return 0;

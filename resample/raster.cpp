@@ -476,6 +476,7 @@ struct BucketRasterizer::Impl {
     for (int s = 0; s < N; ++s) {
       stratumFirst[size_t(s)] = int(std::lower_bound(thetaTimes.begin(), thetaTimes.end(), lo[s] - F) - thetaTimes.begin());
       stratumLast[size_t(s)] = int(std::upper_bound(thetaTimes.begin(), thetaTimes.end(), hi[s] - F) - thetaTimes.begin()) - 1;
+      if (!opt.perStratumBounds) stratumFirst[size_t(s)] = 0, stratumLast[size_t(s)] = int(T) - 1;  // one bound for the interval
     }
     thetaSeg.resize(T), thetaF.resize(T);
     for (size_t ti = 0; ti < T; ++ti) segmentAt(knots, thetaTimes[ti], thetaSeg[ti], thetaF[ti]);

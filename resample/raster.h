@@ -70,6 +70,9 @@ struct AovChannel {
 struct RasterOptions {
   float opacityThreshold = 0.996f;  // a sample stops once every channel's opacity reaches this
   bool backfaceCull = false;        // knock out back-facing micropolygons unless two-sided
+  /// Bound moving micropolygons per time stratum (default) or once over the whole interval. Same
+  /// image either way; the accuracy study measures what the per-stratum bounds save.
+  bool perStratumBounds = true;
 };
 
 /// Counters for --stats; summed over buckets.

@@ -5,7 +5,7 @@ packages=(
   build-essential cmake ninja-build pkg-config clang
   libopenexr-dev libtbb-dev libglm-dev libzstd-dev libxxhash-dev libcli11-dev zlib1g-dev libpng-dev libtiff-dev
   libgtest-dev libbenchmark-dev
-  openimageio-tools gnuplot-nox jq
+  openimageio-tools gnuplot-nox jq time
 )
 missing=()
 for p in "${packages[@]}"; do
