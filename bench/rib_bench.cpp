@@ -6,7 +6,7 @@
 //   handler that takes every request and resolves its parameter list;
 //   ingest micropolygons/s (both passes, store written) from the gzipped dump; peak RSS;
 //   store size against the gzipped RIB.
-// Usage: rib_bench [--mp N] [--dir DIR]
+// Usage: rib_bench [--mp N] [--dir DIR] [--keep]   (--keep leaves dump.rib, dump.rib.gz, dump.mps in DIR)
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
@@ -70,11 +70,13 @@ Timing parseSeconds(const std::function<void(rib::Reader&, ParamHandler&)>& run,
 int main(int argc, char** argv) {
   uint64_t mp = 2'000'000;
   std::string dir = "/tmp/reshutter-rib-bench";
+  bool keep = false;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--mp") && i + 1 < argc) mp = std::stoull(argv[++i]);
     else if (!std::strcmp(argv[i], "--dir") && i + 1 < argc) dir = argv[++i];
+    else if (!std::strcmp(argv[i], "--keep")) keep = true;
     else {
-      std::fprintf(stderr, "usage: rib_bench [--mp N] [--dir DIR]\n");
+      std::fprintf(stderr, "usage: rib_bench [--mp N] [--dir DIR] [--keep]\n");
       return 2;
     }
   }
@@ -124,8 +126,10 @@ int main(int argc, char** argv) {
   line("parse ASCII file:", parseSeconds([&](rib::Reader& r, ParamHandler& h) { r.parseFile(plain, h); }, n));
   line("parse gzipped ASCII (+zlib):", parseSeconds([&](rib::Reader& r, ParamHandler& h) { r.parseFile(gz, h); }, n));
 
-  std::filesystem::remove(plain);
-  std::filesystem::remove(gz);
-  std::filesystem::remove(mps);
+  if (!keep) {
+    std::filesystem::remove(plain);
+    std::filesystem::remove(gz);
+    std::filesystem::remove(mps);
+  }
   return 0;
 }
