@@ -59,6 +59,10 @@ struct ShadeCommand {
                   r.shade.shadeAt, r.shade.seconds, path.c_str(), humanBytes(double(r.write.fileBytes)).c_str(),
                   r.shade.micropolygons ? double(r.write.fileBytes) / double(r.shade.micropolygons) : 0.0);
       std::fflush(stdout);
+      if (verbosity() == Verbosity::Verbose)
+        note(cat("frame ", n, ": ", r.shade.primitives, " primitives, ", r.shade.culledPieces, " pieces culled (off screen, behind the eye or beyond the far plane), ",
+                 r.shade.eyeSplits, " eye splits, ", r.shade.droppedMicropolygons, " micropolygons dropped at the near plane, ", r.shade.vertices,
+                 " vertices shaded"));
     });
     shade::readRibScene(scene, sceneBuilder);
     if (sceneBuilder.framesShaded() == 0) fail(scene, "no WorldBegin/WorldEnd block: nothing to shade");

@@ -12,6 +12,7 @@
 
 #include "common/error.h"
 #include "common/log.h"
+#include "common/progress.h"
 #include "shade/shaders.h"
 
 namespace reshutter::shade {
@@ -201,6 +202,7 @@ ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::Gri
   uint32_t gridId = 0;
   std::vector<store::AttrValues> values(vars.size());
   const size_t tokens = size_t(2 * tbb::this_task_arena::max_concurrency() + 2);
+  Progress progress(cat("shading ", scene.source.empty() ? "frame" : scene.source), flat.size());
   tbb::parallel_pipeline(
       tokens,
       tbb::make_filter<void, BatchPtr>(tbb::filter_mode::serial_in_order,
@@ -222,6 +224,7 @@ ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::Gri
                                            }) &
           tbb::make_filter<BatchPtr, void>(tbb::filter_mode::serial_in_order, [&](BatchPtr b) {
             stats.droppedMicropolygons += b->dropped;
+            progress.advance(b->count);
             for (GridOut& go : b->grids) {
               if (go.corners.empty()) continue;
               if (go.prim != lastPrim) {
@@ -247,6 +250,7 @@ ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::Gri
               stats.movingMicropolygons += schedule != 0 ? in.numMicropolygons() : 0;
             }
           }));
+  progress.finish();
   stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return stats;
 }
