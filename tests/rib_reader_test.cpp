@@ -378,6 +378,22 @@ TEST(RibReaderTest, BinaryEncodingParsesLikeAscii) {
     bin.fixed(v, w, d);
   }
   ascii += "\n";
+  // All sixteen codes 0x80-0x8F (w+1 bytes, d bytes after the binary point), at the most negative
+  // and the most positive raw value of each width. Printed exactly (glibc prints a double's exact
+  // decimal expansion), so the ASCII side rounds the same real number to RtFloat.
+  ascii += "Widths";
+  bin.ascii("Widths");
+  for (int w = 0; w < 4; ++w)
+    for (int d = 0; d < 4; ++d)
+      for (int64_t raw : {-(int64_t(1) << (8 * (w + 1) - 1)), (int64_t(1) << (8 * (w + 1) - 1)) - 1}) {
+        const double v = std::ldexp(double(raw), -8 * d);
+        char text[128];
+        std::snprintf(text, sizeof text, " %.80g", v);
+        ascii += text;
+        bin.fixed(v, w, d);
+      }
+  ascii += "\n";
+  bin.ascii("\n");
   // float32 and float64.
   ascii += "Floats " + shortestFloat(0.1f) + " " + shortestFloat(-3.4e38f) + " " + shortestFloat(1e-30f) + " " + shortestFloat(float(1.0 / 3)) + "\n";
   bin.ascii("Floats");
@@ -424,15 +440,21 @@ TEST(RibReaderTest, BinaryEncodingParsesLikeAscii) {
   auto a = parse(ascii, "ascii.rib");
   auto b = parse(bin.out, "binary.rib");
   expectSameRequests(a, b);
-  ASSERT_EQ(a.size(), 9u);
+  ASSERT_EQ(a.size(), 10u);
   EXPECT_EQ(b[0].values[2].number, -128);
   EXPECT_EQ(b[0].values[9].number, -2147483648.0);
   EXPECT_EQ(b[1].values[1].number, -1);  // signed, not 255
+  ASSERT_EQ(b[3].name, "Widths");
+  ASSERT_EQ(b[3].values.size(), 32u);
+  EXPECT_EQ(b[3].values[0].number, -128);      // 0x80: one byte, most negative
+  EXPECT_EQ(b[3].values[1].number, 127);
+  EXPECT_EQ(b[3].values[2].number, -0.5);      // 0x84: -128 / 256
+  EXPECT_EQ(b[3].values[30].number, double(float(-2147483648.0 / 16777216)));  // 0x8F
   EXPECT_TRUE(b[0].where.binary);
   EXPECT_EQ(b[0].where.str().find("binary.rib: byte "), 0u);
   EXPECT_FALSE(b[1].where.binary);  // ASCII request name inside a binary file
-  EXPECT_EQ(b[6].values[0].numbers.size(), 3u);
-  EXPECT_EQ(b[6].values[1].numbers.size(), 300u);
+  EXPECT_EQ(b[7].values[0].numbers.size(), 3u);
+  EXPECT_EQ(b[7].values[1].numbers.size(), 300u);
 
   // Gzipped binary parses the same too.
   expectSameRequests(a, parse(gzipBytes(bin.out), "binary.rib.gz"));
