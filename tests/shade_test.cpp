@@ -205,6 +205,30 @@ TEST(ShadeDiceHard, SphereCrossingEyePlane) {
       }
 }
 
+TEST(ShadeDiceHard, DegenerateAndEnclosingPrimitives) {
+  // Zero-size quadrics, collinear polygons, a sphere around the eye and a huge one far away:
+  // nothing may throw, and the store writer (which rejects non-finite data) must take it all.
+  FrameScene f = frameOf([](Scene& s) {
+    s.sphere(0, 0, 0, 360);
+    s.disk(1, 0, 360);
+    s.cone(0, 0, 360);
+    s.torus(0, 0, 0, 360, 360);
+    s.cylinder(1, 2, 2, 360);
+    s.polygon({dvec3(0, 0, 3), dvec3(1, 0, 3), dvec3(2, 0, 3)});
+    s.polygon({dvec3(0, 0, 3), dvec3(0, 0, 3), dvec3(0, 0, 3), dvec3(0, 0, 3)});
+    s.sphere(50, -50, 50, 360);  // the eye is inside
+    s.translate(0, 0, 1e6);
+    s.sphere(1e5, -1e5, 1e5, 360);
+  });
+  test::ScratchDir dir;
+  StoreResult r;
+  ASSERT_NO_THROW(r = shadeToStore(f, ShadeOptions{}, dir.path("d.mps")));
+  EXPECT_GT(r.shade.micropolygons, 10'000u);
+  EXPECT_LT(r.shade.micropolygons, 3'000'000u);
+  store::StoreReader reader(dir.path("d.mps"));
+  EXPECT_EQ(reader.verify().micropolygons, r.shade.micropolygons);
+}
+
 TEST(ShadeDiceHard, SphereMovingThroughEyePlane) {
   FrameScene f = frameOf([](Scene& s) {
     s.motionBegin({0, 1});
