@@ -505,7 +505,9 @@ void Scene::motionEnd() {
   }
 }
 
-Primitive Scene::basePrim(PrimKind kind) const {
+Primitive Scene::basePrim(PrimKind kind) {
+  // Primitives declared under one transform share it.
+  if (!ctmShared_) ctmShared_ = std::make_shared<const MotionXform>(cur_.ctm);
   Primitive p;
   p.kind = kind;
   p.attrs = cur_.attrs;
@@ -533,12 +535,8 @@ void checkFinite(const Scene& s, std::initializer_list<double> v) {
 }
 }  // namespace
 
-#define RESHUTTER_PRIM_PROLOGUE \
-  if (!ctmShared_) ctmShared_ = std::make_shared<const MotionXform>(cur_.ctm)
-
 void Scene::sphere(double radius, double zmin, double zmax, double thetamax) {
   checkFinite(*this, {radius, zmin, zmax, thetamax});
-  RESHUTTER_PRIM_PROLOGUE;
   Primitive p = basePrim(PrimKind::Sphere);
   Shape s;
   s.q = {radius, zmin, zmax, thetamax, 0};
@@ -547,7 +545,6 @@ void Scene::sphere(double radius, double zmin, double zmax, double thetamax) {
 }
 void Scene::cylinder(double radius, double zmin, double zmax, double thetamax) {
   checkFinite(*this, {radius, zmin, zmax, thetamax});
-  RESHUTTER_PRIM_PROLOGUE;
   Primitive p = basePrim(PrimKind::Cylinder);
   Shape s;
   s.q = {radius, zmin, zmax, thetamax, 0};
@@ -556,7 +553,6 @@ void Scene::cylinder(double radius, double zmin, double zmax, double thetamax) {
 }
 void Scene::cone(double height, double radius, double thetamax) {
   checkFinite(*this, {height, radius, thetamax});
-  RESHUTTER_PRIM_PROLOGUE;
   Primitive p = basePrim(PrimKind::Cone);
   Shape s;
   s.q = {height, radius, thetamax, 0, 0};
@@ -565,7 +561,6 @@ void Scene::cone(double height, double radius, double thetamax) {
 }
 void Scene::disk(double height, double radius, double thetamax) {
   checkFinite(*this, {height, radius, thetamax});
-  RESHUTTER_PRIM_PROLOGUE;
   Primitive p = basePrim(PrimKind::Disk);
   Shape s;
   s.q = {height, radius, thetamax, 0, 0};
@@ -574,7 +569,6 @@ void Scene::disk(double height, double radius, double thetamax) {
 }
 void Scene::torus(double rmajor, double rminor, double phimin, double phimax, double thetamax) {
   checkFinite(*this, {rmajor, rminor, phimin, phimax, thetamax});
-  RESHUTTER_PRIM_PROLOGUE;
   Primitive p = basePrim(PrimKind::Torus);
   Shape s;
   s.q = {rmajor, rminor, phimin, phimax, thetamax};
@@ -584,7 +578,6 @@ void Scene::torus(double rmajor, double rminor, double phimin, double phimax, do
 
 void Scene::patch(const std::array<glm::dvec3, 4>& P, const VertexData& vd) {
   for (const auto& c : P) checkFinite(*this, {c.x, c.y, c.z});
-  RESHUTTER_PRIM_PROLOGUE;
   Primitive p = basePrim(PrimKind::Patch);
   Shape s;
   s.P = P;
@@ -658,7 +651,6 @@ void Scene::emitFaces(const std::vector<int>& nverts, const std::vector<int>& ve
 
 void Scene::pointsPolygons(const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P,
                            const VertexData& vd) {
-  RESHUTTER_PRIM_PROLOGUE;
   std::vector<Primitive> out;
   emitFaces(nverts, verts, P, vd, out);
   addPrims(std::move(out));

@@ -261,7 +261,7 @@ class Scene {
   void addPrims(std::vector<Primitive> prims);
   void emitFaces(const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P,
                  const VertexData& vd, std::vector<Primitive>& out);
-  Primitive basePrim(PrimKind kind) const;
+  Primitive basePrim(PrimKind kind);
   bool motionTake(Pending kind);
   [[noreturn]] void error(const std::string& what) const;
 
