@@ -1,14 +1,17 @@
 // `reshutter demo`: the main job on built-in content, no files needed. Shades the built-in demo
-// scene (shade/demo_scene.h) into a store, and reports where the outputs are and how long each
-// stage took.
+// scene (shade/demo_scene.h) once into a store, re-samples that store into a progressive frame
+// (flat and deep OpenEXR, PNG preview) and an interlaced frame (two fields, one pass, no
+// re-shading), and reports where the outputs are and how long each stage took.
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
 
 #include "cli/commands.h"
+#include "cli/render_options.h"
 #include "common/error.h"
 #include "shade/demo_scene.h"
 #include "shade/shading_pass.h"
+#include "store/reader.h"
 
 namespace reshutter::cli {
 namespace {
@@ -33,8 +36,37 @@ struct DemoCommand {
     std::printf("            %s micropolygons in %s grids (%s moving), %s (%.1f bytes/micropolygon)\n",
                 grouped(r.shade.micropolygons).c_str(), grouped(r.shade.grids).c_str(), grouped(r.shade.movingGrids).c_str(),
                 humanBytes(double(r.write.fileBytes)).c_str(), r.shade.micropolygons ? double(r.write.fileBytes) / double(r.shade.micropolygons) : 0.0);
-    std::printf("  timings   shading %.2f s (shaded once at t=%g, every motion knot kept)\n", r.shade.seconds, r.shade.shadeAt);
+    std::printf("  shading   %.2f s (shaded once at t=%g, every motion knot kept)\n", r.shade.seconds, r.shade.shadeAt);
+
+    // Re-sample the one shading pass: no shading from here on.
+    auto reader = std::make_shared<const store::StoreReader>(storePath);
+    const auto& meta = reader->meta();
+    const double F = double(meta.frame);
+    auto renderWith = [&](resample::ShutterModel shutter, const std::string& filter, const std::string& name, bool deep) {
+      RenderOptions o;
+      o.spp = "16";
+      o.filter = filter;
+      o.previews = {outDir + "/" + name + ".png"};
+      if (deep) o.deep = outDir + "/" + name + "_deep.exr";
+      resample::RenderSpec spec;
+      spec.sources = {resample::Source{reader, meta.frame}};
+      spec.shutter = std::move(shutter);
+      o.applyTo(spec);
+      resample::RenderResult result = resample::render(spec);
+      o.writeOutputs(result, outDir + "/" + name + ".exr", meta.frame);
+      return result.stats.wallSeconds;
+    };
+    const double progressive = renderWith(resample::ShutterModel::progressive(F + meta.shutterOpen, F + meta.shutterClose), "gaussian:2x2",
+                                          "progressive", true);
+    // The reference workflow's fields: Shutter 0 0.25 and 0.5 0.75 of the frame, rows alternating.
+    const double interlaced = renderWith(resample::ShutterModel::fields(resample::ShutterGroup{F, F + 0.25}, resample::ShutterGroup{F + 0.5, F + 0.75}, 0),
+                                         "gaussian:2x1", "interlaced", false);
+    std::printf("  resample  progressive frame [%g, %g]: %.2f s -> %s/progressive.exr, progressive_deep.exr, progressive.png\n",
+                meta.shutterOpen, meta.shutterClose, progressive, outDir.c_str());
+    std::printf("            interlaced frame, fields [0, 0.25] + [0.5, 0.75], one pass: %.2f s -> %s/interlaced.exr, interlaced.png\n", interlaced,
+                outDir.c_str());
     std::printf("  next      reshutter info %s\n", storePath.c_str());
+    std::printf("            reshutter resample %s --shutter 0.25:0.5 -o quarter.exr --preview quarter.png\n", storePath.c_str());
     return 0;
   }
 };
