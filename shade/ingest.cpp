@@ -374,7 +374,10 @@ bool DumpHandler::handle(const Request& r, const Args& a) {
     if (kind == "perspective") {
       perspective_ = true;
       for (const auto& p : a.params(1))
-        if (p.decl.name == "fov") fov_ = p.value->isNumber() ? p.value->number : p.value->numbers.at(0);
+        if (p.decl.name == "fov") {
+          if (!p.value->isNumber() && p.value->numbers.size() != 1) a.fail("\"fov\" takes one number");
+          fov_ = p.value->isNumber() ? p.value->number : p.value->numbers[0];
+        }
       if (!(fov_ > 0 && fov_ < 180)) a.fail(cat("field of view ", fov_, " not in (0, 180)"));
     } else if (kind == "orthographic") {
       perspective_ = false;
@@ -752,6 +755,8 @@ void DumpHandler::split(const Args& a, Prim& p) {
       if (stats_) ++stats_->fannedPolygons;
     } else {
       std::vector<std::array<uint32_t, 3>> tris;
+      // Ear clipping is cubic in the worst case; dumps hold grids of small polygons.
+      if (n > 4096) a.fail(cat("polygon ", f, " is not convex and has ", n, " vertices; ingest triangulates up to 4096"));
       if (!simple(q) || !earClip(q, tris)) a.fail(cat("polygon ", f, " (", n, " vertices) is self-intersecting or degenerate; ingest cannot triangulate it"));
       for (auto& t : tris) add(f, {b + t[0], b + t[1], b + t[2]});
       if (stats_) ++stats_->earClippedPolygons;
