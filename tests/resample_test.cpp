@@ -1,7 +1,9 @@
 // Re-sampler: analytic coverage of moving squares, exact instants, watertight shared edges,
 // compositing, mattes, filters, determinism across threads and buckets, and agreement with an
 // independent brute-force ray caster (tests/resample_test_util.h).
+#include <algorithm>
 #include <cmath>
+#include <filesystem>
 #include <numeric>
 
 #include <gtest/gtest.h>
@@ -474,5 +476,42 @@ TEST(ResampleReference, ManySmallMovingMicropolygonsLoseNoHits) {
     for (size_t p = 0; p < ref.a.size(); ++p) diff += std::abs(channel(r, "A").f[p] - ref.a[p]);
     EXPECT_LT(diff, 3.0 / 16) << "interval " << a << ":" << b << ": more than 3 samples disagree";
     EXPECT_GT(r.stats.raster.hits, 1000u);
+  }
+}
+
+TEST(ResampleCli, ImagesOpenInAnIndependentReader) {
+  ScratchDir dir;
+  const std::string store = dir.path("gen.mps");
+  ASSERT_EQ(runReshutter("generate -n 40000 --width 160 --height 90 --transparent 0.3 -o " + store).exitCode, 0);
+  const std::string a = dir.path("a.exr"), b = dir.path("b.exr"), tif = dir.path("p.tif"), png = dir.path("p.png");
+  CommandResult r = runReshutter("-j 1 resample " + store + " -o " + a + " --spp 9 --aov z --aov id --crop 20 140 10 80 --preview " + tif +
+                                 "=R,G,B --quantize 0,65535,0,65535 --preview " + png + " --shutter 0.25:0.75");
+  ASSERT_EQ(r.exitCode, 0) << r.err;
+  ASSERT_EQ(runReshutter("-j 2 resample " + store + " -o " + b + " --spp 9 --aov z --aov id --crop 20 140 10 80 --shutter 0.25:0.75 --bucket 16").exitCode, 0);
+  CommandResult info = runCommand("timeout 60 iinfo -v " + a);
+  ASSERT_EQ(info.exitCode, 0) << info.err;
+  for (const char* want : {"120 x   70", "full/display size: 160 x 90", "pixel data origin: x=20, y=10", "R (float), G (float), B (float), A (float), Z (float), z (float), id (uint)", "worldToCamera", "worldToNDC",
+                           "reshutter/shutterInterval", "software"})
+    EXPECT_NE(info.out.find(want), std::string::npos) << want << " not in\n" << info.out;
+  // Same image from another thread count and bucket size, as an independent reader sees it.
+  CommandResult diff = runCommand("timeout 60 idiff -q -fail 0 -failpercent 0 -warn 0 " + a + " " + b);
+  EXPECT_EQ(diff.exitCode, 0) << diff.out << diff.err;
+  CommandResult tinfo = runCommand("timeout 60 iinfo -v " + tif);
+  EXPECT_NE(tinfo.out.find("uint16"), std::string::npos) << tinfo.out;
+  CommandResult pinfo = runCommand("timeout 60 iinfo -v " + png);
+  EXPECT_NE(pinfo.out.find("4 channel, uint16 png"), std::string::npos) << pinfo.out;  // --quantize up to 65535: 16 bits
+}
+
+TEST(ResampleCli, BadArgumentsGiveOneLineAndNoOutput) {
+  ScratchDir dir;
+  const std::string store = dir.path("gen.mps");
+  ASSERT_EQ(runReshutter("generate -n 2000 --width 64 --height 48 -o " + store).exitCode, 0);
+  for (const char* args : {"--shutter 0.5:0.2", "--shutter 0:2", "--filter nonesuch", "--aov bogus", "--spp 0", "--shutter-shape trapezoid:0.9:0.1"}) {
+    const std::string out = dir.path("x.exr");
+    CommandResult r = runReshutter("resample " + store + " -o " + out + " " + args);
+    EXPECT_NE(r.exitCode, 0) << args;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << args << ": " << r.err;
+    EXPECT_EQ(r.err.rfind("reshutter: ", 0), 0u) << r.err;
+    EXPECT_FALSE(std::filesystem::exists(out)) << args;
   }
 }
