@@ -65,6 +65,13 @@ Motion concat(const Motion& a, const Motion& b) {
 
 bool isIdentity(const glm::dmat4& m) { return m == glm::dmat4(1.0); }
 
+/// An integer argument in [lo, hi] (converting an out-of-range double to int is undefined).
+int64_t integerArg(const Args& a, size_t i, double lo, double hi) {
+  const double v = a.number(i);
+  if (!(v >= lo && v <= hi) || v != std::trunc(v)) a.fail(cat("argument ", i + 1, " must be an integer in [", lo, ", ", hi, "], not ", v));
+  return int64_t(v);
+}
+
 enum class Orient : uint8_t { Outside, Inside, LH, RH };
 
 struct Attrs {
@@ -332,7 +339,7 @@ bool DumpHandler::handle(const Request& r, const Args& a) {
   const std::string_view n = r.name;
   if (done_) return true;
   if (n == "FrameBegin") {
-    int64_t f = a.count() ? int64_t(a.number(0)) : 0;
+    int64_t f = a.count() ? integerArg(a, 0, -1e15, 1e15) : 0;
     framesSeen_.push_back(f);
     sawFrame_ = true;
     inFrame_ = true;
@@ -353,7 +360,7 @@ bool DumpHandler::handle(const Request& r, const Args& a) {
 
   // Camera and options.
   if (n == "Format") {
-    width_ = int(a.number(0)), height_ = int(a.number(1));
+    width_ = int(integerArg(a, 0, 1, 1 << 20)), height_ = int(integerArg(a, 1, 1, 1 << 20));
     pixelAspect_ = a.count() > 2 ? a.number(2) : 1.0;
     if (width_ < 1 || height_ < 1 || width_ > 1 << 20 || height_ > 1 << 20) a.fail(cat("resolution ", width_, "x", height_, " out of range"));
     if (!(pixelAspect_ > 0)) a.fail("pixel aspect must be positive");
@@ -485,7 +492,7 @@ bool DumpHandler::handle(const Request& r, const Args& a) {
     return true;
   }
   if (n == "Sides") {
-    int s = int(a.number(0));
+    int s = int(integerArg(a, 0, 1, 2));
     if (s != 1 && s != 2) a.fail(cat("Sides ", s, " (1 or 2)"));
     cur().sides = s;
     return true;

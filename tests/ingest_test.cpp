@@ -437,6 +437,8 @@ TEST(IngestHardTest, BadDumpsGiveOneClearError) {
       {"Polygon " + kSquare + "\n", "dump.rib", "no WorldBegin"},
       {"Projection \"fisheye\"\n", "dump.rib:1 (Projection)", "not supported"},
       {"Projection \"perspective\" \"fov\" []\n", "dump.rib:1 (Projection)", "takes one number"},
+      {"Format 1e300 480 1\n", "dump.rib:1 (Format)", "must be an integer"},
+      {"FrameBegin 1.5\n", "dump.rib:1 (FrameBegin)", "must be an integer"},
       {kHeader + "Polygon \"P\" [0 0 5 1 0 5]\n", "dump.rib:5 (Polygon)", "2 vertices"},
       {kHeader + "PointsPolygons [4] [0 1 2 3] " + kSquare + " \"Cs\" [1 0 0 1 0 0 1 0 0 1 0 0]\nPolygon " + kSquare + " \"uniform float Cs\" [1]\n",
        "dump.rib:6 (Polygon)", "is a float here and a color elsewhere"},
