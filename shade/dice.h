@@ -4,9 +4,10 @@
 // maxGridSize micropolygons of about `ShadingRate` square pixels, measured on the primary
 // camera's raster at *every* motion knot (the largest size over the shutter wins, so no knot is
 // under-sampled). GeometricApproximation "motionfactor" coarsens fast-moving pieces: the shading
-// rate is multiplied by 1 + motionfactor · (raster motion length in pixels) / 16, PRMan's
-// definition (mental ray's "motion factor" likewise divides the shading samples by a
-// screen-speed term). Pieces that straddle the near plane at some knot are split again (up to
+// rate is multiplied by 1 + motionfactor · (raster motion length in pixels) / 16 — the idea of
+// PRMan's attribute (rate grows with blur length, per 16 pixels) and of mental ray's "motion
+// factor" (shading samples divided by a screen-speed term); renderers differ in the exact
+// curve, so this one is stated here and measured in bench/RESULTS.md. Pieces that straddle the near plane at some knot are split again (up to
 // maxEyeSplits times) and then culled; micropolygons that still straddle it after dicing are
 // dropped, so no projection ever divides by a depth at or behind the eye. Pieces that are
 // behind the near plane or beyond the far plane at every knot, or far outside the screen
