@@ -4,9 +4,9 @@
 //
 // Specular exponent convention: `specular(N, V, roughness)` sums
 //   Cl · max(0, N·H)^(1/roughness),  H = normalize(normalize(L) + V),
-// over the lights in the hemisphere around N — the RI Spec's and PRMan's definition. (BMRT,
-// Aqsis and 3Delight use 8/roughness instead, which gives tighter highlights for the same
-// roughness: scenes tuned for those renderers look broader here.)
+// over the lights in the hemisphere around N — the RI Spec's and PRMan's definition. Other
+// renderers scale the exponent differently (some by 8/roughness, giving tighter highlights for
+// the same roughness), so scenes tuned for them can look broader here.
 //
 // Surfaces use faceforward(normalize(N), I) as the standard shaders do, so that one-sided
 // scenes light correctly from either side. The view-dependent part of each result (the
