@@ -283,6 +283,10 @@ void diceLeaf(const Primitive& p, const Leaf& leaf, const std::vector<double>& k
   const glm::dmat3 nm = glm::inverseTranspose(glm::dmat3(m));
   const double flip = p.flipNormals ? -1.0 : 1.0;
   g.P.resize(nV), g.N.resize(nV), g.Ng.resize(nV), g.u.resize(nV), g.v.resize(nV), g.s.resize(nV), g.t.resize(nV);
+  std::array<glm::dvec3, 4> cornerN;
+  std::array<glm::dvec2, 4> st;
+  const bool hasN = p.mesh && p.corners(p.mesh->N, cornerN);
+  const bool hasST = p.cornerST(st);
   for (int j = 0; j <= nv; ++j)
     for (int i = 0; i <= nu; ++i) {
       const size_t idx = size_t(j * row + i);
@@ -292,16 +296,15 @@ void diceLeaf(const Primitive& p, const Leaf& leaf, const std::vector<double>& k
       double len = glm::length(ng);
       ng = len > 0 ? flip * ng / len : glm::dvec3(0, 0, -1);
       g.Ng[idx] = ng;
-      if (p.hasN) {
-        glm::dvec3 n = nm * bilinear(p.N, u, v);
+      if (hasN) {
+        glm::dvec3 n = nm * bilinear(cornerN, u, v);
         double l = glm::length(n);
         g.N[idx] = l > 0 ? n / l : ng;
       } else {
         g.N[idx] = ng;
       }
       g.u[idx] = u, g.v[idx] = v;
-      if (p.hasST) {
-        const auto& st = p.st;
+      if (hasST) {
         g.s[idx] = (1 - u) * (1 - v) * st[0].x + u * (1 - v) * st[1].x + (1 - u) * v * st[2].x + u * v * st[3].x;
         g.t[idx] = (1 - u) * (1 - v) * st[0].y + u * (1 - v) * st[1].y + (1 - u) * v * st[2].y + u * v * st[3].y;
       } else {

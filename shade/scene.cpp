@@ -160,6 +160,25 @@ Shape Primitive::shapeAt(double t) const {
   return s;
 }
 
+bool Primitive::corners(const std::vector<glm::dvec3>& data, std::array<glm::dvec3, 4>& out) const {
+  if (!mesh || data.empty()) return false;
+  if (data.size() == mesh->points) {
+    for (int c = 0; c < 4; ++c) out[size_t(c)] = data[meshPoint[size_t(c)]];
+    return true;
+  }
+  if (data.size() == mesh->faces) {
+    out.fill(data[meshFace]);
+    return true;
+  }
+  return false;
+}
+
+bool Primitive::cornerST(std::array<glm::dvec2, 4>& out) const {
+  if (!mesh || mesh->st.size() != mesh->points) return false;
+  for (int c = 0; c < 4; ++c) out[size_t(c)] = mesh->st[meshPoint[size_t(c)]];
+  return true;
+}
+
 std::vector<double> Primitive::knotTimes() const { return unionTimes(times, xform->times); }
 
 const std::vector<OutputVar>& knownOutputVars() {
@@ -582,17 +601,12 @@ void Scene::patch(const std::array<glm::dvec3, 4>& P, const VertexData& vd) {
   Shape s;
   s.P = P;
   p.keys = {s};
-  auto take = [](const std::vector<glm::dvec3>& src, bool& has, std::array<glm::dvec3, 4>& dst) {
-    if (src.size() != 4) return;
-    has = true;
-    for (int i = 0; i < 4; ++i) dst[i] = src[i];
-  };
-  take(vd.N, p.hasN, p.N);
-  take(vd.Cs, p.hasCs, p.Cs);
-  take(vd.Os, p.hasOs, p.Os);
-  if (vd.st.size() == 4) {
-    p.hasST = true;
-    for (int i = 0; i < 4; ++i) p.st[i] = vd.st[i];
+  if (!vd.N.empty() || !vd.Cs.empty() || !vd.Os.empty() || !vd.st.empty()) {
+    auto mesh = std::make_shared<MeshData>();
+    mesh->N = vd.N, mesh->Cs = vd.Cs, mesh->Os = vd.Os, mesh->st = vd.st;
+    mesh->points = 4, mesh->faces = 1;
+    p.mesh = std::move(mesh);
+    p.meshPoint = {0, 1, 2, 3};
   }
   addPrims({std::move(p)});
 }
@@ -609,12 +623,13 @@ void Scene::emitFaces(const std::vector<int>& nverts, const std::vector<int>& ve
     if (v < 0 || size_t(v) >= P.size()) error(cat("vertex index ", v, " out of range (", P.size(), " points)"));
   for (const auto& c : P) checkFinite(*this, {c.x, c.y, c.z});
   const size_t nFaces = nverts.size();
-  // Vertex data is per vertex (vertex/varying) or per face (uniform).
-  auto value = [&](const std::vector<glm::dvec3>& src, size_t face, int vertex, glm::dvec3& dst) {
-    if (src.size() == P.size()) return dst = src[size_t(vertex)], true;
-    if (src.size() == nFaces) return dst = src[face], true;
-    return false;
-  };
+  std::shared_ptr<const MeshData> mesh;
+  if (!vd.N.empty() || !vd.Cs.empty() || !vd.Os.empty() || !vd.st.empty()) {
+    auto m = std::make_shared<MeshData>();
+    m->N = vd.N, m->Cs = vd.Cs, m->Os = vd.Os, m->st = vd.st;
+    m->points = P.size(), m->faces = nFaces;
+    mesh = std::move(m);
+  }
   size_t first = 0;
   for (size_t f = 0; f < nFaces; ++f) {
     const int n = nverts[f];
@@ -631,18 +646,10 @@ void Scene::emitFaces(const std::vector<int>& nverts, const std::vector<int>& ve
       Shape s;
       for (int c = 0; c < 4; ++c) s.P[c] = P[size_t(rib[c])];
       p.keys = {s};
-      bool okN = true, okCs = true, okOs = true;
-      for (int c = 0; c < 4; ++c) {
-        okN = okN && value(vd.N, f, rib[c], p.N[c]);
-        okCs = okCs && value(vd.Cs, f, rib[c], p.Cs[c]);
-        okOs = okOs && value(vd.Os, f, rib[c], p.Os[c]);
-      }
-      p.hasN = okN && !vd.N.empty();
-      p.hasCs = okCs && !vd.Cs.empty();
-      p.hasOs = okOs && !vd.Os.empty();
-      if (vd.st.size() == P.size()) {
-        p.hasST = true;
-        for (int c = 0; c < 4; ++c) p.st[c] = vd.st[size_t(rib[c])];
+      if (mesh) {
+        p.mesh = mesh;
+        for (int c = 0; c < 4; ++c) p.meshPoint[size_t(c)] = uint32_t(rib[c]);
+        p.meshFace = uint32_t(f);
       }
       out.push_back(std::move(p));
     }

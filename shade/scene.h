@@ -109,6 +109,15 @@ struct Shape {
   std::array<glm::dvec3, 4> P{};
 };
 
+/// Vertex data of a polygon mesh or patch (N in object space), shared by all the patches its
+/// faces become, so a big mesh costs one copy of its data. Each array is empty, one value per
+/// point (vertex/varying) or one per face (uniform).
+struct MeshData {
+  std::vector<glm::dvec3> N, Cs, Os;
+  std::vector<glm::dvec2> st;  // empty or per point
+  size_t points = 0, faces = 0;
+};
+
 /// A parametric surface over (u, v) ∈ [0,1]², ready to dice. Polygons become patches (quads, and
 /// triangles as patches whose last edge is collapsed).
 struct Primitive {
@@ -116,14 +125,17 @@ struct Primitive {
   std::vector<double> times;  // deformation knot times; empty: one key
   std::vector<Shape> keys;
   bool triangle = false;
-  bool hasN = false, hasCs = false, hasOs = false, hasST = false;
-  std::array<glm::dvec3, 4> N{}, Cs{}, Os{};  // per corner (patches), object space for N
-  std::array<glm::dvec2, 4> st{};
+  std::shared_ptr<const MeshData> mesh;   // patches with vertex data; null otherwise
+  std::array<uint32_t, 4> meshPoint{};    // the corners' (P00 P10 P01 P11) points in `mesh`
+  uint32_t meshFace = 0;
   std::shared_ptr<const MotionXform> xform;  // object → camera
   std::shared_ptr<const Attributes> attrs;
   bool flipNormals = false;  // orientation differs from the coordinate system's handedness
 
   Shape shapeAt(double t) const;
+  /// The corner values of one of `mesh`'s arrays (N, Cs, Os); false when it is absent.
+  bool corners(const std::vector<glm::dvec3>& data, std::array<glm::dvec3, 4>& out) const;
+  bool cornerST(std::array<glm::dvec2, 4>& out) const;
   /// Every knot time of the primitive (transform and deformation), sorted, unique.
   std::vector<double> knotTimes() const;
 };

@@ -156,6 +156,9 @@ ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::Gri
         if (li < lit.size()) lights.push_back(lit[li]);
       const SurfaceShader shader = a.surface.at(iv.shadeAt);
       const glm::dvec3 Cs0 = a.color.at(iv.shadeAt), Os0 = a.opacity.at(iv.shadeAt);
+      std::array<glm::dvec3, 4> cornerCs, cornerOs;
+      const bool hasCs = p.mesh && p.corners(p.mesh->Cs, cornerCs);
+      const bool hasOs = p.mesh && p.corners(p.mesh->Os, cornerOs);
       const size_t nV = g.numVertices;
       GridOut& out = b.grids[n];
       out.prim = pi;
@@ -169,8 +172,8 @@ ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::Gri
         in.P = g.P[i], in.N = g.N[i], in.Ng = g.Ng[i];
         in.I = perspective ? g.P[i] : glm::dvec3(0, 0, 1);
         // Per-vertex colours are given over the primitive's own (u, v) square.
-        in.Cs = p.hasCs ? bilinear(p.Cs, g.u[i], g.v[i]) : Cs0;
-        in.Os = p.hasOs ? bilinear(p.Os, g.u[i], g.v[i]) : Os0;
+        in.Cs = hasCs ? bilinear(cornerCs, g.u[i], g.v[i]) : Cs0;
+        in.Os = hasOs ? bilinear(cornerOs, g.u[i], g.v[i]) : Os0;
         const SurfaceOutput so = shadeSurface(shader, in, lights);
         for (size_t ai = 0; ai < vars.size(); ++ai) {
           auto& dst = out.attrs[ai];

@@ -784,7 +784,10 @@ FrameEnd
   EXPECT_EQ(got.options.camera.width, 200);
   EXPECT_EQ(got.options.outputs, (std::vector<std::string>{"N", "specular"}));
   ASSERT_EQ(got.prims.size(), 1u);
-  EXPECT_TRUE(got.prims[0].hasCs);
+  std::array<dvec3, 4> cs;
+  ASSERT_TRUE(got.prims[0].corners(got.prims[0].mesh->Cs, cs));
+  EXPECT_EQ(cs[1], dvec3(0, 1, 0));  // P10 is the polygon's second point
+  EXPECT_EQ(cs[3], dvec3(0, 0, 1));  // P11 its third
   EXPECT_TRUE(got.prims[0].attrs->matte);
   EXPECT_EQ(got.prims[0].xform->times, (std::vector<double>{0, 0.5, 1}));
   ASSERT_EQ(got.lights.size(), 1u);
