@@ -119,6 +119,7 @@ struct BucketRasterizer::Impl {
   std::vector<float> thetaF;           // and the parameter inside it
   std::vector<float> knotX, knotY;     // [knot * nV + v]; knotX NaN = before the near plane
   std::vector<uint8_t> vertexStamp;    // theta projections computed for this vertex
+  std::vector<float> thetaBox;         // current micropolygon's raster box per theta: x0[T] y0[T] x1[T] y1[T]
 
   Impl(const SamplePattern& p, const ShutterModel& s, const View& v, const std::vector<AovChannel>& a, const RasterOptions& o)
       : pattern(p), shutter(s), view(v), aovs(a), opt(o), N(p.spp()), tBase(std::floor(s.earliest())) {
@@ -500,6 +501,7 @@ struct BucketRasterizer::Impl {
         else knotX[size_t(k) * nV + v] = NAN;
       }
     projX.resize(T * nV), projY.resize(T * nV);
+    thetaBox.resize(4 * T);
     vertexStamp.assign(nV, 0u);
 
     // Two-knot schedules (the common case): the segment parameter is a linear map of st.
@@ -543,19 +545,46 @@ struct BucketRasterizer::Impl {
       std::fill(segReady.begin(), segReady.end(), 0);
       const uint8_t flags = part.flags[mi];
 
+      // The micropolygon's raster box at every theta time (min/max over its corners), in
+      // straight vectorisable loops; a NaN anywhere (a corner before the near plane) makes the
+      // whole path unbounded. Per stratum the box is then the union over its few theta times, so
+      // the strata that miss this region (most of them, for fast motion) cost a handful of loads.
+      bool pathBounded = true;
+      {
+        float* __restrict tx0 = thetaBox.data();
+        float* __restrict ty0 = tx0 + T;
+        float* __restrict tx1 = ty0 + T;
+        float* __restrict ty1 = tx1 + T;
+        const float* xa = &projX[size_t(c[0]) * T];
+        const float* ya = &projY[size_t(c[0]) * T];
+        int nanCount = 0;
+        for (size_t ti = 0; ti < T; ++ti) tx0[ti] = tx1[ti] = xa[ti], ty0[ti] = ty1[ti] = ya[ti], nanCount += xa[ti] != xa[ti];
+        for (int j = 1; j < nc; ++j) {
+          const float* xs = &projX[size_t(c[j]) * T];
+          const float* ys = &projY[size_t(c[j]) * T];
+          for (size_t ti = 0; ti < T; ++ti) {
+            tx0[ti] = std::min(tx0[ti], xs[ti]), tx1[ti] = std::max(tx1[ti], xs[ti]);
+            ty0[ti] = std::min(ty0[ti], ys[ti]), ty1[ti] = std::max(ty1[ti], ys[ti]);
+            nanCount += xs[ti] != xs[ti];
+          }
+        }
+        pathBounded = nanCount == 0;
+      }
+      const float* tx0 = thetaBox.data();
+      const float* ty0 = tx0 + T;
+      const float* tx1 = ty0 + T;
+      const float* ty1 = tx1 + T;
+      const float rx0 = float(x0) - m, ry0 = float(y0) - m, rx1 = float(x0 + w) + m, ry1 = float(y0 + h) + m;
+
       for (int s = 0; s < N; ++s) {
         float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
-        bool bounded = true;
-        for (int ti = stratumFirst[size_t(s)]; ti <= stratumLast[size_t(s)] && bounded; ++ti)
-          for (int j = 0; j < nc; ++j) {
-            const float x = projX[size_t(c[j]) * T + size_t(ti)];
-            if (std::isnan(x)) {
-              bounded = false;
-              break;
-            }
-            const float y = projY[size_t(c[j]) * T + size_t(ti)];
-            bx0 = std::min(bx0, x), by0 = std::min(by0, y), bx1 = std::max(bx1, x), by1 = std::max(by1, y);
-          }
+        const bool bounded = pathBounded;
+        if (bounded) {
+          for (int ti = stratumFirst[size_t(s)]; ti <= stratumLast[size_t(s)]; ++ti)
+            bx0 = std::min(bx0, tx0[ti]), by0 = std::min(by0, ty0[ti]), bx1 = std::max(bx1, tx1[ti]), by1 = std::max(by1, ty1[ti]);
+          const float mm = 1e-6f * std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1)));
+          if (bx1 + mm < rx0 || bx0 - mm >= rx1 || by1 + mm < ry0 || by0 - mm >= ry1) continue;  // pixelRange()'s margin
+        }
         int px0, py0, px1, py1;
         // The sample itself must lie in the stratum's bound (not just its pixel): a cheap
         // rejection before the edge functions. Unbounded micropolygons skip it.
