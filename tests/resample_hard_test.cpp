@@ -4,6 +4,7 @@
 // ~0 at the border. Each asserts finite output and agreement with the brute-force ray caster
 // (tests/resample_test_util.h) within a stated bound.
 #include <cmath>
+#include <filesystem>
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
@@ -171,4 +172,66 @@ TEST(ResampleHard, NegativeLobesAtTheBorderStayFinite) {
         }
       }
   }
+}
+
+// Cases the accuracy study found missing from issue 8's list for the flat re-sampler: alpha within
+// 1e-7 of 0 and 1, 10 000 fragments in one pixel (the deep path has its own), and non-finite
+// attribute values (positions are covered by StoreBadInputHard).
+TEST(ResampleHard, AlphaWithinATenMillionthOfZeroAndOne) {
+  ScratchDir dir;
+  TestScene s = makeScene(24, 16);
+  TestMp clear = cameraQuad({s.rect(2, 2, 14, 12, 8), s.rect(4, 2, 16, 12, 8)}, glm::vec3(1e-7f));
+  clear.oi = glm::vec3(1e-7f);
+  TestMp opaque = cameraQuad({s.rect(8, 4, 22, 14, 12), s.rect(6, 4, 20, 14, 12)}, glm::vec3(1 - 1e-7f));
+  opaque.oi = glm::vec3(1 - 1e-7f);
+  s.mps = {clear, opaque};
+  EXPECT_LT(compareWithRayCaster(s, dir.path("alpha.mps"), 0, 1), 3e-3);
+  RenderResult r = render(specFor(writeScene(s, dir.path("alpha2.mps")), 0, 1, 4, 4));
+  expectFinite(r);
+  const auto& A = channel(r, "A").f;
+  EXPECT_GT(A[5 * 24 + 5], 0.f);  // only the nearly clear surface: 1e-7, not 0
+  EXPECT_NEAR(A[5 * 24 + 5], 1e-7, 1e-9);
+  EXPECT_NEAR(A[8 * 24 + 10], 1 - 1e-7, 2e-7);  // 1e-7 + (1 - 1e-7)²: never above 1
+  EXPECT_LE(A[8 * 24 + 10], 1.f);
+}
+
+TEST(ResampleHard, TenThousandFragmentsInOnePixelFlat) {
+  ScratchDir dir;
+  TestScene s = makeScene(4, 4, {0.0});
+  for (int i = 0; i < 10000; ++i) {  // each 1e-4 opaque: 1 - e^-1 in all, the threshold never stops it
+    TestMp mp = cameraQuad({s.rect(0.5, 0.5, 3.5, 3.5, 5 + i * 1e-3)}, glm::vec3(0.5e-4f));
+    mp.oi = glm::vec3(1e-4f);
+    s.mps.push_back(mp);
+  }
+  EXPECT_LT(compareWithRayCaster(s, dir.path("layers.mps"), 0, 1), 1e-4);
+  RenderResult r = render(specFor(writeScene(s, dir.path("layers2.mps")), 0, 1, 2, 2));
+  expectFinite(r);
+  const double exact = 1 - std::pow(1 - 1e-4, 10000);
+  for (int p : {5, 6, 9, 10}) {
+    EXPECT_NEAR(channel(r, "A").f[size_t(p)], exact, 1e-4) << p;
+    EXPECT_NEAR(channel(r, "R").f[size_t(p)], 0.5 * exact, 1e-4) << p;
+  }
+}
+
+TEST(ResampleHard, NonFiniteAttributesAreRejectedNamingGridAndAttribute) {
+  ScratchDir dir;
+  for (float bad : {NAN, INFINITY, -INFINITY})
+    for (bool opacity : {false, true}) {
+      TestScene s = makeScene(8, 8);
+      TestMp mp = cameraQuad({s.rect(1, 1, 5, 5, 5), s.rect(2, 1, 6, 5, 5)});
+      (opacity ? mp.oi : mp.ci).y = bad;
+      mp.gridId = 23;
+      s.mps.push_back(mp);
+      const std::string path = dir.path("bad.mps");
+      try {
+        writeScene(s, path);
+        ADD_FAILURE() << "non-finite " << (opacity ? "Oi" : "Ci") << " accepted";
+      } catch (const std::exception& e) {
+        const std::string what = e.what();
+        EXPECT_NE(what.find(opacity ? "'Oi'" : "'Ci'"), std::string::npos) << what;
+        EXPECT_NE(what.find("not finite"), std::string::npos) << what;
+        EXPECT_NE(what.find("23"), std::string::npos) << what;
+      }
+      EXPECT_FALSE(std::filesystem::exists(path));
+    }
 }
