@@ -45,7 +45,8 @@ ${cpu}, $(nproc) vCPU; load average before/after the run: ${load_before} / ${loa
 (a shared VM: other builds were running, so absolute times are noisy; ratios between curves
 measured in the same run are the figures to read). The whole study took ${secs} s.
 
-Every plot is log-log error against cost, one curve per setting of a knob; the dashed grey line
+Every plot is log-log error against cost (wall seconds; file bytes for codecs and deep), one
+curve per setting of a knob; the dashed grey line
 with circled points is the Pareto front (no other point of the plot is both faster and more
 accurate). Tables below list every point. Raw numbers: [\`accuracy/study.csv\`](accuracy/study.csv).
 
@@ -60,6 +61,12 @@ rotation, acceleration and motion in depth (exact polygon–pixel overlap of the
 integrated over the shutter with 2048 midpoint steps); a converged render with the same filter for
 filters; and the shading pass re-run at the target interval for "shade once, re-sample".
 
+## Headlines
+
+EOF
+  cat "$out/headlines.md"
+  cat <<EOF
+
 ## Plots
 
 | | |
@@ -68,7 +75,7 @@ filters; and the shading pass re-run at the target interval for "shade once, re-
 | ![knots rotate](accuracy/knots-rotate.png) | ![knots accel](accuracy/knots-accel.png) |
 | ![depth](accuracy/depth.png) | ![filters](accuracy/filter.png) |
 | ![codecs](accuracy/codec.png) | ![motion factor](accuracy/motionfactor.png) |
-| ![deep](accuracy/deep.png) | |
+| ![deep](accuracy/deep.png) | ![time bounds](accuracy/timebounds.png) |
 
 ## Tables
 
@@ -80,10 +87,13 @@ EOF
 - **Time-bound strategy "per pixel"** (issue 8 lists none / per stratum / per pixel): the
   re-sampler has two strategies (`RasterOptions::perStratumBounds`: per time stratum, or one
   bound over the whole interval, which is the "none" case); there is no per-pixel bound to time.
+- **Deep tolerance, compositing error**: the deep study measures file size against the
+  flattening error (which the deep design keeps exact at every tolerance); what a coarser
+  tolerance loses is depth detail for deep compositing with other elements, not measured here.
 - **Position codecs**: positions are always stored as float32 (store/codec.h); only attributes
   have lossy codecs, so the codec study covers Ci / Oi (and N as Oct32, which does not reach the
   image).
 EOF
 } > docs/accuracy.md
-rm -f "$out/tables.md" "$out"/*.gp "$out"/*.dat
+rm -f "$out/tables.md" "$out/headlines.md" "$out"/*.gp "$out"/*.dat
 echo "wrote docs/accuracy.md and $(ls "$out"/*.png | wc -l) plots in $out ($secs s)"
