@@ -210,15 +210,29 @@ void plot(const std::string& outDir, const std::string& study, const std::string
      << " using 1:2 with points pt 6 ps 2 lc rgb 'black' notitle\n";
 }
 
-void table(const std::string& study, const std::string& knobName, bool withBytes = false) {
-  gTables << "| curve | " << knobName << " | spp | seconds | RMSE | max | luminance RMSE | bias | noise |" << (withBytes ? " bytes |" : "")
-          << " Pareto |\n|---|---|---|---|---|---|---|---|---|" << (withBytes ? "---|" : "") << "---|\n";
+/// Every point of a study; `knobName` empty (or "spp", already a column) leaves the knob out.
+void table(const std::string& study, const std::string& knobName, bool withBytes = false, const std::string& bytesName = "bytes") {
+  const bool knob = !knobName.empty() && knobName != "spp";
+  gTables << "| curve |" << (knob ? " " + knobName + " |" : "") << " spp | seconds | RMSE | max | luminance RMSE | bias | noise |" << (withBytes ? " " + bytesName + " |" : "")
+          << " Pareto |\n|---|" << (knob ? "---|" : "") << "---|---|---|---|---|---|---|" << (withBytes ? "---|" : "") << "---|\n";
   for (const Point& p : gPoints) {
     if (p.study != study) continue;
-    gTables << "| " << p.curve << " | " << fmt(p.knob) << " | " << p.spp << " | " << fmt(p.seconds, "%.4f") << " | " << fmt(p.rmse, "%.2e")
-            << " | " << fmt(p.max, "%.2e") << " | " << fmt(p.lum, "%.2e") << " | " << fmt(p.bias, "%.2e") << " | " << fmt(p.noise, "%.2e")
-            << " |" << (withBytes ? " " + fmt(p.bytes, "%.0f") + " |" : "") << (p.pareto ? " ★ |" : " |") << "\n";
+    gTables << "| " << p.curve << " |" << (knob ? " " + fmt(p.knob) + " |" : "") << " " << p.spp << " | " << fmt(p.seconds, "%.4f") << " | "
+            << fmt(p.rmse, "%.2e") << " | " << fmt(p.max, "%.2e") << " | " << fmt(p.lum, "%.2e") << " | " << fmt(p.bias, "%.2e") << " | "
+            << fmt(p.noise, "%.2e") << " |" << (withBytes ? " " + fmt(p.bytes, "%.0f") + " |" : "") << (p.pareto ? " ★ |" : " |") << "\n";
   }
+  gTables << "\n";
+}
+
+/// The two time-bound strategies side by side: time at equal error.
+void strategyTable(const std::string& study) {
+  gTables << "Time at equal error (both strategies make the same image):\n\n| spp | per-stratum s | one bound s | one bound / per-stratum | RMSE |\n"
+             "|---|---|---|---|---|\n";
+  for (const Point& a : gPoints)
+    for (const Point& b : gPoints)
+      if (a.study == study && b.study == study && a.spp == b.spp && a.curve[0] == 'p' && b.curve[0] == 'o')
+        gTables << "| " << a.spp << " | " << fmt(a.seconds, "%.4f") << " | " << fmt(b.seconds, "%.4f") << " | " << fmt(b.seconds / a.seconds, "%.2f")
+                << " | " << fmt(a.rmse, "%.2e") << " |\n";
   gTables << "\n";
 }
 
@@ -374,13 +388,7 @@ void studySpp(const std::string& out) {
   gTables << "### Samples per pixel and time-bound strategy\n\nScene: 12 opaque squares (14–26 px) moving 10–30 px over the shutter, " << kW << "×"
           << kH << ", box filter 1×1; reference: `analyticCoverage` (exact). 3 seeds per point.\n\n";
   table("spp", "spp");
-  gTables << "Time at equal error (the two strategies make the same image):\n\n| spp | per-stratum s | one bound s | ratio |\n|---|---|---|---|\n";
-  for (const Point& a : gPoints)
-    for (const Point& b : gPoints)
-      if (a.study == "spp" && b.study == "spp" && a.spp == b.spp && a.curve[0] == 'p' && b.curve[0] == 'o')
-        gTables << "| " << a.spp << " | " << fmt(a.seconds, "%.4f") << " | " << fmt(b.seconds, "%.4f") << " | " << fmt(b.seconds / a.seconds, "%.2f")
-                << " |\n";
-  gTables << "\n";
+  strategyTable("spp");
 }
 
 /// Time-bound strategy where it matters: a 96 × 64 px rectangle diced into 1-px micropolygons
@@ -421,13 +429,7 @@ void studyTimeBounds(const std::string& out) {
              "(48, 16) px over the shutter; reference: `analyticCoverage` of the rectangle. Both strategies make the same image (equal error); "
              "the time is what differs (one bound stops at 64 spp: 256 would take minutes). 2 seeds.\n\n";
   table("timebounds", "spp");
-  gTables << "| spp | per-stratum s | one bound s | one bound / per-stratum | RMSE |\n|---|---|---|---|---|\n";
-  for (const Point& a : gPoints)
-    for (const Point& b : gPoints)
-      if (a.study == "timebounds" && b.study == "timebounds" && a.spp == b.spp && a.curve[0] == 'p' && b.curve[0] == 'o')
-        gTables << "| " << a.spp << " | " << fmt(a.seconds, "%.4f") << " | " << fmt(b.seconds, "%.4f") << " | " << fmt(b.seconds / a.seconds, "%.2f")
-                << " | " << fmt(a.rmse, "%.2e") << " |\n";
-  gTables << "\n";
+  strategyTable("timebounds");
 }
 
 /// Motion knots M against rotating and accelerating motion.
@@ -571,7 +573,7 @@ void studyCodecs(const std::string& out) {
              "codec's alone. For scale, the same render at another seed differs by RMSE "
           << fmt(gPoints.back().rmse, "%.2e")
           << " (16-spp noise). Positions have no lossy codec (always float32), so there is no position-codec row.\n\n";
-  table("codec", "–", true);
+  table("codec", "", true, "store bytes");
 }
 
 /// Pixel filters: error against a converged render with the same filter and shutter.
@@ -698,8 +700,8 @@ void studyMotionFactor(const std::string& out) {
   gTables << "### Motion factor\n\nScene: the demo at " << kDW << "×" << kDH
           << ", gaussian 2×2, 16 spp, one seed. Error: against motion factor 0 rendered with the same samples (so it is the coarser "
              "shading's alone); for scale, 16-spp noise (motion factor 0, another seed) is RMSE "
-          << fmt(noise, "%.2e") << ". Seconds = shading (best of 3) + render (best of 3); `bytes` column = micropolygons shaded.\n\n";
-  table("motionfactor", "motion factor", true);
+          << fmt(noise, "%.2e") << ". Seconds = shading (best of 3) + render (best of 3).\n\n";
+  table("motionfactor", "motion factor", true, "micropolygons");
 }
 
 void studyDeep(const std::string& out) {
@@ -738,7 +740,7 @@ void studyDeep(const std::string& out) {
   gTables << "### Deep depth tolerance\n\nScene: the demo (shaded once) at " << kDW << "×" << kDH
           << ", gaussian 2×2, 16 spp. Error: the deep image flattened (`flattenDeepPixel`, matte-aware) against the flat image of the same "
              "render; bytes: the deep EXR (ZIPS). Seconds: render with deep formation.\n\n";
-  table("deep", "tolerance", true);
+  table("deep", "tolerance", true, "deep EXR bytes");
 }
 
 const Point* find(const std::string& study, const std::string& curvePrefix, int spp = -1, double knob = NAN) {
