@@ -449,10 +449,10 @@ TEST(ResampleReference, ManySmallMovingMicropolygonsLoseNoHits) {
   // Grids of ~1.5 px micropolygons sharing vertices, moving up to 30 px with motion in depth, as
   // the shading pass makes them: per-stratum bounds must never drop a hit the ray caster finds.
   ScratchDir dir;
-  TestScene s = makeScene(64, 48);
+  TestScene s = makeScene(40, 30);
   Rng rng(23);
-  for (int gi = 0; gi < 30; ++gi) {
-    const double ox = rng.uniform(-8, 60), oy = rng.uniform(-8, 44), z0 = rng.uniform(5, 50), dz = rng.uniform(-3, 3);
+  for (int gi = 0; gi < 14; ++gi) {
+    const double ox = rng.uniform(-8, 36), oy = rng.uniform(-8, 26), z0 = rng.uniform(5, 50), dz = rng.uniform(-3, 3);
     const glm::dvec2 vel(rng.uniform(-30, 30), rng.uniform(-30, 30));
     glm::vec3 ci(float(rng.uniform()), float(rng.uniform()), float(rng.uniform()));
     for (int j = 0; j < 8; ++j)
@@ -471,11 +471,11 @@ TEST(ResampleReference, ManySmallMovingMicropolygonsLoseNoHits) {
   for (auto [a, b] : {std::pair{0.0, 1.0}, std::pair{0.2, 0.45}}) {
     RenderSpec spec = specFor(reader, a, b, 4, 4, 2);
     RenderResult r = render(spec);
-    Reference ref = rayCast(s, spec, 64, 48);
+    Reference ref = rayCast(s, spec, 40, 30);
     double diff = 0;
     for (size_t p = 0; p < ref.a.size(); ++p) diff += std::abs(channel(r, "A").f[p] - ref.a[p]);
     EXPECT_LT(diff, 3.0 / 16) << "interval " << a << ":" << b << ": more than 3 samples disagree";
-    EXPECT_GT(r.stats.raster.hits, 1000u);
+    EXPECT_GT(r.stats.raster.hits, 1000u);  // (sized for the sanitizer build: the ray caster is brute force)
   }
 }
 
