@@ -397,8 +397,15 @@ struct BucketRasterizer::Impl {
       }
       if (tri) zv[3] = zv[2];
       int px0, py0, px1, py1;
+      // As on the moving path, a sample outside the micropolygon's box is rejected before its
+      // edge functions; unbounded micropolygons (a corner before the near plane) test everything.
+      float sbx0 = -INFINITY, sby0 = -INFINITY, sbx1 = INFINITY, sby1 = INFINITY;
       if (!bounded) px0 = x0, py0 = y0, px1 = x0 + w - 1, py1 = y0 + h - 1;
       else if (!pixelRange(bx0, by0, bx1, by1, px0, py0, px1, py1)) continue;
+      else {
+        const float sm = 1e-3f + 1e-6f * std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1)));
+        sbx0 = bx0 - sm, sby0 = by0 - sm, sbx1 = bx1 + sm, sby1 = by1 + sm;
+      }
       ++stats.staticMicropolygons;
       for (int py = py0; py <= py1; ++py) {
         if (onlyGroup >= 0 && rowGroup[size_t(py - y0)] != onlyGroup) continue;
@@ -406,6 +413,7 @@ struct BucketRasterizer::Impl {
           const size_t p = size_t(py - y0) * w + size_t(px - x0);
           for (int s = 0; s < N; ++s) {
             const size_t idx = size_t(s) * P + p;
+            if (sx[idx] < sbx0 || sx[idx] > sbx1 || sy[idx] < sby0 || sy[idx] > sby1) continue;
             if (checkCover && !(tBase + st[idx] >= covLo && tBase + st[idx] <= covHi)) continue;
             ++stats.sampleTests;
             double e[5] = {0, 0, 0, 0, 0};
