@@ -32,8 +32,11 @@ struct OutputFrame {
 int renderSequence(const std::string& storePattern, const std::string& outPattern, const std::vector<OutputFrame>& frames,
                    const RenderOptions& render, const std::string& what) {
   if (frames.empty()) fail("--frames", "no frames to render");
+  if (outPattern.empty() && render.deep.empty()) fail(what, "nothing to write: give -o OUT.####.exr, --deep DEEP.####.exr or both");
   if (frames.size() > 1 && !outPattern.empty() && !hasFramePlaceholder(outPattern))
     fail("-o", "'", outPattern, "' has no frame placeholder (####, %04d, @) but ", frames.size(), " frames are rendered");
+  if (frames.size() > 1 && !render.deep.empty() && !hasFramePlaceholder(render.deep))
+    fail("--deep", "'", render.deep, "' has no frame placeholder (####, %04d, @) but ", frames.size(), " frames are rendered");
   ShotStores stores(storePattern, size_t(render.cacheMb * 1e6));
   // Every store any frame needs, checked before any work.
   {
@@ -96,6 +99,7 @@ struct FieldsCommand {
 
   int run() const {
     std::vector<int64_t> list = parseFrameRange(frames, "--frames");
+    if (output.empty() && render.deep.empty()) fail("fields", "nothing to write: give -o OUT.####.exr, --deep DEEP.####.exr or both");
     const int parity = dominance == "upper" ? 0 : 1;
     if (!twoPass) {
       std::vector<OutputFrame> out;
@@ -188,7 +192,7 @@ void addRetimeCommands(CLI::App& app, Registry& registry) {
     auto cmd = std::make_shared<FieldsCommand>();
     auto* sub = app.add_subcommand("fields", "Interlaced video: each output frame's two fields from their own shutter intervals, in one pass");
     sub->add_option("stores", cmd->input, "The shot's stores, e.g. shot.####.mps")->required();
-    sub->add_option("-o,--output", cmd->output, "Output OpenEXR pattern, e.g. out.####.exr")->required();
+    sub->add_option("-o,--output", cmd->output, "Output OpenEXR pattern, e.g. out.####.exr (optional with --deep)");
     sub->add_option("--frames", cmd->frames, "Frames: 1-48, 1-48x2, 1,5,9, ...")->required();
     sub->add_option("--dominance", cmd->dominance, "Field dominance: upper (row 0 is in the first field) or lower")
         ->check(CLI::IsMember({"upper", "lower"}))
@@ -224,7 +228,7 @@ void addRetimeCommands(CLI::App& app, Registry& registry) {
     auto cmd = std::make_shared<RetimeCommand>();
     auto* sub = app.add_subcommand("retime", "Frame-rate conversion: render another rate's frames from a shot's stores");
     sub->add_option("stores", cmd->input, "The shot's stores, e.g. shot.####.mps")->required();
-    sub->add_option("-o,--output", cmd->output, "Output OpenEXR pattern, e.g. out.####.exr")->required();
+    sub->add_option("-o,--output", cmd->output, "Output OpenEXR pattern, e.g. out.####.exr (optional with --deep)");
     sub->add_option("--frames", cmd->frames, "Output frames: 1-100, 1-100x2, 1,5,9, ...")->required();
     sub->add_option("--from-fps", cmd->fromFps, "The shot's rate (default: the stores' own)")->group("Shutter");
     sub->add_option("--to-fps", cmd->toFps, "Target rate: 25, 30, 30000/1001, 29.97, 50, 59.94, ...")->required()->group("Shutter");
