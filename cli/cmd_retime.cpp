@@ -65,7 +65,8 @@ int renderSequence(const std::string& storePattern, const std::string& outPatter
     progress.advance();
   }
   progress.finish();
-  note(cat("wrote ", frames.size(), " frame", frames.size() == 1 ? "" : "s", " (", outPattern, ") in ", seconds, " s"));
+  const std::string wrote = outPattern.empty() ? render.deep : render.deep.empty() ? outPattern : outPattern + " and " + render.deep;
+  note(cat("wrote ", frames.size(), " frame", frames.size() == 1 ? "" : "s", " (", wrote, ") in ", seconds, " s"));
   return 0;
 }
 
