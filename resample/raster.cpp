@@ -357,6 +357,25 @@ struct BucketRasterizer::Impl {
     return std::isfinite(x) && std::isfinite(y);
   }
 
+  // Where to test a micropolygon with raster box (bx0, by0)-(bx1, by1): the pixels its box
+  // touches, and the box (widened for float rounding) that each sample must lie in before its
+  // edge functions are evaluated. An unbounded micropolygon (a corner before the near plane) is
+  // tested everywhere. False when nothing in the region can be covered.
+  struct TestArea {
+    int px0, py0, px1, py1;
+    float sx0 = -INFINITY, sy0 = -INFINITY, sx1 = INFINITY, sy1 = INFINITY;
+  };
+  bool testArea(bool bounded, float bx0, float by0, float bx1, float by1, TestArea& a) const {
+    if (!bounded) {
+      a.px0 = x0, a.py0 = y0, a.px1 = x0 + w - 1, a.py1 = y0 + h - 1;
+      return true;
+    }
+    if (!pixelRange(bx0, by0, bx1, by1, a.px0, a.py0, a.px1, a.py1)) return false;
+    const float sm = 1e-3f + 1e-6f * std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1)));
+    a.sx0 = bx0 - sm, a.sy0 = by0 - sm, a.sx1 = bx1 + sm, a.sy1 = by1 + sm;
+    return true;
+  }
+
   // Pixel range of a raster box, clipped to the region; false if empty.
   bool pixelRange(float bx0, float by0, float bx1, float by1, int& px0, int& py0, int& px1, int& py1) const {
     // A sample at x lies in pixel floor(x); a small margin absorbs float rounding of projections.
@@ -396,16 +415,10 @@ struct BucketRasterizer::Impl {
         else bx0 = std::min(bx0, x), by0 = std::min(by0, y), bx1 = std::max(bx1, x), by1 = std::max(by1, y);
       }
       if (tri) zv[3] = zv[2];
-      int px0, py0, px1, py1;
-      // As on the moving path, a sample outside the micropolygon's box is rejected before its
-      // edge functions; unbounded micropolygons (a corner before the near plane) test everything.
-      float sbx0 = -INFINITY, sby0 = -INFINITY, sbx1 = INFINITY, sby1 = INFINITY;
-      if (!bounded) px0 = x0, py0 = y0, px1 = x0 + w - 1, py1 = y0 + h - 1;
-      else if (!pixelRange(bx0, by0, bx1, by1, px0, py0, px1, py1)) continue;
-      else {
-        const float sm = 1e-3f + 1e-6f * std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1)));
-        sbx0 = bx0 - sm, sby0 = by0 - sm, sbx1 = bx1 + sm, sby1 = by1 + sm;
-      }
+      TestArea ta;
+      if (!testArea(bounded, bx0, by0, bx1, by1, ta)) continue;
+      const int px0 = ta.px0, py0 = ta.py0, px1 = ta.px1, py1 = ta.py1;
+      const float sbx0 = ta.sx0, sby0 = ta.sy0, sbx1 = ta.sx1, sby1 = ta.sy1;
       ++stats.staticMicropolygons;
       for (int py = py0; py <= py1; ++py) {
         if (onlyGroup >= 0 && rowGroup[size_t(py - y0)] != onlyGroup) continue;
@@ -593,16 +606,10 @@ struct BucketRasterizer::Impl {
           const float mm = 1e-6f * std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1)));
           if (bx1 + mm < rx0 || bx0 - mm >= rx1 || by1 + mm < ry0 || by0 - mm >= ry1) continue;  // pixelRange()'s margin
         }
-        int px0, py0, px1, py1;
-        // The sample itself must lie in the stratum's bound (not just its pixel): a cheap
-        // rejection before the edge functions. Unbounded micropolygons skip it.
-        float sbx0 = -INFINITY, sby0 = -INFINITY, sbx1 = INFINITY, sby1 = INFINITY;
-        if (!bounded) px0 = x0, py0 = y0, px1 = x0 + w - 1, py1 = y0 + h - 1;
-        else if (!pixelRange(bx0, by0, bx1, by1, px0, py0, px1, py1)) continue;
-        else {
-          const float sm = 1e-3f + 1e-6f * std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1)));
-          sbx0 = bx0 - sm, sby0 = by0 - sm, sbx1 = bx1 + sm, sby1 = by1 + sm;
-        }
+        TestArea ta;
+        if (!testArea(bounded, bx0, by0, bx1, by1, ta)) continue;
+        const int px0 = ta.px0, py0 = ta.py0, px1 = ta.px1, py1 = ta.py1;
+        const float sbx0 = ta.sx0, sby0 = ta.sy0, sbx1 = ta.sx1, sby1 = ta.sy1;
         for (int py = py0; py <= py1; ++py) {
           if (rowGroup[size_t(py - y0)] != g) continue;
           const size_t rowBase = size_t(s) * P + size_t(py - y0) * w;
