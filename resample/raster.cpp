@@ -117,7 +117,8 @@ struct BucketRasterizer::Impl {
   std::vector<uint8_t> segReady;
   std::vector<uint32_t> thetaSeg;      // knot segment of each theta time
   std::vector<float> thetaF;           // and the parameter inside it
-  std::vector<float> knotX, knotY;     // [knot * nV + v]; knotX NaN = before the near plane
+  std::vector<float> knotX, knotY;     // [cull time * nV + v]; knotX NaN = before the near plane
+  std::vector<uint32_t> cullTheta;     // theta indices the cull projects at
   std::vector<uint8_t> vertexStamp;    // theta projections computed for this vertex
   std::vector<float> thetaBox;         // current micropolygon's raster box per theta: x0[T] y0[T] x1[T] y1[T]
 
@@ -503,24 +504,26 @@ struct BucketRasterizer::Impl {
     thetaSeg.resize(T), thetaF.resize(T);
     for (size_t ti = 0; ti < T; ++ti) segmentAt(knots, thetaTimes[ti], thetaSeg[ti], thetaF[ti]);
 
-    // Knots whose segments the group's time range touches, and every vertex projected at them:
-    // a cheap cull of micropolygons that cannot reach this bucket before any per-stratum work.
-    uint32_t kFirst, kLast;
-    {
-      float f;
-      segmentAt(knots, lo[0] - F, kFirst, f);
-      if (f == 1.f && kFirst + 1 < K) ++kFirst;
-      segmentAt(knots, hi[N - 1] - F, kLast, f);
-      if (f > 0.f || kLast + 1 < K) ++kLast;
-      kLast = std::min(kLast, K - 1);
-    }
-    knotX.resize(size_t(K) * nV), knotY.resize(size_t(K) * nV);
-    for (uint32_t k = kFirst; k <= kLast; ++k)
+    // Every vertex projected at the group's first and last theta times and at the knots between:
+    // within a knot segment a vertex's screen path is straight, so the boxes at those times bound
+    // the micropolygon over the whole group interval - a cull, tight for short intervals, before
+    // any per-stratum work.
+    cullTheta.clear();
+    for (size_t ti = 0; ti < T; ++ti)
+      if (ti == 0 || ti + 1 == T || std::binary_search(knots.begin(), knots.end(), thetaTimes[ti])) cullTheta.push_back(uint32_t(ti));
+    const size_t C = cullTheta.size();
+    knotX.resize(C * nV), knotY.resize(C * nV);
+    for (size_t ci = 0; ci < C; ++ci) {
+      const uint32_t k = thetaSeg[cullTheta[ci]];
+      const float f = thetaF[cullTheta[ci]];
       for (uint32_t v = 0; v < nV; ++v) {
+        const glm::vec3& a = part.position(k, v);
+        const glm::vec3 p = a + f * (part.position(k + 1, v) - a);
         float x, y;
-        if (project(part.position(k, v), x, y)) knotX[size_t(k) * nV + v] = x, knotY[size_t(k) * nV + v] = y;
-        else knotX[size_t(k) * nV + v] = NAN;
+        if (project(p, x, y)) knotX[ci * nV + v] = x, knotY[ci * nV + v] = y;
+        else knotX[ci * nV + v] = NAN;
       }
+    }
     projX.resize(T * nV), projY.resize(T * nV);
     thetaBox.resize(4 * T);
     vertexStamp.assign(nV, 0u);
@@ -542,17 +545,18 @@ struct BucketRasterizer::Impl {
       {
         float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
         bool bounded = true;
-        for (uint32_t k = kFirst; k <= kLast && bounded; ++k)
+        for (size_t ci = 0; ci < C && bounded; ++ci)
           for (int j = 0; j < nc; ++j) {
-            const float x = knotX[size_t(k) * nV + c[j]];
+            const float x = knotX[ci * nV + c[j]];
             if (std::isnan(x)) {
               bounded = false;
               break;
             }
-            const float y = knotY[size_t(k) * nV + c[j]];
+            const float y = knotY[ci * nV + c[j]];
             bx0 = std::min(bx0, x), by0 = std::min(by0, y), bx1 = std::max(bx1, x), by1 = std::max(by1, y);
           }
-        if (bounded && (bx1 + m < float(x0) || bx0 - m >= float(x0 + w) || by1 + m < float(y0) || by0 - m >= float(y0 + h))) continue;
+        const float mm = m + 1e-6f * std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1)));
+        if (bounded && (bx1 + mm < float(x0) || bx0 - mm >= float(x0 + w) || by1 + mm < float(y0) || by0 - mm >= float(y0 + h))) continue;
       }
       // Corner projections at the strata boundaries, computed once per vertex. Vertex-major and
       // branch-free per knot segment so the compiler vectorises it: this is the per-micropolygon
