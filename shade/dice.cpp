@@ -18,6 +18,15 @@ double sgn(double x) { return x < 0 ? -1.0 : 1.0; }
 
 double sphereLat(double r, double z) { return std::asin(std::clamp(z / r, -1.0, 1.0)); }
 
+// A sphere's (u, v) as longitude phi and latitude lat, with the latitude range [lat0, lat1].
+struct SphereAngles {
+  double phi, lat, lat0, lat1;
+};
+SphereAngles sphereAngles(const std::array<double, 5>& q, double u, double v) {
+  const double lat0 = sphereLat(q[0], q[1]), lat1 = sphereLat(q[0], q[2]);
+  return {u * q[3] * kDeg, lat0 + v * (lat1 - lat0), lat0, lat1};
+}
+
 glm::dvec3 bilinear(const std::array<glm::dvec3, 4>& c, double u, double v) {
   return (1 - u) * (1 - v) * c[0] + u * (1 - v) * c[1] + (1 - u) * v * c[2] + u * v * c[3];
 }
@@ -27,9 +36,8 @@ glm::dvec3 evalP(PrimKind kind, const Shape& s, double u, double v) {
   const auto& q = s.q;
   switch (kind) {
     case PrimKind::Sphere: {
-      const double r = q[0], phi = u * q[3] * kDeg;
-      const double lat0 = sphereLat(r, q[1]), lat1 = sphereLat(r, q[2]);
-      const double lat = lat0 + v * (lat1 - lat0);
+      const double r = q[0];
+      const auto [phi, lat, lat0, lat1] = sphereAngles(q, u, v);
       return {r * std::cos(lat) * std::cos(phi), r * std::cos(lat) * std::sin(phi), r * std::sin(lat)};
     }
     case PrimKind::Cylinder: {
@@ -58,9 +66,7 @@ glm::dvec3 evalNg(PrimKind kind, const Shape& s, double u, double v, bool triang
   const auto& q = s.q;
   switch (kind) {
     case PrimKind::Sphere: {
-      const double r = q[0], phi = u * q[3] * kDeg;
-      const double lat0 = sphereLat(r, q[1]), lat1 = sphereLat(r, q[2]);
-      const double lat = lat0 + v * (lat1 - lat0);
+      const auto [phi, lat, lat0, lat1] = sphereAngles(q, u, v);
       const double k = sgn(q[3]) * sgn(lat1 - lat0);
       return k * glm::dvec3(std::cos(lat) * std::cos(phi), std::cos(lat) * std::sin(phi), std::sin(lat));
     }

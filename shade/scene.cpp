@@ -2,6 +2,7 @@
 #include "shade/scene.h"
 
 #include <algorithm>
+#include <span>
 #include <cmath>
 
 #include <glm/gtc/matrix_transform.hpp>
@@ -548,51 +549,29 @@ void Scene::addPrims(std::vector<Primitive> prims) {
 }
 
 namespace {
-void checkFinite(const Scene& s, std::initializer_list<double> v) {
+void checkFinite(const Scene& s, std::span<const double> v) {
   for (double x : v)
     if (!std::isfinite(x)) fail(s.where, "primitive parameter is not finite");
 }
+void checkFinite(const Scene& s, std::initializer_list<double> v) { checkFinite(s, std::span<const double>(v.begin(), v.size())); }
 }  // namespace
 
-void Scene::sphere(double radius, double zmin, double zmax, double thetamax) {
-  checkFinite(*this, {radius, zmin, zmax, thetamax});
-  Primitive p = basePrim(PrimKind::Sphere);
+void Scene::quadric(PrimKind kind, const std::array<double, 5>& q, size_t used) {
+  checkFinite(*this, std::span<const double>(q.data(), used));
+  Primitive p = basePrim(kind);
   Shape s;
-  s.q = {radius, zmin, zmax, thetamax, 0};
+  s.q = q;
   p.keys = {s};
   addPrims({std::move(p)});
 }
+void Scene::sphere(double radius, double zmin, double zmax, double thetamax) { quadric(PrimKind::Sphere, {radius, zmin, zmax, thetamax, 0}, 4); }
 void Scene::cylinder(double radius, double zmin, double zmax, double thetamax) {
-  checkFinite(*this, {radius, zmin, zmax, thetamax});
-  Primitive p = basePrim(PrimKind::Cylinder);
-  Shape s;
-  s.q = {radius, zmin, zmax, thetamax, 0};
-  p.keys = {s};
-  addPrims({std::move(p)});
+  quadric(PrimKind::Cylinder, {radius, zmin, zmax, thetamax, 0}, 4);
 }
-void Scene::cone(double height, double radius, double thetamax) {
-  checkFinite(*this, {height, radius, thetamax});
-  Primitive p = basePrim(PrimKind::Cone);
-  Shape s;
-  s.q = {height, radius, thetamax, 0, 0};
-  p.keys = {s};
-  addPrims({std::move(p)});
-}
-void Scene::disk(double height, double radius, double thetamax) {
-  checkFinite(*this, {height, radius, thetamax});
-  Primitive p = basePrim(PrimKind::Disk);
-  Shape s;
-  s.q = {height, radius, thetamax, 0, 0};
-  p.keys = {s};
-  addPrims({std::move(p)});
-}
+void Scene::cone(double height, double radius, double thetamax) { quadric(PrimKind::Cone, {height, radius, thetamax, 0, 0}, 3); }
+void Scene::disk(double height, double radius, double thetamax) { quadric(PrimKind::Disk, {height, radius, thetamax, 0, 0}, 3); }
 void Scene::torus(double rmajor, double rminor, double phimin, double phimax, double thetamax) {
-  checkFinite(*this, {rmajor, rminor, phimin, phimax, thetamax});
-  Primitive p = basePrim(PrimKind::Torus);
-  Shape s;
-  s.q = {rmajor, rminor, phimin, phimax, thetamax};
-  p.keys = {s};
-  addPrims({std::move(p)});
+  quadric(PrimKind::Torus, {rmajor, rminor, phimin, phimax, thetamax}, 5);
 }
 
 void Scene::patch(const std::array<glm::dvec3, 4>& P, const VertexData& vd) {

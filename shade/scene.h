@@ -274,6 +274,8 @@ class Scene {
   void emitFaces(const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P,
                  const VertexData& vd, std::vector<Primitive>& out);
   Primitive basePrim(PrimKind kind);
+  /// Sphere, Cylinder, Cone, Disk and Torus: one keyframe of parameters, the first `used` checked finite.
+  void quadric(PrimKind kind, const std::array<double, 5>& q, size_t used);
   bool motionTake(Pending kind);
   [[noreturn]] void error(const std::string& what) const;
 
