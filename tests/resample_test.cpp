@@ -488,17 +488,17 @@ TEST(ResampleCli, ImagesOpenInAnIndependentReader) {
                                  "=R,G,B --quantize 0,65535,0,65535 --preview " + png + " --shutter 0.25:0.75");
   ASSERT_EQ(r.exitCode, 0) << r.err;
   ASSERT_EQ(runReshutter("-j 2 resample " + store + " -o " + b + " --spp 9 --aov z --aov id --crop 20 140 10 80 --shutter 0.25:0.75 --bucket 16").exitCode, 0);
-  CommandResult info = runCommand("timeout 60 iinfo -v " + a);
+  CommandResult info = runImageTool("iinfo -v " + a);
   ASSERT_EQ(info.exitCode, 0) << info.err;
   for (const char* want : {"120 x   70", "full/display size: 160 x 90", "pixel data origin: x=20, y=10", "R (float), G (float), B (float), A (float), Z (float), z (float), id (uint)", "worldToCamera", "worldToNDC",
                            "reshutter/shutterInterval", "software"})
     EXPECT_NE(info.out.find(want), std::string::npos) << want << " not in\n" << info.out;
   // Same image from another thread count and bucket size, as an independent reader sees it.
-  CommandResult diff = runCommand("timeout 60 idiff -q -fail 0 -failpercent 0 -warn 0 " + a + " " + b);
+  CommandResult diff = runImageTool("idiff -q -fail 0 -failpercent 0 -warn 0 " + a + " " + b);
   EXPECT_EQ(diff.exitCode, 0) << diff.out << diff.err;
-  CommandResult tinfo = runCommand("timeout 60 iinfo -v " + tif);
+  CommandResult tinfo = runImageTool("iinfo -v " + tif);
   EXPECT_NE(tinfo.out.find("uint16"), std::string::npos) << tinfo.out;
-  CommandResult pinfo = runCommand("timeout 60 iinfo -v " + png);
+  CommandResult pinfo = runImageTool("iinfo -v " + png);
   EXPECT_NE(pinfo.out.find("4 channel, uint16 png"), std::string::npos) << pinfo.out;  // --quantize up to 65535: 16 bits
 }
 

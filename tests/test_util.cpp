@@ -42,6 +42,8 @@ CommandResult runCommand(const std::string& command) {
   return r;
 }
 
+CommandResult runImageTool(const std::string& toolAndArgs) { return runCommand("timeout 300 " + toolAndArgs); }
+
 CommandResult runReshutter(const std::string& args) { return runCommand(std::string(RESHUTTER_BINARY) + " " + args); }
 
 std::vector<uint8_t> readBytes(const std::string& path) {

@@ -30,6 +30,10 @@ struct CommandResult {
 CommandResult runReshutter(const std::string& args);
 /// Runs any shell command, capturing stdout and stderr.
 CommandResult runCommand(const std::string& command);
+/// Runs an OpenImageIO tool (iinfo, idiff, oiiotool) as an independent checker. A hang guard, not
+/// a speed check: OpenImageIO 2.4's iinfo can hang on a damaged deep file, so a tool still running
+/// after five minutes is killed and reported as a failure (exit 124).
+CommandResult runImageTool(const std::string& toolAndArgs);
 
 std::vector<uint8_t> readBytes(const std::string& path);
 void writeBytes(const std::string& path, const std::vector<uint8_t>& bytes);
