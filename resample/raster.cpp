@@ -117,7 +117,7 @@ struct BucketRasterizer::Impl {
   std::vector<uint8_t> segReady;
   std::vector<uint32_t> thetaSeg;      // knot segment of each theta time
   std::vector<float> thetaF;           // and the parameter inside it
-  std::vector<float> knotX, knotY;     // [cull time * nV + v]; knotX NaN = before the near plane
+  std::vector<float> cullX, cullY;     // [cull time * nV + v]; cullX NaN = before the near plane
   std::vector<uint32_t> cullTheta;     // theta indices the cull projects at
   std::vector<uint8_t> vertexStamp;    // theta projections computed for this vertex
   std::vector<float> thetaBox;         // current micropolygon's raster box per theta: x0[T] y0[T] x1[T] y1[T]
@@ -512,7 +512,7 @@ struct BucketRasterizer::Impl {
     for (size_t ti = 0; ti < T; ++ti)
       if (ti == 0 || ti + 1 == T || std::binary_search(knots.begin(), knots.end(), thetaTimes[ti])) cullTheta.push_back(uint32_t(ti));
     const size_t C = cullTheta.size();
-    knotX.resize(C * nV), knotY.resize(C * nV);
+    cullX.resize(C * nV), cullY.resize(C * nV);
     for (size_t ci = 0; ci < C; ++ci) {
       const uint32_t k = thetaSeg[cullTheta[ci]];
       const float f = thetaF[cullTheta[ci]];
@@ -520,8 +520,8 @@ struct BucketRasterizer::Impl {
         const glm::vec3& a = part.position(k, v);
         const glm::vec3 p = a + f * (part.position(k + 1, v) - a);
         float x, y;
-        if (project(p, x, y)) knotX[ci * nV + v] = x, knotY[ci * nV + v] = y;
-        else knotX[ci * nV + v] = NAN;
+        if (project(p, x, y)) cullX[ci * nV + v] = x, cullY[ci * nV + v] = y;
+        else cullX[ci * nV + v] = NAN;
       }
     }
     projX.resize(T * nV), projY.resize(T * nV);
@@ -547,12 +547,12 @@ struct BucketRasterizer::Impl {
         bool bounded = true;
         for (size_t ci = 0; ci < C && bounded; ++ci)
           for (int j = 0; j < nc; ++j) {
-            const float x = knotX[ci * nV + c[j]];
+            const float x = cullX[ci * nV + c[j]];
             if (std::isnan(x)) {
               bounded = false;
               break;
             }
-            const float y = knotY[ci * nV + c[j]];
+            const float y = cullY[ci * nV + c[j]];
             bx0 = std::min(bx0, x), by0 = std::min(by0, y), bx1 = std::max(bx1, x), by1 = std::max(by1, y);
           }
         const float mm = m + 1e-6f * std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1)));

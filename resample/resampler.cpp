@@ -355,6 +355,16 @@ RenderResult render(const RenderSpec& spec) {
       if (aovs[a].isUInt) ++uintBase;
       else floatBase += aovs[a].components;
     }
+    // Per filtered output variable, its sample arrays and image channels: set up once per bucket,
+    // not per pixel.
+    std::vector<std::vector<const std::vector<float>*>> aovIn(aovs.size());
+    std::vector<std::vector<float*>> aovOut(aovs.size());
+    for (size_t a = 0; a < aovs.size(); ++a)
+      if (!aovs[a].isUInt && !aovs[a].filter.special())
+        for (int c = 0; c < aovs[a].components; ++c) {
+          aovIn[a].push_back(&rs.aov[size_t(aovFloatBase[a] + c)]);
+          aovOut[a].push_back(img.channels[size_t(aovImageChannel[a][size_t(c)])].f.data());
+        }
     for (int py = bk.y0; py < bk.y1; ++py)
       for (int px = bk.x0; px < bk.x1; ++px) {
         filterInto(mainTable, rgbaIn, rgbaOut, px, py);
@@ -374,13 +384,7 @@ RenderResult render(const RenderSpec& spec) {
               img.channels[size_t(aovImageChannel[a][size_t(c)])].f[o] =
                   specialFilter(ch.filter.kind, rs.aov[size_t(aovFloatBase[a] + c)].data() + q * N, rs.aovZ.data() + q * N, N, 0.f);
           } else {
-            std::vector<const std::vector<float>*> in;
-            std::vector<float*> outs;
-            for (int c = 0; c < ch.components; ++c) {
-              in.push_back(&rs.aov[size_t(aovFloatBase[a] + c)]);
-              outs.push_back(img.channels[size_t(aovImageChannel[a][size_t(c)])].f.data());
-            }
-            filterInto(*aovTables[a], in, outs, px, py);
+            filterInto(*aovTables[a], aovIn[a], aovOut[a], px, py);
           }
         }
       }
