@@ -85,9 +85,7 @@ struct FieldsCommand {
   std::pair<ShutterGroup, ShutterGroup> fieldGroups(int64_t frame) const {
     double a = 0, b = fieldAngle / 360.0;
     if (!fieldShutter.empty()) {
-      char tail = 0;
-      if (std::sscanf(fieldShutter.c_str(), "%lf:%lf%c", &a, &b, &tail) != 2 || !(a <= b) || !std::isfinite(a) || !std::isfinite(b))
-        fail("--field-shutter", "expected OPEN:CLOSE in field durations, got '", fieldShutter, "'");
+      parseInterval(fieldShutter, "--field-shutter", a, b);
     } else if (position == "center") {
       a = -b / 2, b = b / 2;
     } else if (position == "end") {

@@ -39,13 +39,17 @@ void ShutterOptions::addTo(CLI::App* app, bool withInterval) {
       ->group("Shutter");
 }
 
+void parseInterval(const std::string& text, const std::string& where, double& open, double& close) {
+  char tail = 0;
+  if (std::sscanf(text.c_str(), "%lf:%lf%c", &open, &close, &tail) != 2 || !std::isfinite(open) || !std::isfinite(close))
+    fail(where, "expected OPEN:CLOSE, got '", text, "'");
+  if (close < open) fail(where, "the interval ", open, ":", close, " closes before it opens");
+}
+
 void ShutterOptions::interval(double& open, double& close, double defaultOpen, double defaultClose) const {
   open = defaultOpen, close = defaultClose;
   if (!shutter.empty()) {
-    char tail = 0;
-    if (std::sscanf(shutter.c_str(), "%lf:%lf%c", &open, &close, &tail) != 2 || !std::isfinite(open) || !std::isfinite(close))
-      fail("--shutter", "expected OPEN:CLOSE in frames, got '", shutter, "'");
-    if (close < open) fail("--shutter", "the interval ", open, ":", close, " closes before it opens");
+    parseInterval(shutter, "--shutter", open, close);
   } else if (angle >= 0) {
     const double len = angle / 360.0;
     if (position == "start") open = 0, close = len;

@@ -25,6 +25,9 @@
 
 namespace reshutter::cli {
 
+/// Parses "OPEN:CLOSE" (two finite numbers, OPEN <= CLOSE); throws Error naming `where`.
+void parseInterval(const std::string& text, const std::string& where, double& open, double& close);
+
 struct ShutterOptions {
   std::string shutter;             // "A:B"
   double angle = -1;               // degrees; < 0: not given
