@@ -1,6 +1,7 @@
 // Re-timing on the shutter model: interlaced fields in one pass against the two-pass reference,
 // frame-rate conversion across per-frame stores against analytic coverage, shutter shapes,
 // rolling shutter slant, coverage gaps, and the `fields` / `retime` commands on sequences.
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 
@@ -260,4 +261,21 @@ TEST(RetimeCli, MissingStoresAreReportedAllAtOnceBeforeAnyWork) {
   EXPECT_NE(r.err.find("shot.0003.mps"), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("shot.0005.mps"), std::string::npos) << r.err;
   EXPECT_FALSE(std::filesystem::exists(dir.path("out.0001.exr"))) << "no work may start before the check";
+}
+
+TEST(RetimeCli, BadShutterArgumentsGiveOneLineAndNoOutput) {
+  ScratchDir dir;
+  Motion m;
+  frameStore(m, 1, dir.path("shot.0001.mps"));
+  const std::string shot = dir.path("shot.####.mps"), out = dir.path("o.####.exr");
+  for (const std::string& args : {"fields " + shot + " --frames 1 --field-shutter 0.5:0.1 -o " + out, "fields " + shot + " --frames 1 --field-shutter x -o " + out,
+                                 "fields " + shot + " --frames 1", "retime " + shot + " --to-fps 30 --frames 1 --shutter 1:0 -o " + out,
+                                 "retime " + shot + " --to-fps 0/0 --frames 1 -o " + out, "fields " + shot + " --frames 1-2 -o " + dir.path("same.exr")}) {
+    CommandResult r = runReshutter(args);
+    EXPECT_NE(r.exitCode, 0) << args;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << args << ": " << r.err;
+    EXPECT_EQ(r.err.rfind("reshutter: ", 0), 0u) << r.err;
+  }
+  EXPECT_FALSE(std::filesystem::exists(dir.path("o.0001.exr")));
+  EXPECT_FALSE(std::filesystem::exists(dir.path("same.exr")));
 }
