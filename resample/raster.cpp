@@ -19,6 +19,7 @@ void RasterStats::add(const RasterStats& o) {
   parts += o.parts;
   fragments += o.fragments;
   staticMicropolygons += o.staticMicropolygons;
+  linearMicropolygons += o.linearMicropolygons;
   transparentParts += o.transparentParts;
 }
 
@@ -111,7 +112,12 @@ struct BucketRasterizer::Impl {
   // Per-part scratch.
   std::vector<glm::dvec3> hom;         // homogeneous vertex coordinates at one time
   std::vector<double> thetaTimes;      // distinct times the moving path projects vertices at
-  std::vector<float> projX, projY;     // [theta * nV + v]; projX NaN = before the near plane
+  std::vector<float> projX, projY;     // [v * T + theta]; projX NaN = before the near plane
+  std::vector<float> projRho;          // [v * T + theta]: perspective lag bound of theta interval (theta, theta+1)
+  std::vector<float> depthScratch;     // one vertex's depths at the theta times
+  std::vector<uint32_t> candidates;    // sample indices that pass the box test, per stratum
+  std::vector<float> cullZ;            // [cull time * nV + v]: camera depth
+  std::vector<float> stratumU;         // linear path: [2 s], [2 s + 1] = stratum s's span in the group interval, 0..1
   std::vector<int> stratumFirst, stratumLast;  // theta index range per stratum
   std::vector<EdgeQuad> segEdges;      // [segment * 5 + edge] for the current micropolygon
   std::vector<uint8_t> segReady;
@@ -478,6 +484,19 @@ struct BucketRasterizer::Impl {
     f = float((tau - knots[k]) / (knots[k + 1] - knots[k]));
   }
 
+  // Time mapping of one part's knot schedule for the exact sample tests.
+  struct SegmentMap {
+    bool twoKnots;
+    float fScale, fOffset;  // two knots: segment parameter f = (st + fOffset) * fScale
+    double toLocal;         // local time = st + toLocal
+  };
+
+  // A group interval [theta0, theta1] that lies inside one knot segment, for rasterizeLinear().
+  struct LinearInterval {
+    float thetaA = 0, invLen = 0;  // u = (st - thetaA) * invLen
+    float uErr = 0;                // rounding of u, as a fraction of the interval
+  };
+
   void rasterizeMoving(const Source& src, const TilePart& part, const store::Schedule& knots, const HitContext& hc, int g) {
     const uint32_t nV = part.numVertices, K = part.numKnots;
     const double F = double(src.frame);
@@ -512,7 +531,7 @@ struct BucketRasterizer::Impl {
     for (size_t ti = 0; ti < T; ++ti)
       if (ti == 0 || ti + 1 == T || std::binary_search(knots.begin(), knots.end(), thetaTimes[ti])) cullTheta.push_back(uint32_t(ti));
     const size_t C = cullTheta.size();
-    cullX.resize(C * nV), cullY.resize(C * nV);
+    cullX.resize(C * nV), cullY.resize(C * nV), cullZ.resize(C * nV);
     for (size_t ci = 0; ci < C; ++ci) {
       const uint32_t k = thetaSeg[cullTheta[ci]];
       const float f = thetaF[cullTheta[ci]];
@@ -522,25 +541,49 @@ struct BucketRasterizer::Impl {
         float x, y;
         if (project(p, x, y)) cullX[ci * nV + v] = x, cullY[ci * nV + v] = y;
         else cullX[ci * nV + v] = NAN;
+        cullZ[ci * nV + v] = p.z;
       }
     }
-    projX.resize(T * nV), projY.resize(T * nV);
+    projX.resize(T * nV), projY.resize(T * nV), projRho.resize(T * nV), depthScratch.resize(T);
     thetaBox.resize(4 * T);
     vertexStamp.assign(nV, 0u);
 
     // Two-knot schedules (the common case): the segment parameter is a linear map of st.
     const bool twoKnots = K == 2;
-    const float fScale = twoKnots ? float(1.0 / (knots[1] - knots[0])) : 0.f;
-    const float fOffset = twoKnots ? float(toLocal - knots[0]) : 0.f;
+    const SegmentMap seg{twoKnots, twoKnots ? float(1.0 / (knots[1] - knots[0])) : 0.f, twoKnots ? float(toLocal - knots[0]) : 0.f, toLocal};
 
     const uint32_t segments = K - 1;
     segEdges.resize(size_t(segments) * 5);
     segReady.resize(segments);
     const float m = 1e-3f;
+    const float rx0 = float(x0) - m, ry0 = float(y0) - m, rx1 = float(x0 + w) + m, ry1 = float(y0 + h) + m;
+
+    // The whole group interval inside one knot segment (always, for two-knot schedules): every
+    // corner moves along one straight screen line over it, so the two end projections the cull
+    // made bound the micropolygon at any time (see linearPathMargins), with no per-theta work.
+    const bool linearPath = opt.perStratumBounds && C == 2 && thetaTimes[0] >= knots[0] && thetaTimes[T - 1] <= knots[K - 1];
+    LinearInterval li{};
+    if (linearPath) {
+      const double th0 = thetaTimes[0], th1 = thetaTimes[T - 1], len = th1 - th0;
+      li.thetaA = float(th0 - toLocal);
+      li.invLen = float(1.0 / len);
+      const uint32_t k0 = thetaSeg[0];
+      const double knotSpan = K > 1 ? knots[std::min(k0 + 1, K - 1)] - knots[k0] : 0.0;
+      // A sample's time and segment parameter are floats: their rounding, as a fraction of the
+      // interval, widens the box by that fraction of the micropolygon's motion.
+      li.uErr = float(5e-7 * (std::max({1.0, std::abs(th0 - toLocal), std::abs(th1 - toLocal)}) + knotSpan) / len);
+      stratumU.resize(2 * size_t(N));
+      for (int s = 0; s < N; ++s) {
+        stratumU[2 * size_t(s)] = std::clamp(float((lo[s] - F - th0) / len) - 1e-6f, 0.f, 1.f);
+        stratumU[2 * size_t(s) + 1] = std::clamp(float((hi[s] - F - th0) / len) + 1e-6f, 0.f, 1.f);
+      }
+    }
+
     for (uint32_t mi = 0; mi < part.numMicropolygons; ++mi) {
       const uint32_t* c = &part.corners[size_t(mi) * 4];
       const bool tri = c[3] == kNoCorner;
       const int nc = tri ? 3 : 4;
+      if (linearPath && rasterizeLinear(part, knots, hc, seg, li, g, mi, c, tri, nc, nV, checkCover, covLo, covHi, rx0, ry0, rx1, ry1)) continue;
       // Cull against the region over the knots in range.
       {
         float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
@@ -599,64 +642,183 @@ struct BucketRasterizer::Impl {
       const float* ty0 = tx0 + T;
       const float* tx1 = ty0 + T;
       const float* ty1 = tx1 + T;
-      const float rx0 = float(x0) - m, ry0 = float(y0) - m, rx1 = float(x0 + w) + m, ry1 = float(y0 + h) + m;
-
       for (int s = 0; s < N; ++s) {
+        const int first = stratumFirst[size_t(s)], last = stratumLast[size_t(s)];
         float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
         const bool bounded = pathBounded;
         if (bounded) {
-          for (int ti = stratumFirst[size_t(s)]; ti <= stratumLast[size_t(s)]; ++ti)
+          for (int ti = first; ti <= last; ++ti)
             bx0 = std::min(bx0, tx0[ti]), by0 = std::min(by0, ty0[ti]), bx1 = std::max(bx1, tx1[ti]), by1 = std::max(by1, ty1[ti]);
           const float mm = 1e-6f * std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1)));
           if (bx1 + mm < rx0 || bx0 - mm >= rx1 || by1 + mm < ry0 || by0 - mm >= ry1) continue;  // pixelRange()'s margin
         }
         TestArea ta;
         if (!testArea(bounded, bx0, by0, bx1, by1, ta)) continue;
-        const int px0 = ta.px0, py0 = ta.py0, px1 = ta.px1, py1 = ta.py1;
-        const float sbx0 = ta.sx0, sby0 = ta.sy0, sbx1 = ta.sx1, sby1 = ta.sy1;
-        for (int py = py0; py <= py1; ++py) {
-          if (rowGroup[size_t(py - y0)] != g) continue;
-          const size_t rowBase = size_t(s) * P + size_t(py - y0) * w;
-          for (int px = px0; px <= px1; ++px) {
-            const size_t idx = rowBase + size_t(px - x0);
-            if (sx[idx] < sbx0 || sx[idx] > sbx1 || sy[idx] < sby0 || sy[idx] > sby1) continue;
-            const float t = st[idx];
-            if (checkCover && (double(t) < covLo || double(t) > covHi)) continue;
-            ++stats.sampleTests;
-            uint32_t k = 0;
-            float f;
-            if (twoKnots) f = std::clamp((t + fOffset) * fScale, 0.f, 1.f);
-            else segmentAt(knots, double(t) + toLocal, k, f);
-            EdgeQuad* q = &segEdges[size_t(k) * 5];
-            if (!segReady[k]) {
-              prepareEdges(part, c, tri, k, q);
-              segReady[k] = 1;
+        // Candidates: the stratum's samples inside the micropolygon's box at the sample's own
+        // time, gathered without branches (the in/out pattern is random, so branches mispredict).
+        size_t n = 0;
+        candidates.resize(size_t(ta.px1 - ta.px0 + 1) * size_t(ta.py1 - ta.py0 + 1));
+        uint32_t* __restrict cand = candidates.data();
+        // One theta interval inside one knot segment: each corner moves along a straight screen
+        // line, so the box at time u is the lerp of the boxes at the interval's ends (min of
+        // lerps >= lerp of mins), widened by how far perspective makes a corner lag or lead its
+        // linear schedule (|dx| |dz| / 4 z_min), and for float rounding.
+        float mx = INFINITY, my = INFINITY;
+        if (bounded && last == first + 1) {
+          float rho = 0.f;
+          if (view.perspective)
+            for (int j = 0; j < nc; ++j) rho = std::max(rho, projRho[size_t(c[j]) * T + size_t(first)]);
+          const float mag = std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1)));
+          mx = 1e-3f + 1e-6f * mag + (rho + 1e-5f) * (bx1 - bx0);
+          my = 1e-3f + 1e-6f * mag + (rho + 1e-5f) * (by1 - by0);
+        }
+        if (std::isfinite(mx) && std::isfinite(my)) {
+          const float ax0 = tx0[first] - mx, dx0 = tx0[last] - tx0[first], ax1 = tx1[first] + mx, dx1 = tx1[last] - tx1[first];
+          const float ay0 = ty0[first] - my, dy0 = ty0[last] - ty0[first], ay1 = ty1[first] + my, dy1 = ty1[last] - ty1[first];
+          const float thetaA = float(thetaTimes[size_t(first)] - toLocal);
+          const float invLen = float(1.0 / (thetaTimes[size_t(last)] - thetaTimes[size_t(first)]));
+          const float cLo = float(covLo), cHi = float(covHi);
+          for (int py = ta.py0; py <= ta.py1; ++py) {
+            if (rowGroup[size_t(py - y0)] != g) continue;
+            const uint32_t rowBase = uint32_t(size_t(s) * P + size_t(py - y0) * w - size_t(x0));
+            for (int px = ta.px0; px <= ta.px1; ++px) {
+              const uint32_t idx = rowBase + uint32_t(px);
+              const float t = st[idx];
+              const float u = std::clamp((t - thetaA) * invLen, 0.f, 1.f);
+              const float x = sx[idx], y = sy[idx];
+              bool in = (x >= ax0 + u * dx0) & (x <= ax1 + u * dx1) & (y >= ay0 + u * dy0) & (y <= ay1 + u * dy1);
+              if (checkCover) in &= (t >= cLo) & (t <= cHi);
+              cand[n] = idx;
+              n += in;
             }
-            glm::dvec3 E[5];
-            double e[5];
-            for (int ei = 0; ei < 5; ++ei) {
-              if (tri && (ei == 2 || ei == 3)) {
-                E[ei] = glm::dvec3(0.0), e[ei] = 0.0;
-                continue;
-              }
-              E[ei] = q[ei].at(f);
-              e[ei] = dotRay(rayX[idx], rayY[idx], E[ei]);
+          }
+        } else {
+          const float sbx0 = ta.sx0, sby0 = ta.sy0, sbx1 = ta.sx1, sby1 = ta.sy1;
+          for (int py = ta.py0; py <= ta.py1; ++py) {
+            if (rowGroup[size_t(py - y0)] != g) continue;
+            const uint32_t rowBase = uint32_t(size_t(s) * P + size_t(py - y0) * w - size_t(x0));
+            for (int px = ta.px0; px <= ta.px1; ++px) {
+              const uint32_t idx = rowBase + uint32_t(px);
+              const float x = sx[idx], y = sy[idx];
+              bool in = (x >= sbx0) & (x <= sbx1) & (y >= sby0) & (y <= sby1);
+              if (checkCover) in &= (double(st[idx]) >= covLo) & (double(st[idx]) <= covHi);
+              cand[n] = idx;
+              n += in;
             }
-            int tr;
-            float b[3];
-            if (!inside(e, E, tri, flags, tr, b)) continue;
-            float zv[3];
-            const uint32_t tv[3] = {c[0], c[tr == 0 ? 1 : 2], c[tr == 0 ? 2 : 3]};
-            for (int j = 0; j < 3; ++j) {
-              const float za = part.position(k, tv[j]).z, zb = part.position(k + 1, tv[j]).z;
-              zv[j] = za + f * (zb - za);
-            }
-            const float z = b[0] * zv[0] + b[1] * zv[1] + b[2] * zv[2];
-            if (!(z >= view.nearClip && z <= view.farClip)) continue;
-            recordHit(hc, slotAt[idx], mi, tv, b, z);
           }
         }
+        testCandidates(part, knots, hc, seg, mi, c, tri, flags, n);
       }
+    }
+  }
+
+  // Micropolygon mi over a group interval inside one knot segment, from its corners' raster
+  // positions A and B at the interval's ends (cullX/cullY rows 0 and 1). Corner j's raster
+  // position at fraction u is x_j(u) = A_j + (B_j - A_j) g_j(u), a straight line in screen space;
+  // with perspective g_j(u) - u = u (1 - u) (zB - zA) / z(u), at most |dz| / (4 z_min) = rho_j.
+  // As min of lerps >= lerp of mins, min_j x_j(u) >= lerp(min_j A_j, min_j B_j, u) - max_j rho_j
+  // |B_j - A_j|: the box at any time is the lerped end boxes widened by that margin. Each
+  // stratum tests only its samples inside the box at the sample's own time. False (nothing
+  // done) when a corner lies before the near plane at either end: the general path handles it.
+  bool rasterizeLinear(const TilePart& part, const store::Schedule& knots, const HitContext& hc, const SegmentMap& seg, const LinearInterval& li,
+                       int g, uint32_t mi, const uint32_t* c, bool tri, int nc, uint32_t nV, bool checkCover, double covLo, double covHi, float rx0,
+                       float ry0, float rx1, float ry1) {
+    float ax0 = INFINITY, ay0 = INFINITY, ax1 = -INFINITY, ay1 = -INFINITY;
+    float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
+    float rho = 0.f, mvx = 0.f, mvy = 0.f;
+    for (int j = 0; j < nc; ++j) {
+      const uint32_t v = c[j];
+      const float xa = cullX[v], ya = cullY[v], xb = cullX[nV + v], yb = cullY[nV + v];
+      if (std::isnan(xa) || std::isnan(xb)) return false;
+      ax0 = std::min(ax0, xa), ax1 = std::max(ax1, xa), ay0 = std::min(ay0, ya), ay1 = std::max(ay1, ya);
+      bx0 = std::min(bx0, xb), bx1 = std::max(bx1, xb), by0 = std::min(by0, yb), by1 = std::max(by1, yb);
+      mvx = std::max(mvx, std::abs(xb - xa)), mvy = std::max(mvy, std::abs(yb - ya));
+      if (view.perspective) {
+        const float za = cullZ[v], zb = cullZ[nV + v];
+        rho = std::max(rho, std::abs(zb - za) / (4.f * std::min(za, zb)) * 1.001f);
+      }
+    }
+    const float mag = std::max(std::max(std::max(std::abs(ax0), std::abs(ax1)), std::max(std::abs(ay0), std::abs(ay1))),
+                               std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1))));
+    const float slack = rho + li.uErr + 1e-5f;
+    const float mx = 1e-3f + 1e-6f * mag + slack * mvx, my = 1e-3f + 1e-6f * mag + slack * mvy;
+    if (!(std::isfinite(mx) && std::isfinite(my))) return false;
+    // The whole interval first: most parts' micropolygons miss a given bucket.
+    if (std::max(ax1, bx1) + mx < rx0 || std::min(ax0, bx0) - mx >= rx1 || std::max(ay1, by1) + my < ry0 || std::min(ay0, by0) - my >= ry1)
+      return true;
+    ++stats.linearMicropolygons;
+    const float lx0 = ax0 - mx, dx0 = bx0 - ax0, lx1 = ax1 + mx, dx1 = bx1 - ax1;
+    const float ly0 = ay0 - my, dy0 = by0 - ay0, ly1 = ay1 + my, dy1 = by1 - ay1;
+    std::fill(segReady.begin(), segReady.end(), 0);
+    const uint8_t flags = part.flags[mi];
+    for (int s = 0; s < N; ++s) {
+      const float u0 = stratumU[2 * size_t(s)], u1 = stratumU[2 * size_t(s) + 1];
+      const float sx0 = std::min(lx0 + u0 * dx0, lx0 + u1 * dx0), sx1 = std::max(lx1 + u0 * dx1, lx1 + u1 * dx1);
+      const float sy0 = std::min(ly0 + u0 * dy0, ly0 + u1 * dy0), sy1 = std::max(ly1 + u0 * dy1, ly1 + u1 * dy1);
+      if (sx1 < rx0 || sx0 >= rx1 || sy1 < ry0 || sy0 >= ry1) continue;
+      int px0, py0, px1, py1;
+      if (!pixelRange(sx0, sy0, sx1, sy1, px0, py0, px1, py1)) continue;
+      candidates.resize(size_t(px1 - px0 + 1) * size_t(py1 - py0 + 1));
+      uint32_t* __restrict cand = candidates.data();
+      size_t n = 0;
+      for (int py = py0; py <= py1; ++py) {
+        if (rowGroup[size_t(py - y0)] != g) continue;
+        const uint32_t rowBase = uint32_t(size_t(s) * P + size_t(py - y0) * w - size_t(x0));
+        for (int px = px0; px <= px1; ++px) {
+          const uint32_t idx = rowBase + uint32_t(px);
+          const float t = st[idx];
+          const float u = std::clamp((t - li.thetaA) * li.invLen, 0.f, 1.f);
+          const float x = sx[idx], y = sy[idx];
+          bool in = (x >= lx0 + u * dx0) & (x <= lx1 + u * dx1) & (y >= ly0 + u * dy0) & (y <= ly1 + u * dy1);
+          if (checkCover) in &= (double(t) >= covLo) & (double(t) <= covHi);
+          cand[n] = idx;
+          n += in;
+        }
+      }
+      testCandidates(part, knots, hc, seg, mi, c, tri, flags, n);
+    }
+    return true;
+  }
+
+  // Exact coverage test of micropolygon mi against the first n sample indices in `candidates`.
+  void testCandidates(const TilePart& part, const store::Schedule& knots, const HitContext& hc, const SegmentMap& seg, uint32_t mi,
+                      const uint32_t* c, bool tri, uint8_t flags, size_t n) {
+    stats.sampleTests += n;
+    const uint32_t* cand = candidates.data();
+    for (size_t ci = 0; ci < n; ++ci) {
+      const uint32_t idx = cand[ci];
+      const float t = st[idx];
+      uint32_t k = 0;
+      float f;
+      if (seg.twoKnots) f = std::clamp((t + seg.fOffset) * seg.fScale, 0.f, 1.f);
+      else segmentAt(knots, double(t) + seg.toLocal, k, f);
+      EdgeQuad* q = &segEdges[size_t(k) * 5];
+      if (!segReady[k]) {
+        prepareEdges(part, c, tri, k, q);
+        segReady[k] = 1;
+      }
+      glm::dvec3 E[5];
+      double e[5];
+      for (int ei = 0; ei < 5; ++ei) {
+        if (tri && (ei == 2 || ei == 3)) {
+          E[ei] = glm::dvec3(0.0), e[ei] = 0.0;
+          continue;
+        }
+        E[ei] = q[ei].at(f);
+        e[ei] = dotRay(rayX[idx], rayY[idx], E[ei]);
+      }
+      int tr;
+      float b[3];
+      if (!inside(e, E, tri, flags, tr, b)) continue;
+      float zv[3];
+      const uint32_t tv[3] = {c[0], c[tr == 0 ? 1 : 2], c[tr == 0 ? 2 : 3]};
+      for (int j = 0; j < 3; ++j) {
+        const float za = part.position(k, tv[j]).z, zb = part.position(k + 1, tv[j]).z;
+        zv[j] = za + f * (zb - za);
+      }
+      const float z = b[0] * zv[0] + b[1] * zv[1] + b[2] * zv[2];
+      if (!(z >= view.nearClip && z <= view.farClip)) continue;
+      recordHit(hc, slotAt[idx], mi, tv, b, z);
     }
   }
 
@@ -667,6 +829,7 @@ struct BucketRasterizer::Impl {
     float* __restrict ys = &projY[size_t(v) * T];
     const float* __restrict fs = thetaF.data();
     const float ax = float(view.ax), bx = float(view.bx), ay = float(view.ay), by = float(view.by), nearZ = view.nearClip;
+    float* __restrict zd = depthScratch.data();
     size_t ti = 0;
     while (ti < T) {
       const uint32_t k = thetaSeg[ti];
@@ -680,6 +843,7 @@ struct BucketRasterizer::Impl {
           const float x = ax * (px * iz) + bx, y = ay * (py * iz) + by;
           xs[i] = pz >= nearZ ? x : NAN;
           ys[i] = y;
+          zd[i] = pz;
         }
       } else {
         for (size_t i = ti; i < end; ++i) {
@@ -692,6 +856,17 @@ struct BucketRasterizer::Impl {
     // Infinite or NaN results (a vertex exactly at the eye) count as unbounded.
     for (size_t i = 0; i < T; ++i)
       if (!std::isfinite(xs[i]) || !std::isfinite(ys[i])) xs[i] = NAN;
+    if (!view.perspective) return;
+    // How far the projected corner can stray from its linear schedule between theta times i
+    // and i+1, per pixel of its motion: x(u) = x_i + (x_{i+1} - x_i) g(u) with
+    // g(u) - u = u (1 - u) (z_{i+1} - z_i) / z(u), at most |dz| / (4 z_min). Inside one knot segment.
+    float* __restrict rho = &projRho[size_t(v) * T];
+    const float* __restrict zs = depthScratch.data();
+    for (size_t i = 0; i + 1 < T; ++i) {
+      const float za = zs[i], zb = zs[i + 1];
+      rho[i] = std::abs(zb - za) / (4.f * std::min(za, zb)) * 1.001f;
+    }
+    rho[T - 1] = 0.f;
   }
 
   void prepareEdges(const TilePart& part, const uint32_t* c, bool tri, uint32_t k, EdgeQuad* q) const {

@@ -32,7 +32,8 @@ std::string RenderStats::report() const {
   s << "  sample tests       " << raster.sampleTests << "\n";
   s << "  hits               " << raster.hits << "\n";
   s << "  test efficiency    " << ste << " (hits / tests)\n";
-  s << "  micropolygons      " << raster.micropolygons << " processed (" << raster.staticMicropolygons << " on the static path), "
+  s << "  micropolygons      " << raster.micropolygons << " processed (" << raster.staticMicropolygons << " on the static path, "
+    << raster.linearMicropolygons << " bounded from their interval ends), "
     << raster.parts << " parts (" << raster.transparentParts << " transparent)\n";
   s << "  fragments          " << raster.fragments << " transparent\n";
   s << "  time (thread-sum)  gather " << gatherSeconds << " s, rasterize " << rasterSeconds << " s, resolve " << resolveSeconds

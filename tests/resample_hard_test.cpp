@@ -119,6 +119,33 @@ TEST(ResampleHard, TinyAndHugeMotion) {
   }
 }
 
+// Fast depth motion under perspective: a corner's screen position is not linear in time (it lags
+// or leads by up to |dx| |dz| / 4 z_min), so bounds lerped between the interval's ends must be
+// widened by that much. Here the lag reaches ~100 px; a bound without it drops whole regions.
+// Every pixel must agree with the ray caster to within one sample of its 16.
+TEST(ResampleHard, FastDepthMotionUnderPerspective) {
+  ScratchDir dir;
+  TestScene s = makeScene(48, 32);
+  // Rushing at the camera while sliding across the frame, and receding the other way.
+  s.mps.push_back(cameraQuad({{s.cam(2, 4, 20), s.cam(14, 4, 20), s.cam(14, 16, 20), s.cam(2, 16, 20)},
+                              {s.cam(20, 6, 1), s.cam(46, 6, 1), s.cam(46, 30, 1), s.cam(20, 30, 1)}}));
+  s.mps.push_back(cameraQuad({{s.cam(40, 2, 1.2), s.cam(47, 2, 1.2), s.cam(47, 12, 1.5), s.cam(40, 12, 1.5)},
+                              {s.cam(5, 20, 25), s.cam(9, 20, 25), s.cam(9, 28, 25), s.cam(5, 28, 25)}},
+                             {0.1f, 0.3f, 0.9f}));
+  auto reader = writeScene(s, dir.path("depth.mps"));
+  for (auto [a, b] : {std::pair{0.0, 1.0}, std::pair{0.2, 0.45}}) {
+    RenderSpec spec = specFor(reader, a, b, 4, 4, 3);
+    RenderResult r = render(spec);
+    expectFinite(r);
+    Reference ref = rayCast(s, spec, 48, 32);
+    const auto& A = channel(r, "A").f;
+    double worst = 0, covered = 0;
+    for (size_t p = 0; p < ref.a.size(); ++p) worst = std::max(worst, std::abs(A[p] - ref.a[p])), covered += ref.a[p];
+    EXPECT_GT(covered, 50.0) << "the scene must cover a good part of the frame";
+    EXPECT_LE(worst, 1.0 / 16 + 1e-4) << a << ":" << b;
+  }
+}
+
 TEST(ResampleHard, KnotsATenMillionthOfAFrameApart) {
   ScratchDir dir;
   TestScene s = makeScene(32, 24, {0.5, 0.5 + 1e-7});
