@@ -85,6 +85,7 @@ struct BucketRasterizer::Impl {
   std::vector<uint32_t> slotAt;               // [s * P + p] → p * N + i
   std::vector<uint8_t> rowGroup;              // per region row
   std::vector<uint8_t> groupPresent;
+  bool multiGroup = false;                    // more than one shutter group (fields): rows differ
   std::vector<double> stratumLo, stratumHi;   // [g * N + s], absolute frames
   double tMin = 0, tMax = 0;
   // Sample times are stored as float offsets from one base shared by every bucket, so a sample's
@@ -198,6 +199,8 @@ struct BucketRasterizer::Impl {
         }
       }
 
+    candidates.resize(size_t(P));
+    multiGroup = G > 1;
     zbuf.assign(slots, INFINITY);
     cr.assign(slots, 0.f), cg.assign(slots, 0.f), cb.assign(slots, 0.f);
     state.assign(slots, 0);
@@ -316,37 +319,31 @@ struct BucketRasterizer::Impl {
   // ------------------------------------------------------------------------------------------
   // Coverage
 
+  // One triangle's coverage from its three edge values, oriented around it, and - for exact
+  // zeros only, so they may be computed on demand - its edge vectors vecOf(0..2). On a hit, the
+  // perspective-correct barycentrics of its three vertices.
+  template <class EdgeVector>
+  inline bool triangleCovers(double a0, double a1, double a2, EdgeVector vecOf, uint8_t flags, float bOut[3]) const {
+    const double S = a0 + a1 + a2;
+    if (S == 0.0 || (opt.backfaceCull && S > 0.0 && !(flags & store::kTwoSided))) return false;
+    const bool flip = S < 0.0;
+    const bool in0 = a0 == 0.0 ? ownsTie(vecOf(0), flip) : (flip ? a0 < 0.0 : a0 > 0.0);
+    const bool in1 = a1 == 0.0 ? ownsTie(vecOf(1), flip) : (flip ? a1 < 0.0 : a1 > 0.0);
+    const bool in2 = a2 == 0.0 ? ownsTie(vecOf(2), flip) : (flip ? a2 < 0.0 : a2 > 0.0);
+    if (!(in0 && in1 && in2)) return false;
+    const double inv = 1.0 / S;
+    bOut[0] = float(a0 * inv), bOut[1] = float(a1 * inv), bOut[2] = float(a2 * inv);
+    return true;
+  }
+
   // Given the edge values e[5] (edges 01 12 23 30 02) and vectors E[5] at the sample's time,
   // decides coverage: triangle A (p0 p1 p2) first, then B (p0 p2 p3). On a hit, returns which
   // triangle and the perspective-correct barycentrics of its three vertices.
   inline bool inside(const double e[5], const glm::dvec3 E[5], bool triangle, uint8_t flags, int& triOut, float bOut[3]) const {
-    {
-      const double a0 = e[1], a1 = -e[4], a2 = e[0];
-      const double S = a0 + a1 + a2;
-      if (S != 0.0 && !(opt.backfaceCull && S > 0.0 && !(flags & store::kTwoSided))) {
-        const bool flip = S < 0.0;
-        const bool in0 = a0 == 0.0 ? ownsTie(E[1], flip) : (flip ? a0 < 0.0 : a0 > 0.0);
-        const bool in1 = a1 == 0.0 ? ownsTie(-E[4], flip) : (flip ? a1 < 0.0 : a1 > 0.0);
-        const bool in2 = a2 == 0.0 ? ownsTie(E[0], flip) : (flip ? a2 < 0.0 : a2 > 0.0);
-        if (in0 && in1 && in2) {
-          const double inv = 1.0 / S;
-          triOut = 0, bOut[0] = float(a0 * inv), bOut[1] = float(a1 * inv), bOut[2] = float(a2 * inv);
-          return true;
-        }
-      }
-    }
-    if (triangle) return false;
-    const double a0 = e[2], a1 = e[3], a2 = e[4];
-    const double S = a0 + a1 + a2;
-    if (S == 0.0 || (opt.backfaceCull && S > 0.0 && !(flags & store::kTwoSided))) return false;
-    const bool flip = S < 0.0;
-    const bool in0 = a0 == 0.0 ? ownsTie(E[2], flip) : (flip ? a0 < 0.0 : a0 > 0.0);
-    const bool in1 = a1 == 0.0 ? ownsTie(E[3], flip) : (flip ? a1 < 0.0 : a1 > 0.0);
-    const bool in2 = a2 == 0.0 ? ownsTie(E[4], flip) : (flip ? a2 < 0.0 : a2 > 0.0);
-    if (!(in0 && in1 && in2)) return false;
-    const double inv = 1.0 / S;
-    triOut = 1, bOut[0] = float(a0 * inv), bOut[1] = float(a1 * inv), bOut[2] = float(a2 * inv);
-    return true;
+    triOut = 0;
+    if (triangleCovers(e[1], -e[4], e[0], [&](int i) { return i == 0 ? E[1] : i == 1 ? -E[4] : E[0]; }, flags, bOut)) return true;
+    triOut = 1;
+    return !triangle && triangleCovers(e[2], e[3], e[4], [&](int i) { return E[2 + i]; }, flags, bOut);
   }
 
   glm::dvec3 homogeneous(const glm::vec3& p) const { return view.perspective ? glm::dvec3(p) : glm::dvec3(p.x, p.y, 1.0); }
@@ -388,10 +385,17 @@ struct BucketRasterizer::Impl {
     // A sample at x lies in pixel floor(x); a small margin absorbs float rounding of projections.
     const float mag = std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1)));
     const float m = 1e-3f + 1e-6f * mag;
-    px0 = std::max(x0, int(std::floor(std::max(bx0 - m, float(x0)))));
-    py0 = std::max(y0, int(std::floor(std::max(by0 - m, float(y0)))));
-    px1 = std::min(x0 + w - 1, int(std::floor(std::min(bx1 + m, float(x0 + w)))));
-    py1 = std::min(y0 + h - 1, int(std::floor(std::min(by1 + m, float(y0 + h)))));
+    // Clamped into the region first (NaN goes to the low end), so the floor is a plain int cast:
+    // std::floor is a libm call on baseline x86-64 and this runs once per stratum.
+    auto clampTo = [](float v, float lo, float hi) { return v >= lo ? (v <= hi ? v : hi) : lo; };
+    auto floorInt = [](float v) {
+      const int i = int(v);
+      return i - (float(i) > v);
+    };
+    px0 = floorInt(clampTo(bx0 - m, float(x0), float(x0 + w)));
+    py0 = floorInt(clampTo(by0 - m, float(y0), float(y0 + h)));
+    px1 = std::min(x0 + w - 1, floorInt(clampTo(bx1 + m, float(x0 - 1), float(x0 + w))));
+    py1 = std::min(y0 + h - 1, floorInt(clampTo(by1 + m, float(y0 - 1), float(y0 + h))));
     return px0 <= px1 && py0 <= py1;
   }
 
@@ -657,8 +661,7 @@ struct BucketRasterizer::Impl {
         // Candidates: the stratum's samples inside the micropolygon's box at the sample's own
         // time, gathered without branches (the in/out pattern is random, so branches mispredict).
         size_t n = 0;
-        candidates.resize(size_t(ta.px1 - ta.px0 + 1) * size_t(ta.py1 - ta.py0 + 1));
-        uint32_t* __restrict cand = candidates.data();
+        uint32_t* __restrict cand = candidates.data();  // one sample per pixel and stratum: P suffice
         // One theta interval inside one knot segment: each corner moves along a straight screen
         // line, so the box at time u is the lerp of the boxes at the interval's ends (min of
         // lerps >= lerp of mins), widened by how far perspective makes a corner lag or lead its
@@ -758,16 +761,15 @@ struct BucketRasterizer::Impl {
       if (sx1 < rx0 || sx0 >= rx1 || sy1 < ry0 || sy0 >= ry1) continue;
       int px0, py0, px1, py1;
       if (!pixelRange(sx0, sy0, sx1, sy1, px0, py0, px1, py1)) continue;
-      candidates.resize(size_t(px1 - px0 + 1) * size_t(py1 - py0 + 1));
-      uint32_t* __restrict cand = candidates.data();
+      uint32_t* __restrict cand = candidates.data();  // one sample per pixel and stratum: P suffice
       size_t n = 0;
       for (int py = py0; py <= py1; ++py) {
-        if (rowGroup[size_t(py - y0)] != g) continue;
+        if (multiGroup && rowGroup[size_t(py - y0)] != g) continue;
         const uint32_t rowBase = uint32_t(size_t(s) * P + size_t(py - y0) * w - size_t(x0));
         for (int px = px0; px <= px1; ++px) {
           const uint32_t idx = rowBase + uint32_t(px);
           const float t = st[idx];
-          const float u = std::clamp((t - li.thetaA) * li.invLen, 0.f, 1.f);
+          const float u = std::min(std::max((t - li.thetaA) * li.invLen, 0.f), 1.f);  // minss/maxss, no branches
           const float x = sx[idx], y = sy[idx];
           bool in = (x >= lx0 + u * dx0) & (x <= lx1 + u * dx1) & (y >= ly0 + u * dy0) & (y <= ly1 + u * dy1);
           if (checkCover) in &= (double(t) >= covLo) & (double(t) <= covHi);
@@ -797,19 +799,17 @@ struct BucketRasterizer::Impl {
         prepareEdges(part, c, tri, k, q);
         segReady[k] = 1;
       }
-      glm::dvec3 E[5];
-      double e[5];
-      for (int ei = 0; ei < 5; ++ei) {
-        if (tri && (ei == 2 || ei == 3)) {
-          E[ei] = glm::dvec3(0.0), e[ei] = 0.0;
-          continue;
-        }
-        E[ei] = q[ei].at(f);
-        e[ei] = dotRay(rayX[idx], rayY[idx], E[ei]);
-      }
-      int tr;
+      // Triangle A's edges first; B's two others only if A misses. Edge vectors only for ties.
+      const double rx = rayX[idx], ry = rayY[idx];
+      const double fd = f;
+      auto edgeValue = [&](int ei) { return dotRay(rx, ry, q[ei].at(fd)); };
+      const double e0 = edgeValue(0), e1 = edgeValue(1), e4 = edgeValue(4);
+      int tr = 0;
       float b[3];
-      if (!inside(e, E, tri, flags, tr, b)) continue;
+      if (!triangleCovers(e1, -e4, e0, [&](int i) { return i == 0 ? q[1].at(fd) : i == 1 ? -q[4].at(fd) : q[0].at(fd); }, flags, b)) {
+        if (tri || !triangleCovers(edgeValue(2), edgeValue(3), e4, [&](int i) { return q[2 + i].at(fd); }, flags, b)) continue;
+        tr = 1;
+      }
       float zv[3];
       const uint32_t tv[3] = {c[0], c[tr == 0 ? 1 : 2], c[tr == 0 ? 2 : 3]};
       for (int j = 0; j < 3; ++j) {
