@@ -754,30 +754,39 @@ struct BucketRasterizer::Impl {
     const float ly0 = ay0 - my, dy0 = by0 - ay0, ly1 = ay1 + my, dy1 = by1 - ay1;
     std::fill(segReady.begin(), segReady.end(), 0);
     const uint8_t flags = part.flags[mi];
-    for (int s = 0; s < N; ++s) {
-      const float u0 = stratumU[2 * size_t(s)], u1 = stratumU[2 * size_t(s) + 1];
+    // Strata share one pixel range while their combined motion stays under half the
+    // micropolygon's size (at least half a pixel): short intervals and slow motion then pay the
+    // per-bound set-up once for several strata instead of once each (the samples' own-time box
+    // test below keeps the candidates as tight either way).
+    const float motion = std::max(mvx, mvy), size = std::max(std::max(ax1 - ax0, ay1 - ay0), 1.f);
+    const int span = motion > 0.f ? std::clamp(int(0.5f * size * float(N) / motion), 1, N) : N;
+    for (int s0 = 0; s0 < N; s0 += span) {
+      const int s1 = std::min(N, s0 + span);  // strata [s0, s1)
+      const float u0 = stratumU[2 * size_t(s0)], u1 = stratumU[2 * size_t(s1 - 1) + 1];
       const float sx0 = std::min(lx0 + u0 * dx0, lx0 + u1 * dx0), sx1 = std::max(lx1 + u0 * dx1, lx1 + u1 * dx1);
       const float sy0 = std::min(ly0 + u0 * dy0, ly0 + u1 * dy0), sy1 = std::max(ly1 + u0 * dy1, ly1 + u1 * dy1);
       if (sx1 < rx0 || sx0 >= rx1 || sy1 < ry0 || sy0 >= ry1) continue;
       int px0, py0, px1, py1;
       if (!pixelRange(sx0, sy0, sx1, sy1, px0, py0, px1, py1)) continue;
-      uint32_t* __restrict cand = candidates.data();  // one sample per pixel and stratum: P suffice
-      size_t n = 0;
-      for (int py = py0; py <= py1; ++py) {
-        if (multiGroup && rowGroup[size_t(py - y0)] != g) continue;
-        const uint32_t rowBase = uint32_t(size_t(s) * P + size_t(py - y0) * w - size_t(x0));
-        for (int px = px0; px <= px1; ++px) {
-          const uint32_t idx = rowBase + uint32_t(px);
-          const float t = st[idx];
-          const float u = std::min(std::max((t - li.thetaA) * li.invLen, 0.f), 1.f);  // minss/maxss, no branches
-          const float x = sx[idx], y = sy[idx];
-          bool in = (x >= lx0 + u * dx0) & (x <= lx1 + u * dx1) & (y >= ly0 + u * dy0) & (y <= ly1 + u * dy1);
-          if (checkCover) in &= (double(t) >= covLo) & (double(t) <= covHi);
-          cand[n] = idx;
-          n += in;
+      for (int s = s0; s < s1; ++s) {
+        uint32_t* __restrict cand = candidates.data();  // one sample per pixel and stratum: P suffice
+        size_t n = 0;
+        for (int py = py0; py <= py1; ++py) {
+          if (multiGroup && rowGroup[size_t(py - y0)] != g) continue;
+          const uint32_t rowBase = uint32_t(size_t(s) * P + size_t(py - y0) * w - size_t(x0));
+          for (int px = px0; px <= px1; ++px) {
+            const uint32_t idx = rowBase + uint32_t(px);
+            const float t = st[idx];
+            const float u = std::min(std::max((t - li.thetaA) * li.invLen, 0.f), 1.f);  // minss/maxss, no branches
+            const float x = sx[idx], y = sy[idx];
+            bool in = (x >= lx0 + u * dx0) & (x <= lx1 + u * dx1) & (y >= ly0 + u * dy0) & (y <= ly1 + u * dy1);
+            if (checkCover) in &= (double(t) >= covLo) & (double(t) <= covHi);
+            cand[n] = idx;
+            n += in;
+          }
         }
+        testCandidates(part, knots, hc, seg, mi, c, tri, flags, n);
       }
-      testCandidates(part, knots, hc, seg, mi, c, tri, flags, n);
     }
     return true;
   }
