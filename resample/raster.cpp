@@ -768,6 +768,11 @@ struct BucketRasterizer::Impl {
       if (sx1 < rx0 || sx0 >= rx1 || sy1 < ry0 || sy0 >= ry1) continue;
       int px0, py0, px1, py1;
       if (!pixelRange(sx0, sy0, sx1, sy1, px0, py0, px1, py1)) continue;
+      if (multiGroup) {  // fields: trim to this group's rows (a one-row range is often the other field's)
+        while (py0 <= py1 && rowGroup[size_t(py0 - y0)] != g) ++py0;
+        while (py1 >= py0 && rowGroup[size_t(py1 - y0)] != g) --py1;
+        if (py0 > py1) continue;
+      }
       for (int s = s0; s < s1; ++s) {
         uint32_t* __restrict cand = candidates.data();  // one sample per pixel and stratum: P suffice
         size_t n = 0;
@@ -785,7 +790,7 @@ struct BucketRasterizer::Impl {
             n += in;
           }
         }
-        testCandidates(part, knots, hc, seg, mi, c, tri, flags, n);
+        if (n) testCandidates(part, knots, hc, seg, mi, c, tri, flags, n);
       }
     }
     return true;

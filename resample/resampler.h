@@ -39,7 +39,7 @@ struct RenderSpec {
   FilterSpec filter;             // for R G B A (Z always takes zmin)
   std::vector<AovRequest> aovs;
   RasterOptions raster;
-  int bucketSize = 32;
+  int bucketSize = 64;
   size_t cacheBytes = size_t(256) << 20;  // decoded-part cache per store
   bool progress = true;
   bool halfColor = false;        // write R G B A as half
