@@ -16,9 +16,10 @@
 // The build uses -ffp-contract=off so no compiler contraction breaks that symmetry.
 //
 // Per-time-stratum bounds: each micropolygon is bounded separately for each of the N time strata
-// of the bucket (its vertices projected at the strata's boundary times), and tested only against
-// the one sample per pixel whose time falls in that stratum (Pixar's INTERVAL idea). A shorter
-// shutter gives smaller bounds and proportionally fewer tests.
+// of the bucket and tested only against the one sample per pixel whose time falls in that stratum
+// (Pixar's INTERVAL idea). Inside one knot segment the bound comes from the corners' projections
+// at the interval's two ends (a perspective-widened lerp), and each sample is first checked
+// against the box at its own time; otherwise vertices are projected at every stratum boundary.
 #pragma once
 
 #include <cstdint>
