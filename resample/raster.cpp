@@ -501,12 +501,64 @@ struct BucketRasterizer::Impl {
     float uErr = 0;                // rounding of u, as a fraction of the interval
   };
 
+  // The source's coverage in st units, where a render spans several stores.
+  struct Coverage {
+    bool check;
+    double lo, hi;
+  };
+
+  // What every micropolygon of one part shares on the moving path for shutter group g.
+  struct MovingPart {
+    const TilePart& part;
+    const store::Schedule& knots;
+    const HitContext& hc;
+    SegmentMap seg;
+    int g;
+    uint32_t nV;
+    Coverage cover;
+    float rx0, ry0, rx1, ry1;  // the region, widened by the projection margin
+  };
+
+  // An axis-aligned box moving linearly over a time span: [x0 + u dx0, x1 + u dx1] ×
+  // [y0 + u dy0, y1 + u dy1] at u = clamp((st - thetaA) invLen, 0, 1). A fixed box has zero d's.
+  struct MovingBox {
+    float x0, dx0, x1, dx1, y0, dy0, y1, dy1;
+    float thetaA = 0, invLen = 0;
+  };
+
+  // How far perspective can make a projected corner stray from its linear schedule between
+  // depths za and zb, per pixel of its motion: x(u) = xa + (xb - xa) g(u) with
+  // g(u) - u = u (1 - u) (zb - za) / z(u), at most |dz| / (4 z_min). Inside one knot segment.
+  static float perspectiveLag(float za, float zb) { return std::abs(zb - za) / (4.f * std::min(za, zb)) * 1.001f; }
+
+  // Gathers into `candidates` stratum s's samples of group g in pixels [px0, px1] × [py0, py1]
+  // that lie in `box` at their own time and inside the source's coverage; returns how many.
+  // Branch-free: the in/out pattern is random, so branches would mispredict.
+  size_t gatherCandidates(int s, int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover) {
+    uint32_t* __restrict cand = candidates.data();  // one sample per pixel and stratum: P suffice
+    size_t n = 0;
+    for (int py = py0; py <= py1; ++py) {
+      if (multiGroup && rowGroup[size_t(py - y0)] != g) continue;
+      const uint32_t rowBase = uint32_t(size_t(s) * P + size_t(py - y0) * w - size_t(x0));
+      for (int px = px0; px <= px1; ++px) {
+        const uint32_t idx = rowBase + uint32_t(px);
+        const float t = st[idx];
+        const float u = std::min(std::max((t - box.thetaA) * box.invLen, 0.f), 1.f);  // minss/maxss, no branches
+        const float x = sx[idx], y = sy[idx];
+        bool in = (x >= box.x0 + u * box.dx0) & (x <= box.x1 + u * box.dx1) & (y >= box.y0 + u * box.dy0) & (y <= box.y1 + u * box.dy1);
+        if (cover.check) in &= (double(t) >= cover.lo) & (double(t) <= cover.hi);
+        cand[n] = idx;
+        n += in;
+      }
+    }
+    return n;
+  }
+
   void rasterizeMoving(const Source& src, const TilePart& part, const store::Schedule& knots, const HitContext& hc, int g) {
     const uint32_t nV = part.numVertices, K = part.numKnots;
     const double F = double(src.frame);
     const double toLocal = tBase - F;  // local time = st + toLocal
-    const double covLo = src.coverStart() - tBase, covHi = src.coverEnd() - tBase;  // in st units
-    const bool checkCover = tMin < src.coverStart() || tMax > src.coverEnd();
+    const Coverage cover{tMin < src.coverStart() || tMax > src.coverEnd(), src.coverStart() - tBase, src.coverEnd() - tBase};
     const double* lo = &stratumLo[size_t(g) * N];
     const double* hi = &stratumHi[size_t(g) * N];
 
@@ -561,10 +613,11 @@ struct BucketRasterizer::Impl {
     segReady.resize(segments);
     const float m = 1e-3f;
     const float rx0 = float(x0) - m, ry0 = float(y0) - m, rx1 = float(x0 + w) + m, ry1 = float(y0 + h) + m;
+    const MovingPart mp{part, knots, hc, seg, g, nV, cover, rx0, ry0, rx1, ry1};
 
     // The whole group interval inside one knot segment (always, for two-knot schedules): every
     // corner moves along one straight screen line over it, so the two end projections the cull
-    // made bound the micropolygon at any time (see linearPathMargins), with no per-theta work.
+    // made bound the micropolygon at any time (see rasterizeLinear), with no per-theta work.
     const bool linearPath = opt.perStratumBounds && C == 2 && thetaTimes[0] >= knots[0] && thetaTimes[T - 1] <= knots[K - 1];
     LinearInterval li{};
     if (linearPath) {
@@ -587,7 +640,7 @@ struct BucketRasterizer::Impl {
       const uint32_t* c = &part.corners[size_t(mi) * 4];
       const bool tri = c[3] == kNoCorner;
       const int nc = tri ? 3 : 4;
-      if (linearPath && rasterizeLinear(part, knots, hc, seg, li, g, mi, c, tri, nc, nV, checkCover, covLo, covHi, rx0, ry0, rx1, ry1)) continue;
+      if (linearPath && rasterizeLinear(mp, li, mi, c, tri, nc)) continue;
       // Cull against the region over the knots in range.
       {
         float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
@@ -658,14 +711,10 @@ struct BucketRasterizer::Impl {
         }
         TestArea ta;
         if (!testArea(bounded, bx0, by0, bx1, by1, ta)) continue;
-        // Candidates: the stratum's samples inside the micropolygon's box at the sample's own
-        // time, gathered without branches (the in/out pattern is random, so branches mispredict).
-        size_t n = 0;
-        uint32_t* __restrict cand = candidates.data();  // one sample per pixel and stratum: P suffice
         // One theta interval inside one knot segment: each corner moves along a straight screen
         // line, so the box at time u is the lerp of the boxes at the interval's ends (min of
-        // lerps >= lerp of mins), widened by how far perspective makes a corner lag or lead its
-        // linear schedule (|dx| |dz| / 4 z_min), and for float rounding.
+        // lerps >= lerp of mins), widened by the perspective lag and for float rounding; each
+        // sample is tested against the box at its own time. Otherwise the stratum's fixed box.
         float mx = INFINITY, my = INFINITY;
         if (bounded && last == first + 1) {
           float rho = 0.f;
@@ -675,42 +724,13 @@ struct BucketRasterizer::Impl {
           mx = 1e-3f + 1e-6f * mag + (rho + 1e-5f) * (bx1 - bx0);
           my = 1e-3f + 1e-6f * mag + (rho + 1e-5f) * (by1 - by0);
         }
-        if (std::isfinite(mx) && std::isfinite(my)) {
-          const float ax0 = tx0[first] - mx, dx0 = tx0[last] - tx0[first], ax1 = tx1[first] + mx, dx1 = tx1[last] - tx1[first];
-          const float ay0 = ty0[first] - my, dy0 = ty0[last] - ty0[first], ay1 = ty1[first] + my, dy1 = ty1[last] - ty1[first];
-          const float thetaA = float(thetaTimes[size_t(first)] - toLocal);
-          const float invLen = float(1.0 / (thetaTimes[size_t(last)] - thetaTimes[size_t(first)]));
-          const float cLo = float(covLo), cHi = float(covHi);
-          for (int py = ta.py0; py <= ta.py1; ++py) {
-            if (rowGroup[size_t(py - y0)] != g) continue;
-            const uint32_t rowBase = uint32_t(size_t(s) * P + size_t(py - y0) * w - size_t(x0));
-            for (int px = ta.px0; px <= ta.px1; ++px) {
-              const uint32_t idx = rowBase + uint32_t(px);
-              const float t = st[idx];
-              const float u = std::clamp((t - thetaA) * invLen, 0.f, 1.f);
-              const float x = sx[idx], y = sy[idx];
-              bool in = (x >= ax0 + u * dx0) & (x <= ax1 + u * dx1) & (y >= ay0 + u * dy0) & (y <= ay1 + u * dy1);
-              if (checkCover) in &= (t >= cLo) & (t <= cHi);
-              cand[n] = idx;
-              n += in;
-            }
-          }
-        } else {
-          const float sbx0 = ta.sx0, sby0 = ta.sy0, sbx1 = ta.sx1, sby1 = ta.sy1;
-          for (int py = ta.py0; py <= ta.py1; ++py) {
-            if (rowGroup[size_t(py - y0)] != g) continue;
-            const uint32_t rowBase = uint32_t(size_t(s) * P + size_t(py - y0) * w - size_t(x0));
-            for (int px = ta.px0; px <= ta.px1; ++px) {
-              const uint32_t idx = rowBase + uint32_t(px);
-              const float x = sx[idx], y = sy[idx];
-              bool in = (x >= sbx0) & (x <= sbx1) & (y >= sby0) & (y <= sby1);
-              if (checkCover) in &= (double(st[idx]) >= covLo) & (double(st[idx]) <= covHi);
-              cand[n] = idx;
-              n += in;
-            }
-          }
-        }
-        testCandidates(part, knots, hc, seg, mi, c, tri, flags, n);
+        MovingBox box{ta.sx0, 0.f, ta.sx1, 0.f, ta.sy0, 0.f, ta.sy1, 0.f};
+        if (std::isfinite(mx) && std::isfinite(my))
+          box = {tx0[first] - mx, tx0[last] - tx0[first], tx1[first] + mx, tx1[last] - tx1[first],
+                 ty0[first] - my, ty0[last] - ty0[first], ty1[first] + my, ty1[last] - ty1[first],
+                 float(thetaTimes[size_t(first)] - toLocal), float(1.0 / (thetaTimes[size_t(last)] - thetaTimes[size_t(first)]))};
+        const size_t n = gatherCandidates(s, g, ta.px0, ta.py0, ta.px1, ta.py1, box, cover);
+        if (n) testCandidates(mp, mi, c, tri, flags, n);
       }
     }
   }
@@ -723,9 +743,8 @@ struct BucketRasterizer::Impl {
   // |B_j - A_j|: the box at any time is the lerped end boxes widened by that margin. Each
   // stratum tests only its samples inside the box at the sample's own time. False (nothing
   // done) when a corner lies before the near plane at either end: the general path handles it.
-  bool rasterizeLinear(const TilePart& part, const store::Schedule& knots, const HitContext& hc, const SegmentMap& seg, const LinearInterval& li,
-                       int g, uint32_t mi, const uint32_t* c, bool tri, int nc, uint32_t nV, bool checkCover, double covLo, double covHi, float rx0,
-                       float ry0, float rx1, float ry1) {
+  bool rasterizeLinear(const MovingPart& mp, const LinearInterval& li, uint32_t mi, const uint32_t* c, bool tri, int nc) {
+    const uint32_t nV = mp.nV;
     float ax0 = INFINITY, ay0 = INFINITY, ax1 = -INFINITY, ay1 = -INFINITY;
     float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
     float rho = 0.f, mvx = 0.f, mvy = 0.f;
@@ -736,10 +755,7 @@ struct BucketRasterizer::Impl {
       ax0 = std::min(ax0, xa), ax1 = std::max(ax1, xa), ay0 = std::min(ay0, ya), ay1 = std::max(ay1, ya);
       bx0 = std::min(bx0, xb), bx1 = std::max(bx1, xb), by0 = std::min(by0, yb), by1 = std::max(by1, yb);
       mvx = std::max(mvx, std::abs(xb - xa)), mvy = std::max(mvy, std::abs(yb - ya));
-      if (view.perspective) {
-        const float za = cullZ[v], zb = cullZ[nV + v];
-        rho = std::max(rho, std::abs(zb - za) / (4.f * std::min(za, zb)) * 1.001f);
-      }
+      if (view.perspective) rho = std::max(rho, perspectiveLag(cullZ[v], cullZ[nV + v]));
     }
     const float mag = std::max(std::max(std::max(std::abs(ax0), std::abs(ax1)), std::max(std::abs(ay0), std::abs(ay1))),
                                std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1))));
@@ -747,13 +763,13 @@ struct BucketRasterizer::Impl {
     const float mx = 1e-3f + 1e-6f * mag + slack * mvx, my = 1e-3f + 1e-6f * mag + slack * mvy;
     if (!(std::isfinite(mx) && std::isfinite(my))) return false;
     // The whole interval first: most parts' micropolygons miss a given bucket.
-    if (std::max(ax1, bx1) + mx < rx0 || std::min(ax0, bx0) - mx >= rx1 || std::max(ay1, by1) + my < ry0 || std::min(ay0, by0) - my >= ry1)
+    if (std::max(ax1, bx1) + mx < mp.rx0 || std::min(ax0, bx0) - mx >= mp.rx1 || std::max(ay1, by1) + my < mp.ry0 ||
+        std::min(ay0, by0) - my >= mp.ry1)
       return true;
     ++stats.linearMicropolygons;
-    const float lx0 = ax0 - mx, dx0 = bx0 - ax0, lx1 = ax1 + mx, dx1 = bx1 - ax1;
-    const float ly0 = ay0 - my, dy0 = by0 - ay0, ly1 = ay1 + my, dy1 = by1 - ay1;
+    const MovingBox box{ax0 - mx, bx0 - ax0, ax1 + mx, bx1 - ax1, ay0 - my, by0 - ay0, ay1 + my, by1 - ay1, li.thetaA, li.invLen};
     std::fill(segReady.begin(), segReady.end(), 0);
-    const uint8_t flags = part.flags[mi];
+    const uint8_t flags = mp.part.flags[mi];
     // Strata share one pixel range while their combined motion stays under half the
     // micropolygon's size (at least half a pixel): short intervals and slow motion then pay the
     // per-bound set-up once for several strata instead of once each (the samples' own-time box
@@ -763,42 +779,28 @@ struct BucketRasterizer::Impl {
     for (int s0 = 0; s0 < N; s0 += span) {
       const int s1 = std::min(N, s0 + span);  // strata [s0, s1)
       const float u0 = stratumU[2 * size_t(s0)], u1 = stratumU[2 * size_t(s1 - 1) + 1];
-      const float sx0 = std::min(lx0 + u0 * dx0, lx0 + u1 * dx0), sx1 = std::max(lx1 + u0 * dx1, lx1 + u1 * dx1);
-      const float sy0 = std::min(ly0 + u0 * dy0, ly0 + u1 * dy0), sy1 = std::max(ly1 + u0 * dy1, ly1 + u1 * dy1);
-      if (sx1 < rx0 || sx0 >= rx1 || sy1 < ry0 || sy0 >= ry1) continue;
+      const float sx0 = std::min(box.x0 + u0 * box.dx0, box.x0 + u1 * box.dx0), sx1 = std::max(box.x1 + u0 * box.dx1, box.x1 + u1 * box.dx1);
+      const float sy0 = std::min(box.y0 + u0 * box.dy0, box.y0 + u1 * box.dy0), sy1 = std::max(box.y1 + u0 * box.dy1, box.y1 + u1 * box.dy1);
+      if (sx1 < mp.rx0 || sx0 >= mp.rx1 || sy1 < mp.ry0 || sy0 >= mp.ry1) continue;
       int px0, py0, px1, py1;
       if (!pixelRange(sx0, sy0, sx1, sy1, px0, py0, px1, py1)) continue;
       if (multiGroup) {  // fields: trim to this group's rows (a one-row range is often the other field's)
-        while (py0 <= py1 && rowGroup[size_t(py0 - y0)] != g) ++py0;
-        while (py1 >= py0 && rowGroup[size_t(py1 - y0)] != g) --py1;
+        while (py0 <= py1 && rowGroup[size_t(py0 - y0)] != mp.g) ++py0;
+        while (py1 >= py0 && rowGroup[size_t(py1 - y0)] != mp.g) --py1;
         if (py0 > py1) continue;
       }
       for (int s = s0; s < s1; ++s) {
-        uint32_t* __restrict cand = candidates.data();  // one sample per pixel and stratum: P suffice
-        size_t n = 0;
-        for (int py = py0; py <= py1; ++py) {
-          if (multiGroup && rowGroup[size_t(py - y0)] != g) continue;
-          const uint32_t rowBase = uint32_t(size_t(s) * P + size_t(py - y0) * w - size_t(x0));
-          for (int px = px0; px <= px1; ++px) {
-            const uint32_t idx = rowBase + uint32_t(px);
-            const float t = st[idx];
-            const float u = std::min(std::max((t - li.thetaA) * li.invLen, 0.f), 1.f);  // minss/maxss, no branches
-            const float x = sx[idx], y = sy[idx];
-            bool in = (x >= lx0 + u * dx0) & (x <= lx1 + u * dx1) & (y >= ly0 + u * dy0) & (y <= ly1 + u * dy1);
-            if (checkCover) in &= (double(t) >= covLo) & (double(t) <= covHi);
-            cand[n] = idx;
-            n += in;
-          }
-        }
-        if (n) testCandidates(part, knots, hc, seg, mi, c, tri, flags, n);
+        const size_t n = gatherCandidates(s, mp.g, px0, py0, px1, py1, box, mp.cover);
+        if (n) testCandidates(mp, mi, c, tri, flags, n);
       }
     }
     return true;
   }
 
   // Exact coverage test of micropolygon mi against the first n sample indices in `candidates`.
-  void testCandidates(const TilePart& part, const store::Schedule& knots, const HitContext& hc, const SegmentMap& seg, uint32_t mi,
-                      const uint32_t* c, bool tri, uint8_t flags, size_t n) {
+  void testCandidates(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, uint8_t flags, size_t n) {
+    const TilePart& part = mp.part;
+    const SegmentMap& seg = mp.seg;
     stats.sampleTests += n;
     const uint32_t* cand = candidates.data();
     for (size_t ci = 0; ci < n; ++ci) {
@@ -807,7 +809,7 @@ struct BucketRasterizer::Impl {
       uint32_t k = 0;
       float f;
       if (seg.twoKnots) f = std::clamp((t + seg.fOffset) * seg.fScale, 0.f, 1.f);
-      else segmentAt(knots, double(t) + seg.toLocal, k, f);
+      else segmentAt(mp.knots, double(t) + seg.toLocal, k, f);
       EdgeQuad* q = &segEdges[size_t(k) * 5];
       if (!segReady[k]) {
         prepareEdges(part, c, tri, k, q);
@@ -832,7 +834,7 @@ struct BucketRasterizer::Impl {
       }
       const float z = b[0] * zv[0] + b[1] * zv[1] + b[2] * zv[2];
       if (!(z >= view.nearClip && z <= view.farClip)) continue;
-      recordHit(hc, slotAt[idx], mi, tv, b, z);
+      recordHit(mp.hc, slotAt[idx], mi, tv, b, z);
     }
   }
 
@@ -871,15 +873,10 @@ struct BucketRasterizer::Impl {
     for (size_t i = 0; i < T; ++i)
       if (!std::isfinite(xs[i]) || !std::isfinite(ys[i])) xs[i] = NAN;
     if (!view.perspective) return;
-    // How far the projected corner can stray from its linear schedule between theta times i
-    // and i+1, per pixel of its motion: x(u) = x_i + (x_{i+1} - x_i) g(u) with
-    // g(u) - u = u (1 - u) (z_{i+1} - z_i) / z(u), at most |dz| / (4 z_min). Inside one knot segment.
+    // The perspective lag of each theta interval (i, i+1).
     float* __restrict rho = &projRho[size_t(v) * T];
     const float* __restrict zs = depthScratch.data();
-    for (size_t i = 0; i + 1 < T; ++i) {
-      const float za = zs[i], zb = zs[i + 1];
-      rho[i] = std::abs(zb - za) / (4.f * std::min(za, zb)) * 1.001f;
-    }
+    for (size_t i = 0; i + 1 < T; ++i) rho[i] = perspectiveLag(zs[i], zs[i + 1]);
     rho[T - 1] = 0.f;
   }
 

@@ -119,11 +119,11 @@ TEST(ResampleHard, TinyAndHugeMotion) {
   }
 }
 
-// Fast depth motion under perspective: a corner's screen position is not linear in time (it lags
+// Strong depth motion under perspective: a corner's screen position is not linear in time (it lags
 // or leads by up to |dx| |dz| / 4 z_min), so bounds lerped between the interval's ends must be
 // widened by that much. Here the lag reaches ~100 px; a bound without it drops whole regions.
 // Every pixel must agree with the ray caster to within one sample of its 16.
-TEST(ResampleHard, FastDepthMotionUnderPerspective) {
+TEST(ResampleHard, StrongDepthMotionUnderPerspective) {
   ScratchDir dir;
   TestScene s = makeScene(48, 32);
   // Rushing at the camera while sliding across the frame, and receding the other way.
