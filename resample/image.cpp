@@ -10,6 +10,7 @@
 #include <OpenEXR/ImfHeader.h>
 #include <OpenEXR/ImfOutputFile.h>
 #include <OpenEXR/ImfStandardAttributes.h>
+#include <OpenEXR/ImfThreading.h>
 #include <OpenEXR/ImfStringAttribute.h>
 #include <OpenEXR/ImfIntAttribute.h>
 #include <OpenEXR/ImfVecAttribute.h>
@@ -44,6 +45,8 @@ ImageChannel& FlatImage::add(const std::string& name, bool isUInt) {
   channels.push_back(std::move(c));
   return channels.back();
 }
+
+void setExrThreads(int threads) { Imf::setGlobalThreadCount(threads); }
 
 ExrCompression parseExrCompression(const std::string& s, const std::string& where) {
   static const std::pair<const char*, ExrCompression> names[] = {

@@ -55,6 +55,9 @@ struct ExrOptions {
 /// Writes a scanline OpenEXR. Throws Error naming the file on failure; nothing is left under
 /// `path` unless the write completes.
 void writeExr(const std::string& path, const FlatImage& image, const ImageProvenance& info, const ExrOptions& options = {});
+/// Threads OpenEXR compresses (and decompresses) chunks with, flat and deep; 0 = none (the
+/// calling thread does it all). The file's bytes do not depend on it.
+void setExrThreads(int threads);
 
 struct Quantize {
   double zero = 0, one = 255, min = 0, max = 255;

@@ -5,6 +5,7 @@
 #include <cstring>
 
 #include "common/error.h"
+#include "resample/raster_kernels.h"
 
 namespace reshutter::resample {
 
@@ -55,6 +56,7 @@ inline bool ownsTie(const glm::dvec3& e, bool flip) {
 }
 
 constexpr uint8_t kHitOpaque = 1, kHitMatte = 2;
+constexpr size_t kPad = 8;
 
 struct Fragment {
   float z;
@@ -76,13 +78,14 @@ struct BucketRasterizer::Impl {
   const std::vector<AovChannel>& aovs;
   RasterOptions opt;
   const int N;
+  const bool vectorKernels;  // the AVX2 loops of raster_kernels.h (same results as the scalar ones)
   int aovFloatCount = 0, aovUIntCount = 0;
   std::vector<int> aovFloatBase, aovUIntBase;  // per AOV channel: first component slot
 
   // Region.
   int x0 = 0, y0 = 0, w = 0, h = 0, P = 0;
   std::vector<float> sx, sy, st, rayX, rayY;  // stratum-major: [s * P + p]
-  std::vector<uint32_t> slotAt;               // [s * P + p] → p * N + i
+  std::vector<uint32_t> idxOf;                // [p * N + i] → s * P + p (sample i of pixel p lies in stratum s)
   std::vector<uint8_t> rowGroup;              // per region row
   std::vector<uint8_t> groupPresent;
   bool multiGroup = false;                    // more than one shutter group (fields): rows differ
@@ -94,7 +97,8 @@ struct BucketRasterizer::Impl {
   // field rendered alone and the same field inside an interlaced frame get bit-identical times.
   double tBase = 0;
 
-  // Per-sample results (slot = p * N + i).
+  // Per-sample results, indexed like the samples (stratum-major, s * P + p): a micropolygon's hits
+  // then land next to the sample data its tests just read; resolve() reorders them by pixel.
   std::vector<float> zbuf, cr, cg, cb;
   std::vector<uint8_t> state;
   std::vector<uint32_t> objectOf, gridOf;
@@ -116,9 +120,11 @@ struct BucketRasterizer::Impl {
   std::vector<float> projX, projY;     // [v * T + theta]; projX NaN = before the near plane
   std::vector<float> projRho;          // [v * T + theta]: perspective lag bound of theta interval (theta, theta+1)
   std::vector<float> depthScratch;     // one vertex's depths at the theta times
-  std::vector<uint32_t> candidates;    // sample indices that pass the box test, per stratum
+  std::vector<uint32_t> candidates;    // sample indices that pass the box test, per micropolygon
+  std::vector<kernels::EdgeHit> edgeHits;
   std::vector<float> cullZ;            // [cull time * nV + v]: camera depth
   std::vector<float> stratumU;         // linear path: [2 s], [2 s + 1] = stratum s's span in the group interval, 0..1
+  std::vector<float> stratumU0, stratumU1;  // the same split in two, padded to whole vectors (kernels::gatherStrata)
   std::vector<int> stratumFirst, stratumLast;  // theta index range per stratum
   std::vector<EdgeQuad> segEdges;      // [segment * 5 + edge] for the current micropolygon
   std::vector<uint8_t> segReady;
@@ -130,7 +136,8 @@ struct BucketRasterizer::Impl {
   std::vector<float> thetaBox;         // current micropolygon's raster box per theta: x0[T] y0[T] x1[T] y1[T]
 
   Impl(const SamplePattern& p, const ShutterModel& s, const View& v, const std::vector<AovChannel>& a, const RasterOptions& o)
-      : pattern(p), shutter(s), view(v), aovs(a), opt(o), N(p.spp()), tBase(std::floor(s.earliest())) {
+      : pattern(p), shutter(s), view(v), aovs(a), opt(o), N(p.spp()), vectorKernels(o.vectorKernels && kernels::available()),
+        tBase(std::floor(s.earliest())) {
     for (const auto& ch : aovs) {
       if (ch.isUInt) {
         aovUIntBase.push_back(aovUIntCount);
@@ -147,7 +154,9 @@ struct BucketRasterizer::Impl {
   void begin(int rx0, int ry0, int rw, int rh) {
     x0 = rx0, y0 = ry0, w = rw, h = rh, P = w * h;
     const size_t slots = size_t(P) * N;
-    sx.resize(slots), sy.resize(slots), st.resize(slots), rayX.resize(slots), rayY.resize(slots), slotAt.resize(slots);
+    // The vector kernels read up to 7 floats past a row's end.
+    sx.resize(slots + kPad), sy.resize(slots + kPad), st.resize(slots + kPad), rayX.resize(slots + kPad), rayY.resize(slots + kPad);
+    idxOf.resize(slots);
     rowGroup.resize(size_t(h));
     const int G = int(shutter.groups().size());
     groupPresent.assign(size_t(G), 0);
@@ -175,7 +184,7 @@ struct BucketRasterizer::Impl {
           tMin = std::min(tMin, tc), tMax = std::max(tMax, tc);
           glm::vec2 ray = view.rayXY(x, y);
           rayX[idx] = ray.x, rayY[idx] = ray.y;
-          slotAt[idx] = uint32_t(p * N + i);
+          idxOf[size_t(p) * N + i] = uint32_t(idx);
         }
       }
     // Time range of each stratum over this region's rows (rolling shutter widens it), widened to
@@ -199,13 +208,15 @@ struct BucketRasterizer::Impl {
         }
       }
 
-    candidates.resize(size_t(P));
+    // One micropolygon's candidates: at most one per pixel and stratum, and the kernels write up
+    // to 7 entries past the count.
+    candidates.resize(slots + kPad);
+    edgeHits.resize(slots + kPad);
     multiGroup = G > 1;
     zbuf.assign(slots, INFINITY);
     cr.assign(slots, 0.f), cg.assign(slots, 0.f), cb.assign(slots, 0.f);
     state.assign(slots, 0);
-    objectOf.assign(slots, 0);
-    gridOf.assign(slots, 0);
+    if (opt.surfaceIds) objectOf.assign(slots, 0), gridOf.assign(slots, 0);
     zAov.assign(slots * size_t(aovFloatCount), 0.f);
     zAovU.assign(slots * size_t(aovUIntCount), 0u);
     fragHead.assign(slots, -1);
@@ -262,9 +273,42 @@ struct BucketRasterizer::Impl {
     const store::Schema* schema;
     int ci, oi;
     bool transparentPart;
+    // The common case - an opaque part, per-vertex colour, no output variables - takes
+    // recordOpaqueHit() with the colour array at hand instead of the general attribute lookup.
+    bool opaqueFast = false;
+    const float* colour = nullptr;
   };
 
+  HitContext hitContext(const store::StoreMeta& meta, const TileEntry& entry, const TilePart& part) const {
+    HitContext hc{&part, &meta.schema, meta.schema.ci(), meta.schema.oi(), (entry.effects & store::kEffectTransparent) != 0};
+    if (!hc.transparentPart && !aovFloatCount && !aovUIntCount && hc.ci >= 0) {
+      const auto& decl = meta.schema.attrs[size_t(hc.ci)];
+      const auto& arr = part.attrs[size_t(hc.ci)].f;
+      if (decl.rate == store::AttrRate::Vertex && store::componentCount(decl.type) == 3 && !arr.empty()) hc.opaqueFast = true, hc.colour = arr.data();
+    }
+    return hc;
+  }
+
   void recordHit(const HitContext& hc, uint32_t slot, uint32_t m, const uint32_t v[3], const float b[3], float z) {
+    if (hc.opaqueFast) recordOpaqueHit(hc, slot, m, v, b, z);
+    else recordAnyHit(hc, slot, m, v, b, z);
+  }
+
+  // Same values as recordAnyHit() gives an opaque surface (attrAt's arithmetic, in its order).
+  inline void recordOpaqueHit(const HitContext& hc, uint32_t slot, uint32_t m, const uint32_t v[3], const float b[3], float z) {
+    ++stats.hits;
+    if (!(z < zbuf[slot])) return;  // ties keep the earlier surface: deterministic by store order
+    zbuf[slot] = z;
+    const float *c0 = hc.colour + size_t(v[0]) * 3, *c1 = hc.colour + size_t(v[1]) * 3, *c2 = hc.colour + size_t(v[2]) * 3;
+    cr[slot] = b[0] * c0[0] + b[1] * c1[0] + b[2] * c2[0];
+    cg[slot] = b[0] * c0[1] + b[1] * c1[1] + b[2] * c2[1];
+    cb[slot] = b[0] * c0[2] + b[1] * c1[2] + b[2] * c2[2];
+    const store::TilePart& part = *hc.part;
+    state[slot] = kHitOpaque | ((part.flags[m] & store::kMatte) ? kHitMatte : 0);
+    if (opt.surfaceIds) objectOf[slot] = part.objectId[m], gridOf[slot] = part.gridId[m];
+  }
+
+  void recordAnyHit(const HitContext& hc, uint32_t slot, uint32_t m, const uint32_t v[3], const float b[3], float z) {
     ++stats.hits;
     const store::TilePart& part = *hc.part;
     const bool matte = part.flags[m] & store::kMatte;
@@ -278,8 +322,7 @@ struct BucketRasterizer::Impl {
       attrAt(part, *hc.schema, hc.ci, m, v, b, c);
       cr[slot] = c[0], cg[slot] = c[1], cb[slot] = c[2];
       state[slot] = kHitOpaque | (matte ? kHitMatte : 0);
-      objectOf[slot] = part.objectId[m];
-      gridOf[slot] = part.gridId[m];
+      if (opt.surfaceIds) objectOf[slot] = part.objectId[m], gridOf[slot] = part.gridId[m];
       if (aovFloatCount || aovUIntCount) {
         float fv[64];
         uint32_t uv[16];
@@ -431,6 +474,32 @@ struct BucketRasterizer::Impl {
       const int px0 = ta.px0, py0 = ta.py0, px1 = ta.px1, py1 = ta.py1;
       const float sbx0 = ta.sx0, sby0 = ta.sy0, sbx1 = ta.sx1, sby1 = ta.sy1;
       ++stats.staticMicropolygons;
+      if (vectorKernels && !checkCover) {
+        // Every stratum's samples in the box, then the vector edge test with fixed edges.
+        const MovingBox box{ta.sx0, 0.f, ta.sx1, 0.f, ta.sy0, 0.f, ta.sy1, 0.f, 0.f, 0.f};
+        size_t n = 0;
+        n = gatherCandidates(0, onlyGroup, px0, py0, px1, py1, box, Coverage{false, 0, 0}, n, N);
+        if (!n) continue;
+        stats.sampleTests += n;
+        kernels::LinearEdges edges{};
+        for (int k = 0; k < 5; ++k) edges.c[k][0] = E[k].x, edges.c[k][1] = E[k].y, edges.c[k][2] = E[k].z;
+        const kernels::EdgeTestSetup setup{st.data(), rayX.data(), rayY.data(), 0.f, 0.f, tri, opt.backfaceCull && !(part.flags[m] & store::kTwoSided), true};
+        const size_t hits = kernels::testLinearEdges(setup, edges, candidates.data(), n, edgeHits.data());
+        for (size_t hi = 0; hi < hits; ++hi) {
+          const kernels::EdgeHit& eh = edgeHits[hi];
+          const uint32_t idx = candidates[eh.candidate];
+          if (eh.undecided) {
+            testStatic(hc, m, c, tri, E, zv, idx);
+            continue;
+          }
+          const float* b = eh.b;
+          const float z = eh.triangle == 0 ? b[0] * zv[0] + b[1] * zv[1] + b[2] * zv[2] : b[0] * zv[0] + b[1] * zv[2] + b[2] * zv[3];
+          if (!(z >= view.nearClip && z <= view.farClip)) continue;
+          const uint32_t tv[3] = {c[0], c[eh.triangle == 0 ? 1 : 2], c[eh.triangle == 0 ? 2 : 3]};
+          recordHit(hc, idx, m, tv, b, z);
+        }
+        continue;
+      }
       for (int py = py0; py <= py1; ++py) {
         if (onlyGroup >= 0 && rowGroup[size_t(py - y0)] != onlyGroup) continue;
         for (int px = px0; px <= px1; ++px) {
@@ -440,20 +509,25 @@ struct BucketRasterizer::Impl {
             if (sx[idx] < sbx0 || sx[idx] > sbx1 || sy[idx] < sby0 || sy[idx] > sby1) continue;
             if (checkCover && !(tBase + st[idx] >= covLo && tBase + st[idx] <= covHi)) continue;
             ++stats.sampleTests;
-            double e[5] = {0, 0, 0, 0, 0};
-            for (int k = 0; k < 5; ++k)
-              if (!tri || k == 0 || k == 1 || k == 4) e[k] = dotRay(rayX[idx], rayY[idx], E[k]);
-            float b[3];
-            int t;
-            if (!inside(e, E, tri, part.flags[m], t, b)) continue;
-            const float z = t == 0 ? b[0] * zv[0] + b[1] * zv[1] + b[2] * zv[2] : b[0] * zv[0] + b[1] * zv[2] + b[2] * zv[3];
-            if (!(z >= view.nearClip && z <= view.farClip)) continue;
-            const uint32_t tv[3] = {c[0], c[t == 0 ? 1 : 2], c[t == 0 ? 2 : 3]};
-            recordHit(hc, slotAt[idx], m, tv, b, z);
+            testStatic(hc, m, c, tri, E, zv, uint32_t(idx));
           }
         }
       }
     }
+  }
+
+  // Exact coverage test of static micropolygon m (edge vectors E, corner depths zv) against one sample.
+  void testStatic(const HitContext& hc, uint32_t m, const uint32_t* c, bool tri, const glm::dvec3 E[5], const float zv[4], uint32_t idx) {
+    double e[5] = {0, 0, 0, 0, 0};
+    for (int k = 0; k < 5; ++k)
+      if (!tri || k == 0 || k == 1 || k == 4) e[k] = dotRay(rayX[idx], rayY[idx], E[k]);
+    float b[3];
+    int t;
+    if (!inside(e, E, tri, hc.part->flags[m], t, b)) return;
+    const float z = t == 0 ? b[0] * zv[0] + b[1] * zv[1] + b[2] * zv[2] : b[0] * zv[0] + b[1] * zv[2] + b[2] * zv[3];
+    if (!(z >= view.nearClip && z <= view.farClip)) return;
+    const uint32_t tv[3] = {c[0], c[t == 0 ? 1 : 2], c[t == 0 ? 2 : 3]};
+    recordHit(hc, idx, m, tv, b, z);
   }
 
   // ------------------------------------------------------------------------------------------
@@ -519,26 +593,30 @@ struct BucketRasterizer::Impl {
     float rx0, ry0, rx1, ry1;  // the region, widened by the projection margin
   };
 
-  // An axis-aligned box moving linearly over a time span: [x0 + u dx0, x1 + u dx1] ×
-  // [y0 + u dy0, y1 + u dy1] at u = clamp((st - thetaA) invLen, 0, 1). A fixed box has zero d's.
-  struct MovingBox {
-    float x0, dx0, x1, dx1, y0, dy0, y1, dy1;
-    float thetaA = 0, invLen = 0;
-  };
+  using MovingBox = kernels::MovingBox;
 
   // How far perspective can make a projected corner stray from its linear schedule between
   // depths za and zb, per pixel of its motion: x(u) = xa + (xb - xa) g(u) with
   // g(u) - u = u (1 - u) (zb - za) / z(u), at most |dz| / (4 z_min). Inside one knot segment.
   static float perspectiveLag(float za, float zb) { return std::abs(zb - za) / (4.f * std::min(za, zb)) * 1.001f; }
 
-  // Gathers into `candidates` stratum s's samples of group g in pixels [px0, px1] × [py0, py1]
-  // that lie in `box` at their own time and inside the source's coverage; returns how many.
-  // Branch-free: the in/out pattern is random, so branches would mispredict.
-  size_t gatherCandidates(int s, int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover) {
-    uint32_t* __restrict cand = candidates.data();  // one sample per pixel and stratum: P suffice
-    size_t n = 0;
+  // Appends to `candidates` (from position n) stratum s's samples of group g (< 0: any) in pixels
+  // [px0, px1] × [py0, py1] that lie in `box` at their own time and inside the source's
+  // coverage; returns the new count. Branch-free: the in/out pattern is random, so branches
+  // would mispredict.
+  // Strata [s, sEnd) when sEnd is given, all with the same pixel range.
+  size_t gatherCandidates(int s, int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover, size_t n, int sEnd = -1) {
+    if (sEnd < 0) sEnd = s + 1;
+    if (vectorKernels && !cover.check) {
+      const kernels::SampleRows rows{st.data(), sx.data(), sy.data(), size_t(s) * P + size_t(py0 - y0) * w + size_t(px0 - x0), size_t(w),
+                                     px1 - px0 + 1, py1 - py0 + 1, multiGroup && g >= 0 ? &rowGroup[size_t(py0 - y0)] : nullptr, uint8_t(g),
+                                     sEnd - s, size_t(P)};
+      return n + kernels::gatherInBox(rows, box, candidates.data() + n);
+    }
+    uint32_t* __restrict cand = candidates.data();
+    for (; s < sEnd; ++s)
     for (int py = py0; py <= py1; ++py) {
-      if (multiGroup && rowGroup[size_t(py - y0)] != g) continue;
+      if (multiGroup && g >= 0 && rowGroup[size_t(py - y0)] != g) continue;
       const uint32_t rowBase = uint32_t(size_t(s) * P + size_t(py - y0) * w - size_t(x0));
       for (int px = px0; px <= px1; ++px) {
         const uint32_t idx = rowBase + uint32_t(px);
@@ -634,6 +712,8 @@ struct BucketRasterizer::Impl {
         stratumU[2 * size_t(s)] = std::clamp(float((lo[s] - F - th0) / len) - 1e-6f, 0.f, 1.f);
         stratumU[2 * size_t(s) + 1] = std::clamp(float((hi[s] - F - th0) / len) + 1e-6f, 0.f, 1.f);
       }
+      stratumU0.assign(size_t(N + 7) / 8 * 8, 0.f), stratumU1.assign(size_t(N + 7) / 8 * 8, 0.f);
+      for (int s = 0; s < N; ++s) stratumU0[size_t(s)] = stratumU[2 * size_t(s)], stratumU1[size_t(s)] = stratumU[2 * size_t(s) + 1];
     }
 
     for (uint32_t mi = 0; mi < part.numMicropolygons; ++mi) {
@@ -729,7 +809,7 @@ struct BucketRasterizer::Impl {
           box = {tx0[first] - mx, tx0[last] - tx0[first], tx1[first] + mx, tx1[last] - tx1[first],
                  ty0[first] - my, ty0[last] - ty0[first], ty1[first] + my, ty1[last] - ty1[first],
                  float(thetaTimes[size_t(first)] - toLocal), float(1.0 / (thetaTimes[size_t(last)] - thetaTimes[size_t(first)]))};
-        const size_t n = gatherCandidates(s, g, ta.px0, ta.py0, ta.px1, ta.py1, box, cover);
+        const size_t n = gatherCandidates(s, g, ta.px0, ta.py0, ta.px1, ta.py1, box, cover, 0);
         if (n) testCandidates(mp, mi, c, tri, flags, n);
       }
     }
@@ -776,6 +856,16 @@ struct BucketRasterizer::Impl {
     // test below keeps the candidates as tight either way).
     const float motion = std::max(mvx, mvy), size = std::max(std::max(ax1 - ax0, ay1 - ay0), 1.f);
     const int span = motion > 0.f ? std::clamp(int(0.5f * size * float(N) / motion), 1, N) : N;
+    size_t n = 0;
+    if (span == 1 && vectorKernels && !mp.cover.check && N <= 64) {
+      // Every stratum's pixel range and samples in one vector pass.
+      const kernels::SampleRows region{st.data(), sx.data(), sy.data(), 0, size_t(w), w, h, multiGroup ? rowGroup.data() : nullptr,
+                                       uint8_t(mp.g), N, size_t(P)};
+      const kernels::StrataSpans spans{stratumU0.data(), stratumU1.data(), N, x0, y0, w, h, 1e-3f + 1e-6f * mag};
+      n = kernels::gatherStrata(region, spans, box, candidates.data());
+      if (n) testCandidates(mp, mi, c, tri, flags, n);
+      return true;
+    }
     for (int s0 = 0; s0 < N; s0 += span) {
       const int s1 = std::min(N, s0 + span);  // strata [s0, s1)
       const float u0 = stratumU[2 * size_t(s0)], u1 = stratumU[2 * size_t(s1 - 1) + 1];
@@ -789,53 +879,91 @@ struct BucketRasterizer::Impl {
         while (py1 >= py0 && rowGroup[size_t(py1 - y0)] != mp.g) --py1;
         if (py0 > py1) continue;
       }
-      for (int s = s0; s < s1; ++s) {
-        const size_t n = gatherCandidates(s, mp.g, px0, py0, px1, py1, box, mp.cover);
-        if (n) testCandidates(mp, mi, c, tri, flags, n);
-      }
+      n = gatherCandidates(s0, mp.g, px0, py0, px1, py1, box, mp.cover, n, s1);
     }
+    // Every stratum's candidates tested together: the vector test fills its lanes.
+    if (n) testCandidates(mp, mi, c, tri, flags, n);
     return true;
   }
 
   // Exact coverage test of micropolygon mi against the first n sample indices in `candidates`.
   void testCandidates(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, uint8_t flags, size_t n) {
+    stats.sampleTests += n;
+    if (vectorKernels && mp.seg.twoKnots) {
+      testCandidatesVector(mp, mi, c, tri, flags, n);
+      return;
+    }
+    const uint32_t* cand = candidates.data();
+    for (size_t ci = 0; ci < n; ++ci) testCandidate(mp, mi, c, tri, flags, cand[ci]);
+  }
+
+  // Two-knot schedules through the vector kernel; the rare exact ties go to testCandidate().
+  void testCandidatesVector(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, uint8_t flags, size_t n) {
+    const TilePart& part = mp.part;
+    EdgeQuad* q = &segEdges[0];
+    if (!segReady[0]) {
+      prepareEdges(part, c, tri, 0, q);
+      segReady[0] = 1;
+    }
+    static_assert(sizeof(EdgeQuad) == 9 * sizeof(double), "EdgeQuad is e0 e1 e2, three dvec3s");
+    kernels::LinearEdges edges;
+    std::memcpy(edges.c, q, sizeof edges.c);
+    const kernels::EdgeTestSetup setup{st.data(), rayX.data(), rayY.data(), mp.seg.fOffset, mp.seg.fScale, tri,
+                                       opt.backfaceCull && !(flags & store::kTwoSided)};
+    const size_t hits = kernels::testLinearEdges(setup, edges, candidates.data(), n, edgeHits.data());
+    float za[4], zb[4];
+    const int nc = tri ? 3 : 4;
+    for (int j = 0; j < nc; ++j) za[j] = part.position(0, c[j]).z, zb[j] = part.position(1, c[j]).z;
+    for (size_t hi = 0; hi < hits; ++hi) {
+      const kernels::EdgeHit& eh = edgeHits[hi];
+      const uint32_t idx = candidates[eh.candidate];
+      if (eh.undecided) {
+        testCandidate(mp, mi, c, tri, flags, idx);
+        continue;
+      }
+      const int j1 = eh.triangle ? 2 : 1, j2 = eh.triangle ? 3 : 2;
+      const float f = eh.f;
+      const float z = eh.b[0] * (za[0] + f * (zb[0] - za[0])) + eh.b[1] * (za[j1] + f * (zb[j1] - za[j1])) + eh.b[2] * (za[j2] + f * (zb[j2] - za[j2]));
+      if (!(z >= view.nearClip && z <= view.farClip)) continue;
+      const uint32_t tv[3] = {c[0], c[j1], c[j2]};
+      recordHit(mp.hc, idx, mi, tv, eh.b, z);
+    }
+  }
+
+  // Exact coverage test of micropolygon mi against one sample, in scalar double precision.
+  void testCandidate(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, uint8_t flags, uint32_t idx) {
     const TilePart& part = mp.part;
     const SegmentMap& seg = mp.seg;
-    stats.sampleTests += n;
-    const uint32_t* cand = candidates.data();
-    for (size_t ci = 0; ci < n; ++ci) {
-      const uint32_t idx = cand[ci];
-      const float t = st[idx];
-      uint32_t k = 0;
-      float f;
-      if (seg.twoKnots) f = std::clamp((t + seg.fOffset) * seg.fScale, 0.f, 1.f);
-      else segmentAt(mp.knots, double(t) + seg.toLocal, k, f);
-      EdgeQuad* q = &segEdges[size_t(k) * 5];
-      if (!segReady[k]) {
-        prepareEdges(part, c, tri, k, q);
-        segReady[k] = 1;
-      }
-      // Triangle A's edges first; B's two others only if A misses. Edge vectors only for ties.
-      const double rx = rayX[idx], ry = rayY[idx];
-      const double fd = f;
-      auto edgeValue = [&](int ei) { return dotRay(rx, ry, q[ei].at(fd)); };
-      const double e0 = edgeValue(0), e1 = edgeValue(1), e4 = edgeValue(4);
-      int tr = 0;
-      float b[3];
-      if (!triangleCovers(e1, -e4, e0, [&](int i) { return i == 0 ? q[1].at(fd) : i == 1 ? -q[4].at(fd) : q[0].at(fd); }, flags, b)) {
-        if (tri || !triangleCovers(edgeValue(2), edgeValue(3), e4, [&](int i) { return q[2 + i].at(fd); }, flags, b)) continue;
-        tr = 1;
-      }
-      float zv[3];
-      const uint32_t tv[3] = {c[0], c[tr == 0 ? 1 : 2], c[tr == 0 ? 2 : 3]};
-      for (int j = 0; j < 3; ++j) {
-        const float za = part.position(k, tv[j]).z, zb = part.position(k + 1, tv[j]).z;
-        zv[j] = za + f * (zb - za);
-      }
-      const float z = b[0] * zv[0] + b[1] * zv[1] + b[2] * zv[2];
-      if (!(z >= view.nearClip && z <= view.farClip)) continue;
-      recordHit(mp.hc, slotAt[idx], mi, tv, b, z);
+    const float t = st[idx];
+    uint32_t k = 0;
+    float f;
+    if (seg.twoKnots) f = std::clamp((t + seg.fOffset) * seg.fScale, 0.f, 1.f);
+    else segmentAt(mp.knots, double(t) + seg.toLocal, k, f);
+    EdgeQuad* q = &segEdges[size_t(k) * 5];
+    if (!segReady[k]) {
+      prepareEdges(part, c, tri, k, q);
+      segReady[k] = 1;
     }
+    // Triangle A's edges first; B's two others only if A misses. Edge vectors only for ties.
+    const double rx = rayX[idx], ry = rayY[idx];
+    const double fd = f;
+    auto edgeValue = [&](int ei) { return dotRay(rx, ry, q[ei].at(fd)); };
+    const double e0 = edgeValue(0), e1 = edgeValue(1), e4 = edgeValue(4);
+    int tr = 0;
+    float b[3];
+    if (!triangleCovers(e1, -e4, e0, [&](int i) { return i == 0 ? q[1].at(fd) : i == 1 ? -q[4].at(fd) : q[0].at(fd); }, flags, b)) {
+      if (tri || !triangleCovers(edgeValue(2), edgeValue(3), e4, [&](int i) { return q[2 + i].at(fd); }, flags, b)) return;
+      tr = 1;
+    }
+    float zv[3];
+    const uint32_t tv[3] = {c[0], c[tr == 0 ? 1 : 2], c[tr == 0 ? 2 : 3]};
+    for (int j = 0; j < 3; ++j) {
+      const float za = part.position(k, tv[j]).z, zb = part.position(k + 1, tv[j]).z;
+      zv[j] = za + f * (zb - za);
+    }
+    const float z = b[0] * zv[0] + b[1] * zv[1] + b[2] * zv[2];
+    if (!(z >= view.nearClip && z <= view.farClip)) return;
+    recordHit(mp.hc, idx, mi, tv, b, z);
   }
 
   // Raster positions of vertex v at every theta time (projX/projY[v * T + ti]); NaN x marks a
@@ -900,7 +1028,7 @@ struct BucketRasterizer::Impl {
   void rasterize(const Source& src, const TileEntry& entry, const TilePart& part) {
     const auto& meta = src.store->meta();
     const auto& knots = meta.schedules[entry.schedule];
-    HitContext hc{&part, &meta.schema, meta.schema.ci(), meta.schema.oi(), (entry.effects & store::kEffectTransparent) != 0};
+    const HitContext hc = hitContext(meta, entry, part);
     ++stats.parts;
     stats.micropolygons += part.numMicropolygons;
     if (hc.transparentPart) ++stats.transparentParts;
@@ -942,20 +1070,21 @@ struct BucketRasterizer::Impl {
     const float stopT = 1.f - opt.opacityThreshold;
     std::vector<const Fragment*> list;
     for (size_t slot = 0; slot < slots; ++slot) {
-      const uint8_t s = state[slot];
-      const float zo = zbuf[slot];
-      if (!anyFragments || fragHead[slot] < 0) {
+      const size_t k = idxOf[slot];  // the rasterizer keeps samples stratum-major
+      const uint8_t s = state[k];
+      const float zo = zbuf[k];
+      if (!anyFragments || fragHead[k] < 0) {
         const bool visible = (s & kHitOpaque) && !(s & kHitMatte);
-        out.r[slot] = visible ? cr[slot] : 0.f;
-        out.g[slot] = visible ? cg[slot] : 0.f;
-        out.b[slot] = visible ? cb[slot] : 0.f;
+        out.r[slot] = visible ? cr[k] : 0.f;
+        out.g[slot] = visible ? cg[k] : 0.f;
+        out.b[slot] = visible ? cb[k] : 0.f;
         const float a = visible ? 1.f : 0.f;
         out.a[slot] = out.ar[slot] = out.ag[slot] = out.ab[slot] = a;
         out.z[slot] = (s & kHitOpaque) ? zo : far;
         if (s & kHitOpaque) {
           out.aovZ[slot] = zo;
-          for (int c = 0; c < aovFloatCount; ++c) out.aov[size_t(c)][slot] = zAov[size_t(c) * slots + slot];
-          for (int c = 0; c < aovUIntCount; ++c) out.aovU[size_t(c)][slot] = zAovU[size_t(c) * slots + slot];
+          for (int c = 0; c < aovFloatCount; ++c) out.aov[size_t(c)][slot] = zAov[size_t(c) * slots + k];
+          for (int c = 0; c < aovUIntCount; ++c) out.aovU[size_t(c)][slot] = zAovU[size_t(c) * slots + k];
         }
         // Composited AOVs of a matte surface are zero like its colour.
         if ((s & kHitMatte)) zeroCompositedAovs(slot);
@@ -963,7 +1092,7 @@ struct BucketRasterizer::Impl {
       }
       // Transparent surfaces in front of the nearest opaque one, front to back.
       list.clear();
-      for (int32_t f = fragHead[slot]; f >= 0; f = frags[size_t(f)].next)
+      for (int32_t f = fragHead[k]; f >= 0; f = frags[size_t(f)].next)
         if (frags[size_t(f)].z < zo) list.push_back(&frags[size_t(f)]);
       std::sort(list.begin(), list.end(), [](const Fragment* a, const Fragment* b) { return a->z != b->z ? a->z < b->z : a->seq < b->seq; });
       float T[3] = {1.f, 1.f, 1.f}, C[3] = {0.f, 0.f, 0.f}, A[3] = {0.f, 0.f, 0.f};
@@ -1002,17 +1131,17 @@ struct BucketRasterizer::Impl {
       if (!opaqueReached && (s & kHitOpaque)) {
         const float tAvg = (T[0] + T[1] + T[2]) / 3.f;
         if (!(s & kHitMatte)) {
-          C[0] += T[0] * cr[slot], C[1] += T[1] * cg[slot], C[2] += T[2] * cb[slot];
+          C[0] += T[0] * cr[k], C[1] += T[1] * cg[k], C[2] += T[2] * cb[k];
           for (int c = 0; c < 3; ++c) A[c] += T[c];
           for (size_t a = 0; a < aovs.size(); ++a)
             if (!aovs[a].isUInt && aovs[a].composited())
-              for (int c = 0; c < aovs[a].components; ++c) aovAcc[aovFloatBase[a] + c] += tAvg * zAov[size_t(aovFloatBase[a] + c) * slots + slot];
+              for (int c = 0; c < aovs[a].components; ++c) aovAcc[aovFloatBase[a] + c] += tAvg * zAov[size_t(aovFloatBase[a] + c) * slots + k];
         }
         if (!closestChosen) {
           float fv[64];
           uint32_t uv[16];
-          for (int c = 0; c < aovFloatCount; ++c) fv[c] = zAov[size_t(c) * slots + slot];
-          for (int c = 0; c < aovUIntCount; ++c) uv[c] = zAovU[size_t(c) * slots + slot];
+          for (int c = 0; c < aovFloatCount; ++c) fv[c] = zAov[size_t(c) * slots + k];
+          for (int c = 0; c < aovUIntCount; ++c) uv[c] = zAovU[size_t(c) * slots + k];
           takeSingle(fv, uv, zo);
         }
       }
@@ -1035,12 +1164,13 @@ struct BucketRasterizer::Impl {
     std::vector<float> opaqueAov(static_cast<size_t>(aovFloatCount));
     std::vector<uint32_t> opaqueAovU(static_cast<size_t>(aovUIntCount));
     for (size_t slot = 0; slot < slots; ++slot) {
-      const uint8_t s = state[slot];
-      const float zo = zbuf[slot];
+      const size_t k = idxOf[slot];  // the rasterizer keeps samples stratum-major
+      const uint8_t s = state[k];
+      const float zo = zbuf[k];
       list.clear();
       outList.clear();
       if (anyFragments)
-        for (int32_t f = fragHead[slot]; f >= 0; f = frags[size_t(f)].next)
+        for (int32_t f = fragHead[k]; f >= 0; f = frags[size_t(f)].next)
           if (frags[size_t(f)].z < zo) list.push_back(&frags[size_t(f)]);
       std::sort(list.begin(), list.end(), [](const Fragment* a, const Fragment* b) { return a->z != b->z ? a->z < b->z : a->seq < b->seq; });
       float T[3] = {1.f, 1.f, 1.f};
@@ -1063,10 +1193,11 @@ struct BucketRasterizer::Impl {
         SampleFragment sf;
         sf.z = zo;
         const bool matte = s & kHitMatte;
-        sf.c[0] = matte ? 0.f : cr[slot], sf.c[1] = matte ? 0.f : cg[slot], sf.c[2] = matte ? 0.f : cb[slot];
-        sf.objectId = objectOf[slot], sf.gridId = gridOf[slot], sf.matte = matte;
-        for (int c = 0; c < aovFloatCount; ++c) opaqueAov[size_t(c)] = zAov[size_t(c) * slots + slot];
-        for (int c = 0; c < aovUIntCount; ++c) opaqueAovU[size_t(c)] = zAovU[size_t(c) * slots + slot];
+        sf.c[0] = matte ? 0.f : cr[k], sf.c[1] = matte ? 0.f : cg[k], sf.c[2] = matte ? 0.f : cb[k];
+        if (!opt.surfaceIds) fail("rasterizer", "visitFragments() needs RasterOptions::surfaceIds");
+        sf.objectId = objectOf[k], sf.gridId = gridOf[k], sf.matte = matte;
+        for (int c = 0; c < aovFloatCount; ++c) opaqueAov[size_t(c)] = zAov[size_t(c) * slots + k];
+        for (int c = 0; c < aovUIntCount; ++c) opaqueAovU[size_t(c)] = zAovU[size_t(c) * slots + k];
         sf.aov = opaqueAov.data(), sf.aovU = opaqueAovU.data();
         outList.push_back(sf);
       }

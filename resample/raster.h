@@ -74,6 +74,12 @@ struct RasterOptions {
   /// Bound moving micropolygons per time stratum (default) or once over the whole interval. Same
   /// image either way; the accuracy study measures what the per-stratum bounds save.
   bool perStratumBounds = true;
+  /// Use the AVX2 inner loops (resample/raster_kernels.h) where the CPU has them; off = the
+  /// scalar loops. Same image either way.
+  bool vectorKernels = true;
+  /// Keep the object and grid id of each sample's opaque surface for visitFragments() (deep
+  /// output); a flat render turns it off to keep the bucket's working set small.
+  bool surfaceIds = true;
 };
 
 /// Counters for --stats; summed over buckets.

@@ -270,13 +270,15 @@ RenderResult render(const RenderSpec& spec) {
     deepFormer = std::make_unique<DeepFormer>(result.deep, mainTable, pattern, spec.deepOptions);
   }
 
+  RasterOptions rasterOptions = spec.raster;
+  rasterOptions.surfaceIds = spec.deep;  // only deep output reads them back
   tbb::enumerable_thread_specific<ThreadState> threads;
   Progress progress("resample", buckets.size());
   const bool showProgress = spec.progress;
 
   auto processBucket = [&](const Bucket& bk) {
     ThreadState& ts = threads.local();
-    if (!ts.raster) ts.raster = std::make_unique<BucketRasterizer>(pattern, shutter, view, aovs, spec.raster);
+    if (!ts.raster) ts.raster = std::make_unique<BucketRasterizer>(pattern, shutter, view, aovs, rasterOptions);
     BucketRasterizer& r = *ts.raster;
     const int rx0 = bk.x0 - margin, ry0 = bk.y0 - margin, rw = bk.x1 - bk.x0 + 2 * margin, rh = bk.y1 - bk.y0 + 2 * margin;
     auto t0 = clock::now();

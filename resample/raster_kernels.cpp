@@ -1,0 +1,232 @@
+#include "resample/raster_kernels.h"
+
+#include "common/error.h"
+
+#if defined(__x86_64__) || defined(__i386__)
+#define RESHUTTER_X86 1
+#include <immintrin.h>
+#endif
+
+namespace reshutter::resample::kernels {
+
+#if RESHUTTER_X86
+
+namespace {
+
+// For each 8-bit lane mask, the lanes that are set, in order: the permutation that packs the
+// selected indices to the front of a vector (AVX2 has no compress instruction).
+struct CompressTable {
+  alignas(32) uint32_t perm[256][8];
+};
+constexpr CompressTable makeCompressTable() {
+  CompressTable t{};
+  for (uint32_t m = 0; m < 256; ++m) {
+    uint32_t k = 0;
+    for (uint32_t lane = 0; lane < 8; ++lane)
+      if (m & (1u << lane)) t.perm[m][k++] = lane;
+    for (; k < 8; ++k) t.perm[m][k] = 0;
+  }
+  return t;
+}
+constexpr CompressTable kCompress = makeCompressTable();
+
+#define RESHUTTER_AVX2 __attribute__((target("avx2,popcnt")))
+
+RESHUTTER_AVX2 size_t gatherInBoxAvx2(const SampleRows& rows, const MovingBox& b, uint32_t* out) {
+  const SampleRows r = rows;  // locals: the index stores below may alias anything
+  const __m256 thetaA = _mm256_set1_ps(b.thetaA), invLen = _mm256_set1_ps(b.invLen);
+  const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.f);
+  const __m256 x0 = _mm256_set1_ps(b.x0), dx0 = _mm256_set1_ps(b.dx0), x1 = _mm256_set1_ps(b.x1), dx1 = _mm256_set1_ps(b.dx1);
+  const __m256 y0 = _mm256_set1_ps(b.y0), dy0 = _mm256_set1_ps(b.dy0), y1 = _mm256_set1_ps(b.y1), dy1 = _mm256_set1_ps(b.dy1);
+  const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+  size_t n = 0;
+  for (int plane = 0; plane < r.planes; ++plane)
+  for (int row = 0; row < r.rows; ++row) {
+    if (r.rowGroup && r.rowGroup[row] != r.group) continue;
+    const size_t base = r.first + size_t(plane) * r.planeStride + size_t(row) * r.stride;
+    for (int c = 0; c < r.cols; c += 8) {
+      const size_t at = base + size_t(c);
+      const __m256 t = _mm256_loadu_ps(r.st + at), x = _mm256_loadu_ps(r.sx + at), y = _mm256_loadu_ps(r.sy + at);
+      // u = min(max((t - thetaA) invLen, 0), 1), operand order as std::max / std::min.
+      const __m256 u = _mm256_min_ps(one, _mm256_max_ps(zero, _mm256_mul_ps(_mm256_sub_ps(t, thetaA), invLen)));
+      __m256 in = _mm256_cmp_ps(x, _mm256_add_ps(x0, _mm256_mul_ps(u, dx0)), _CMP_GE_OQ);
+      in = _mm256_and_ps(in, _mm256_cmp_ps(x, _mm256_add_ps(x1, _mm256_mul_ps(u, dx1)), _CMP_LE_OQ));
+      in = _mm256_and_ps(in, _mm256_cmp_ps(y, _mm256_add_ps(y0, _mm256_mul_ps(u, dy0)), _CMP_GE_OQ));
+      in = _mm256_and_ps(in, _mm256_cmp_ps(y, _mm256_add_ps(y1, _mm256_mul_ps(u, dy1)), _CMP_LE_OQ));
+      const __m256i live = _mm256_cmpgt_epi32(_mm256_set1_epi32(r.cols - c), lane);
+      const unsigned mask = unsigned(_mm256_movemask_ps(_mm256_and_ps(in, _mm256_castsi256_ps(live))));
+      const __m256i idx = _mm256_add_epi32(_mm256_set1_epi32(int(uint32_t(at))), lane);
+      const __m256i perm = _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompress.perm[mask]));
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + n), _mm256_permutevar8x32_epi32(idx, perm));
+      n += size_t(__builtin_popcount(mask));
+    }
+  }
+  return n;
+}
+
+RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpans& sp, const MovingBox& b, uint32_t* out) {
+  // Pixel ranges of every stratum, eight at a time: the box over [u0, u1] (min / max of its two
+  // ends, as the corners move linearly), widened, clamped to the region and floored.
+  alignas(32) int px0[64], py0[64], px1[64], py1[64];
+  const int N = sp.strata;
+  const __m256 m = _mm256_set1_ps(sp.margin);
+  const __m256 lox = _mm256_set1_ps(float(sp.x0)), hix = _mm256_set1_ps(float(sp.x0 + sp.w));
+  const __m256 loy = _mm256_set1_ps(float(sp.y0)), hiy = _mm256_set1_ps(float(sp.y0 + sp.h));
+  const __m256 one = _mm256_set1_ps(1.f);
+  const __m256 x0 = _mm256_set1_ps(b.x0), dx0 = _mm256_set1_ps(b.dx0), x1 = _mm256_set1_ps(b.x1), dx1 = _mm256_set1_ps(b.dx1);
+  const __m256 y0 = _mm256_set1_ps(b.y0), dy0 = _mm256_set1_ps(b.dy0), y1 = _mm256_set1_ps(b.y1), dy1 = _mm256_set1_ps(b.dy1);
+  for (int s = 0; s < N; s += 8) {
+    const __m256 u0 = _mm256_loadu_ps(sp.u0 + s), u1 = _mm256_loadu_ps(sp.u1 + s);
+    const __m256 ax0 = _mm256_min_ps(_mm256_add_ps(x0, _mm256_mul_ps(u0, dx0)), _mm256_add_ps(x0, _mm256_mul_ps(u1, dx0)));
+    const __m256 ax1 = _mm256_max_ps(_mm256_add_ps(x1, _mm256_mul_ps(u0, dx1)), _mm256_add_ps(x1, _mm256_mul_ps(u1, dx1)));
+    const __m256 ay0 = _mm256_min_ps(_mm256_add_ps(y0, _mm256_mul_ps(u0, dy0)), _mm256_add_ps(y0, _mm256_mul_ps(u1, dy0)));
+    const __m256 ay1 = _mm256_max_ps(_mm256_add_ps(y1, _mm256_mul_ps(u0, dy1)), _mm256_add_ps(y1, _mm256_mul_ps(u1, dy1)));
+    // A NaN bound clamps to the region (max/min return their second operand for NaN).
+    const __m256 cx0 = _mm256_min_ps(_mm256_max_ps(_mm256_sub_ps(ax0, m), lox), hix);
+    const __m256 cy0 = _mm256_min_ps(_mm256_max_ps(_mm256_sub_ps(ay0, m), loy), hiy);
+    const __m256 cx1 = _mm256_min_ps(_mm256_max_ps(_mm256_add_ps(ax1, m), _mm256_sub_ps(lox, one)), _mm256_sub_ps(hix, one));
+    const __m256 cy1 = _mm256_min_ps(_mm256_max_ps(_mm256_add_ps(ay1, m), _mm256_sub_ps(loy, one)), _mm256_sub_ps(hiy, one));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(px0 + s), _mm256_cvttps_epi32(_mm256_floor_ps(cx0)));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(py0 + s), _mm256_cvttps_epi32(_mm256_floor_ps(cy0)));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(px1 + s), _mm256_cvttps_epi32(_mm256_floor_ps(cx1)));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(py1 + s), _mm256_cvttps_epi32(_mm256_floor_ps(cy1)));
+  }
+  size_t n = 0;
+  for (int s = 0; s < N; ++s) {
+    if (px0[s] > px1[s] || py0[s] > py1[s]) continue;
+    SampleRows r = region;
+    r.first = region.first + size_t(s) * region.planeStride + size_t(py0[s] - sp.y0) * region.stride + size_t(px0[s] - sp.x0);
+    r.cols = px1[s] - px0[s] + 1, r.rows = py1[s] - py0[s] + 1;
+    r.planes = 1;
+    if (region.rowGroup) r.rowGroup = region.rowGroup + (py0[s] - sp.y0);
+    n += gatherInBoxAvx2(r, b, out + n);
+  }
+  return n;
+}
+
+// One edge's value d · E(f) for four samples: E(f) = c0 + f (c3 + f c6) per component, and
+// d · E = (rx Ex + ry Ey) + Ez, as dotRay() and EdgeQuad::at() compute it.
+template <bool kFixed>
+RESHUTTER_AVX2 inline __m256d edgeValue(const double* c, __m256d f, __m256d rx, __m256d ry) {
+  if constexpr (kFixed)
+    return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(rx, _mm256_set1_pd(c[0])), _mm256_mul_pd(ry, _mm256_set1_pd(c[1]))), _mm256_set1_pd(c[2]));
+  const __m256d ex = _mm256_add_pd(_mm256_set1_pd(c[0]), _mm256_mul_pd(f, _mm256_add_pd(_mm256_set1_pd(c[3]), _mm256_mul_pd(f, _mm256_set1_pd(c[6])))));
+  const __m256d ey = _mm256_add_pd(_mm256_set1_pd(c[1]), _mm256_mul_pd(f, _mm256_add_pd(_mm256_set1_pd(c[4]), _mm256_mul_pd(f, _mm256_set1_pd(c[7])))));
+  const __m256d ez = _mm256_add_pd(_mm256_set1_pd(c[2]), _mm256_mul_pd(f, _mm256_add_pd(_mm256_set1_pd(c[5]), _mm256_mul_pd(f, _mm256_set1_pd(c[8])))));
+  return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(rx, ex), _mm256_mul_pd(ry, ey)), ez);
+}
+
+// Coverage of one triangle from its oriented edge values, as triangleCovers() decides it:
+// `hit` where every edge is strictly on the inner side, `tie` where the triangle counts (non-zero,
+// not culled) and an edge value is exactly zero, so the scalar tie rule must decide. Also the
+// barycentrics a_k / S.
+// Strictly on the inner side of an edge: a > 0, or a < 0 for a clockwise (flipped) triangle.
+RESHUTTER_AVX2 inline __m256d innerSide(__m256d a, __m256d flip) {
+  const __m256d zero = _mm256_setzero_pd();
+  return _mm256_blendv_pd(_mm256_cmp_pd(a, zero, _CMP_GT_OQ), _mm256_cmp_pd(a, zero, _CMP_LT_OQ), flip);
+}
+
+struct TriangleMasks {
+  int hit, tie;
+  __m128 b[3];
+};
+RESHUTTER_AVX2 inline TriangleMasks triangleMasks(__m256d a0, __m256d a1, __m256d a2, bool cullBack) {
+  const __m256d zero = _mm256_setzero_pd();
+  const __m256d S = _mm256_add_pd(_mm256_add_pd(a0, a1), a2);
+  __m256d counts = _mm256_cmp_pd(S, zero, _CMP_NEQ_UQ);  // S == 0 is degenerate; NaN goes on (and misses)
+  if (cullBack) counts = _mm256_andnot_pd(_mm256_cmp_pd(S, zero, _CMP_GT_OQ), counts);
+  const __m256d flip = _mm256_cmp_pd(S, zero, _CMP_LT_OQ);
+  const __m256d in = _mm256_and_pd(_mm256_and_pd(innerSide(a0, flip), innerSide(a1, flip)), innerSide(a2, flip));
+  const __m256d anyZero = _mm256_or_pd(_mm256_or_pd(_mm256_cmp_pd(a0, zero, _CMP_EQ_OQ), _mm256_cmp_pd(a1, zero, _CMP_EQ_OQ)),
+                                       _mm256_cmp_pd(a2, zero, _CMP_EQ_OQ));
+  TriangleMasks m;
+  m.hit = _mm256_movemask_pd(_mm256_and_pd(counts, in));
+  m.tie = _mm256_movemask_pd(_mm256_and_pd(counts, anyZero));
+  const __m256d inv = _mm256_div_pd(_mm256_set1_pd(1.0), S);
+  m.b[0] = _mm256_cvtpd_ps(_mm256_mul_pd(a0, inv));
+  m.b[1] = _mm256_cvtpd_ps(_mm256_mul_pd(a1, inv));
+  m.b[2] = _mm256_cvtpd_ps(_mm256_mul_pd(a2, inv));
+  return m;
+}
+
+template <bool kFixed>
+RESHUTTER_AVX2 size_t testLinearEdgesAvx2(const EdgeTestSetup& s, const LinearEdges& E, const uint32_t* idx, size_t n, EdgeHit* hits) {
+  const __m128 fOffset = _mm_set1_ps(s.fOffset), fScale = _mm_set1_ps(s.fScale), zero = _mm_setzero_ps(), one = _mm_set1_ps(1.f);
+  const __m256d sign = _mm256_set1_pd(-0.0);
+  size_t h = 0;
+  for (size_t i = 0; i < n; i += 4) {
+    const size_t live = n - i < 4 ? n - i : 4;
+    alignas(16) uint32_t lanes[4];
+    for (size_t k = 0; k < 4; ++k) lanes[k] = idx[i + (k < live ? k : live - 1)];
+    const __m128i vi = _mm_load_si128(reinterpret_cast<const __m128i*>(lanes));
+    const __m128 t = _mm_i32gather_ps(s.st, vi, 4);
+    // f = clamp((t + fOffset) fScale, 0, 1), operand order as std::clamp.
+    const __m128 f = _mm_min_ps(one, _mm_max_ps(zero, _mm_mul_ps(_mm_add_ps(t, fOffset), fScale)));
+    const __m256d fd = _mm256_cvtps_pd(f);
+    const __m256d rx = _mm256_cvtps_pd(_mm_i32gather_ps(s.rayX, vi, 4)), ry = _mm256_cvtps_pd(_mm_i32gather_ps(s.rayY, vi, 4));
+    const __m256d e0 = edgeValue<kFixed>(E.c[0], fd, rx, ry), e1 = edgeValue<kFixed>(E.c[1], fd, rx, ry), e4 = edgeValue<kFixed>(E.c[4], fd, rx, ry);
+    const int liveMask = (1 << live) - 1;
+    // Triangle A = (p0 p1 p2) with edges 12, 20 (= -02), 01.
+    const TriangleMasks A = triangleMasks(e1, _mm256_xor_pd(e4, sign), e0, s.cullBackFaces);
+    int hitA = A.hit & liveMask, undecided = A.tie & liveMask, hitB = 0;
+    TriangleMasks B{};
+    const int needB = liveMask & ~hitA & ~undecided;
+    if (!s.triangle && needB) {
+      // Triangle B = (p0 p2 p3) with edges 23, 30, 02.
+      B = triangleMasks(edgeValue<kFixed>(E.c[2], fd, rx, ry), edgeValue<kFixed>(E.c[3], fd, rx, ry), e4, s.cullBackFaces);
+      hitB = B.hit & needB;
+      undecided |= B.tie & needB;
+      hitB &= ~undecided;
+    }
+    int any = hitA | hitB | undecided;
+    if (!any) continue;
+    alignas(16) float fs[4], bA[3][4], bB[3][4];
+    _mm_store_ps(fs, f);
+    for (int k = 0; k < 3; ++k) _mm_store_ps(bA[k], A.b[k]), _mm_store_ps(bB[k], B.b[k]);
+    while (any) {
+      const int l = __builtin_ctz(unsigned(any));
+      any &= any - 1;
+      EdgeHit& out = hits[h++];
+      out.candidate = uint32_t(i + size_t(l));
+      out.undecided = (undecided >> l) & 1;
+      out.triangle = (hitB >> l) & 1;
+      out.f = fs[l];
+      const auto& b = out.triangle ? bB : bA;
+      out.b[0] = b[0][l], out.b[1] = b[1][l], out.b[2] = b[2][l];
+    }
+  }
+  return h;
+}
+
+}  // namespace
+
+bool available() {
+  static const bool ok = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("popcnt");
+  return ok;
+}
+
+size_t gatherInBox(const SampleRows& rows, const MovingBox& box, uint32_t* out) { return gatherInBoxAvx2(rows, box, out); }
+
+size_t gatherStrata(const SampleRows& region, const StrataSpans& spans, const MovingBox& box, uint32_t* out) {
+  if (spans.strata > 64) fail("rasterizer", "more than 64 time strata per pixel for the vector kernels");
+  return gatherStrataAvx2(region, spans, box, out);
+}
+
+size_t testLinearEdges(const EdgeTestSetup& setup, const LinearEdges& edges, const uint32_t* idx, size_t n, EdgeHit* hits) {
+  return setup.fixed ? testLinearEdgesAvx2<true>(setup, edges, idx, n, hits) : testLinearEdgesAvx2<false>(setup, edges, idx, n, hits);
+}
+
+#else
+
+bool available() { return false; }
+size_t gatherInBox(const SampleRows&, const MovingBox&, uint32_t*) { fail("rasterizer", "vector kernels called on a CPU without them"); }
+size_t gatherStrata(const SampleRows&, const StrataSpans&, const MovingBox&, uint32_t*) {
+  fail("rasterizer", "vector kernels called on a CPU without them");
+}
+size_t testLinearEdges(const EdgeTestSetup&, const LinearEdges&, const uint32_t*, size_t, EdgeHit*) {
+  fail("rasterizer", "vector kernels called on a CPU without them");
+}
+
+#endif
+
+}  // namespace reshutter::resample::kernels

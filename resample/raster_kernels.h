@@ -1,0 +1,95 @@
+// The bucket rasterizer's vectorised inner loops: gathering one time stratum's samples that lie in
+// a micropolygon's moving box, row by row, and the exact double-precision edge test of a list of
+// candidates against a micropolygon moving linearly inside one knot segment.
+//
+// They are written with AVX2 intrinsics in functions compiled for AVX2 only, chosen at run time
+// (kernels::available()), so the binary still runs on any x86-64 node; raster.cpp keeps the scalar
+// loops as the fallback. Both compute every value with the same IEEE operations in the same order
+// (no fused multiply-adds: AVX2 does not imply FMA, and the module builds with -ffp-contract=off),
+// so the two paths give bit-identical images; ResampleHard.VectorAndScalarPathsAgree checks it.
+// Hand-written rather than through Highway (libhwy-dev) or xsimd (libxsimd-dev), both in Debian:
+// these are two loops of a few dozen lines, x86 is the farm's ISA, and the scalar fallback serves
+// every other CPU; a SIMD framework's multi-target build machinery would outweigh them.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+
+namespace reshutter::resample::kernels {
+
+/// True when this CPU runs the AVX2 kernels (checked once) and RESHUTTER_SIMD is not "off".
+bool available();
+
+/// An axis-aligned box moving linearly over a time span: [x0 + u dx0, x1 + u dx1] ×
+/// [y0 + u dy0, y1 + u dy1] at u = clamp((st - thetaA) invLen, 0, 1). A fixed box has zero d's.
+struct MovingBox {
+  float x0, dx0, x1, dx1, y0, dy0, y1, dy1;
+  float thetaA = 0, invLen = 0;
+};
+
+/// Strata's samples laid out row-major over the region, one plane per stratum:
+/// index = first + plane * planeStride + row * stride + col.
+struct SampleRows {
+  const float* st;  // sample time offsets
+  const float* sx;  // raster positions
+  const float* sy;
+  size_t first;     // index of the range's first sample
+  size_t stride;    // region width
+  int cols, rows;
+  const uint8_t* rowGroup = nullptr;  // when set: skip rows whose group differs from `group`
+  uint8_t group = 0;
+  int planes = 1;
+  size_t planeStride = 0;
+};
+
+/// Appends to `out` the indices of the samples in `rows` (plane by plane) that lie inside `box`
+/// at their own time; returns how many. Reads up to 7 floats past a row's end (arrays need that padding) and
+/// writes up to 7 indices past the returned count.
+size_t gatherInBox(const SampleRows& rows, const MovingBox& box, uint32_t* out);
+
+/// The strata of one moving box: stratum s covers box times u in [u0[s], u1[s]] and its
+/// samples are plane s of `rows` (whose first/cols/rows describe the whole region).
+struct StrataSpans {
+  const float* u0;
+  const float* u1;
+  int strata;
+  int x0, y0, w, h;  // the region, raster pixels
+  float margin;      // widening for float rounding of the box (pixelRange's margin or more)
+};
+
+/// For each stratum, the pixels its part of the box's path touches, then gatherInBox() over
+/// them: one call per micropolygon instead of one per stratum.
+size_t gatherStrata(const SampleRows& region, const StrataSpans& spans, const MovingBox& box, uint32_t* out);
+
+/// A micropolygon's edges over one knot segment: edge e's cross product is
+/// c[e][0..2] + f (c[e][3..5] + f c[e][6..8]) at segment parameter f (edges 01 12 23 30 02).
+struct LinearEdges {
+  double c[5][9];
+};
+
+struct EdgeTestSetup {
+  const float* st;
+  const float* rayX;
+  const float* rayY;
+  float fOffset, fScale;  // f = clamp((st + fOffset) fScale, 0, 1)
+  bool triangle;          // edges 23 and 30 unused
+  bool cullBackFaces;     // back-face knock-out applies to this micropolygon
+  bool fixed = false;     // a static micropolygon: the edges are c[e][0..2] at any time (f = 0)
+};
+
+/// One decided candidate: which triangle it hit (0: p0 p1 p2, 1: p0 p2 p3), its barycentrics
+/// and segment parameter; `undecided` when an edge value was exactly zero and the tie rule
+/// (which needs the edge vectors) must decide in scalar code.
+struct EdgeHit {
+  uint32_t candidate;  // position in the candidate list
+  uint8_t triangle;
+  bool undecided;
+  float f;
+  float b[3];
+};
+
+/// Tests candidates idx[0..n) and appends the hits and undecided ones, in candidate order, to
+/// `hits`; returns how many. The list needs room for n + 3 entries.
+size_t testLinearEdges(const EdgeTestSetup& setup, const LinearEdges& edges, const uint32_t* idx, size_t n, EdgeHit* hits);
+
+}  // namespace reshutter::resample::kernels
