@@ -343,6 +343,21 @@ std::vector<int> sppSides(std::vector<int> sides) {
   return sides;
 }
 
+/// Per-stratum time bounds against one bound over the shutter, at 1–256 spp (the single bound
+/// only up to `oneBoundMaxSide`² spp): same image, different cost.
+void sweepTimeBounds(const std::string& study, std::shared_ptr<const store::StoreReader> store, const Img& ref, int seeds, int oneBoundMaxSide) {
+  for (bool per : {true, false})
+    for (int n : sppSides({1, 2, 4, 8, 16}))
+      if (per || n <= oneBoundMaxSide)
+        measure(study, per ? "per-stratum time bounds" : "one bound over the shutter", n * n,
+                [&](uint64_t seed) {
+                  RenderSpec spec = specOf(store, n, seed);
+                  spec.raster.perStratumBounds = per;
+                  return spec;
+                },
+                ref, seeds);
+}
+
 // ---------------------------------------------------------------------------------------------
 // The studies
 
@@ -375,15 +390,7 @@ void studySpp(const std::string& out) {
         ref.c[0][i] += a * c.x, ref.c[1][i] += a * c.y, ref.c[2][i] += a * c.z, ref.c[3][i] += a;
       }
   }
-  for (bool per : {true, false})
-    for (int n : sppSides({1, 2, 4, 8, 16}))
-      measure("spp", per ? "per-stratum time bounds" : "one bound over the shutter", n * n,
-              [&](uint64_t seed) {
-                RenderSpec spec = specOf(store, n, seed);
-                spec.raster.perStratumBounds = per;
-                return spec;
-              },
-              ref, 3);
+  sweepTimeBounds("spp", store, ref, 3, 16);
   plot(out, "spp", "Samples per pixel and time-bound strategy (moving squares, analytic reference)");
   gTables << "### Samples per pixel and time-bound strategy\n\nScene: 12 opaque squares (14–26 px) moving 10–30 px over the shutter, " << kW << "×"
           << kH << ", box filter 1×1; reference: `analyticCoverage` (exact). 3 seeds per point.\n\n";
@@ -414,16 +421,7 @@ void studyTimeBounds(const std::string& out) {
       const size_t i = size_t(py) * kW + px;
       ref.c[0][i] = 0.8 * a, ref.c[1][i] = 0.6 * a, ref.c[2][i] = 0.3 * a, ref.c[3][i] = a;
     }
-  for (bool per : {true, false})
-    for (int n : sppSides({1, 2, 4, 8, 16}))
-      if (per || n <= (gQuick ? 4 : 8))  // one bound at 256 spp would take minutes
-      measure("timebounds", per ? "per-stratum time bounds" : "one bound over the shutter", n * n,
-              [&](uint64_t seed) {
-                RenderSpec spec = specOf(store, n, seed);
-                spec.raster.perStratumBounds = per;
-                return spec;
-              },
-              ref, 2);
+  sweepTimeBounds("timebounds", store, ref, 2, gQuick ? 4 : 8);  // one bound at 256 spp would take minutes
   plot(out, "timebounds", "Time-bound strategy: 6144 1-px micropolygons moving 50 px");
   gTables << "### Time-bound strategy (dense motion)\n\nScene: a 96×64 px rectangle diced into 6144 one-pixel micropolygons moving "
              "(48, 16) px over the shutter; reference: `analyticCoverage` of the rectangle. Both strategies make the same image (equal error); "

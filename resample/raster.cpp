@@ -123,8 +123,7 @@ struct BucketRasterizer::Impl {
   std::vector<uint32_t> candidates;    // sample indices that pass the box test, per micropolygon
   std::vector<kernels::EdgeHit> edgeHits;
   std::vector<float> cullZ;            // [cull time * nV + v]: camera depth
-  std::vector<float> stratumU;         // linear path: [2 s], [2 s + 1] = stratum s's span in the group interval, 0..1
-  std::vector<float> stratumU0, stratumU1;  // the same split in two, padded to whole vectors (kernels::gatherStrata)
+  std::vector<float> stratumU0, stratumU1;  // linear path: stratum s's span [u0, u1] in the group interval, 0..1, padded to whole vectors
   std::vector<int> stratumFirst, stratumLast;  // theta index range per stratum
   std::vector<EdgeQuad> segEdges;      // [segment * 5 + edge] for the current micropolygon
   std::vector<uint8_t> segReady;
@@ -289,26 +288,27 @@ struct BucketRasterizer::Impl {
     return hc;
   }
 
-  void recordHit(const HitContext& hc, uint32_t slot, uint32_t m, const uint32_t v[3], const float b[3], float z) {
-    if (hc.opaqueFast) recordOpaqueHit(hc, slot, m, v, b, z);
-    else recordAnyHit(hc, slot, m, v, b, z);
+  // Records a hit of micropolygon m on a sample (its stratum-major index s * P + p).
+  void recordHit(const HitContext& hc, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float z) {
+    if (hc.opaqueFast) recordOpaqueHit(hc, sample, m, v, b, z);
+    else recordAnyHit(hc, sample, m, v, b, z);
   }
 
   // Same values as recordAnyHit() gives an opaque surface (attrAt's arithmetic, in its order).
-  inline void recordOpaqueHit(const HitContext& hc, uint32_t slot, uint32_t m, const uint32_t v[3], const float b[3], float z) {
+  inline void recordOpaqueHit(const HitContext& hc, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float z) {
     ++stats.hits;
-    if (!(z < zbuf[slot])) return;  // ties keep the earlier surface: deterministic by store order
-    zbuf[slot] = z;
+    if (!(z < zbuf[sample])) return;  // ties keep the earlier surface: deterministic by store order
+    zbuf[sample] = z;
     const float *c0 = hc.colour + size_t(v[0]) * 3, *c1 = hc.colour + size_t(v[1]) * 3, *c2 = hc.colour + size_t(v[2]) * 3;
-    cr[slot] = b[0] * c0[0] + b[1] * c1[0] + b[2] * c2[0];
-    cg[slot] = b[0] * c0[1] + b[1] * c1[1] + b[2] * c2[1];
-    cb[slot] = b[0] * c0[2] + b[1] * c1[2] + b[2] * c2[2];
+    cr[sample] = b[0] * c0[0] + b[1] * c1[0] + b[2] * c2[0];
+    cg[sample] = b[0] * c0[1] + b[1] * c1[1] + b[2] * c2[1];
+    cb[sample] = b[0] * c0[2] + b[1] * c1[2] + b[2] * c2[2];
     const store::TilePart& part = *hc.part;
-    state[slot] = kHitOpaque | ((part.flags[m] & store::kMatte) ? kHitMatte : 0);
-    if (opt.surfaceIds) objectOf[slot] = part.objectId[m], gridOf[slot] = part.gridId[m];
+    state[sample] = kHitOpaque | ((part.flags[m] & store::kMatte) ? kHitMatte : 0);
+    if (opt.surfaceIds) objectOf[sample] = part.objectId[m], gridOf[sample] = part.gridId[m];
   }
 
-  void recordAnyHit(const HitContext& hc, uint32_t slot, uint32_t m, const uint32_t v[3], const float b[3], float z) {
+  void recordAnyHit(const HitContext& hc, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float z) {
     ++stats.hits;
     const store::TilePart& part = *hc.part;
     const bool matte = part.flags[m] & store::kMatte;
@@ -316,24 +316,24 @@ struct BucketRasterizer::Impl {
     if (hc.transparentPart) attrAt(part, *hc.schema, hc.oi, m, v, b, o);
     const bool opaque = o[0] >= 1.f && o[1] >= 1.f && o[2] >= 1.f;
     if (opaque) {
-      if (!(z < zbuf[slot])) return;  // ties keep the earlier surface: deterministic by store order
-      zbuf[slot] = z;
+      if (!(z < zbuf[sample])) return;  // ties keep the earlier surface: deterministic by store order
+      zbuf[sample] = z;
       float c[3];
       attrAt(part, *hc.schema, hc.ci, m, v, b, c);
-      cr[slot] = c[0], cg[slot] = c[1], cb[slot] = c[2];
-      state[slot] = kHitOpaque | (matte ? kHitMatte : 0);
-      if (opt.surfaceIds) objectOf[slot] = part.objectId[m], gridOf[slot] = part.gridId[m];
+      cr[sample] = c[0], cg[sample] = c[1], cb[sample] = c[2];
+      state[sample] = kHitOpaque | (matte ? kHitMatte : 0);
+      if (opt.surfaceIds) objectOf[sample] = part.objectId[m], gridOf[sample] = part.gridId[m];
       if (aovFloatCount || aovUIntCount) {
         float fv[64];
         uint32_t uv[16];
         aovValues(part, *hc.schema, m, v, b, z, fv, uv);
         const size_t slots = size_t(P) * N;
-        for (int c2 = 0; c2 < aovFloatCount; ++c2) zAov[size_t(c2) * slots + slot] = fv[c2];
-        for (int c2 = 0; c2 < aovUIntCount; ++c2) zAovU[size_t(c2) * slots + slot] = uv[c2];
+        for (int c2 = 0; c2 < aovFloatCount; ++c2) zAov[size_t(c2) * slots + sample] = fv[c2];
+        for (int c2 = 0; c2 < aovUIntCount; ++c2) zAovU[size_t(c2) * slots + sample] = uv[c2];
       }
       return;
     }
-    if (!(z < zbuf[slot])) return;  // hidden behind an opaque surface already found
+    if (!(z < zbuf[sample])) return;  // hidden behind an opaque surface already found
     for (float& x : o) x = std::clamp(x, 0.f, 1.f);
     Fragment f;
     f.z = z;
@@ -343,7 +343,7 @@ struct BucketRasterizer::Impl {
     f.gridId = part.gridId[m];
     f.seq = fragSeq++;
     f.matte = matte;
-    f.next = fragHead[slot];
+    f.next = fragHead[sample];
     f.aovOffset = uint32_t(fragAov.size());
     f.aovUOffset = uint32_t(fragAovU.size());
     if (aovFloatCount || aovUIntCount) {
@@ -353,7 +353,7 @@ struct BucketRasterizer::Impl {
       fragAov.insert(fragAov.end(), fv, fv + aovFloatCount);
       fragAovU.insert(fragAovU.end(), uv, uv + aovUIntCount);
     }
-    fragHead[slot] = int32_t(frags.size());
+    fragHead[sample] = int32_t(frags.size());
     frags.push_back(f);
     anyFragments = true;
     ++stats.fragments;
@@ -477,27 +477,13 @@ struct BucketRasterizer::Impl {
       if (vectorKernels && !checkCover) {
         // Every stratum's samples in the box, then the vector edge test with fixed edges.
         const MovingBox box{ta.sx0, 0.f, ta.sx1, 0.f, ta.sy0, 0.f, ta.sy1, 0.f, 0.f, 0.f};
-        size_t n = 0;
-        n = gatherCandidates(0, onlyGroup, px0, py0, px1, py1, box, Coverage{false, 0, 0}, n, N);
+        const size_t n = gatherCandidates(0, N, onlyGroup, px0, py0, px1, py1, box, Coverage{false, 0, 0}, 0);
         if (!n) continue;
         stats.sampleTests += n;
         kernels::LinearEdges edges{};
         for (int k = 0; k < 5; ++k) edges.c[k][0] = E[k].x, edges.c[k][1] = E[k].y, edges.c[k][2] = E[k].z;
         const kernels::EdgeTestSetup setup{st.data(), rayX.data(), rayY.data(), 0.f, 0.f, tri, opt.backfaceCull && !(part.flags[m] & store::kTwoSided), true};
-        const size_t hits = kernels::testLinearEdges(setup, edges, candidates.data(), n, edgeHits.data());
-        for (size_t hi = 0; hi < hits; ++hi) {
-          const kernels::EdgeHit& eh = edgeHits[hi];
-          const uint32_t idx = candidates[eh.candidate];
-          if (eh.undecided) {
-            testStatic(hc, m, c, tri, E, zv, idx);
-            continue;
-          }
-          const float* b = eh.b;
-          const float z = eh.triangle == 0 ? b[0] * zv[0] + b[1] * zv[1] + b[2] * zv[2] : b[0] * zv[0] + b[1] * zv[2] + b[2] * zv[3];
-          if (!(z >= view.nearClip && z <= view.farClip)) continue;
-          const uint32_t tv[3] = {c[0], c[eh.triangle == 0 ? 1 : 2], c[eh.triangle == 0 ? 2 : 3]};
-          recordHit(hc, idx, m, tv, b, z);
-        }
+        recordKernelHits(hc, m, c, setup, edges, n, zv, zv, [&](uint32_t idx) { testStatic(hc, m, c, tri, E, zv, idx); });
         continue;
       }
       for (int py = py0; py <= py1; ++py) {
@@ -600,21 +586,19 @@ struct BucketRasterizer::Impl {
   // g(u) - u = u (1 - u) (zb - za) / z(u), at most |dz| / (4 z_min). Inside one knot segment.
   static float perspectiveLag(float za, float zb) { return std::abs(zb - za) / (4.f * std::min(za, zb)) * 1.001f; }
 
-  // Appends to `candidates` (from position n) stratum s's samples of group g (< 0: any) in pixels
-  // [px0, px1] × [py0, py1] that lie in `box` at their own time and inside the source's
-  // coverage; returns the new count. Branch-free: the in/out pattern is random, so branches
-  // would mispredict.
-  // Strata [s, sEnd) when sEnd is given, all with the same pixel range.
-  size_t gatherCandidates(int s, int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover, size_t n, int sEnd = -1) {
-    if (sEnd < 0) sEnd = s + 1;
+  // Appends to `candidates` (from position n) the samples of strata [s0, s1) and group g (< 0:
+  // any) in pixels [px0, px1] × [py0, py1] that lie in `box` at their own time and inside the
+  // source's coverage; returns the new count. Branch-free: the in/out pattern is random, so
+  // branches would mispredict.
+  size_t gatherCandidates(int s0, int s1, int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover, size_t n) {
     if (vectorKernels && !cover.check) {
-      const kernels::SampleRows rows{st.data(), sx.data(), sy.data(), size_t(s) * P + size_t(py0 - y0) * w + size_t(px0 - x0), size_t(w),
+      const kernels::SampleRows rows{st.data(), sx.data(), sy.data(), size_t(s0) * P + size_t(py0 - y0) * w + size_t(px0 - x0), size_t(w),
                                      px1 - px0 + 1, py1 - py0 + 1, multiGroup && g >= 0 ? &rowGroup[size_t(py0 - y0)] : nullptr, uint8_t(g),
-                                     sEnd - s, size_t(P)};
+                                     s1 - s0, size_t(P)};
       return n + kernels::gatherInBox(rows, box, candidates.data() + n);
     }
     uint32_t* __restrict cand = candidates.data();
-    for (; s < sEnd; ++s)
+    for (int s = s0; s < s1; ++s)
     for (int py = py0; py <= py1; ++py) {
       if (multiGroup && g >= 0 && rowGroup[size_t(py - y0)] != g) continue;
       const uint32_t rowBase = uint32_t(size_t(s) * P + size_t(py - y0) * w - size_t(x0));
@@ -707,13 +691,11 @@ struct BucketRasterizer::Impl {
       // A sample's time and segment parameter are floats: their rounding, as a fraction of the
       // interval, widens the box by that fraction of the micropolygon's motion.
       li.uErr = float(5e-7 * (std::max({1.0, std::abs(th0 - toLocal), std::abs(th1 - toLocal)}) + knotSpan) / len);
-      stratumU.resize(2 * size_t(N));
-      for (int s = 0; s < N; ++s) {
-        stratumU[2 * size_t(s)] = std::clamp(float((lo[s] - F - th0) / len) - 1e-6f, 0.f, 1.f);
-        stratumU[2 * size_t(s) + 1] = std::clamp(float((hi[s] - F - th0) / len) + 1e-6f, 0.f, 1.f);
-      }
       stratumU0.assign(size_t(N + 7) / 8 * 8, 0.f), stratumU1.assign(size_t(N + 7) / 8 * 8, 0.f);
-      for (int s = 0; s < N; ++s) stratumU0[size_t(s)] = stratumU[2 * size_t(s)], stratumU1[size_t(s)] = stratumU[2 * size_t(s) + 1];
+      for (int s = 0; s < N; ++s) {
+        stratumU0[size_t(s)] = std::clamp(float((lo[s] - F - th0) / len) - 1e-6f, 0.f, 1.f);
+        stratumU1[size_t(s)] = std::clamp(float((hi[s] - F - th0) / len) + 1e-6f, 0.f, 1.f);
+      }
     }
 
     for (uint32_t mi = 0; mi < part.numMicropolygons; ++mi) {
@@ -809,7 +791,7 @@ struct BucketRasterizer::Impl {
           box = {tx0[first] - mx, tx0[last] - tx0[first], tx1[first] + mx, tx1[last] - tx1[first],
                  ty0[first] - my, ty0[last] - ty0[first], ty1[first] + my, ty1[last] - ty1[first],
                  float(thetaTimes[size_t(first)] - toLocal), float(1.0 / (thetaTimes[size_t(last)] - thetaTimes[size_t(first)]))};
-        const size_t n = gatherCandidates(s, g, ta.px0, ta.py0, ta.px1, ta.py1, box, cover, 0);
+        const size_t n = gatherCandidates(s, s + 1, g, ta.px0, ta.py0, ta.px1, ta.py1, box, cover, 0);
         if (n) testCandidates(mp, mi, c, tri, flags, n);
       }
     }
@@ -868,7 +850,7 @@ struct BucketRasterizer::Impl {
     }
     for (int s0 = 0; s0 < N; s0 += span) {
       const int s1 = std::min(N, s0 + span);  // strata [s0, s1)
-      const float u0 = stratumU[2 * size_t(s0)], u1 = stratumU[2 * size_t(s1 - 1) + 1];
+      const float u0 = stratumU0[size_t(s0)], u1 = stratumU1[size_t(s1 - 1)];
       const float sx0 = std::min(box.x0 + u0 * box.dx0, box.x0 + u1 * box.dx0), sx1 = std::max(box.x1 + u0 * box.dx1, box.x1 + u1 * box.dx1);
       const float sy0 = std::min(box.y0 + u0 * box.dy0, box.y0 + u1 * box.dy0), sy1 = std::max(box.y1 + u0 * box.dy1, box.y1 + u1 * box.dy1);
       if (sx1 < mp.rx0 || sx0 >= mp.rx1 || sy1 < mp.ry0 || sy0 >= mp.ry1) continue;
@@ -879,7 +861,7 @@ struct BucketRasterizer::Impl {
         while (py1 >= py0 && rowGroup[size_t(py1 - y0)] != mp.g) --py1;
         if (py0 > py1) continue;
       }
-      n = gatherCandidates(s0, mp.g, px0, py0, px1, py1, box, mp.cover, n, s1);
+      n = gatherCandidates(s0, s1, mp.g, px0, py0, px1, py1, box, mp.cover, n);
     }
     // Every stratum's candidates tested together: the vector test fills its lanes.
     if (n) testCandidates(mp, mi, c, tri, flags, n);
@@ -910,15 +892,24 @@ struct BucketRasterizer::Impl {
     std::memcpy(edges.c, q, sizeof edges.c);
     const kernels::EdgeTestSetup setup{st.data(), rayX.data(), rayY.data(), mp.seg.fOffset, mp.seg.fScale, tri,
                                        opt.backfaceCull && !(flags & store::kTwoSided)};
+    float za[4] = {}, zb[4] = {};
+    for (int j = 0; j < (tri ? 3 : 4); ++j) za[j] = part.position(0, c[j]).z, zb[j] = part.position(1, c[j]).z;
+    recordKernelHits(mp.hc, mi, c, setup, edges, n, za, zb, [&](uint32_t idx) { testCandidate(mp, mi, c, tri, flags, idx); });
+  }
+
+  // Runs the vector edge test of micropolygon m over the first n candidates and records its hits:
+  // corner depths za / zb at the segment's two ends (equal when fixed), exact ties to `scalarTest`.
+  // The depth is the scalar paths' arithmetic: zv_j = za_j + f (zb_j - za_j), z = sum b_j zv_j
+  // (for fixed edges f = 0, so zv_j = za_j exactly).
+  template <class ScalarTest>
+  void recordKernelHits(const HitContext& hc, uint32_t m, const uint32_t* c, const kernels::EdgeTestSetup& setup, const kernels::LinearEdges& edges,
+                        size_t n, const float za[4], const float zb[4], ScalarTest scalarTest) {
     const size_t hits = kernels::testLinearEdges(setup, edges, candidates.data(), n, edgeHits.data());
-    float za[4], zb[4];
-    const int nc = tri ? 3 : 4;
-    for (int j = 0; j < nc; ++j) za[j] = part.position(0, c[j]).z, zb[j] = part.position(1, c[j]).z;
     for (size_t hi = 0; hi < hits; ++hi) {
       const kernels::EdgeHit& eh = edgeHits[hi];
       const uint32_t idx = candidates[eh.candidate];
       if (eh.undecided) {
-        testCandidate(mp, mi, c, tri, flags, idx);
+        scalarTest(idx);
         continue;
       }
       const int j1 = eh.triangle ? 2 : 1, j2 = eh.triangle ? 3 : 2;
@@ -926,7 +917,7 @@ struct BucketRasterizer::Impl {
       const float z = eh.b[0] * (za[0] + f * (zb[0] - za[0])) + eh.b[1] * (za[j1] + f * (zb[j1] - za[j1])) + eh.b[2] * (za[j2] + f * (zb[j2] - za[j2]));
       if (!(z >= view.nearClip && z <= view.farClip)) continue;
       const uint32_t tv[3] = {c[0], c[j1], c[j2]};
-      recordHit(mp.hc, idx, mi, tv, eh.b, z);
+      recordHit(hc, idx, m, tv, eh.b, z);
     }
   }
 

@@ -159,9 +159,9 @@ RESHUTTER_AVX2 size_t testLinearEdgesAvx2(const EdgeTestSetup& s, const LinearEd
     alignas(16) uint32_t lanes[4];
     for (size_t k = 0; k < 4; ++k) lanes[k] = idx[i + (k < live ? k : live - 1)];
     const __m128i vi = _mm_load_si128(reinterpret_cast<const __m128i*>(lanes));
-    const __m128 t = _mm_i32gather_ps(s.st, vi, 4);
-    // f = clamp((t + fOffset) fScale, 0, 1), operand order as std::clamp.
-    const __m128 f = _mm_min_ps(one, _mm_max_ps(zero, _mm_mul_ps(_mm_add_ps(t, fOffset), fScale)));
+    // f = clamp((t + fOffset) fScale, 0, 1), operand order as std::clamp; fixed edges need no time.
+    __m128 f = zero;
+    if constexpr (!kFixed) f = _mm_min_ps(one, _mm_max_ps(zero, _mm_mul_ps(_mm_add_ps(_mm_i32gather_ps(s.st, vi, 4), fOffset), fScale)));
     const __m256d fd = _mm256_cvtps_pd(f);
     const __m256d rx = _mm256_cvtps_pd(_mm_i32gather_ps(s.rayX, vi, 4)), ry = _mm256_cvtps_pd(_mm_i32gather_ps(s.rayY, vi, 4));
     const __m256d e0 = edgeValue<kFixed>(E.c[0], fd, rx, ry), e1 = edgeValue<kFixed>(E.c[1], fd, rx, ry), e4 = edgeValue<kFixed>(E.c[4], fd, rx, ry);

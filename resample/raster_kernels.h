@@ -6,7 +6,7 @@
 // (kernels::available()), so the binary still runs on any x86-64 node; raster.cpp keeps the scalar
 // loops as the fallback. Both compute every value with the same IEEE operations in the same order
 // (no fused multiply-adds: AVX2 does not imply FMA, and the module builds with -ffp-contract=off),
-// so the two paths give bit-identical images; ResampleHard.VectorAndScalarPathsAgree checks it.
+// so the two paths give bit-identical images; ResampleHard.VectorAndScalarKernelsAgree checks it.
 // Hand-written rather than through Highway (libhwy-dev) or xsimd (libxsimd-dev), both in Debian:
 // these are two loops of a few dozen lines, x86 is the farm's ISA, and the scalar fallback serves
 // every other CPU; a SIMD framework's multi-target build machinery would outweigh them.
@@ -17,7 +17,7 @@
 
 namespace reshutter::resample::kernels {
 
-/// True when this CPU runs the AVX2 kernels (checked once) and RESHUTTER_SIMD is not "off".
+/// True when this CPU runs the AVX2 kernels (checked once).
 bool available();
 
 /// An axis-aligned box moving linearly over a time span: [x0 + u dx0, x1 + u dx1] ×
