@@ -44,7 +44,9 @@ struct EdgeQuad {
   glm::dvec3 at(double f) const { return e0 + f * (e1 + f * e2); }
 };
 
-inline double dotRay(double rx, double ry, const glm::dvec3& e) { return rx * e.x + ry * e.y + e.z; }
+// An edge's value at raster sample (x, y): the edges are kept in raster space (toRaster()), so the
+// test reads the samples' own positions and needs no per-sample view rays.
+inline double edgeAt(double x, double y, const glm::dvec3& e) { return x * e.x + y * e.y + e.z; }
 
 // A sample exactly on an edge belongs to the triangle for which the orientation-normalised edge
 // vector is lexicographically positive; the neighbour sees the exact negation and declines.
@@ -84,7 +86,7 @@ struct BucketRasterizer::Impl {
 
   // Region.
   int x0 = 0, y0 = 0, w = 0, h = 0, P = 0;
-  std::vector<float> sx, sy, st, rayX, rayY;  // stratum-major: [s * P + p]
+  std::vector<float> sx, sy, st;  // stratum-major: [s * P + p]
   std::vector<uint32_t> idxOf;                // [p * N + i] → s * P + p (sample i of pixel p lies in stratum s)
   std::vector<uint8_t> rowGroup;              // per region row
   std::vector<uint8_t> groupPresent;
@@ -154,7 +156,7 @@ struct BucketRasterizer::Impl {
     x0 = rx0, y0 = ry0, w = rw, h = rh, P = w * h;
     const size_t slots = size_t(P) * N;
     // The vector kernels read up to 7 floats past a row's end.
-    sx.resize(slots + kPad), sy.resize(slots + kPad), st.resize(slots + kPad), rayX.resize(slots + kPad), rayY.resize(slots + kPad);
+    sx.resize(slots + kPad), sy.resize(slots + kPad), st.resize(slots + kPad);
     idxOf.resize(slots);
     rowGroup.resize(size_t(h));
     const int G = int(shutter.groups().size());
@@ -181,8 +183,6 @@ struct BucketRasterizer::Impl {
           st[idx] = float(t - tBase);
           const double tc = tBase + double(st[idx]);
           tMin = std::min(tMin, tc), tMax = std::max(tMax, tc);
-          glm::vec2 ray = view.rayXY(x, y);
-          rayX[idx] = ray.x, rayY[idx] = ray.y;
           idxOf[size_t(p) * N + i] = uint32_t(idx);
         }
       }
@@ -389,6 +389,17 @@ struct BucketRasterizer::Impl {
     return !triangle && triangleCovers(e[2], e[3], e[4], [&](int i) { return E[2 + i]; }, flags, bOut);
   }
 
+  // An edge (the plane through the eye and two vertices, or the line through two orthographic
+  // vertices) as a function of raster position: E · (x', y', 1) with x' = (x - bx) / ax equals
+  // (E.x / ax) x + (E.y / ay) y + (E.z - bx E.x / ax - by E.y / ay). Every operation is odd in E,
+  // so the neighbour's exactly negated edge stays exactly negated (watertight ties), and the
+  // edge test then reads only the samples' positions. It is linear, so it commutes with the
+  // quadratic time expansion of EdgeQuad.
+  glm::dvec3 toRaster(const glm::dvec3& e) const {
+    const double ex = e.x / view.ax, ey = e.y / view.ay;
+    return {ex, ey, (e.z - ex * view.bx) - ey * view.by};
+  }
+
   glm::dvec3 homogeneous(const glm::vec3& p) const { return view.perspective ? glm::dvec3(p) : glm::dvec3(p.x, p.y, 1.0); }
 
   // Raster bounds of a set of camera-space points; false if one lies before the near plane.
@@ -457,7 +468,7 @@ struct BucketRasterizer::Impl {
       glm::dvec3 E[5] = {};
       for (int k = 0; k < 5; ++k) {
         if (tri && (k == 2 || k == 3)) continue;
-        E[k] = cross(hom[c[kEdgeVerts[k][0]]], hom[c[kEdgeVerts[k][1]]]);
+        E[k] = toRaster(cross(hom[c[kEdgeVerts[k][0]]], hom[c[kEdgeVerts[k][1]]]));
       }
       float zv[4];
       float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
@@ -482,7 +493,7 @@ struct BucketRasterizer::Impl {
         stats.sampleTests += n;
         kernels::LinearEdges edges{};
         for (int k = 0; k < 5; ++k) edges.c[k][0] = E[k].x, edges.c[k][1] = E[k].y, edges.c[k][2] = E[k].z;
-        const kernels::EdgeTestSetup setup{st.data(), rayX.data(), rayY.data(), 0.f, 0.f, tri, opt.backfaceCull && !(part.flags[m] & store::kTwoSided), true};
+        const kernels::EdgeTestSetup setup{st.data(), sx.data(), sy.data(), 0.f, 0.f, tri, opt.backfaceCull && !(part.flags[m] & store::kTwoSided), true};
         recordKernelHits(hc, m, c, setup, edges, n, zv, zv, [&](uint32_t idx) { testStatic(hc, m, c, tri, E, zv, idx); });
         continue;
       }
@@ -506,7 +517,7 @@ struct BucketRasterizer::Impl {
   void testStatic(const HitContext& hc, uint32_t m, const uint32_t* c, bool tri, const glm::dvec3 E[5], const float zv[4], uint32_t idx) {
     double e[5] = {0, 0, 0, 0, 0};
     for (int k = 0; k < 5; ++k)
-      if (!tri || k == 0 || k == 1 || k == 4) e[k] = dotRay(rayX[idx], rayY[idx], E[k]);
+      if (!tri || k == 0 || k == 1 || k == 4) e[k] = edgeAt(sx[idx], sy[idx], E[k]);
     float b[3];
     int t;
     if (!inside(e, E, tri, hc.part->flags[m], t, b)) return;
@@ -890,7 +901,7 @@ struct BucketRasterizer::Impl {
     static_assert(sizeof(EdgeQuad) == 9 * sizeof(double), "EdgeQuad is e0 e1 e2, three dvec3s");
     kernels::LinearEdges edges;
     std::memcpy(edges.c, q, sizeof edges.c);
-    const kernels::EdgeTestSetup setup{st.data(), rayX.data(), rayY.data(), mp.seg.fOffset, mp.seg.fScale, tri,
+    const kernels::EdgeTestSetup setup{st.data(), sx.data(), sy.data(), mp.seg.fOffset, mp.seg.fScale, tri,
                                        opt.backfaceCull && !(flags & store::kTwoSided)};
     float za[4] = {}, zb[4] = {};
     for (int j = 0; j < (tri ? 3 : 4); ++j) za[j] = part.position(0, c[j]).z, zb[j] = part.position(1, c[j]).z;
@@ -936,9 +947,9 @@ struct BucketRasterizer::Impl {
       segReady[k] = 1;
     }
     // Triangle A's edges first; B's two others only if A misses. Edge vectors only for ties.
-    const double rx = rayX[idx], ry = rayY[idx];
+    const double rx = sx[idx], ry = sy[idx];
     const double fd = f;
-    auto edgeValue = [&](int ei) { return dotRay(rx, ry, q[ei].at(fd)); };
+    auto edgeValue = [&](int ei) { return edgeAt(rx, ry, q[ei].at(fd)); };
     const double e0 = edgeValue(0), e1 = edgeValue(1), e4 = edgeValue(4);
     int tr = 0;
     float b[3];
@@ -1010,9 +1021,9 @@ struct BucketRasterizer::Impl {
     for (int e = 0; e < 5; ++e) {
       if (tri && (e == 2 || e == 3)) continue;
       const int a = kEdgeVerts[e][0], b = kEdgeVerts[e][1];
-      q[e].e0 = cross(A[a], A[b]);
-      q[e].e1 = cross(A[a], D[b]) + cross(D[a], A[b]);
-      q[e].e2 = cross(D[a], D[b]);
+      q[e].e0 = toRaster(cross(A[a], A[b]));
+      q[e].e1 = toRaster(cross(A[a], D[b]) + cross(D[a], A[b]));
+      q[e].e2 = toRaster(cross(D[a], D[b]));
     }
   }
 

@@ -42,8 +42,6 @@ struct View {
   double ax = 1, bx = 0, ay = 1, by = 0;  // raster = a·(x/z) + b (perspective) or a·x + b
   bool perspective = true;
   float nearClip = 1e-4f, farClip = 1e30f;
-  /// Normalised view-ray direction of a raster position: (x', y', 1).
-  glm::vec2 rayXY(float rx, float ry) const { return {float((rx - bx) / ax), float((ry - by) / ay)}; }
 };
 
 /// One store contributing to the render: its micropolygons cover [frame + open, frame + close]

@@ -105,7 +105,7 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
 }
 
 // One edge's value d · E(f) for four samples: E(f) = c0 + f (c3 + f c6) per component, and
-// d · E = (rx Ex + ry Ey) + Ez, as dotRay() and EdgeQuad::at() compute it.
+// (x Ex + y Ey) + Ez at raster position (x, y), as edgeAt() and EdgeQuad::at() compute it.
 template <bool kFixed>
 RESHUTTER_AVX2 inline __m256d edgeValue(const double* c, __m256d f, __m256d rx, __m256d ry) {
   if constexpr (kFixed)
@@ -163,7 +163,7 @@ RESHUTTER_AVX2 size_t testLinearEdgesAvx2(const EdgeTestSetup& s, const LinearEd
     __m128 f = zero;
     if constexpr (!kFixed) f = _mm_min_ps(one, _mm_max_ps(zero, _mm_mul_ps(_mm_add_ps(_mm_i32gather_ps(s.st, vi, 4), fOffset), fScale)));
     const __m256d fd = _mm256_cvtps_pd(f);
-    const __m256d rx = _mm256_cvtps_pd(_mm_i32gather_ps(s.rayX, vi, 4)), ry = _mm256_cvtps_pd(_mm_i32gather_ps(s.rayY, vi, 4));
+    const __m256d rx = _mm256_cvtps_pd(_mm_i32gather_ps(s.sx, vi, 4)), ry = _mm256_cvtps_pd(_mm_i32gather_ps(s.sy, vi, 4));
     const __m256d e0 = edgeValue<kFixed>(E.c[0], fd, rx, ry), e1 = edgeValue<kFixed>(E.c[1], fd, rx, ry), e4 = edgeValue<kFixed>(E.c[4], fd, rx, ry);
     const int liveMask = (1 << live) - 1;
     // Triangle A = (p0 p1 p2) with edges 12, 20 (= -02), 01.

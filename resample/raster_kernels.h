@@ -69,8 +69,8 @@ struct LinearEdges {
 
 struct EdgeTestSetup {
   const float* st;
-  const float* rayX;
-  const float* rayY;
+  const float* sx;  // raster positions (the edges are in raster space)
+  const float* sy;
   float fOffset, fScale;  // f = clamp((st + fOffset) fScale, 0, 1)
   bool triangle;          // edges 23 and 30 unused
   bool cullBackFaces;     // back-face knock-out applies to this micropolygon
