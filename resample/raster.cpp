@@ -123,6 +123,7 @@ struct BucketRasterizer::Impl {
   std::vector<float> projRho;          // [v * T + theta]: perspective lag bound of theta interval (theta, theta+1)
   std::vector<float> depthScratch;     // one vertex's depths at the theta times
   std::vector<uint32_t> candidates;    // sample indices that pass the box test, per micropolygon
+  std::vector<float> candT, candX, candY;  // and their times and positions, for the vector edge test
   std::vector<kernels::EdgeHit> edgeHits;
   std::vector<float> cullZ;            // [cull time * nV + v]: camera depth
   std::vector<float> stratumU0, stratumU1;  // linear path: stratum s's span [u0, u1] in the group interval, 0..1, padded to whole vectors
@@ -209,7 +210,7 @@ struct BucketRasterizer::Impl {
 
     // One micropolygon's candidates: at most one per pixel and stratum, and the kernels write up
     // to 7 entries past the count.
-    candidates.resize(slots + kPad);
+    candidates.resize(slots + kPad), candT.resize(slots + kPad), candX.resize(slots + kPad), candY.resize(slots + kPad);
     edgeHits.resize(slots + kPad);
     multiGroup = G > 1;
     zbuf.assign(slots, INFINITY);
@@ -493,7 +494,7 @@ struct BucketRasterizer::Impl {
         stats.sampleTests += n;
         kernels::LinearEdges edges{};
         for (int k = 0; k < 5; ++k) edges.c[k][0] = E[k].x, edges.c[k][1] = E[k].y, edges.c[k][2] = E[k].z;
-        const kernels::EdgeTestSetup setup{st.data(), sx.data(), sy.data(), 0.f, 0.f, tri, opt.backfaceCull && !(part.flags[m] & store::kTwoSided), true};
+        const kernels::EdgeTestSetup setup{candT.data(), candX.data(), candY.data(), 0.f, 0.f, tri, opt.backfaceCull && !(part.flags[m] & store::kTwoSided), true};
         recordKernelHits(hc, m, c, setup, edges, n, zv, zv, [&](uint32_t idx) { testStatic(hc, m, c, tri, E, zv, idx); });
         continue;
       }
@@ -597,6 +598,8 @@ struct BucketRasterizer::Impl {
   // g(u) - u = u (1 - u) (zb - za) / z(u), at most |dz| / (4 z_min). Inside one knot segment.
   static float perspectiveLag(float za, float zb) { return std::abs(zb - za) / (4.f * std::min(za, zb)) * 1.001f; }
 
+  kernels::Candidates candidateList() { return {candidates.data(), candT.data(), candX.data(), candY.data()}; }
+
   // Appends to `candidates` (from position n) the samples of strata [s0, s1) and group g (< 0:
   // any) in pixels [px0, px1] × [py0, py1] that lie in `box` at their own time and inside the
   // source's coverage; returns the new count. Branch-free: the in/out pattern is random, so
@@ -606,9 +609,12 @@ struct BucketRasterizer::Impl {
       const kernels::SampleRows rows{st.data(), sx.data(), sy.data(), size_t(s0) * P + size_t(py0 - y0) * w + size_t(px0 - x0), size_t(w),
                                      px1 - px0 + 1, py1 - py0 + 1, multiGroup && g >= 0 ? &rowGroup[size_t(py0 - y0)] : nullptr, uint8_t(g),
                                      s1 - s0, size_t(P)};
-      return n + kernels::gatherInBox(rows, box, candidates.data() + n);
+      return kernels::gatherInBox(rows, box, candidateList(), n);
     }
     uint32_t* __restrict cand = candidates.data();
+    float* __restrict ct = candT.data();
+    float* __restrict cx = candX.data();
+    float* __restrict cy = candY.data();
     for (int s = s0; s < s1; ++s)
     for (int py = py0; py <= py1; ++py) {
       if (multiGroup && g >= 0 && rowGroup[size_t(py - y0)] != g) continue;
@@ -620,7 +626,7 @@ struct BucketRasterizer::Impl {
         const float x = sx[idx], y = sy[idx];
         bool in = (x >= box.x0 + u * box.dx0) & (x <= box.x1 + u * box.dx1) & (y >= box.y0 + u * box.dy0) & (y <= box.y1 + u * box.dy1);
         if (cover.check) in &= (double(t) >= cover.lo) & (double(t) <= cover.hi);
-        cand[n] = idx;
+        cand[n] = idx, ct[n] = t, cx[n] = x, cy[n] = y;
         n += in;
       }
     }
@@ -855,7 +861,7 @@ struct BucketRasterizer::Impl {
       const kernels::SampleRows region{st.data(), sx.data(), sy.data(), 0, size_t(w), w, h, multiGroup ? rowGroup.data() : nullptr,
                                        uint8_t(mp.g), N, size_t(P)};
       const kernels::StrataSpans spans{stratumU0.data(), stratumU1.data(), N, x0, y0, w, h, 1e-3f + 1e-6f * mag};
-      n = kernels::gatherStrata(region, spans, box, candidates.data());
+      n = kernels::gatherStrata(region, spans, box, candidateList());
       if (n) testCandidates(mp, mi, c, tri, flags, n);
       return true;
     }
@@ -901,7 +907,7 @@ struct BucketRasterizer::Impl {
     static_assert(sizeof(EdgeQuad) == 9 * sizeof(double), "EdgeQuad is e0 e1 e2, three dvec3s");
     kernels::LinearEdges edges;
     std::memcpy(edges.c, q, sizeof edges.c);
-    const kernels::EdgeTestSetup setup{st.data(), sx.data(), sy.data(), mp.seg.fOffset, mp.seg.fScale, tri,
+    const kernels::EdgeTestSetup setup{candT.data(), candX.data(), candY.data(), mp.seg.fOffset, mp.seg.fScale, tri,
                                        opt.backfaceCull && !(flags & store::kTwoSided)};
     float za[4] = {}, zb[4] = {};
     for (int j = 0; j < (tri ? 3 : 4); ++j) za[j] = part.position(0, c[j]).z, zb[j] = part.position(1, c[j]).z;
@@ -915,7 +921,7 @@ struct BucketRasterizer::Impl {
   template <class ScalarTest>
   void recordKernelHits(const HitContext& hc, uint32_t m, const uint32_t* c, const kernels::EdgeTestSetup& setup, const kernels::LinearEdges& edges,
                         size_t n, const float za[4], const float zb[4], ScalarTest scalarTest) {
-    const size_t hits = kernels::testLinearEdges(setup, edges, candidates.data(), n, edgeHits.data());
+    const size_t hits = kernels::testLinearEdges(setup, edges, n, edgeHits.data());
     for (size_t hi = 0; hi < hits; ++hi) {
       const kernels::EdgeHit& eh = edgeHits[hi];
       const uint32_t idx = candidates[eh.candidate];

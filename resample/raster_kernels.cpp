@@ -32,14 +32,65 @@ constexpr CompressTable kCompress = makeCompressTable();
 
 #define RESHUTTER_AVX2 __attribute__((target("avx2,popcnt")))
 
-RESHUTTER_AVX2 size_t gatherInBoxAvx2(const SampleRows& rows, const MovingBox& b, uint32_t* out) {
-  const SampleRows r = rows;  // locals: the index stores below may alias anything
-  const __m256 thetaA = _mm256_set1_ps(b.thetaA), invLen = _mm256_set1_ps(b.invLen);
-  const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.f);
-  const __m256 x0 = _mm256_set1_ps(b.x0), dx0 = _mm256_set1_ps(b.dx0), x1 = _mm256_set1_ps(b.x1), dx1 = _mm256_set1_ps(b.dx1);
-  const __m256 y0 = _mm256_set1_ps(b.y0), dy0 = _mm256_set1_ps(b.dy0), y1 = _mm256_set1_ps(b.y1), dy1 = _mm256_set1_ps(b.dy1);
+// A MovingBox in vector registers, and its test: which of eight samples (time, x, y) lie inside
+// the box at their own time.
+struct BoxLanes {
+  __m256 thetaA, invLen, x0, dx0, x1, dx1, y0, dy0, y1, dy1;
+};
+RESHUTTER_AVX2 inline BoxLanes boxLanes(const MovingBox& b) {
+  return {_mm256_set1_ps(b.thetaA), _mm256_set1_ps(b.invLen), _mm256_set1_ps(b.x0), _mm256_set1_ps(b.dx0), _mm256_set1_ps(b.x1),
+          _mm256_set1_ps(b.dx1),    _mm256_set1_ps(b.y0),     _mm256_set1_ps(b.dy0), _mm256_set1_ps(b.y1), _mm256_set1_ps(b.dy1)};
+}
+RESHUTTER_AVX2 inline __m256 insideAtOwnTime(const BoxLanes& b, __m256 t, __m256 x, __m256 y) {
+  // u = min(max((t - thetaA) invLen, 0), 1), operand order as std::max / std::min.
+  const __m256 u = _mm256_min_ps(_mm256_set1_ps(1.f), _mm256_max_ps(_mm256_setzero_ps(), _mm256_mul_ps(_mm256_sub_ps(t, b.thetaA), b.invLen)));
+  __m256 in = _mm256_cmp_ps(x, _mm256_add_ps(b.x0, _mm256_mul_ps(u, b.dx0)), _CMP_GE_OQ);
+  in = _mm256_and_ps(in, _mm256_cmp_ps(x, _mm256_add_ps(b.x1, _mm256_mul_ps(u, b.dx1)), _CMP_LE_OQ));
+  in = _mm256_and_ps(in, _mm256_cmp_ps(y, _mm256_add_ps(b.y0, _mm256_mul_ps(u, b.dy0)), _CMP_GE_OQ));
+  return _mm256_and_ps(in, _mm256_cmp_ps(y, _mm256_add_ps(b.y1, _mm256_mul_ps(u, b.dy1)), _CMP_LE_OQ));
+}
+// Appends the lanes that are in and live to out from position n; returns the new count.
+RESHUTTER_AVX2 inline size_t appendLanes(__m256 in, __m256i live, __m256i idx, __m256 t, __m256 x, __m256 y, const Candidates& out, size_t n) {
+  const unsigned mask = unsigned(_mm256_movemask_ps(_mm256_and_ps(in, _mm256_castsi256_ps(live))));
+  const __m256i perm = _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompress.perm[mask]));
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(out.index + n), _mm256_permutevar8x32_epi32(idx, perm));
+  _mm256_storeu_ps(out.t + n, _mm256_permutevar8x32_ps(t, perm));
+  _mm256_storeu_ps(out.x + n, _mm256_permutevar8x32_ps(x, perm));
+  _mm256_storeu_ps(out.y + n, _mm256_permutevar8x32_ps(y, perm));
+  return n + size_t(__builtin_popcount(mask));
+}
+
+RESHUTTER_AVX2 size_t gatherInBoxAvx2(const SampleRows& rows, const MovingBox& box, const Candidates& candidates, size_t n) {
+  const SampleRows r = rows;  // locals: the stores below may alias anything
+  const Candidates out = candidates;
+  const BoxLanes b = boxLanes(box);
+  if (r.cols <= 4) {
+    // Narrow boxes (a small micropolygon's stratum box is 2 - 4 pixels wide): two rows per
+    // vector, four lanes each, so that half the lanes are not idle.
+    const __m256i quad = _mm256_setr_epi32(0, 1, 2, 3, 0, 1, 2, 3);
+    const __m256i colLive = _mm256_cmpgt_epi32(_mm256_set1_epi32(r.cols), quad);
+    const __m256i lowHalf = _mm256_setr_epi32(-1, -1, -1, -1, 0, 0, 0, 0);
+    for (int plane = 0; plane < r.planes; ++plane) {
+      const size_t planeBase = r.first + size_t(plane) * r.planeStride;
+      int row = 0;
+      while (true) {
+        while (row < r.rows && r.rowGroup && r.rowGroup[row] != r.group) ++row;
+        if (row >= r.rows) break;
+        int second = row + 1;
+        while (second < r.rows && r.rowGroup && r.rowGroup[second] != r.group) ++second;
+        const bool pair = second < r.rows;
+        const size_t lo = planeBase + size_t(row) * r.stride, hi = pair ? planeBase + size_t(second) * r.stride : lo;
+        const __m256 t = _mm256_loadu2_m128(r.st + hi, r.st + lo), x = _mm256_loadu2_m128(r.sx + hi, r.sx + lo),
+                     y = _mm256_loadu2_m128(r.sy + hi, r.sy + lo);
+        const __m256i live = pair ? colLive : _mm256_and_si256(colLive, lowHalf);
+        const __m256i idx = _mm256_add_epi32(_mm256_setr_m128i(_mm_set1_epi32(int(uint32_t(lo))), _mm_set1_epi32(int(uint32_t(hi)))), quad);
+        n = appendLanes(insideAtOwnTime(b, t, x, y), live, idx, t, x, y, out, n);
+        row = pair ? second + 1 : r.rows;
+      }
+    }
+    return n;
+  }
   const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-  size_t n = 0;
   for (int plane = 0; plane < r.planes; ++plane)
   for (int row = 0; row < r.rows; ++row) {
     if (r.rowGroup && r.rowGroup[row] != r.group) continue;
@@ -47,24 +98,14 @@ RESHUTTER_AVX2 size_t gatherInBoxAvx2(const SampleRows& rows, const MovingBox& b
     for (int c = 0; c < r.cols; c += 8) {
       const size_t at = base + size_t(c);
       const __m256 t = _mm256_loadu_ps(r.st + at), x = _mm256_loadu_ps(r.sx + at), y = _mm256_loadu_ps(r.sy + at);
-      // u = min(max((t - thetaA) invLen, 0), 1), operand order as std::max / std::min.
-      const __m256 u = _mm256_min_ps(one, _mm256_max_ps(zero, _mm256_mul_ps(_mm256_sub_ps(t, thetaA), invLen)));
-      __m256 in = _mm256_cmp_ps(x, _mm256_add_ps(x0, _mm256_mul_ps(u, dx0)), _CMP_GE_OQ);
-      in = _mm256_and_ps(in, _mm256_cmp_ps(x, _mm256_add_ps(x1, _mm256_mul_ps(u, dx1)), _CMP_LE_OQ));
-      in = _mm256_and_ps(in, _mm256_cmp_ps(y, _mm256_add_ps(y0, _mm256_mul_ps(u, dy0)), _CMP_GE_OQ));
-      in = _mm256_and_ps(in, _mm256_cmp_ps(y, _mm256_add_ps(y1, _mm256_mul_ps(u, dy1)), _CMP_LE_OQ));
       const __m256i live = _mm256_cmpgt_epi32(_mm256_set1_epi32(r.cols - c), lane);
-      const unsigned mask = unsigned(_mm256_movemask_ps(_mm256_and_ps(in, _mm256_castsi256_ps(live))));
-      const __m256i idx = _mm256_add_epi32(_mm256_set1_epi32(int(uint32_t(at))), lane);
-      const __m256i perm = _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompress.perm[mask]));
-      _mm256_storeu_si256(reinterpret_cast<__m256i*>(out + n), _mm256_permutevar8x32_epi32(idx, perm));
-      n += size_t(__builtin_popcount(mask));
+      n = appendLanes(insideAtOwnTime(b, t, x, y), live, _mm256_add_epi32(_mm256_set1_epi32(int(uint32_t(at))), lane), t, x, y, out, n);
     }
   }
   return n;
 }
 
-RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpans& sp, const MovingBox& b, uint32_t* out) {
+RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpans& sp, const MovingBox& b, const Candidates& out) {
   // Pixel ranges of every stratum, eight at a time: the box over [u0, u1] (min / max of its two
   // ends, as the corners move linearly), widened, clamped to the region and floored.
   alignas(32) int px0[64], py0[64], px1[64], py1[64];
@@ -99,7 +140,7 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
     r.cols = px1[s] - px0[s] + 1, r.rows = py1[s] - py0[s] + 1;
     r.planes = 1;
     if (region.rowGroup) r.rowGroup = region.rowGroup + (py0[s] - sp.y0);
-    n += gatherInBoxAvx2(r, b, out + n);
+    n = gatherInBoxAvx2(r, b, out, n);
   }
   return n;
 }
@@ -150,20 +191,17 @@ RESHUTTER_AVX2 inline TriangleMasks triangleMasks(__m256d a0, __m256d a1, __m256
 }
 
 template <bool kFixed>
-RESHUTTER_AVX2 size_t testLinearEdgesAvx2(const EdgeTestSetup& s, const LinearEdges& E, const uint32_t* idx, size_t n, EdgeHit* hits) {
+RESHUTTER_AVX2 size_t testLinearEdgesAvx2(const EdgeTestSetup& s, const LinearEdges& E, size_t n, EdgeHit* hits) {
   const __m128 fOffset = _mm_set1_ps(s.fOffset), fScale = _mm_set1_ps(s.fScale), zero = _mm_setzero_ps(), one = _mm_set1_ps(1.f);
   const __m256d sign = _mm256_set1_pd(-0.0);
   size_t h = 0;
   for (size_t i = 0; i < n; i += 4) {
-    const size_t live = n - i < 4 ? n - i : 4;
-    alignas(16) uint32_t lanes[4];
-    for (size_t k = 0; k < 4; ++k) lanes[k] = idx[i + (k < live ? k : live - 1)];
-    const __m128i vi = _mm_load_si128(reinterpret_cast<const __m128i*>(lanes));
+    const size_t live = n - i < 4 ? n - i : 4;  // lanes past n read padding and are masked off
     // f = clamp((t + fOffset) fScale, 0, 1), operand order as std::clamp; fixed edges need no time.
     __m128 f = zero;
-    if constexpr (!kFixed) f = _mm_min_ps(one, _mm_max_ps(zero, _mm_mul_ps(_mm_add_ps(_mm_i32gather_ps(s.st, vi, 4), fOffset), fScale)));
+    if constexpr (!kFixed) f = _mm_min_ps(one, _mm_max_ps(zero, _mm_mul_ps(_mm_add_ps(_mm_loadu_ps(s.st + i), fOffset), fScale)));
     const __m256d fd = _mm256_cvtps_pd(f);
-    const __m256d rx = _mm256_cvtps_pd(_mm_i32gather_ps(s.sx, vi, 4)), ry = _mm256_cvtps_pd(_mm_i32gather_ps(s.sy, vi, 4));
+    const __m256d rx = _mm256_cvtps_pd(_mm_loadu_ps(s.sx + i)), ry = _mm256_cvtps_pd(_mm_loadu_ps(s.sy + i));
     const __m256d e0 = edgeValue<kFixed>(E.c[0], fd, rx, ry), e1 = edgeValue<kFixed>(E.c[1], fd, rx, ry), e4 = edgeValue<kFixed>(E.c[4], fd, rx, ry);
     const int liveMask = (1 << live) - 1;
     // Triangle A = (p0 p1 p2) with edges 12, 20 (= -02), 01.
@@ -205,25 +243,25 @@ bool available() {
   return ok;
 }
 
-size_t gatherInBox(const SampleRows& rows, const MovingBox& box, uint32_t* out) { return gatherInBoxAvx2(rows, box, out); }
+size_t gatherInBox(const SampleRows& rows, const MovingBox& box, const Candidates& out, size_t n) { return gatherInBoxAvx2(rows, box, out, n); }
 
-size_t gatherStrata(const SampleRows& region, const StrataSpans& spans, const MovingBox& box, uint32_t* out) {
+size_t gatherStrata(const SampleRows& region, const StrataSpans& spans, const MovingBox& box, const Candidates& out) {
   if (spans.strata > 64) fail("rasterizer", "more than 64 time strata per pixel for the vector kernels");
   return gatherStrataAvx2(region, spans, box, out);
 }
 
-size_t testLinearEdges(const EdgeTestSetup& setup, const LinearEdges& edges, const uint32_t* idx, size_t n, EdgeHit* hits) {
-  return setup.fixed ? testLinearEdgesAvx2<true>(setup, edges, idx, n, hits) : testLinearEdgesAvx2<false>(setup, edges, idx, n, hits);
+size_t testLinearEdges(const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits) {
+  return setup.fixed ? testLinearEdgesAvx2<true>(setup, edges, n, hits) : testLinearEdgesAvx2<false>(setup, edges, n, hits);
 }
 
 #else
 
 bool available() { return false; }
-size_t gatherInBox(const SampleRows&, const MovingBox&, uint32_t*) { fail("rasterizer", "vector kernels called on a CPU without them"); }
-size_t gatherStrata(const SampleRows&, const StrataSpans&, const MovingBox&, uint32_t*) {
+size_t gatherInBox(const SampleRows&, const MovingBox&, const Candidates&, size_t) { fail("rasterizer", "vector kernels called on a CPU without them"); }
+size_t gatherStrata(const SampleRows&, const StrataSpans&, const MovingBox&, const Candidates&) {
   fail("rasterizer", "vector kernels called on a CPU without them");
 }
-size_t testLinearEdges(const EdgeTestSetup&, const LinearEdges&, const uint32_t*, size_t, EdgeHit*) {
+size_t testLinearEdges(const EdgeTestSetup&, const LinearEdges&, size_t, EdgeHit*) {
   fail("rasterizer", "vector kernels called on a CPU without them");
 }
 

@@ -42,10 +42,19 @@ struct SampleRows {
   size_t planeStride = 0;
 };
 
-/// Appends to `out` the indices of the samples in `rows` (plane by plane) that lie inside `box`
-/// at their own time; returns how many. Reads up to 7 floats past a row's end (arrays need that padding) and
-/// writes up to 7 indices past the returned count.
-size_t gatherInBox(const SampleRows& rows, const MovingBox& box, uint32_t* out);
+/// A list of candidate samples: each one's index and a copy of its time and position, so that
+/// the edge test reads them in order instead of gathering them from the sample arrays.
+struct Candidates {
+  uint32_t* index;
+  float* t;
+  float* x;
+  float* y;
+};
+
+/// Appends to `out` from position n the samples in `rows` (plane by plane) that lie inside `box`
+/// at their own time; returns the new count. Reads up to 7 floats past a row's end (arrays need
+/// that padding) and writes up to 7 entries past the returned count.
+size_t gatherInBox(const SampleRows& rows, const MovingBox& box, const Candidates& out, size_t n);
 
 /// The strata of one moving box: stratum s covers box times u in [u0[s], u1[s]] and its
 /// samples are plane s of `rows` (whose first/cols/rows describe the whole region).
@@ -59,7 +68,7 @@ struct StrataSpans {
 
 /// For each stratum, the pixels its part of the box's path touches, then gatherInBox() over
 /// them: one call per micropolygon instead of one per stratum.
-size_t gatherStrata(const SampleRows& region, const StrataSpans& spans, const MovingBox& box, uint32_t* out);
+size_t gatherStrata(const SampleRows& region, const StrataSpans& spans, const MovingBox& box, const Candidates& out);
 
 /// A micropolygon's edges over one knot segment: edge e's cross product is
 /// c[e][0..2] + f (c[e][3..5] + f c[e][6..8]) at segment parameter f (edges 01 12 23 30 02).
@@ -68,8 +77,8 @@ struct LinearEdges {
 };
 
 struct EdgeTestSetup {
-  const float* st;
-  const float* sx;  // raster positions (the edges are in raster space)
+  const float* st;  // the candidates' times and raster positions (Candidates::t, x, y)
+  const float* sx;
   const float* sy;
   float fOffset, fScale;  // f = clamp((st + fOffset) fScale, 0, 1)
   bool triangle;          // edges 23 and 30 unused
@@ -88,8 +97,9 @@ struct EdgeHit {
   float b[3];
 };
 
-/// Tests candidates idx[0..n) and appends the hits and undecided ones, in candidate order, to
-/// `hits`; returns how many. The list needs room for n + 3 entries.
-size_t testLinearEdges(const EdgeTestSetup& setup, const LinearEdges& edges, const uint32_t* idx, size_t n, EdgeHit* hits);
+/// Tests candidates 0..n) and appends the hits and undecided ones, in candidate order, to `hits`;
+/// returns how many. The list needs room for n + 3 entries, the candidate arrays 3 readable
+/// entries past n.
+size_t testLinearEdges(const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits);
 
 }  // namespace reshutter::resample::kernels

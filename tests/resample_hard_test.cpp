@@ -328,9 +328,8 @@ TEST(ResampleHard, VectorEdgeTestHitsMissesAndDefersTies) {
   std::vector<float> st(16, 0.f), rx = {1, 5, 2, 0.5f}, ry = {1, 5, 0, 2.5f};
   rx.resize(16), ry.resize(16);
   const kernels::EdgeTestSetup setup{st.data(), rx.data(), ry.data(), 0.f, 0.f, true, false, true};
-  const uint32_t idx[4] = {0, 1, 2, 3};
   std::vector<kernels::EdgeHit> hits(8);
-  const size_t n = kernels::testLinearEdges(setup, edges, idx, 4, hits.data());
+  const size_t n = kernels::testLinearEdges(setup, edges, 4, hits.data());
   ASSERT_EQ(n, 3u);
   EXPECT_EQ(hits[0].candidate, 0u);
   EXPECT_FALSE(hits[0].undecided);
