@@ -60,6 +60,33 @@ inline bool ownsTie(const glm::dvec3& e, bool flip) {
 constexpr uint8_t kHitOpaque = 1, kHitMatte = 2;
 constexpr size_t kPad = 8;
 
+// A per-sample array whose first element lies `skewLines` cache lines into its allocation. The
+// rasterizer reads and writes several per-sample arrays at one sample index; large allocations
+// all start at the same offset within a page, so unskewed those elements share one L1 set (64
+// sets of 8 ways) and a hit's loads and stores evicted each other.
+template <class T>
+class SkewedArray {
+ public:
+  explicit SkewedArray(int skewLines) : skew_(size_t(skewLines) * 64 / sizeof(T)) {}
+  void resize(size_t n) {
+    storage_.resize(skew_ + n);
+    p_ = storage_.data() + skew_;
+  }
+  void assign(size_t n, T v) {
+    storage_.assign(skew_ + n, v);
+    p_ = storage_.data() + skew_;
+  }
+  T* data() { return p_; }
+  const T* data() const { return p_; }
+  T& operator[](size_t i) { return p_[i]; }
+  const T& operator[](size_t i) const { return p_[i]; }
+
+ private:
+  size_t skew_;
+  std::vector<T> storage_;
+  T* p_ = nullptr;
+};
+
 struct Fragment {
   float z;
   float c[3];
@@ -86,7 +113,7 @@ struct BucketRasterizer::Impl {
 
   // Region.
   int x0 = 0, y0 = 0, w = 0, h = 0, P = 0;
-  std::vector<float> sx, sy, st;  // stratum-major: [s * P + p]
+  SkewedArray<float> sx{0}, sy{8}, st{16};  // stratum-major: [s * P + p]
   std::vector<uint32_t> idxOf;                // [p * N + i] → s * P + p (sample i of pixel p lies in stratum s)
   std::vector<uint8_t> rowGroup;              // per region row
   std::vector<uint8_t> groupPresent;
@@ -101,12 +128,12 @@ struct BucketRasterizer::Impl {
 
   // Per-sample results, indexed like the samples (stratum-major, s * P + p): a micropolygon's hits
   // then land next to the sample data its tests just read; resolve() reorders them by pixel.
-  std::vector<float> zbuf, cr, cg, cb;
-  std::vector<uint8_t> state;
-  std::vector<uint32_t> objectOf, gridOf;
+  SkewedArray<float> zbuf{24}, cr{32}, cg{40}, cb{48};
+  SkewedArray<uint8_t> state{20};
+  SkewedArray<uint32_t> objectOf{56}, gridOf{4};
   std::vector<float> zAov;       // [component * slots + slot]
   std::vector<uint32_t> zAovU;   // [component * slots + slot]
-  std::vector<int32_t> fragHead;
+  SkewedArray<int32_t> fragHead{12};
   std::vector<Fragment> frags;
   std::vector<float> fragAov;
   std::vector<uint32_t> fragAovU;
@@ -122,8 +149,8 @@ struct BucketRasterizer::Impl {
   std::vector<float> projX, projY;     // [v * T + theta]; projX NaN = before the near plane
   std::vector<float> projRho;          // [v * T + theta]: perspective lag bound of theta interval (theta, theta+1)
   std::vector<float> depthScratch;     // one vertex's depths at the theta times
-  std::vector<uint32_t> candidates;    // sample indices that pass the box test, per micropolygon
-  std::vector<float> candT, candX, candY;  // and their times and positions, for the vector edge test
+  SkewedArray<uint32_t> candidates{28};   // sample indices that pass the box test, per micropolygon
+  SkewedArray<float> candT{36}, candX{44}, candY{52};  // and their times and positions, for the vector edge test
   std::vector<kernels::EdgeHit> edgeHits;
   std::vector<float> cullZ;            // [cull time * nV + v]: camera depth
   std::vector<float> stratumU0, stratumU1;  // linear path: stratum s's span [u0, u1] in the group interval, 0..1, padded to whole vectors
@@ -1068,12 +1095,13 @@ struct BucketRasterizer::Impl {
     const size_t slots = size_t(P) * N;
     out.x0 = x0, out.y0 = y0, out.width = w, out.height = h, out.spp = N;
     out.r.resize(slots), out.g.resize(slots), out.b.resize(slots), out.a.resize(slots), out.z.resize(slots);
-    out.ar.resize(slots), out.ag.resize(slots), out.ab.resize(slots);
     out.aov.resize(size_t(aovFloatCount));
     for (auto& v : out.aov) v.assign(slots, 0.f);
     out.aovU.resize(size_t(aovUIntCount));
     for (auto& v : out.aovU) v.assign(slots, 0u);
-    out.aovZ.assign(slots, INFINITY);
+    const bool anyAovs = aovFloatCount || aovUIntCount;
+    // The depths the single-closest filters compare: only when there are output variables.
+    if (anyAovs) out.aovZ.assign(slots, INFINITY);
     const float far = view.farClip;
     const float stopT = 1.f - opt.opacityThreshold;
     std::vector<const Fragment*> list;
@@ -1087,9 +1115,9 @@ struct BucketRasterizer::Impl {
         out.g[slot] = visible ? cg[k] : 0.f;
         out.b[slot] = visible ? cb[k] : 0.f;
         const float a = visible ? 1.f : 0.f;
-        out.a[slot] = out.ar[slot] = out.ag[slot] = out.ab[slot] = a;
+        out.a[slot] = a;
         out.z[slot] = (s & kHitOpaque) ? zo : far;
-        if (s & kHitOpaque) {
+        if ((s & kHitOpaque) && anyAovs) {
           out.aovZ[slot] = zo;
           for (int c = 0; c < aovFloatCount; ++c) out.aov[size_t(c)][slot] = zAov[size_t(c) * slots + k];
           for (int c = 0; c < aovUIntCount; ++c) out.aovU[size_t(c)][slot] = zAovU[size_t(c) * slots + k];
@@ -1111,7 +1139,7 @@ struct BucketRasterizer::Impl {
       auto takeSingle = [&](const float* fv, const uint32_t* uv, float z) {
         closestChosen = true;
         closestZ = z;
-        out.aovZ[slot] = z;
+        if (anyAovs) out.aovZ[slot] = z;
         for (size_t a = 0; a < aovs.size(); ++a) {
           if (aovs[a].isUInt) out.aovU[size_t(aovUIntBase[a])][slot] = uv[aovUIntBase[a]];
           else if (!aovs[a].composited())
@@ -1154,7 +1182,6 @@ struct BucketRasterizer::Impl {
         }
       }
       out.r[slot] = C[0], out.g[slot] = C[1], out.b[slot] = C[2];
-      out.ar[slot] = A[0], out.ag[slot] = A[1], out.ab[slot] = A[2];
       out.a[slot] = (A[0] + A[1] + A[2]) / 3.f;
       out.z[slot] = closestChosen ? closestZ : far;
       for (size_t a = 0; a < aovs.size(); ++a)

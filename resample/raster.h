@@ -93,10 +93,9 @@ struct RasterStats {
 struct ResolvedSamples {
   int x0 = 0, y0 = 0, width = 0, height = 0, spp = 1;
   std::vector<float> r, g, b, a, z;
-  std::vector<float> ar, ag, ab;     // per-channel alpha (coloured opacity), for deep output
   std::vector<std::vector<float>> aov;      // per AOV component
   std::vector<std::vector<uint32_t>> aovU;  // per uint AOV
-  std::vector<float> aovZ;                  // depth of the surface the single-closest AOVs took
+  std::vector<float> aovZ;                  // depth of the surface the single-closest AOVs took (only with AOVs)
 };
 
 /// One surface a sample saw, for deep output: fragments come front to back, transparent ones
