@@ -113,8 +113,13 @@ struct BucketRasterizer::Impl {
 
   // Region.
   int x0 = 0, y0 = 0, w = 0, h = 0, P = 0;
-  SkewedArray<float> sx{0}, sy{8}, st{16};  // stratum-major: [s * P + p]
-  std::vector<uint32_t> idxOf;                // [p * N + i] → s * P + p (sample i of pixel p lies in stratum s)
+  // Stratum planes are PS >= P samples apart, PS chosen so that a plane is an odd number of cache
+  // lines: with P itself (a multiple of 64 lines for the default bucket) every plane's pixel p
+  // maps to the same L1 set, and a micropolygon's 16 strata evict each other.
+  size_t PS = 0;
+  size_t sampleSlots = 0;                     // N * PS: the length of every per-sample array
+  SkewedArray<float> sx{0}, sy{8}, st{16};    // stratum-major: [s * PS + p]
+  std::vector<uint32_t> idxOf;                // [p * N + i] → s * PS + p (sample i of pixel p lies in stratum s)
   std::vector<uint8_t> rowGroup;              // per region row
   std::vector<uint8_t> groupPresent;
   bool multiGroup = false;                    // more than one shutter group (fields): rows differ
@@ -126,13 +131,13 @@ struct BucketRasterizer::Impl {
   // field rendered alone and the same field inside an interlaced frame get bit-identical times.
   double tBase = 0;
 
-  // Per-sample results, indexed like the samples (stratum-major, s * P + p): a micropolygon's hits
+  // Per-sample results, indexed like the samples (stratum-major, s * PS + p): a micropolygon's hits
   // then land next to the sample data its tests just read; resolve() reorders them by pixel.
   SkewedArray<float> zbuf{24}, cr{32}, cg{40}, cb{48};
   SkewedArray<uint8_t> state{20};
   SkewedArray<uint32_t> objectOf{56}, gridOf{4};
-  std::vector<float> zAov;       // [component * slots + slot]
-  std::vector<uint32_t> zAovU;   // [component * slots + slot]
+  std::vector<float> zAov;       // [component * sampleSlots + sample]
+  std::vector<uint32_t> zAovU;   // [component * sampleSlots + sample]
   SkewedArray<int32_t> fragHead{12};
   std::vector<Fragment> frags;
   std::vector<float> fragAov;
@@ -182,10 +187,14 @@ struct BucketRasterizer::Impl {
 
   void begin(int rx0, int ry0, int rw, int rh) {
     x0 = rx0, y0 = ry0, w = rw, h = rh, P = w * h;
-    const size_t slots = size_t(P) * N;
+    constexpr size_t kLine = 64 / sizeof(float);
+    PS = (size_t(P) + kLine - 1) / kLine * kLine;
+    if ((PS / kLine) % 2 == 0) PS += kLine;
+    const size_t slots = PS * N;
+    sampleSlots = slots;
     // The vector kernels read up to 7 floats past a row's end.
     sx.resize(slots + kPad), sy.resize(slots + kPad), st.resize(slots + kPad);
-    idxOf.resize(slots);
+    idxOf.resize(size_t(P) * N);
     rowGroup.resize(size_t(h));
     const int G = int(shutter.groups().size());
     groupPresent.assign(size_t(G), 0);
@@ -203,7 +212,7 @@ struct BucketRasterizer::Impl {
         pattern.times(gx, gy, stratumOf.data(), u.data());
         const int g = rowGroup[size_t(py)];
         for (int i = 0; i < N; ++i) {
-          const size_t idx = size_t(stratumOf[size_t(i)]) * P + size_t(p);
+          const size_t idx = size_t(stratumOf[size_t(i)]) * PS + size_t(p);
           glm::vec2 o = pattern.offset(pat, i);
           const float x = float(gx) + o.x, y = float(gy) + o.y;
           sx[idx] = x, sy[idx] = y;
@@ -229,7 +238,7 @@ struct BucketRasterizer::Impl {
       for (int py = 0; py < h; ++py) {
         const size_t gs = size_t(rowGroup[size_t(py)]) * N + size_t(s);
         for (int px = 0; px < w; ++px) {
-          const double t = tBase + double(st[size_t(s) * P + size_t(py) * w + size_t(px)]);
+          const double t = tBase + double(st[size_t(s) * PS + size_t(py) * w + size_t(px)]);
           stratumLo[gs] = std::min(stratumLo[gs], t);
           stratumHi[gs] = std::max(stratumHi[gs], t);
         }
@@ -316,7 +325,7 @@ struct BucketRasterizer::Impl {
     return hc;
   }
 
-  // Records a hit of micropolygon m on a sample (its stratum-major index s * P + p).
+  // Records a hit of micropolygon m on a sample (its stratum-major index s * PS + p).
   void recordHit(const HitContext& hc, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float z) {
     if (hc.opaqueFast) recordOpaqueHit(hc, sample, m, v, b, z);
     else recordAnyHit(hc, sample, m, v, b, z);
@@ -355,9 +364,8 @@ struct BucketRasterizer::Impl {
         float fv[64];
         uint32_t uv[16];
         aovValues(part, *hc.schema, m, v, b, z, fv, uv);
-        const size_t slots = size_t(P) * N;
-        for (int c2 = 0; c2 < aovFloatCount; ++c2) zAov[size_t(c2) * slots + sample] = fv[c2];
-        for (int c2 = 0; c2 < aovUIntCount; ++c2) zAovU[size_t(c2) * slots + sample] = uv[c2];
+        for (int c2 = 0; c2 < aovFloatCount; ++c2) zAov[size_t(c2) * sampleSlots + sample] = fv[c2];
+        for (int c2 = 0; c2 < aovUIntCount; ++c2) zAovU[size_t(c2) * sampleSlots + sample] = uv[c2];
       }
       return;
     }
@@ -530,7 +538,7 @@ struct BucketRasterizer::Impl {
         for (int px = px0; px <= px1; ++px) {
           const size_t p = size_t(py - y0) * w + size_t(px - x0);
           for (int s = 0; s < N; ++s) {
-            const size_t idx = size_t(s) * P + p;
+            const size_t idx = size_t(s) * PS + p;
             if (sx[idx] < sbx0 || sx[idx] > sbx1 || sy[idx] < sby0 || sy[idx] > sby1) continue;
             if (checkCover && !(tBase + st[idx] >= covLo && tBase + st[idx] <= covHi)) continue;
             ++stats.sampleTests;
@@ -633,9 +641,9 @@ struct BucketRasterizer::Impl {
   // branches would mispredict.
   size_t gatherCandidates(int s0, int s1, int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover, size_t n) {
     if (vectorKernels && !cover.check) {
-      const kernels::SampleRows rows{st.data(), sx.data(), sy.data(), size_t(s0) * P + size_t(py0 - y0) * w + size_t(px0 - x0), size_t(w),
+      const kernels::SampleRows rows{st.data(), sx.data(), sy.data(), size_t(s0) * PS + size_t(py0 - y0) * w + size_t(px0 - x0), size_t(w),
                                      px1 - px0 + 1, py1 - py0 + 1, multiGroup && g >= 0 ? &rowGroup[size_t(py0 - y0)] : nullptr, uint8_t(g),
-                                     s1 - s0, size_t(P)};
+                                     s1 - s0, PS};
       return kernels::gatherInBox(rows, box, candidateList(), n);
     }
     uint32_t* __restrict cand = candidates.data();
@@ -645,7 +653,7 @@ struct BucketRasterizer::Impl {
     for (int s = s0; s < s1; ++s)
     for (int py = py0; py <= py1; ++py) {
       if (multiGroup && g >= 0 && rowGroup[size_t(py - y0)] != g) continue;
-      const uint32_t rowBase = uint32_t(size_t(s) * P + size_t(py - y0) * w - size_t(x0));
+      const uint32_t rowBase = uint32_t(size_t(s) * PS + size_t(py - y0) * w - size_t(x0));
       for (int px = px0; px <= px1; ++px) {
         const uint32_t idx = rowBase + uint32_t(px);
         const float t = st[idx];
@@ -886,7 +894,7 @@ struct BucketRasterizer::Impl {
     if (span == 1 && vectorKernels && !mp.cover.check && N <= 64) {
       // Every stratum's pixel range and samples in one vector pass.
       const kernels::SampleRows region{st.data(), sx.data(), sy.data(), 0, size_t(w), w, h, multiGroup ? rowGroup.data() : nullptr,
-                                       uint8_t(mp.g), N, size_t(P)};
+                                       uint8_t(mp.g), N, PS};
       const kernels::StrataSpans spans{stratumU0.data(), stratumU1.data(), N, x0, y0, w, h, 1e-3f + 1e-6f * mag};
       n = kernels::gatherStrata(region, spans, box, candidateList());
       if (n) testCandidates(mp, mi, c, tri, flags, n);
@@ -1119,8 +1127,8 @@ struct BucketRasterizer::Impl {
         out.z[slot] = (s & kHitOpaque) ? zo : far;
         if ((s & kHitOpaque) && anyAovs) {
           out.aovZ[slot] = zo;
-          for (int c = 0; c < aovFloatCount; ++c) out.aov[size_t(c)][slot] = zAov[size_t(c) * slots + k];
-          for (int c = 0; c < aovUIntCount; ++c) out.aovU[size_t(c)][slot] = zAovU[size_t(c) * slots + k];
+          for (int c = 0; c < aovFloatCount; ++c) out.aov[size_t(c)][slot] = zAov[size_t(c) * sampleSlots + k];
+          for (int c = 0; c < aovUIntCount; ++c) out.aovU[size_t(c)][slot] = zAovU[size_t(c) * sampleSlots + k];
         }
         // Composited AOVs of a matte surface are zero like its colour.
         if ((s & kHitMatte)) zeroCompositedAovs(slot);
@@ -1171,13 +1179,13 @@ struct BucketRasterizer::Impl {
           for (int c = 0; c < 3; ++c) A[c] += T[c];
           for (size_t a = 0; a < aovs.size(); ++a)
             if (!aovs[a].isUInt && aovs[a].composited())
-              for (int c = 0; c < aovs[a].components; ++c) aovAcc[aovFloatBase[a] + c] += tAvg * zAov[size_t(aovFloatBase[a] + c) * slots + k];
+              for (int c = 0; c < aovs[a].components; ++c) aovAcc[aovFloatBase[a] + c] += tAvg * zAov[size_t(aovFloatBase[a] + c) * sampleSlots + k];
         }
         if (!closestChosen) {
           float fv[64];
           uint32_t uv[16];
-          for (int c = 0; c < aovFloatCount; ++c) fv[c] = zAov[size_t(c) * slots + k];
-          for (int c = 0; c < aovUIntCount; ++c) uv[c] = zAovU[size_t(c) * slots + k];
+          for (int c = 0; c < aovFloatCount; ++c) fv[c] = zAov[size_t(c) * sampleSlots + k];
+          for (int c = 0; c < aovUIntCount; ++c) uv[c] = zAovU[size_t(c) * sampleSlots + k];
           takeSingle(fv, uv, zo);
         }
       }
@@ -1231,8 +1239,8 @@ struct BucketRasterizer::Impl {
         sf.c[0] = matte ? 0.f : cr[k], sf.c[1] = matte ? 0.f : cg[k], sf.c[2] = matte ? 0.f : cb[k];
         if (!opt.surfaceIds) fail("rasterizer", "visitFragments() needs RasterOptions::surfaceIds");
         sf.objectId = objectOf[k], sf.gridId = gridOf[k], sf.matte = matte;
-        for (int c = 0; c < aovFloatCount; ++c) opaqueAov[size_t(c)] = zAov[size_t(c) * slots + k];
-        for (int c = 0; c < aovUIntCount; ++c) opaqueAovU[size_t(c)] = zAovU[size_t(c) * slots + k];
+        for (int c = 0; c < aovFloatCount; ++c) opaqueAov[size_t(c)] = zAov[size_t(c) * sampleSlots + k];
+        for (int c = 0; c < aovUIntCount; ++c) opaqueAovU[size_t(c)] = zAovU[size_t(c) * sampleSlots + k];
         sf.aov = opaqueAov.data(), sf.aovU = opaqueAovU.data();
         outList.push_back(sf);
       }
