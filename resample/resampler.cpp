@@ -318,9 +318,14 @@ RenderResult render(const RenderSpec& spec) {
     auto filterInto = [&](const FilterTable& table, const std::vector<const std::vector<float>*>& in, const std::vector<float*>& outPx, int px,
                           int py) {
       const int m = table.margin();
-      float acc[8] = {};
+      // Eight partial sums per channel over every neighbour, added up once at the end: the
+      // compiler keeps them in vector registers (a single running sum is a serial chain of adds).
+      constexpr int kLanes = 8;
+      float lanes[8][kLanes] = {};
+      float tail[8] = {};
       float wsum = 0;
       const size_t nc = in.size();
+      const int vecN = N / kLanes * kLanes;
       for (int dy = -m; dy <= m; ++dy)
         for (int dx = -m; dx <= m; ++dx) {
           const size_t q = size_t(py - ry0 + dy) * rw + size_t(px - rx0 + dx);
@@ -329,11 +334,16 @@ RenderResult render(const RenderSpec& spec) {
           wsum += table.weightSum(pat, dx, dy);
           for (size_t c = 0; c < nc; ++c) {
             const float* v = in[c]->data() + q * N;
-            float s = 0;
-            for (int i = 0; i < N; ++i) s += wt[i] * v[i];
-            acc[c] += s;
+            for (int i = 0; i < vecN; i += kLanes)
+              for (int k = 0; k < kLanes; ++k) lanes[c][k] += wt[i + k] * v[i + k];
+            for (int i = vecN; i < N; ++i) tail[c] += wt[i] * v[i];
           }
         }
+      float acc[8];
+      for (size_t c = 0; c < nc; ++c) {
+        const float* l = lanes[c];
+        acc[c] = (((l[0] + l[4]) + (l[1] + l[5])) + ((l[2] + l[6]) + (l[3] + l[7]))) + tail[c];
+      }
       const size_t o = size_t(py - cy0) * img.width + size_t(px - cx0);
       if (std::abs(wsum) < 1e-6f * float(N)) {
         // Negative lobes cancelled out: fall back to the pixel's own samples, unweighted.
