@@ -57,7 +57,7 @@ inline bool ownsTie(const glm::dvec3& e, bool flip) {
   return v.z > 0;
 }
 
-constexpr uint8_t kHitOpaque = 1, kHitMatte = 2;
+constexpr uint8_t kHitOpaque = 1, kHitMatte = 2;  // what resolve() finds at a sample
 constexpr size_t kPad = 8;
 
 // A per-sample array whose first element lies `skewLines` cache lines into its allocation. The
@@ -85,6 +85,13 @@ class SkewedArray {
   size_t skew_;
   std::vector<T> storage_;
   T* p_ = nullptr;
+};
+
+// The colour of the nearest opaque surface a sample has seen (its depth is in a separate array,
+// the only part a hit must read), and whether that surface is a matte.
+struct SurfaceColour {
+  float r, g, b;
+  uint32_t matte;
 };
 
 struct Fragment {
@@ -133,8 +140,11 @@ struct BucketRasterizer::Impl {
 
   // Per-sample results, indexed like the samples (stratum-major, s * PS + p): a micropolygon's hits
   // then land next to the sample data its tests just read; resolve() reorders them by pixel.
-  SkewedArray<float> zbuf{24}, cr{32}, cg{40}, cb{48};
-  SkewedArray<uint8_t> state{20};
+  // The nearest opaque surface per sample: depth INFINITY until one is found, then its colour.
+  // Colours are only read where the depth is finite, so they need no clearing per bucket.
+  SkewedArray<float> zbuf{24};
+  SkewedArray<SurfaceColour> colour{32};
+  SurfaceColour discard{};  // where a hit behind the nearest surface writes its colour
   SkewedArray<uint32_t> objectOf{56}, gridOf{4};
   std::vector<float> zAov;       // [component * sampleSlots + sample]
   std::vector<uint32_t> zAovU;   // [component * sampleSlots + sample]
@@ -250,8 +260,7 @@ struct BucketRasterizer::Impl {
     edgeHits.resize(slots + kPad);
     multiGroup = G > 1;
     zbuf.assign(slots, INFINITY);
-    cr.assign(slots, 0.f), cg.assign(slots, 0.f), cb.assign(slots, 0.f);
-    state.assign(slots, 0);
+    colour.resize(slots);
     if (opt.surfaceIds) objectOf.assign(slots, 0), gridOf.assign(slots, 0);
     zAov.assign(slots * size_t(aovFloatCount), 0.f);
     zAovU.assign(slots * size_t(aovUIntCount), 0u);
@@ -334,15 +343,18 @@ struct BucketRasterizer::Impl {
   // Same values as recordAnyHit() gives an opaque surface (attrAt's arithmetic, in its order).
   inline void recordOpaqueHit(const HitContext& hc, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float z) {
     ++stats.hits;
-    if (!(z < zbuf[sample])) return;  // ties keep the earlier surface: deterministic by store order
-    zbuf[sample] = z;
     const float *c0 = hc.colour + size_t(v[0]) * 3, *c1 = hc.colour + size_t(v[1]) * 3, *c2 = hc.colour + size_t(v[2]) * 3;
-    cr[sample] = b[0] * c0[0] + b[1] * c1[0] + b[2] * c2[0];
-    cg[sample] = b[0] * c0[1] + b[1] * c1[1] + b[2] * c2[1];
-    cb[sample] = b[0] * c0[2] + b[1] * c1[2] + b[2] * c2[2];
     const store::TilePart& part = *hc.part;
-    state[sample] = kHitOpaque | ((part.flags[m] & store::kMatte) ? kHitMatte : 0);
-    if (opt.surfaceIds) objectOf[sample] = part.objectId[m], gridOf[sample] = part.gridId[m];
+    const SurfaceColour c{b[0] * c0[0] + b[1] * c1[0] + b[2] * c2[0], b[0] * c0[1] + b[1] * c1[1] + b[2] * c2[1],
+                          b[0] * c0[2] + b[1] * c1[2] + b[2] * c2[2], uint32_t(part.flags[m] & store::kMatte)};
+    // No branch: whether a surface is nearer is a coin toss that the predictor loses, so the
+    // depth is a min and the colour goes to the sample or, when hidden, to a scratch record.
+    // Ties keep the earlier surface: deterministic by store order.
+    const float old = zbuf[sample];
+    const bool nearer = z < old;
+    zbuf[sample] = nearer ? z : old;
+    *(nearer ? &colour[sample] : &discard) = c;
+    if (opt.surfaceIds && nearer) objectOf[sample] = part.objectId[m], gridOf[sample] = part.gridId[m];
   }
 
   void recordAnyHit(const HitContext& hc, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float z) {
@@ -354,11 +366,10 @@ struct BucketRasterizer::Impl {
     const bool opaque = o[0] >= 1.f && o[1] >= 1.f && o[2] >= 1.f;
     if (opaque) {
       if (!(z < zbuf[sample])) return;  // ties keep the earlier surface: deterministic by store order
-      zbuf[sample] = z;
       float c[3];
       attrAt(part, *hc.schema, hc.ci, m, v, b, c);
-      cr[sample] = c[0], cg[sample] = c[1], cb[sample] = c[2];
-      state[sample] = kHitOpaque | (matte ? kHitMatte : 0);
+      zbuf[sample] = z;
+      colour[sample] = {c[0], c[1], c[2], uint32_t(matte)};
       if (opt.surfaceIds) objectOf[sample] = part.objectId[m], gridOf[sample] = part.gridId[m];
       if (aovFloatCount || aovUIntCount) {
         float fv[64];
@@ -1099,6 +1110,11 @@ struct BucketRasterizer::Impl {
   // ------------------------------------------------------------------------------------------
   // Resolve
 
+  uint8_t hitState(size_t k) const {
+    if (!(zbuf[k] < INFINITY)) return 0;
+    return kHitOpaque | (colour[k].matte ? kHitMatte : 0);
+  }
+
   const ResolvedSamples& resolve() {
     const size_t slots = size_t(P) * N;
     out.x0 = x0, out.y0 = y0, out.width = w, out.height = h, out.spp = N;
@@ -1115,13 +1131,14 @@ struct BucketRasterizer::Impl {
     std::vector<const Fragment*> list;
     for (size_t slot = 0; slot < slots; ++slot) {
       const size_t k = idxOf[slot];  // the rasterizer keeps samples stratum-major
-      const uint8_t s = state[k];
       const float zo = zbuf[k];
+      const SurfaceColour& nh = colour[k];
+      const uint8_t s = hitState(k);
       if (!anyFragments || fragHead[k] < 0) {
         const bool visible = (s & kHitOpaque) && !(s & kHitMatte);
-        out.r[slot] = visible ? cr[k] : 0.f;
-        out.g[slot] = visible ? cg[k] : 0.f;
-        out.b[slot] = visible ? cb[k] : 0.f;
+        out.r[slot] = visible ? nh.r : 0.f;
+        out.g[slot] = visible ? nh.g : 0.f;
+        out.b[slot] = visible ? nh.b : 0.f;
         const float a = visible ? 1.f : 0.f;
         out.a[slot] = a;
         out.z[slot] = (s & kHitOpaque) ? zo : far;
@@ -1175,7 +1192,7 @@ struct BucketRasterizer::Impl {
       if (!opaqueReached && (s & kHitOpaque)) {
         const float tAvg = (T[0] + T[1] + T[2]) / 3.f;
         if (!(s & kHitMatte)) {
-          C[0] += T[0] * cr[k], C[1] += T[1] * cg[k], C[2] += T[2] * cb[k];
+          C[0] += T[0] * nh.r, C[1] += T[1] * nh.g, C[2] += T[2] * nh.b;
           for (int c = 0; c < 3; ++c) A[c] += T[c];
           for (size_t a = 0; a < aovs.size(); ++a)
             if (!aovs[a].isUInt && aovs[a].composited())
@@ -1208,8 +1225,9 @@ struct BucketRasterizer::Impl {
     std::vector<uint32_t> opaqueAovU(static_cast<size_t>(aovUIntCount));
     for (size_t slot = 0; slot < slots; ++slot) {
       const size_t k = idxOf[slot];  // the rasterizer keeps samples stratum-major
-      const uint8_t s = state[k];
       const float zo = zbuf[k];
+      const SurfaceColour& nh = colour[k];
+      const uint8_t s = hitState(k);
       list.clear();
       outList.clear();
       if (anyFragments)
@@ -1236,7 +1254,7 @@ struct BucketRasterizer::Impl {
         SampleFragment sf;
         sf.z = zo;
         const bool matte = s & kHitMatte;
-        sf.c[0] = matte ? 0.f : cr[k], sf.c[1] = matte ? 0.f : cg[k], sf.c[2] = matte ? 0.f : cb[k];
+        sf.c[0] = matte ? 0.f : nh.r, sf.c[1] = matte ? 0.f : nh.g, sf.c[2] = matte ? 0.f : nh.b;
         if (!opt.surfaceIds) fail("rasterizer", "visitFragments() needs RasterOptions::surfaceIds");
         sf.objectId = objectOf[k], sf.gridId = gridOf[k], sf.matte = matte;
         for (int c = 0; c < aovFloatCount; ++c) opaqueAov[size_t(c)] = zAov[size_t(c) * sampleSlots + k];
