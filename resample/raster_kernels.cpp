@@ -60,31 +60,42 @@ RESHUTTER_AVX2 inline size_t appendLanes(__m256 in, __m256i live, __m256i idx, _
   return n + size_t(__builtin_popcount(mask));
 }
 
-RESHUTTER_AVX2 size_t gatherInBoxAvx2(const SampleRows& rows, const MovingBox& box, const Candidates& candidates, size_t n) {
-  const SampleRows r = rows;  // locals: the stores below may alias anything
-  const Candidates out = candidates;
-  const BoxLanes b = boxLanes(box);
+// The rows of `rows` against box `b`: the body of both gathers, inlined so that the box is
+// broadcast once per micropolygon, not once per stratum.
+RESHUTTER_AVX2 __attribute__((always_inline)) inline size_t gatherRows(const BoxLanes& b, const SampleRows& r, const Candidates& out, size_t n) {
   if (r.cols <= 4) {
     // Narrow boxes (a small micropolygon's stratum box is 2 - 4 pixels wide): two rows per
     // vector, four lanes each, so that half the lanes are not idle.
     const __m256i quad = _mm256_setr_epi32(0, 1, 2, 3, 0, 1, 2, 3);
     const __m256i colLive = _mm256_cmpgt_epi32(_mm256_set1_epi32(r.cols), quad);
     const __m256i lowHalf = _mm256_setr_epi32(-1, -1, -1, -1, 0, 0, 0, 0);
+    auto rowPair = [&](size_t lo, size_t hi, bool pair) RESHUTTER_AVX2 {
+      const __m256 t = _mm256_loadu2_m128(r.st + hi, r.st + lo), x = _mm256_loadu2_m128(r.sx + hi, r.sx + lo),
+                   y = _mm256_loadu2_m128(r.sy + hi, r.sy + lo);
+      const __m256i live = pair ? colLive : _mm256_and_si256(colLive, lowHalf);
+      const __m256i idx = _mm256_add_epi32(_mm256_setr_m128i(_mm_set1_epi32(int(uint32_t(lo))), _mm_set1_epi32(int(uint32_t(hi)))), quad);
+      n = appendLanes(insideAtOwnTime(b, t, x, y), live, idx, t, x, y, out, n);
+    };
     for (int plane = 0; plane < r.planes; ++plane) {
       const size_t planeBase = r.first + size_t(plane) * r.planeStride;
+      if (!r.rowGroup) {
+        for (int row = 0; row < r.rows; row += 2) {
+          const size_t lo = planeBase + size_t(row) * r.stride;
+          const bool pair = row + 1 < r.rows;
+          rowPair(lo, pair ? lo + r.stride : lo, pair);
+        }
+        continue;
+      }
+      // Fields: pairs of this group's rows.
       int row = 0;
       while (true) {
-        while (row < r.rows && r.rowGroup && r.rowGroup[row] != r.group) ++row;
+        while (row < r.rows && r.rowGroup[row] != r.group) ++row;
         if (row >= r.rows) break;
         int second = row + 1;
-        while (second < r.rows && r.rowGroup && r.rowGroup[second] != r.group) ++second;
+        while (second < r.rows && r.rowGroup[second] != r.group) ++second;
         const bool pair = second < r.rows;
-        const size_t lo = planeBase + size_t(row) * r.stride, hi = pair ? planeBase + size_t(second) * r.stride : lo;
-        const __m256 t = _mm256_loadu2_m128(r.st + hi, r.st + lo), x = _mm256_loadu2_m128(r.sx + hi, r.sx + lo),
-                     y = _mm256_loadu2_m128(r.sy + hi, r.sy + lo);
-        const __m256i live = pair ? colLive : _mm256_and_si256(colLive, lowHalf);
-        const __m256i idx = _mm256_add_epi32(_mm256_setr_m128i(_mm_set1_epi32(int(uint32_t(lo))), _mm_set1_epi32(int(uint32_t(hi)))), quad);
-        n = appendLanes(insideAtOwnTime(b, t, x, y), live, idx, t, x, y, out, n);
+        const size_t lo = planeBase + size_t(row) * r.stride;
+        rowPair(lo, pair ? planeBase + size_t(second) * r.stride : lo, pair);
         row = pair ? second + 1 : r.rows;
       }
     }
@@ -103,6 +114,12 @@ RESHUTTER_AVX2 size_t gatherInBoxAvx2(const SampleRows& rows, const MovingBox& b
     }
   }
   return n;
+}
+
+RESHUTTER_AVX2 size_t gatherInBoxAvx2(const SampleRows& rows, const MovingBox& box, const Candidates& candidates, size_t n) {
+  const SampleRows r = rows;  // locals: the stores below may alias anything
+  const Candidates out = candidates;
+  return gatherRows(boxLanes(box), r, out, n);
 }
 
 RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpans& sp, const MovingBox& b, const Candidates& out) {
@@ -132,6 +149,8 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
     _mm256_store_si256(reinterpret_cast<__m256i*>(px1 + s), _mm256_cvttps_epi32(_mm256_floor_ps(cx1)));
     _mm256_store_si256(reinterpret_cast<__m256i*>(py1 + s), _mm256_cvttps_epi32(_mm256_floor_ps(cy1)));
   }
+  const BoxLanes lanes = boxLanes(b);
+  const Candidates list = out;  // a local: the stores may alias anything
   size_t n = 0;
   for (int s = 0; s < N; ++s) {
     if (px0[s] > px1[s] || py0[s] > py1[s]) continue;
@@ -140,7 +159,7 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
     r.cols = px1[s] - px0[s] + 1, r.rows = py1[s] - py0[s] + 1;
     r.planes = 1;
     if (region.rowGroup) r.rowGroup = region.rowGroup + (py0[s] - sp.y0);
-    n = gatherInBoxAvx2(r, b, out, n);
+    n = gatherRows(lanes, r, list, n);
   }
   return n;
 }
