@@ -28,6 +28,7 @@ struct ResampleCommand {
     if (open < meta.shutterOpen - 1e-12 || close > meta.shutterClose + 1e-12)
       fail(shutter.shutter.empty() ? "--shutter-angle" : "--shutter", "the interval [", open, ", ", close, "] lies outside the store's shutter [",
            meta.shutterOpen, ", ", meta.shutterClose, "] (", input, "); intervals across frames need the neighbouring stores: see `reshutter retime`");
+    render.checkOutputs(output, meta.frame);  // before the render, not after it
     resample::RenderSpec spec;
     spec.sources = {resample::Source{reader, meta.frame}};
     spec.shutter = resample::ShutterModel::progressive(double(meta.frame) + open, double(meta.frame) + close, shutter.parsedShape());

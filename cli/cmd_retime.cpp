@@ -49,6 +49,7 @@ int renderSequence(const std::string& storePattern, const std::string& outPatter
     all.erase(std::unique(all.begin(), all.end()), all.end());
     stores.requireAll(all);
   }
+  for (const auto& f : frames) render.checkOutputs(outPattern.empty() ? "" : expandFramePattern(outPattern, f.frame), f.frame);
   Progress progress(what, frames.size());
   double seconds = 0;
   for (const auto& f : frames) {
@@ -111,6 +112,7 @@ struct FieldsCommand {
       return renderSequence(input, output, out, render, "fields");
     }
     // The reference semantics: two full progressive renders, rows interlaced afterwards.
+    for (int64_t f : list) render.checkOutputs(output.empty() ? "" : expandFramePattern(output, f), f);
     ShotStores stores(input, size_t(render.cacheMb * 1e6));
     Progress progress("fields (two-pass)", list.size());
     for (int64_t f : list) {

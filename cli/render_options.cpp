@@ -3,6 +3,7 @@
 #include <cstdio>
 #include <sstream>
 
+#include "common/atomic_file.h"
 #include "common/error.h"
 #include "common/frame_range.h"
 
@@ -74,6 +75,44 @@ void RenderOptions::applyTo(resample::RenderSpec& spec) const {
   resample::parseDeepCompression(deepCompression, "--deep-compression");
 }
 
+namespace {
+
+resample::Quantize parseQuantize(const std::string& quantize, bool dither) {
+  resample::Quantize q;
+  if (std::sscanf(quantize.c_str(), "%lf,%lf,%lf,%lf", &q.zero, &q.one, &q.min, &q.max) != 4 || !(q.min <= q.max) || q.max > 65535 || q.min < 0)
+    fail("--quantize", "expected ZERO,ONE,MIN,MAX with 0 <= MIN <= MAX <= 65535, got '", quantize, "'");
+  q.dither = dither;
+  return q;
+}
+
+// A --preview value: PATH or PATH=CHANNEL,CHANNEL,...
+struct PreviewRequest {
+  std::string path;
+  std::vector<std::string> channels;
+};
+PreviewRequest parsePreview(const std::string& p, int64_t frame) {
+  std::string path = p, list = "R,G,B,A";
+  if (auto eq = p.find('='); eq != std::string::npos) path = p.substr(0, eq), list = p.substr(eq + 1);
+  PreviewRequest r{expandFramePattern(path, frame), {}};
+  std::stringstream ss(list);
+  std::string c;
+  while (std::getline(ss, c, ',')) r.channels.push_back(c);
+  return r;
+}
+
+}  // namespace
+
+void RenderOptions::checkOutputs(const std::string& exrPath, int64_t frame) const {
+  resample::parseExrCompression(compression, "--compression");
+  if (!exrPath.empty()) checkCanCreate(exrPath);
+  if (!deep.empty()) {
+    resample::parseDeepCompression(deepCompression, "--deep-compression");
+    checkCanCreate(expandFramePattern(deep, frame));
+  }
+  parseQuantize(quantize, dither);
+  for (const auto& p : previews) checkCanCreate(parsePreview(p, frame).path);
+}
+
 void RenderOptions::writeOutputs(const resample::RenderResult& result, const std::string& exrPath, int64_t frame) const {
   resample::ExrOptions eo;
   eo.compression = resample::parseExrCompression(compression, "--compression");
@@ -83,18 +122,10 @@ void RenderOptions::writeOutputs(const resample::RenderResult& result, const std
     deo.compression = resample::parseDeepCompression(deepCompression, "--deep-compression");
     resample::writeDeepExr(expandFramePattern(deep, frame), result.deep, result.provenance, deo);
   }
-  resample::Quantize q;
-  if (std::sscanf(quantize.c_str(), "%lf,%lf,%lf,%lf", &q.zero, &q.one, &q.min, &q.max) != 4 || !(q.min <= q.max) || q.max > 65535 || q.min < 0)
-    fail("--quantize", "expected ZERO,ONE,MIN,MAX with 0 <= MIN <= MAX <= 65535, got '", quantize, "'");
-  q.dither = dither;
+  const resample::Quantize q = parseQuantize(quantize, dither);
   for (const auto& p : previews) {
-    std::string path = p, list = "R,G,B,A";
-    if (auto eq = p.find('='); eq != std::string::npos) path = p.substr(0, eq), list = p.substr(eq + 1);
-    std::vector<std::string> channels;
-    std::stringstream ss(list);
-    std::string c;
-    while (std::getline(ss, c, ',')) channels.push_back(c);
-    resample::writePreview(expandFramePattern(path, frame), result.image, channels, q, uint64_t(frame));
+    const PreviewRequest r = parsePreview(p, frame);
+    resample::writePreview(r.path, result.image, r.channels, q, uint64_t(frame));
   }
 }
 

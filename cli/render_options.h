@@ -38,6 +38,9 @@ struct RenderOptions {
   void addTo(CLI::App* app);
   /// Fills sampling, filter, AOV, crop and raster settings of `spec`.
   void applyTo(resample::RenderSpec& spec) const;
+  /// Checks, before rendering, what writeOutputs() would otherwise find only after it: the
+  /// compression and quantize options parse, and every output's directory exists and is writable.
+  void checkOutputs(const std::string& exrPath, int64_t frame) const;
   /// Writes the EXR (when exrPath is set), the deep EXR (when --deep is) and any previews.
   void writeOutputs(const resample::RenderResult& result, const std::string& exrPath, int64_t frame) const;
 };

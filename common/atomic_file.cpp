@@ -45,6 +45,18 @@ extern "C" void onInterrupt(int sig) {
 
 }  // namespace
 
+void checkCanCreate(const std::string& finalPath) {
+  namespace fs = std::filesystem;
+  fs::path target(finalPath);
+  if (target.filename().empty()) fail(finalPath, "not a file name");
+  fs::path dir = target.parent_path();
+  if (dir.empty()) dir = ".";
+  std::error_code ec;
+  if (!fs::is_directory(dir, ec)) fail(finalPath, "cannot create a temporary file in ", dir.string(), ": no such directory");
+  if (::access(dir.c_str(), W_OK | X_OK) != 0) fail(finalPath, "cannot create a temporary file in ", dir.string(), ": ", std::strerror(errno));
+  if (fs::is_directory(target, ec)) fail(finalPath, "is a directory");
+}
+
 AtomicFile::AtomicFile(std::string finalPath) : finalPath_(std::move(finalPath)) {
   namespace fs = std::filesystem;
   fs::path target(finalPath_);

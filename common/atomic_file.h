@@ -35,6 +35,11 @@ class AtomicFile {
   bool done_ = false;
 };
 
+/// Throws the Error AtomicFile(finalPath) would, without creating anything: for checking every
+/// output before minutes of work rather than after (a missing or read-only directory, a path
+/// that names a directory).
+void checkCanCreate(const std::string& finalPath);
+
 /// Installs SIGINT/SIGTERM handlers that unlink live AtomicFile temporaries, then re-raise.
 void installInterruptCleanup();
 

@@ -72,6 +72,21 @@ TEST(AtomicFile, UnwritableDirectoryIsAnError) {
   EXPECT_THROW(AtomicFile("/nonexistent-dir/x.mps"), Error);
 }
 
+// checkCanCreate() refuses what AtomicFile's constructor refuses, creates nothing, and accepts
+// what it accepts.
+TEST(AtomicFile, CheckCanCreateAgreesWithTheConstructorAndCreatesNothing) {
+  test::ScratchDir dir;
+  EXPECT_THROW(checkCanCreate("/nonexistent-dir/x.mps"), Error);
+  EXPECT_THROW(checkCanCreate(dir.path("missing/x.exr")), Error);
+  EXPECT_THROW(checkCanCreate(dir.dir().string() + "/"), Error);  // no file name
+  std::filesystem::create_directory(dir.path("sub"));
+  EXPECT_THROW(checkCanCreate(dir.path("sub")), Error);  // names a directory
+  EXPECT_NO_THROW(checkCanCreate(dir.path("x.exr")));
+  EXPECT_FALSE(std::filesystem::exists(dir.path("x.exr")));
+  EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir.dir()), {}), 1);  // only sub/
+  EXPECT_NO_THROW(AtomicFile(dir.path("x.exr")));
+}
+
 TEST(ErrorModel, WhereAndProblemJoinIntoOneLine) {
   Error e("scene.rib:12 (Sphere)", "expected 4 numbers");
   EXPECT_STREQ(e.what(), "scene.rib:12 (Sphere): expected 4 numbers");

@@ -502,6 +502,28 @@ TEST(ResampleCli, ImagesOpenInAnIndependentReader) {
   EXPECT_NE(pinfo.out.find("4 channel, uint16 png"), std::string::npos) << pinfo.out;  // --quantize up to 65535: 16 bits
 }
 
+// Every output is checked before the render: one that cannot be written (its directory is
+// missing, or a bad quantize for a preview) fails the command before anything is rendered or
+// written, so the flat EXR that could have been written is not left behind either.
+TEST(ResampleCli, UnwritableOutputFailsBeforeAnythingIsWritten) {
+  ScratchDir dir;
+  const std::string store = dir.path("gen.mps");
+  ASSERT_EQ(runReshutter("generate -n 2000 --width 64 --height 48 -o " + store).exitCode, 0);
+  const std::string flat = dir.path("flat.exr");
+  for (const std::string& extra : {" --preview " + dir.path("missing/p.png"), " --deep " + dir.path("missing/d.exr"),
+                                  " --preview " + dir.path("p.png") + " --quantize 1,2", std::string(" --compression bogus")}) {
+    CommandResult r = runReshutter("resample " + store + " -o " + flat + extra + " --stats");
+    EXPECT_EQ(r.exitCode, 1) << extra;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << extra << ": " << r.err;
+    EXPECT_EQ(r.out.find("sample tests"), std::string::npos) << extra << ": rendered before failing";
+    EXPECT_FALSE(std::filesystem::exists(flat)) << extra << ": the flat EXR was written before the failing output";
+  }
+  CommandResult r = runReshutter("resample " + store + " -o " + dir.path("missing/flat.exr"));
+  EXPECT_EQ(r.exitCode, 1);
+  EXPECT_NE(r.err.find(dir.path("missing/flat.exr")), std::string::npos) << r.err;
+  EXPECT_NE(r.err.find("no such directory"), std::string::npos) << r.err;
+}
+
 TEST(ResampleCli, BadArgumentsGiveOneLineAndNoOutput) {
   ScratchDir dir;
   const std::string store = dir.path("gen.mps");
