@@ -790,8 +790,23 @@ std::string headlines() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  if (argc < 2) {
-    std::fprintf(stderr, "usage: accuracy_study OUTDIR [--quick] [--tmp DIR] [--only a,b]\n");
+  static const char* const kStudies[] = {"spp", "timebounds", "knots", "depth", "codec", "filter", "fields", "motionfactor", "deep"};
+  auto usage = [](FILE* to) {
+    std::fprintf(to,
+                 "usage: accuracy_study OUTDIR [--quick] [--tmp DIR] [--only a,b]\n"
+                 "Runs the accuracy studies and writes their tables, data and gnuplot scripts into OUTDIR\n"
+                 "(bench/accuracy_study.sh turns them into docs/accuracy.md).\n"
+                 "  --quick     fewer samples and time steps (a smoke run)\n"
+                 "  --tmp DIR   scratch directory for stores (default /tmp)\n"
+                 "  --only L    comma-separated studies: spp timebounds knots depth codec filter fields motionfactor deep\n");
+  };
+  if (argc >= 2 && (std::string(argv[1]) == "-h" || std::string(argv[1]) == "--help")) {
+    usage(stdout);
+    return 0;
+  }
+  // An unknown argument must not start a ten-minute study that overwrites the figures.
+  if (argc < 2 || argv[1][0] == '-') {
+    usage(stderr);
     return 2;
   }
   const std::string out = argv[1];
@@ -801,6 +816,21 @@ int main(int argc, char** argv) {
     if (a == "--quick") gQuick = true;
     else if (a == "--tmp" && i + 1 < argc) gTmp = argv[++i];
     else if (a == "--only" && i + 1 < argc) only = argv[++i];
+    else {
+      std::fprintf(stderr, "accuracy_study: unknown argument '%s'\n", a.c_str());
+      usage(stderr);
+      return 2;
+    }
+  }
+  for (size_t at = 0; !only.empty() && at <= only.size();) {
+    const size_t comma = std::min(only.find(',', at), only.size());
+    const std::string name = only.substr(at, comma - at);
+    if (std::find(std::begin(kStudies), std::end(kStudies), name) == std::end(kStudies)) {
+      std::fprintf(stderr, "accuracy_study: unknown study '%s' in --only\n", name.c_str());
+      usage(stderr);
+      return 2;
+    }
+    at = comma + 1;
   }
   auto want = [&](const char* s) { return only.empty() || ("," + only + ",").find("," + std::string(s) + ",") != std::string::npos; };
   std::filesystem::create_directories(out);

@@ -5,8 +5,9 @@
 #
 #   bench/accuracy_study.sh [--quick] [--build DIR]
 #
-# --quick: fewer samples and time steps (a smoke run, ~1 min); the committed figures are the full
-# run (≤ 10 min on a 2-vCPU VM). Uses build DIR (default build-acc), configured if missing.
+# --quick: fewer samples and time steps (a smoke run, ~1 min), written under BUILD/accuracy-quick
+# so the committed figures (docs/accuracy.md, docs/accuracy/: the full run, ≤ 10 min on a 2-vCPU
+# VM) are left alone. Uses build DIR (default build-acc), configured if missing.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 build=build-acc
@@ -23,7 +24,9 @@ command -v gnuplot >/dev/null || { echo "gnuplot missing: run scripts/deps.sh (g
 [[ -f "$build/build.ninja" ]] || cmake -S . -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo >/dev/null
 ninja -C "$build" -j"${JOBS:-1}" accuracy_study >/dev/null
 
-out=docs/accuracy
+docs=docs
+[[ ${#quick[@]} -gt 0 ]] && docs="$build/accuracy-quick"
+out="$docs/accuracy"
 tmp=$(mktemp -d)
 trap 'rm -rf "$tmp"' EXIT
 mkdir -p "$out"
@@ -94,6 +97,6 @@ EOF
   have lossy codecs, so the codec study covers Ci / Oi (and N as Oct32, which does not reach the
   image).
 EOF
-} > docs/accuracy.md
+} > "$docs/accuracy.md"
 rm -f "$out/tables.md" "$out/headlines.md" "$out"/*.gp "$out"/*.dat
-echo "wrote docs/accuracy.md and $(ls "$out"/*.png | wc -l) plots in $out ($secs s)"
+echo "wrote $docs/accuracy.md and $(ls "$out"/*.png | wc -l) plots in $out ($secs s)"
