@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <chrono>
+#include <map>
 #include <cmath>
 #include <mutex>
 #include <sstream>
@@ -36,8 +37,9 @@ std::string RenderStats::report() const {
     << raster.linearMicropolygons << " bounded from their interval ends), "
     << raster.parts << " parts (" << raster.transparentParts << " transparent)\n";
   s << "  fragments          " << raster.fragments << " transparent\n";
-  s << "  time (thread-sum)  gather " << gatherSeconds << " s, rasterize " << rasterSeconds << " s, resolve " << resolveSeconds
-    << " s, filter " << filterSeconds << " s\n";
+  s << "  parts              " << partsFetched << " fetched, " << partsDecoded << " decoded\n";
+  s << "  time (thread-sum)  set-up " << setupSeconds << " s, parts " << partsSeconds << " s (decode, or wait for another thread's), rasterize "
+    << rasterSeconds << " s, resolve " << resolveSeconds << " s, filter " << filterSeconds << " s\n";
   s << "  wall               " << wallSeconds << " s";
   if (wallSeconds > 0) s << ", " << double(samples) / wallSeconds / 1e6 << " M samples/s";
   s << "\n";
@@ -404,7 +406,9 @@ RenderResult render(const RenderSpec& spec) {
     // DEEP HOOK: deep output forms its samples here from r.visitFragments() (resample/deep.h).
     if (deepFormer) deepFormer->formBucket(r, size_t(&bk - buckets.data()), bk.x0, bk.y0, bk.x1, bk.y1, rx0, ry0, rw, rh);
     auto t4 = clock::now();
-    ts.stats.gatherSeconds += std::chrono::duration<double>(t1 - t0).count() + gather;
+    ts.stats.setupSeconds += std::chrono::duration<double>(t1 - t0).count();
+    ts.stats.partsSeconds += gather;
+    ts.stats.partsFetched += ts.parts.size();
     ts.stats.rasterSeconds += raster;
     ts.stats.resolveSeconds += std::chrono::duration<double>(t3 - t2).count();
     ts.stats.filterSeconds += std::chrono::duration<double>(t4 - t3).count();
@@ -413,6 +417,8 @@ RenderResult render(const RenderSpec& spec) {
     ++ts.stats.buckets;
     if (showProgress) progress.advance();
   };
+  std::map<const store::StoreReader*, uint64_t> missesBefore;
+  for (const Source& src : spec.sources) missesBefore.emplace(src.store.get(), src.store->cacheStats().misses);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, buckets.size(), 1), [&](const tbb::blocked_range<size_t>& range) {
     for (size_t b = range.begin(); b != range.end(); ++b) processBucket(buckets[b]);
   });
@@ -422,12 +428,15 @@ RenderResult render(const RenderSpec& spec) {
     result.stats.raster.add(ts.stats.raster);
     result.stats.buckets += ts.stats.buckets;
     result.stats.samples += ts.stats.samples;
-    result.stats.gatherSeconds += ts.stats.gatherSeconds;
+    result.stats.setupSeconds += ts.stats.setupSeconds;
+    result.stats.partsSeconds += ts.stats.partsSeconds;
+    result.stats.partsFetched += ts.stats.partsFetched;
     result.stats.rasterSeconds += ts.stats.rasterSeconds;
     result.stats.resolveSeconds += ts.stats.resolveSeconds;
     result.stats.filterSeconds += ts.stats.filterSeconds;
   }
   result.stats.wallSeconds = std::chrono::duration<double>(clock::now() - wallStart).count();
+  for (const auto& [store, before] : missesBefore) result.stats.partsDecoded += store->cacheStats().misses - before;
 
   ImageProvenance& pv = result.provenance;
   pv.worldToCamera = cam.worldToCamera;

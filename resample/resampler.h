@@ -52,7 +52,10 @@ struct RenderSpec {
 struct RenderStats {
   RasterStats raster;
   int buckets = 0;
-  double gatherSeconds = 0, rasterSeconds = 0, resolveSeconds = 0, filterSeconds = 0;  // summed over threads
+  // Summed over threads. setup: the bucket's samples and its part list; parts: fetching parts,
+  // which is decoding them, or waiting while another thread decodes one both buckets need.
+  double setupSeconds = 0, partsSeconds = 0, rasterSeconds = 0, resolveSeconds = 0, filterSeconds = 0;
+  uint64_t partsFetched = 0, partsDecoded = 0;  // decoded: the store caches' misses during the render
   double wallSeconds = 0;
   uint64_t samples = 0;
   std::string report() const;  // the --stats text

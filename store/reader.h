@@ -18,7 +18,9 @@ namespace reshutter::store {
 struct ReaderOptions {
   size_t cacheBytes = size_t(256) << 20;  // decoded parts kept; 0 = no cache (pure streaming)
   /// Drop a part's mapped pages once decoded, so resident memory stays at the cache budget
-  /// instead of growing with the file (the pages stay in the OS page cache).
+  /// instead of growing with the file (the pages stay in the OS page cache). Only done when the
+  /// payload is larger than cacheBytes: below that, the mapped pages are bounded by the budget
+  /// anyway, and dropping them costs cross-core TLB flushes.
   bool releasePages = true;
 };
 
