@@ -263,6 +263,23 @@ TEST(RetimeCli, MissingStoresAreReportedAllAtOnceBeforeAnyWork) {
   EXPECT_FALSE(std::filesystem::exists(dir.path("out.0001.exr"))) << "no work may start before the check";
 }
 
+// A sequence's outputs are all checked before its first frame renders: a deep pattern into a
+// missing directory fails before frame 1's flat EXR is written, in one pass and in two.
+TEST(RetimeCli, UnwritableOutputFailsBeforeTheFirstFrame) {
+  ScratchDir dir;
+  Motion m;
+  for (int64_t f = 1; f <= 3; ++f) frameStore(m, f, dir.path("shot.000" + std::to_string(f) + ".mps"));
+  const std::string shot = dir.path("shot.####.mps"), deep = " --deep " + dir.path("missing/d.####.exr");
+  for (const std::string& args : {"fields " + shot + " --frames 1-2 --spp 1 -o " + dir.path("f.####.exr") + deep,
+                                 "fields " + shot + " --frames 1-2 --spp 1 --two-pass -o " + dir.path("f.####.exr") + deep,
+                                 "retime " + shot + " --to-fps 24 --frames 1-2 --spp 1 -o " + dir.path("f.####.exr") + deep}) {
+    CommandResult r = runReshutter(args);
+    EXPECT_EQ(r.exitCode, 1) << args;
+    EXPECT_NE(r.err.find("missing/d.0001.exr"), std::string::npos) << r.err;
+    EXPECT_FALSE(std::filesystem::exists(dir.path("f.0001.exr"))) << args << ": frame 1 was written before the check";
+  }
+}
+
 TEST(RetimeCli, BadShutterArgumentsGiveOneLineAndNoOutput) {
   ScratchDir dir;
   Motion m;
