@@ -455,8 +455,9 @@ struct BucketRasterizer::Impl {
   bool project(const glm::vec3& p, float& x, float& y) const {
     if (view.perspective) {
       if (!(p.z >= view.nearClip)) return false;
-      x = float(view.ax * (double(p.x) / p.z) + view.bx);
-      y = float(view.ay * (double(p.y) / p.z) + view.by);
+      const double iz = 1.0 / double(p.z);  // one division: a bound, widened by pixelRange()'s margin
+      x = float(view.ax * (double(p.x) * iz) + view.bx);
+      y = float(view.ay * (double(p.y) * iz) + view.by);
     } else {
       x = float(view.ax * p.x + view.bx);
       y = float(view.ay * p.y + view.by);
