@@ -44,6 +44,33 @@ void RenderOptions::addTo(CLI::App* app) {
   app->add_flag("--stats", stats, "Print sample tests, hits, efficiency and time per phase")->group("Performance");
 }
 
+namespace {
+
+resample::Quantize parseQuantize(const std::string& quantize, bool dither) {
+  resample::Quantize q;
+  if (std::sscanf(quantize.c_str(), "%lf,%lf,%lf,%lf", &q.zero, &q.one, &q.min, &q.max) != 4 || !(q.min <= q.max) || q.max > 65535 || q.min < 0)
+    fail("--quantize", "expected ZERO,ONE,MIN,MAX with 0 <= MIN <= MAX <= 65535, got '", quantize, "'");
+  q.dither = dither;
+  return q;
+}
+
+// A --preview value: PATH or PATH=CHANNEL,CHANNEL,...
+struct PreviewRequest {
+  std::string path;
+  std::vector<std::string> channels;
+};
+PreviewRequest parsePreview(const std::string& p, int64_t frame) {
+  std::string path = p, list = "R,G,B,A";
+  if (auto eq = p.find('='); eq != std::string::npos) path = p.substr(0, eq), list = p.substr(eq + 1);
+  PreviewRequest r{expandFramePattern(path, frame), {}};
+  std::stringstream ss(list);
+  std::string c;
+  while (std::getline(ss, c, ',')) r.channels.push_back(c);
+  return r;
+}
+
+}  // namespace
+
 void RenderOptions::applyTo(resample::RenderSpec& spec) const {
   int nx = 4, ny = 4;
   if (!samples.empty()) {
@@ -73,43 +100,13 @@ void RenderOptions::applyTo(resample::RenderSpec& spec) const {
   spec.deep = !deep.empty();
   spec.deepOptions.tolerance = float(deepTolerance);
   resample::parseDeepCompression(deepCompression, "--deep-compression");
+  parseQuantize(quantize, dither);
 }
 
-namespace {
-
-resample::Quantize parseQuantize(const std::string& quantize, bool dither) {
-  resample::Quantize q;
-  if (std::sscanf(quantize.c_str(), "%lf,%lf,%lf,%lf", &q.zero, &q.one, &q.min, &q.max) != 4 || !(q.min <= q.max) || q.max > 65535 || q.min < 0)
-    fail("--quantize", "expected ZERO,ONE,MIN,MAX with 0 <= MIN <= MAX <= 65535, got '", quantize, "'");
-  q.dither = dither;
-  return q;
-}
-
-// A --preview value: PATH or PATH=CHANNEL,CHANNEL,...
-struct PreviewRequest {
-  std::string path;
-  std::vector<std::string> channels;
-};
-PreviewRequest parsePreview(const std::string& p, int64_t frame) {
-  std::string path = p, list = "R,G,B,A";
-  if (auto eq = p.find('='); eq != std::string::npos) path = p.substr(0, eq), list = p.substr(eq + 1);
-  PreviewRequest r{expandFramePattern(path, frame), {}};
-  std::stringstream ss(list);
-  std::string c;
-  while (std::getline(ss, c, ',')) r.channels.push_back(c);
-  return r;
-}
-
-}  // namespace
 
 void RenderOptions::checkOutputs(const std::string& exrPath, int64_t frame) const {
-  resample::parseExrCompression(compression, "--compression");
   if (!exrPath.empty()) checkCanCreate(exrPath);
-  if (!deep.empty()) {
-    resample::parseDeepCompression(deepCompression, "--deep-compression");
-    checkCanCreate(expandFramePattern(deep, frame));
-  }
-  parseQuantize(quantize, dither);
+  if (!deep.empty()) checkCanCreate(expandFramePattern(deep, frame));
   for (const auto& p : previews) checkCanCreate(parsePreview(p, frame).path);
 }
 

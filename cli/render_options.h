@@ -21,7 +21,7 @@ struct RenderOptions {
   std::vector<int> res;            // W H
   std::vector<int> crop;           // x0 x1 y0 y1 (pixels, end exclusive)
   uint64_t seed = 0;
-  int bucket = 96;  // measured with the vector kernels: 10 % less CPU than 64, 30 % less than 32 (bench/RESULTS.md)
+  int bucket = resample::kDefaultBucketSize;
   double opacityThreshold = 0.996;
   bool backfaceCull = false;
   bool half = false;
@@ -38,8 +38,9 @@ struct RenderOptions {
   void addTo(CLI::App* app);
   /// Fills sampling, filter, AOV, crop and raster settings of `spec`.
   void applyTo(resample::RenderSpec& spec) const;
-  /// Checks, before rendering, what writeOutputs() would otherwise find only after it: the
-  /// compression and quantize options parse, and every output's directory exists and is writable.
+  /// Checks, before rendering, what writeOutputs() would otherwise find only after it: every
+  /// output's directory exists and is writable (applyTo() validates the compression and quantize
+  /// options).
   void checkOutputs(const std::string& exrPath, int64_t frame) const;
   /// Writes the EXR (when exrPath is set), the deep EXR (when --deep is) and any previews.
   void writeOutputs(const resample::RenderResult& result, const std::string& exrPath, int64_t frame) const;

@@ -43,14 +43,18 @@ extern "C" void onInterrupt(int sig) {
   std::raise(sig);
 }
 
+// The directory an output's temporary goes in; an Error if the path names no file.
+std::filesystem::path directoryOf(const std::string& finalPath) {
+  const std::filesystem::path target(finalPath);
+  if (target.filename().empty()) fail(finalPath, "not a file name");
+  return target.parent_path().empty() ? std::filesystem::path(".") : target.parent_path();
+}
+
 }  // namespace
 
 void checkCanCreate(const std::string& finalPath) {
   namespace fs = std::filesystem;
-  fs::path target(finalPath);
-  if (target.filename().empty()) fail(finalPath, "not a file name");
-  fs::path dir = target.parent_path();
-  if (dir.empty()) dir = ".";
+  const fs::path target(finalPath), dir = directoryOf(finalPath);
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) fail(finalPath, "cannot create a temporary file in ", dir.string(), ": no such directory");
   if (::access(dir.c_str(), W_OK | X_OK) != 0) fail(finalPath, "cannot create a temporary file in ", dir.string(), ": ", std::strerror(errno));
@@ -59,10 +63,7 @@ void checkCanCreate(const std::string& finalPath) {
 
 AtomicFile::AtomicFile(std::string finalPath) : finalPath_(std::move(finalPath)) {
   namespace fs = std::filesystem;
-  fs::path target(finalPath_);
-  if (target.filename().empty()) fail(finalPath_, "not a file name");
-  fs::path dir = target.parent_path();
-  if (dir.empty()) dir = ".";
+  const fs::path target(finalPath_), dir = directoryOf(finalPath_);
   std::string pattern = (dir / ("." + target.filename().string() + ".tmp-XXXXXX")).string();
   fd_ = ::mkstemp(pattern.data());
   if (fd_ < 0) fail(finalPath_, "cannot create a temporary file in ", dir.string(), ": ", std::strerror(errno));

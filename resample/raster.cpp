@@ -217,6 +217,17 @@ struct BucketRasterizer::Impl {
     std::vector<uint16_t> stratumOf(static_cast<size_t>(N));
     std::vector<float> u(static_cast<size_t>(N));
     tMin = INFINITY, tMax = -INFINITY;
+    // Time range of each stratum over this region's rows (rolling shutter widens it), widened to
+    // the samples' stored times: a time rounded to float may leave its stratum's exact range, and
+    // a bound that missed it would drop the hit. The widening is taken in the sample loop below.
+    stratumLo.assign(size_t(G) * N, 0.0), stratumHi.assign(size_t(G) * N, 0.0);
+    for (int g = 0; g < G; ++g)
+      for (int s = 0; s < N; ++s) {
+        double lo, hi;
+        shutter.timeRange(g, double(y0), double(y0 + h), double(s) / N, double(s + 1) / N, lo, hi);
+        stratumLo[size_t(g) * N + s] = lo;
+        stratumHi[size_t(g) * N + s] = hi;
+      }
     for (int py = 0; py < h; ++py)
       for (int px = 0; px < w; ++px) {
         const int p = py * w + px, gx = x0 + px, gy = y0 + py;
@@ -232,27 +243,9 @@ struct BucketRasterizer::Impl {
           st[idx] = float(t - tBase);
           const double tc = tBase + double(st[idx]);
           tMin = std::min(tMin, tc), tMax = std::max(tMax, tc);
+          const size_t gs = size_t(g) * N + stratumOf[size_t(i)];
+          stratumLo[gs] = std::min(stratumLo[gs], tc), stratumHi[gs] = std::max(stratumHi[gs], tc);
           idxOf[size_t(p) * N + i] = uint32_t(idx);
-        }
-      }
-    // Time range of each stratum over this region's rows (rolling shutter widens it), widened to
-    // the samples' stored times: a time rounded to float may leave its stratum's exact range, and
-    // a bound that missed it would drop the hit.
-    stratumLo.assign(size_t(G) * N, 0.0), stratumHi.assign(size_t(G) * N, 0.0);
-    for (int g = 0; g < G; ++g)
-      for (int s = 0; s < N; ++s) {
-        double lo, hi;
-        shutter.timeRange(g, double(y0), double(y0 + h), double(s) / N, double(s + 1) / N, lo, hi);
-        stratumLo[size_t(g) * N + s] = lo;
-        stratumHi[size_t(g) * N + s] = hi;
-      }
-    for (int s = 0; s < N; ++s)
-      for (int py = 0; py < h; ++py) {
-        const size_t gs = size_t(rowGroup[size_t(py)]) * N + size_t(s);
-        for (int px = 0; px < w; ++px) {
-          const double t = tBase + double(st[size_t(s) * PS + size_t(py) * w + size_t(px)]);
-          stratumLo[gs] = std::min(stratumLo[gs], t);
-          stratumHi[gs] = std::max(stratumHi[gs], t);
         }
       }
 
@@ -1220,6 +1213,7 @@ struct BucketRasterizer::Impl {
   }
 
   void visitFragments(const std::function<void(size_t, const SampleFragment*, size_t)>& fn) {
+    if (!opt.surfaceIds) fail("rasterizer", "visitFragments() needs RasterOptions::surfaceIds");
     const size_t slots = size_t(P) * N;
     const float stopT = 1.f - opt.opacityThreshold;
     std::vector<const Fragment*> list;
@@ -1258,7 +1252,6 @@ struct BucketRasterizer::Impl {
         sf.z = zo;
         const bool matte = s & kHitMatte;
         sf.c[0] = matte ? 0.f : nh.r, sf.c[1] = matte ? 0.f : nh.g, sf.c[2] = matte ? 0.f : nh.b;
-        if (!opt.surfaceIds) fail("rasterizer", "visitFragments() needs RasterOptions::surfaceIds");
         sf.objectId = objectOf[k], sf.gridId = gridOf[k], sf.matte = matte;
         for (int c = 0; c < aovFloatCount; ++c) opaqueAov[size_t(c)] = zAov[size_t(c) * sampleSlots + k];
         for (int c = 0; c < aovUIntCount; ++c) opaqueAovU[size_t(c)] = zAovU[size_t(c) * sampleSlots + k];

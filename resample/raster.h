@@ -4,10 +4,12 @@
 // Coverage is tested with homogeneous 2D edge functions: for a sample's view ray d and camera-
 // space vertices V_j(t), V_k(t), the edge value is e = d · (V_j(t) × V_k(t)). Between knots the
 // vertices move linearly, so each edge's cross product is a quadratic in the segment parameter,
-// precomputed per micropolygon. The normalised edge values are the perspective-correct
-// barycentrics of the hit, and the hit depth follows from them, so micropolygons crossing the
-// eye plane need no clipping: a hit behind the near plane is simply rejected. Quads are tested as
-// the two triangles (p0 p1 p2) and (p0 p2 p3); attributes interpolate linearly on each.
+// precomputed per micropolygon; as d is affine in raster position, the edges are kept over
+// raster x, y and the test reads the samples' positions. The normalised edge values are the
+// perspective-correct barycentrics of the hit, and the hit depth follows from them, so
+// micropolygons crossing the eye plane need no clipping: a hit behind the near plane is simply
+// rejected. Quads are tested as the two triangles (p0 p1 p2) and (p0 p2 p3); attributes
+// interpolate linearly on each.
 //
 // Watertightness: an edge shared by two micropolygons is evaluated from the same vertex values in
 // opposite order, which yields exactly the negated value (cross products and sums are computed so

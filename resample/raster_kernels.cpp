@@ -131,8 +131,8 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
   const __m256 lox = _mm256_set1_ps(float(sp.x0)), hix = _mm256_set1_ps(float(sp.x0 + sp.w));
   const __m256 loy = _mm256_set1_ps(float(sp.y0)), hiy = _mm256_set1_ps(float(sp.y0 + sp.h));
   const __m256 one = _mm256_set1_ps(1.f);
-  const __m256 x0 = _mm256_set1_ps(b.x0), dx0 = _mm256_set1_ps(b.dx0), x1 = _mm256_set1_ps(b.x1), dx1 = _mm256_set1_ps(b.dx1);
-  const __m256 y0 = _mm256_set1_ps(b.y0), dy0 = _mm256_set1_ps(b.dy0), y1 = _mm256_set1_ps(b.y1), dy1 = _mm256_set1_ps(b.dy1);
+  const BoxLanes lanes = boxLanes(b);
+  const __m256 x0 = lanes.x0, dx0 = lanes.dx0, x1 = lanes.x1, dx1 = lanes.dx1, y0 = lanes.y0, dy0 = lanes.dy0, y1 = lanes.y1, dy1 = lanes.dy1;
   for (int s = 0; s < N; s += 8) {
     const __m256 u0 = _mm256_loadu_ps(sp.u0 + s), u1 = _mm256_loadu_ps(sp.u1 + s);
     const __m256 ax0 = _mm256_min_ps(_mm256_add_ps(x0, _mm256_mul_ps(u0, dx0)), _mm256_add_ps(x0, _mm256_mul_ps(u1, dx0)));
@@ -149,7 +149,6 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
     _mm256_store_si256(reinterpret_cast<__m256i*>(px1 + s), _mm256_cvttps_epi32(_mm256_floor_ps(cx1)));
     _mm256_store_si256(reinterpret_cast<__m256i*>(py1 + s), _mm256_cvttps_epi32(_mm256_floor_ps(cy1)));
   }
-  const BoxLanes lanes = boxLanes(b);
   const Candidates list = out;  // a local: the stores may alias anything
   size_t n = 0;
   for (int s = 0; s < N; ++s) {
@@ -164,7 +163,7 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
   return n;
 }
 
-// One edge's value d · E(f) for four samples: E(f) = c0 + f (c3 + f c6) per component, and
+// One edge's value at four samples: E(f) = c0 + f (c3 + f c6) per component, then
 // (x Ex + y Ey) + Ez at raster position (x, y), as edgeAt() and EdgeQuad::at() compute it.
 template <bool kFixed>
 RESHUTTER_AVX2 inline __m256d edgeValue(const double* c, __m256d f, __m256d rx, __m256d ry) {
