@@ -94,6 +94,17 @@ struct SurfaceColour {
   uint32_t matte;
 };
 
+// A run of consecutive micropolygons of one queued part, drawn as a unit in depth order.
+struct Chunk {
+  float zNear;         // nearest camera depth of any corner at any knot
+  uint32_t part;       // queue index
+  uint32_t m0, m1;     // micropolygons [m0, m1)
+  uint32_t vLo, vHi;   // the vertices their corners use lie in [vLo, vHi]
+};
+// 64 micropolygons are four rows of a 16×16 grid: small enough that depth order is fine-grained,
+// large enough that a chunk's per-vertex set-up is shared.
+constexpr uint32_t kChunkSize = 64;
+
 struct Fragment {
   float z;
   float c[3];
@@ -159,9 +170,20 @@ struct BucketRasterizer::Impl {
   ResolvedSamples out;
   RasterStats stats;
 
-  // Per-part scratch.
+  // Parts queued for rasterizeQueued(), and their chunks of micropolygons.
+  struct QueuedPart {
+    const Source* src;
+    const TileEntry* entry;
+    const TilePart* part;
+  };
+  std::vector<QueuedPart> queued;
+  std::vector<Chunk> chunks;
+  struct MovingTimes;
+  std::vector<std::unique_ptr<MovingTimes>> movingTimes;  // this bucket's, see timesFor()
+  std::vector<glm::vec3> instantPos;   // a chunk's vertices at an instantaneous group's time
+
+  // Per-chunk scratch, indexed by vertex - the chunk's first vertex.
   std::vector<glm::dvec3> hom;         // homogeneous vertex coordinates at one time
-  std::vector<double> thetaTimes;      // distinct times the moving path projects vertices at
   std::vector<float> projX, projY;     // [v * T + theta]; projX NaN = before the near plane
   std::vector<float> projRho;          // [v * T + theta]: perspective lag bound of theta interval (theta, theta+1)
   std::vector<float> depthScratch;     // one vertex's depths at the theta times
@@ -169,14 +191,9 @@ struct BucketRasterizer::Impl {
   SkewedArray<float> candT{36}, candX{44}, candY{52};  // and their times and positions, for the vector edge test
   std::vector<kernels::EdgeHit> edgeHits;
   std::vector<float> cullZ;            // [cull time * nV + v]: camera depth
-  std::vector<float> stratumU0, stratumU1;  // linear path: stratum s's span [u0, u1] in the group interval, 0..1, padded to whole vectors
-  std::vector<int> stratumFirst, stratumLast;  // theta index range per stratum
   std::vector<EdgeQuad> segEdges;      // [segment * 5 + edge] for the current micropolygon
   std::vector<uint8_t> segReady;
-  std::vector<uint32_t> thetaSeg;      // knot segment of each theta time
-  std::vector<float> thetaF;           // and the parameter inside it
   std::vector<float> cullX, cullY;     // [cull time * nV + v]; cullX NaN = before the near plane
-  std::vector<uint32_t> cullTheta;     // theta indices the cull projects at
   std::vector<uint8_t> vertexStamp;    // theta projections computed for this vertex
   std::vector<float> thetaBox;         // current micropolygon's raster box per theta: x0[T] y0[T] x1[T] y1[T]
 
@@ -254,7 +271,7 @@ struct BucketRasterizer::Impl {
     candidates.resize(slots + kPad), candT.resize(slots + kPad), candX.resize(slots + kPad), candY.resize(slots + kPad);
     edgeHits.resize(slots + kPad);
     multiGroup = G > 1;
-    zbuf.assign(slots, INFINITY);
+    zbuf.assign(slots + kPad, INFINITY);  // the gathers' early depth test reads up to 7 past a row's end
     colour.resize(slots);
     if (opt.surfaceIds) objectOf.assign(slots, 0), gridOf.assign(slots, 0);
     zAov.assign(slots * size_t(aovFloatCount), 0.f);
@@ -264,6 +281,7 @@ struct BucketRasterizer::Impl {
     fragSeq = 0;
     anyFragments = false;
     stats = RasterStats{};
+    queued.clear(), chunks.clear(), movingTimes.clear();
   }
 
   // ------------------------------------------------------------------------------------------
@@ -344,7 +362,7 @@ struct BucketRasterizer::Impl {
                           b[0] * c0[2] + b[1] * c1[2] + b[2] * c2[2], uint32_t(part.flags[m] & store::kMatte)};
     // No branch: whether a surface is nearer is a coin toss that the predictor loses, so the
     // depth is a min and the colour goes to the sample or, when hidden, to a scratch record.
-    // Ties keep the earlier surface: deterministic by store order.
+    // Ties keep the surface drawn first: deterministic by draw order (rasterizeQueued).
     const float old = zbuf[sample];
     const bool nearer = z < old;
     zbuf[sample] = nearer ? z : old;
@@ -360,7 +378,7 @@ struct BucketRasterizer::Impl {
     if (hc.transparentPart) attrAt(part, *hc.schema, hc.oi, m, v, b, o);
     const bool opaque = o[0] >= 1.f && o[1] >= 1.f && o[2] >= 1.f;
     if (opaque) {
-      if (!(z < zbuf[sample])) return;  // ties keep the earlier surface: deterministic by store order
+      if (!(z < zbuf[sample])) return;  // ties keep the surface drawn first (rasterizeQueued)
       float c[3];
       attrAt(part, *hc.schema, hc.ci, m, v, b, c);
       zbuf[sample] = z;
@@ -497,29 +515,43 @@ struct BucketRasterizer::Impl {
   }
 
   // ------------------------------------------------------------------------------------------
+  // Occlusion culling: chunks are drawn nearest first (rasterizeQueued), and the gathers drop
+  // every sample whose nearest opaque surface so far is no farther than the micropolygon can
+  // come (the early depth test): such a hit would change nothing, as equal depths keep the
+  // earlier surface. Exact: the image is the same with it off.
+
+  // The depth a micropolygon whose corners are never nearer than zNear cannot hit in front of:
+  // a hit's depth is a float blend of corner depths (barycentrics summing to 1 within a few ulp).
+  float cullDepth(float zNear) const { return opt.occlusionCulling ? zNear - 1e-5f * std::abs(zNear) : -INFINITY; }
+
+  // ------------------------------------------------------------------------------------------
   // Static micropolygons: one set of positions for every sample time.
 
-  void rasterizeStatic(const Source& src, const TilePart& part, const HitContext& hc, const glm::vec3* pos, int onlyGroup) {
+  // Micropolygons [ch.m0, ch.m1) at the positions chunkPos (the chunk's vertices: vertex v at
+  // chunkPos[v - ch.vLo]), for every sample or only group onlyGroup's (>= 0).
+  void rasterizeStatic(const Source& src, const TilePart& part, const HitContext& hc, const glm::vec3* chunkPos, int onlyGroup, const Chunk& ch) {
     const double covLo = src.coverStart(), covHi = src.coverEnd();
     const bool checkCover = tMin < covLo || tMax > covHi;
-    hom.resize(part.numVertices);
-    for (size_t i = 0; i < part.numVertices; ++i) hom[i] = homogeneous(pos[i]);
-    for (uint32_t m = 0; m < part.numMicropolygons; ++m) {
+    const uint32_t vBase = ch.vLo, nV = ch.vHi - ch.vLo + 1;
+    hom.resize(nV);
+    for (size_t i = 0; i < nV; ++i) hom[i] = homogeneous(chunkPos[i]);
+    for (uint32_t m = ch.m0; m < ch.m1; ++m) {
       const uint32_t* c = &part.corners[size_t(m) * 4];
       const bool tri = c[3] == kNoCorner;
       const int nc = tri ? 3 : 4;
       glm::dvec3 E[5] = {};
       for (int k = 0; k < 5; ++k) {
         if (tri && (k == 2 || k == 3)) continue;
-        E[k] = toRaster(cross(hom[c[kEdgeVerts[k][0]]], hom[c[kEdgeVerts[k][1]]]));
+        E[k] = toRaster(cross(hom[c[kEdgeVerts[k][0]] - vBase], hom[c[kEdgeVerts[k][1]] - vBase]));
       }
       float zv[4];
       float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
       bool bounded = true;
       for (int j = 0; j < nc; ++j) {
-        zv[j] = pos[c[j]].z;
+        const glm::vec3& p = chunkPos[c[j] - vBase];
+        zv[j] = p.z;
         float x, y;
-        if (!project(pos[c[j]], x, y)) bounded = false;
+        if (!project(p, x, y)) bounded = false;
         else bx0 = std::min(bx0, x), by0 = std::min(by0, y), bx1 = std::max(bx1, x), by1 = std::max(by1, y);
       }
       if (tri) zv[3] = zv[2];
@@ -528,10 +560,12 @@ struct BucketRasterizer::Impl {
       const int px0 = ta.px0, py0 = ta.py0, px1 = ta.px1, py1 = ta.py1;
       const float sbx0 = ta.sx0, sby0 = ta.sy0, sbx1 = ta.sx1, sby1 = ta.sy1;
       ++stats.staticMicropolygons;
+      const float zCull = cullDepth(*std::min_element(zv, zv + nc));
       if (vectorKernels && !checkCover) {
-        // Every stratum's samples in the box, then the vector edge test with fixed edges.
+        // Every stratum's samples in the box that pass the early depth test, then the vector
+        // edge test with fixed edges.
         const MovingBox box{ta.sx0, 0.f, ta.sx1, 0.f, ta.sy0, 0.f, ta.sy1, 0.f, 0.f, 0.f};
-        const size_t n = gatherCandidates(0, N, onlyGroup, px0, py0, px1, py1, box, Coverage{false, 0, 0}, 0);
+        const size_t n = gatherCandidates(0, N, onlyGroup, px0, py0, px1, py1, box, Coverage{false, 0, 0}, zCull, 0);
         if (!n) continue;
         stats.sampleTests += n;
         kernels::LinearEdges edges{};
@@ -548,6 +582,7 @@ struct BucketRasterizer::Impl {
             const size_t idx = size_t(s) * PS + p;
             if (sx[idx] < sbx0 || sx[idx] > sbx1 || sy[idx] < sby0 || sy[idx] > sby1) continue;
             if (checkCover && !(tBase + st[idx] >= covLo && tBase + st[idx] <= covHi)) continue;
+            if (!(zbuf[idx] > zCull)) continue;  // the early depth test
             ++stats.sampleTests;
             testStatic(hc, m, c, tri, E, zv, uint32_t(idx));
           }
@@ -626,10 +661,9 @@ struct BucketRasterizer::Impl {
     const TilePart& part;
     const store::Schedule& knots;
     const HitContext& hc;
-    SegmentMap seg;
+    const MovingTimes& times;
     int g;
-    uint32_t nV;
-    Coverage cover;
+    uint32_t nV, vBase;  // the chunk's vertices [vBase, vBase + nV): the per-vertex arrays' index base
     float rx0, ry0, rx1, ry1;  // the region, widened by the projection margin
   };
 
@@ -646,11 +680,12 @@ struct BucketRasterizer::Impl {
   // any) in pixels [px0, px1] × [py0, py1] that lie in `box` at their own time and inside the
   // source's coverage; returns the new count. Branch-free: the in/out pattern is random, so
   // branches would mispredict.
-  size_t gatherCandidates(int s0, int s1, int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover, size_t n) {
+  size_t gatherCandidates(int s0, int s1, int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover, float zCull,
+                          size_t n) {
     if (vectorKernels && !cover.check) {
       const kernels::SampleRows rows{st.data(), sx.data(), sy.data(), size_t(s0) * PS + size_t(py0 - y0) * w + size_t(px0 - x0), size_t(w),
                                      px1 - px0 + 1, py1 - py0 + 1, multiGroup && g >= 0 ? &rowGroup[size_t(py0 - y0)] : nullptr, uint8_t(g),
-                                     s1 - s0, PS};
+                                     s1 - s0, PS, zbuf.data(), zCull};
       return kernels::gatherInBox(rows, box, candidateList(), n);
     }
     uint32_t* __restrict cand = candidates.data();
@@ -668,6 +703,7 @@ struct BucketRasterizer::Impl {
         const float x = sx[idx], y = sy[idx];
         bool in = (x >= box.x0 + u * box.dx0) & (x <= box.x1 + u * box.dx1) & (y >= box.y0 + u * box.dy0) & (y <= box.y1 + u * box.dy1);
         if (cover.check) in &= (double(t) >= cover.lo) & (double(t) <= cover.hi);
+        in &= zbuf[idx] > zCull;  // the early depth test
         cand[n] = idx, ct[n] = t, cx[n] = x, cy[n] = y;
         n += in;
       }
@@ -675,118 +711,160 @@ struct BucketRasterizer::Impl {
     return n;
   }
 
-  void rasterizeMoving(const Source& src, const TilePart& part, const store::Schedule& knots, const HitContext& hc, int g) {
-    const uint32_t nV = part.numVertices, K = part.numKnots;
+  // The moving path's time set-up for one source, knot schedule and shutter group: the same for
+  // every part that shares them, so made once per bucket (timesFor()).
+  struct MovingTimes {
+    const Source* src = nullptr;  // the key: source, schedule, group
+    uint32_t schedule = 0;
+    int g = 0;
+    std::vector<double> thetaTimes;               // distinct local times to project vertices at
+    std::vector<int> stratumFirst, stratumLast;   // theta index range per stratum
+    std::vector<uint32_t> thetaSeg;               // knot segment of each theta time
+    std::vector<float> thetaF;                    // and the parameter inside it
+    std::vector<uint32_t> cullTheta;              // theta indices the cull projects at
+    SegmentMap seg{};
+    Coverage cover{};
+    bool linearPath = false;
+    LinearInterval li{};
+    std::vector<float> stratumU0, stratumU1;      // linear path: stratum s's span [u0, u1] in the group interval, 0..1, padded to whole vectors
+  };
+
+  const MovingTimes& timesFor(const Source& src, uint32_t schedule, const store::Schedule& knots, int g) {
+    for (const auto& t : movingTimes)
+      if (t->src == &src && t->schedule == schedule && t->g == g) return *t;
+    movingTimes.push_back(std::make_unique<MovingTimes>());
+    MovingTimes& mt = *movingTimes.back();
+    mt.src = &src, mt.schedule = schedule, mt.g = g;
+    const uint32_t K = uint32_t(knots.size());
     const double F = double(src.frame);
     const double toLocal = tBase - F;  // local time = st + toLocal
-    const Coverage cover{tMin < src.coverStart() || tMax > src.coverEnd(), src.coverStart() - tBase, src.coverEnd() - tBase};
+    mt.cover = {tMin < src.coverStart() || tMax > src.coverEnd(), src.coverStart() - tBase, src.coverEnd() - tBase};
     const double* lo = &stratumLo[size_t(g) * N];
     const double* hi = &stratumHi[size_t(g) * N];
 
     // Distinct local times to project vertices at: strata boundaries and the knots between them.
-    thetaTimes.clear();
+    auto& thetaTimes = mt.thetaTimes;
     for (int s = 0; s < N; ++s) thetaTimes.push_back(lo[s] - F), thetaTimes.push_back(hi[s] - F);
     for (uint32_t k = 0; k < K; ++k)
       if (knots[k] > lo[0] - F && knots[k] < hi[N - 1] - F) thetaTimes.push_back(knots[k]);
     std::sort(thetaTimes.begin(), thetaTimes.end());
     thetaTimes.erase(std::unique(thetaTimes.begin(), thetaTimes.end()), thetaTimes.end());
     const size_t T = thetaTimes.size();
-    stratumFirst.resize(size_t(N)), stratumLast.resize(size_t(N));
+    mt.stratumFirst.resize(size_t(N)), mt.stratumLast.resize(size_t(N));
     for (int s = 0; s < N; ++s) {
-      stratumFirst[size_t(s)] = int(std::lower_bound(thetaTimes.begin(), thetaTimes.end(), lo[s] - F) - thetaTimes.begin());
-      stratumLast[size_t(s)] = int(std::upper_bound(thetaTimes.begin(), thetaTimes.end(), hi[s] - F) - thetaTimes.begin()) - 1;
-      if (!opt.perStratumBounds) stratumFirst[size_t(s)] = 0, stratumLast[size_t(s)] = int(T) - 1;  // one bound for the interval
+      mt.stratumFirst[size_t(s)] = int(std::lower_bound(thetaTimes.begin(), thetaTimes.end(), lo[s] - F) - thetaTimes.begin());
+      mt.stratumLast[size_t(s)] = int(std::upper_bound(thetaTimes.begin(), thetaTimes.end(), hi[s] - F) - thetaTimes.begin()) - 1;
+      if (!opt.perStratumBounds) mt.stratumFirst[size_t(s)] = 0, mt.stratumLast[size_t(s)] = int(T) - 1;  // one bound for the interval
     }
-    thetaSeg.resize(T), thetaF.resize(T);
-    for (size_t ti = 0; ti < T; ++ti) segmentAt(knots, thetaTimes[ti], thetaSeg[ti], thetaF[ti]);
+    mt.thetaSeg.resize(T), mt.thetaF.resize(T);
+    for (size_t ti = 0; ti < T; ++ti) segmentAt(knots, thetaTimes[ti], mt.thetaSeg[ti], mt.thetaF[ti]);
 
-    // Every vertex projected at the group's first and last theta times and at the knots between:
+    // Vertices are projected at the group's first and last theta times and at the knots between:
     // within a knot segment a vertex's screen path is straight, so the boxes at those times bound
     // the micropolygon over the whole group interval - a cull, tight for short intervals, before
     // any per-stratum work.
-    cullTheta.clear();
     for (size_t ti = 0; ti < T; ++ti)
-      if (ti == 0 || ti + 1 == T || std::binary_search(knots.begin(), knots.end(), thetaTimes[ti])) cullTheta.push_back(uint32_t(ti));
-    const size_t C = cullTheta.size();
+      if (ti == 0 || ti + 1 == T || std::binary_search(knots.begin(), knots.end(), thetaTimes[ti])) mt.cullTheta.push_back(uint32_t(ti));
+    const size_t C = mt.cullTheta.size();
+
+    // Two-knot schedules (the common case): the segment parameter is a linear map of st.
+    const bool twoKnots = K == 2;
+    mt.seg = {twoKnots, twoKnots ? float(1.0 / (knots[1] - knots[0])) : 0.f, twoKnots ? float(toLocal - knots[0]) : 0.f, toLocal};
+
+    // The whole group interval inside one knot segment (always, for two-knot schedules): every
+    // corner moves along one straight screen line over it, so the two end projections the cull
+    // made bound the micropolygon at any time (see rasterizeLinear), with no per-theta work.
+    mt.linearPath = opt.perStratumBounds && C == 2 && thetaTimes[0] >= knots[0] && thetaTimes[T - 1] <= knots[K - 1];
+    if (mt.linearPath) {
+      LinearInterval& li = mt.li;
+      const double th0 = thetaTimes[0], th1 = thetaTimes[T - 1], len = th1 - th0;
+      li.thetaA = float(th0 - toLocal);
+      li.invLen = float(1.0 / len);
+      const uint32_t k0 = mt.thetaSeg[0];
+      const double knotSpan = K > 1 ? knots[std::min(k0 + 1, K - 1)] - knots[k0] : 0.0;
+      // A sample's time and segment parameter are floats: their rounding, as a fraction of the
+      // interval, widens the box by that fraction of the micropolygon's motion.
+      li.uErr = float(5e-7 * (std::max({1.0, std::abs(th0 - toLocal), std::abs(th1 - toLocal)}) + knotSpan) / len);
+      mt.stratumU0.assign(size_t(N + 7) / 8 * 8, 0.f), mt.stratumU1.assign(size_t(N + 7) / 8 * 8, 0.f);
+      for (int s = 0; s < N; ++s) {
+        mt.stratumU0[size_t(s)] = std::clamp(float((lo[s] - F - th0) / len) - 1e-6f, 0.f, 1.f);
+        mt.stratumU1[size_t(s)] = std::clamp(float((hi[s] - F - th0) / len) + 1e-6f, 0.f, 1.f);
+      }
+    }
+    return mt;
+  }
+
+  // Micropolygons [ch.m0, ch.m1) of a moving part in shutter group mt.g. Per-vertex work covers
+  // the chunk's vertices [ch.vLo, ch.vHi] only.
+  void rasterizeMoving(const MovingTimes& mt, const TilePart& part, const store::Schedule& knots, const HitContext& hc, const Chunk& ch) {
+    const uint32_t K = part.numKnots, vBase = ch.vLo, nV = ch.vHi - ch.vLo + 1;
+    const int g = mt.g;
+    const auto& thetaTimes = mt.thetaTimes;
+    const auto& stratumFirst = mt.stratumFirst;
+    const auto& stratumLast = mt.stratumLast;
+    const double toLocal = mt.seg.toLocal;
+    const Coverage& cover = mt.cover;
+    const size_t T = thetaTimes.size(), C = mt.cullTheta.size();
     cullX.resize(C * nV), cullY.resize(C * nV), cullZ.resize(C * nV);
     for (size_t ci = 0; ci < C; ++ci) {
-      const uint32_t k = thetaSeg[cullTheta[ci]];
-      const float f = thetaF[cullTheta[ci]];
-      for (uint32_t v = 0; v < nV; ++v) {
-        const glm::vec3& a = part.position(k, v);
-        const glm::vec3 p = a + f * (part.position(k + 1, v) - a);
+      const uint32_t k = mt.thetaSeg[mt.cullTheta[ci]];
+      const float f = mt.thetaF[mt.cullTheta[ci]];
+      for (uint32_t i = 0; i < nV; ++i) {
+        const glm::vec3& a = part.position(k, vBase + i);
+        const glm::vec3 p = a + f * (part.position(k + 1, vBase + i) - a);
         float x, y;
-        if (project(p, x, y)) cullX[ci * nV + v] = x, cullY[ci * nV + v] = y;
-        else cullX[ci * nV + v] = NAN;
-        cullZ[ci * nV + v] = p.z;
+        if (project(p, x, y)) cullX[ci * nV + i] = x, cullY[ci * nV + i] = y;
+        else cullX[ci * nV + i] = NAN;
+        cullZ[ci * nV + i] = p.z;
       }
     }
     projX.resize(T * nV), projY.resize(T * nV), projRho.resize(T * nV), depthScratch.resize(T);
     thetaBox.resize(4 * T);
     vertexStamp.assign(nV, 0u);
 
-    // Two-knot schedules (the common case): the segment parameter is a linear map of st.
-    const bool twoKnots = K == 2;
-    const SegmentMap seg{twoKnots, twoKnots ? float(1.0 / (knots[1] - knots[0])) : 0.f, twoKnots ? float(toLocal - knots[0]) : 0.f, toLocal};
-
     const uint32_t segments = K - 1;
     segEdges.resize(size_t(segments) * 5);
     segReady.resize(segments);
     const float m = 1e-3f;
     const float rx0 = float(x0) - m, ry0 = float(y0) - m, rx1 = float(x0 + w) + m, ry1 = float(y0 + h) + m;
-    const MovingPart mp{part, knots, hc, seg, g, nV, cover, rx0, ry0, rx1, ry1};
+    const MovingPart mp{part, knots, hc, mt, g, nV, vBase, rx0, ry0, rx1, ry1};
 
-    // The whole group interval inside one knot segment (always, for two-knot schedules): every
-    // corner moves along one straight screen line over it, so the two end projections the cull
-    // made bound the micropolygon at any time (see rasterizeLinear), with no per-theta work.
-    const bool linearPath = opt.perStratumBounds && C == 2 && thetaTimes[0] >= knots[0] && thetaTimes[T - 1] <= knots[K - 1];
-    LinearInterval li{};
-    if (linearPath) {
-      const double th0 = thetaTimes[0], th1 = thetaTimes[T - 1], len = th1 - th0;
-      li.thetaA = float(th0 - toLocal);
-      li.invLen = float(1.0 / len);
-      const uint32_t k0 = thetaSeg[0];
-      const double knotSpan = K > 1 ? knots[std::min(k0 + 1, K - 1)] - knots[k0] : 0.0;
-      // A sample's time and segment parameter are floats: their rounding, as a fraction of the
-      // interval, widens the box by that fraction of the micropolygon's motion.
-      li.uErr = float(5e-7 * (std::max({1.0, std::abs(th0 - toLocal), std::abs(th1 - toLocal)}) + knotSpan) / len);
-      stratumU0.assign(size_t(N + 7) / 8 * 8, 0.f), stratumU1.assign(size_t(N + 7) / 8 * 8, 0.f);
-      for (int s = 0; s < N; ++s) {
-        stratumU0[size_t(s)] = std::clamp(float((lo[s] - F - th0) / len) - 1e-6f, 0.f, 1.f);
-        stratumU1[size_t(s)] = std::clamp(float((hi[s] - F - th0) / len) + 1e-6f, 0.f, 1.f);
-      }
-    }
-
-    for (uint32_t mi = 0; mi < part.numMicropolygons; ++mi) {
+    for (uint32_t mi = ch.m0; mi < ch.m1; ++mi) {
       const uint32_t* c = &part.corners[size_t(mi) * 4];
       const bool tri = c[3] == kNoCorner;
       const int nc = tri ? 3 : 4;
-      if (linearPath && rasterizeLinear(mp, li, mi, c, tri, nc)) continue;
+      if (mt.linearPath && rasterizeLinear(mp, mi, c, tri, nc)) continue;
       // Cull against the region over the knots in range.
+      float zCull;
       {
         float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
         bool bounded = true;
         for (size_t ci = 0; ci < C && bounded; ++ci)
           for (int j = 0; j < nc; ++j) {
-            const float x = cullX[ci * nV + c[j]];
+            const float x = cullX[ci * nV + (c[j] - vBase)];
             if (std::isnan(x)) {
               bounded = false;
               break;
             }
-            const float y = cullY[ci * nV + c[j]];
+            const float y = cullY[ci * nV + (c[j] - vBase)];
             bx0 = std::min(bx0, x), by0 = std::min(by0, y), bx1 = std::max(bx1, x), by1 = std::max(by1, y);
           }
         const float mm = m + 1e-6f * std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1)));
         if (bounded && (bx1 + mm < float(x0) || bx0 - mm >= float(x0 + w) || by1 + mm < float(y0) || by0 - mm >= float(y0 + h))) continue;
+        // The nearest depth over the whole path (depths are linear between the cull times too).
+        float zNear = INFINITY;
+        for (size_t ci = 0; ci < C; ++ci)
+          for (int j = 0; j < nc; ++j) zNear = std::min(zNear, cullZ[ci * nV + (c[j] - vBase)]);
+        zCull = cullDepth(zNear);
       }
       // Corner projections at the strata boundaries, computed once per vertex. Vertex-major and
       // branch-free per knot segment so the compiler vectorises it: this is the per-micropolygon
       // cost that remains when the shutter (and so the number of sample tests) shrinks.
       for (int j = 0; j < nc; ++j) {
-        const uint32_t v = c[j];
+        const uint32_t v = c[j] - vBase;
         if (vertexStamp[v]) continue;
         vertexStamp[v] = 1;
-        projectVertexPath(part, v, T);
+        projectVertexPath(mt, part, vBase, v);
       }
       std::fill(segReady.begin(), segReady.end(), 0);
       const uint8_t flags = part.flags[mi];
@@ -801,13 +879,13 @@ struct BucketRasterizer::Impl {
         float* __restrict ty0 = tx0 + T;
         float* __restrict tx1 = ty0 + T;
         float* __restrict ty1 = tx1 + T;
-        const float* xa = &projX[size_t(c[0]) * T];
-        const float* ya = &projY[size_t(c[0]) * T];
+        const float* xa = &projX[size_t(c[0] - vBase) * T];
+        const float* ya = &projY[size_t(c[0] - vBase) * T];
         int nanCount = 0;
         for (size_t ti = 0; ti < T; ++ti) tx0[ti] = tx1[ti] = xa[ti], ty0[ti] = ty1[ti] = ya[ti], nanCount += xa[ti] != xa[ti];
         for (int j = 1; j < nc; ++j) {
-          const float* xs = &projX[size_t(c[j]) * T];
-          const float* ys = &projY[size_t(c[j]) * T];
+          const float* xs = &projX[size_t(c[j] - vBase) * T];
+          const float* ys = &projY[size_t(c[j] - vBase) * T];
           for (size_t ti = 0; ti < T; ++ti) {
             tx0[ti] = std::min(tx0[ti], xs[ti]), tx1[ti] = std::max(tx1[ti], xs[ti]);
             ty0[ti] = std::min(ty0[ti], ys[ti]), ty1[ti] = std::max(ty1[ti], ys[ti]);
@@ -840,7 +918,7 @@ struct BucketRasterizer::Impl {
         if (bounded && last == first + 1) {
           float rho = 0.f;
           if (view.perspective)
-            for (int j = 0; j < nc; ++j) rho = std::max(rho, projRho[size_t(c[j]) * T + size_t(first)]);
+            for (int j = 0; j < nc; ++j) rho = std::max(rho, projRho[size_t(c[j] - vBase) * T + size_t(first)]);
           const float mag = std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1)));
           mx = 1e-3f + 1e-6f * mag + (rho + 1e-5f) * (bx1 - bx0);
           my = 1e-3f + 1e-6f * mag + (rho + 1e-5f) * (by1 - by0);
@@ -850,7 +928,7 @@ struct BucketRasterizer::Impl {
           box = {tx0[first] - mx, tx0[last] - tx0[first], tx1[first] + mx, tx1[last] - tx1[first],
                  ty0[first] - my, ty0[last] - ty0[first], ty1[first] + my, ty1[last] - ty1[first],
                  float(thetaTimes[size_t(first)] - toLocal), float(1.0 / (thetaTimes[size_t(last)] - thetaTimes[size_t(first)]))};
-        const size_t n = gatherCandidates(s, s + 1, g, ta.px0, ta.py0, ta.px1, ta.py1, box, cover, 0);
+        const size_t n = gatherCandidates(s, s + 1, g, ta.px0, ta.py0, ta.px1, ta.py1, box, cover, zCull, 0);
         if (n) testCandidates(mp, mi, c, tri, flags, n);
       }
     }
@@ -864,13 +942,14 @@ struct BucketRasterizer::Impl {
   // |B_j - A_j|: the box at any time is the lerped end boxes widened by that margin. Each
   // stratum tests only its samples inside the box at the sample's own time. False (nothing
   // done) when a corner lies before the near plane at either end: the general path handles it.
-  bool rasterizeLinear(const MovingPart& mp, const LinearInterval& li, uint32_t mi, const uint32_t* c, bool tri, int nc) {
+  bool rasterizeLinear(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, int nc) {
     const uint32_t nV = mp.nV;
+    const LinearInterval& li = mp.times.li;
     float ax0 = INFINITY, ay0 = INFINITY, ax1 = -INFINITY, ay1 = -INFINITY;
     float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
     float rho = 0.f, mvx = 0.f, mvy = 0.f;
     for (int j = 0; j < nc; ++j) {
-      const uint32_t v = c[j];
+      const uint32_t v = c[j] - mp.vBase;
       const float xa = cullX[v], ya = cullY[v], xb = cullX[nV + v], yb = cullY[nV + v];
       if (std::isnan(xa) || std::isnan(xb)) return false;
       ax0 = std::min(ax0, xa), ax1 = std::max(ax1, xa), ay0 = std::min(ay0, ya), ay1 = std::max(ay1, ya);
@@ -888,6 +967,13 @@ struct BucketRasterizer::Impl {
         std::min(ay0, by0) - my >= mp.ry1)
       return true;
     ++stats.linearMicropolygons;
+    // Depths are linear over the interval; a sample's rounded time may stray li.uErr of it.
+    float zNear = INFINITY, dz = 0.f;
+    for (int j = 0; j < nc; ++j) {
+      const float za = cullZ[c[j] - mp.vBase], zb = cullZ[nV + c[j] - mp.vBase];
+      zNear = std::min({zNear, za, zb}), dz = std::max(dz, std::abs(zb - za));
+    }
+    const float zCull = cullDepth(zNear) - li.uErr * dz;
     const MovingBox box{ax0 - mx, bx0 - ax0, ax1 + mx, bx1 - ax1, ay0 - my, by0 - ay0, ay1 + my, by1 - ay1, li.thetaA, li.invLen};
     std::fill(segReady.begin(), segReady.end(), 0);
     const uint8_t flags = mp.part.flags[mi];
@@ -898,18 +984,18 @@ struct BucketRasterizer::Impl {
     const float motion = std::max(mvx, mvy), size = std::max(std::max(ax1 - ax0, ay1 - ay0), 1.f);
     const int span = motion > 0.f ? std::clamp(int(0.5f * size * float(N) / motion), 1, N) : N;
     size_t n = 0;
-    if (span == 1 && vectorKernels && !mp.cover.check && N <= 64) {
+    if (span == 1 && vectorKernels && !mp.times.cover.check && N <= 64) {
       // Every stratum's pixel range and samples in one vector pass.
       const kernels::SampleRows region{st.data(), sx.data(), sy.data(), 0, size_t(w), w, h, multiGroup ? rowGroup.data() : nullptr,
-                                       uint8_t(mp.g), N, PS};
-      const kernels::StrataSpans spans{stratumU0.data(), stratumU1.data(), N, x0, y0, w, h, 1e-3f + 1e-6f * mag};
+                                       uint8_t(mp.g), N, PS, zbuf.data(), zCull};
+      const kernels::StrataSpans spans{mp.times.stratumU0.data(), mp.times.stratumU1.data(), N, x0, y0, w, h, 1e-3f + 1e-6f * mag};
       n = kernels::gatherStrata(region, spans, box, candidateList());
       if (n) testCandidates(mp, mi, c, tri, flags, n);
       return true;
     }
     for (int s0 = 0; s0 < N; s0 += span) {
       const int s1 = std::min(N, s0 + span);  // strata [s0, s1)
-      const float u0 = stratumU0[size_t(s0)], u1 = stratumU1[size_t(s1 - 1)];
+      const float u0 = mp.times.stratumU0[size_t(s0)], u1 = mp.times.stratumU1[size_t(s1 - 1)];
       const float sx0 = std::min(box.x0 + u0 * box.dx0, box.x0 + u1 * box.dx0), sx1 = std::max(box.x1 + u0 * box.dx1, box.x1 + u1 * box.dx1);
       const float sy0 = std::min(box.y0 + u0 * box.dy0, box.y0 + u1 * box.dy0), sy1 = std::max(box.y1 + u0 * box.dy1, box.y1 + u1 * box.dy1);
       if (sx1 < mp.rx0 || sx0 >= mp.rx1 || sy1 < mp.ry0 || sy0 >= mp.ry1) continue;
@@ -920,7 +1006,7 @@ struct BucketRasterizer::Impl {
         while (py1 >= py0 && rowGroup[size_t(py1 - y0)] != mp.g) --py1;
         if (py0 > py1) continue;
       }
-      n = gatherCandidates(s0, s1, mp.g, px0, py0, px1, py1, box, mp.cover, n);
+      n = gatherCandidates(s0, s1, mp.g, px0, py0, px1, py1, box, mp.times.cover, zCull, n);
     }
     // Every stratum's candidates tested together: the vector test fills its lanes.
     if (n) testCandidates(mp, mi, c, tri, flags, n);
@@ -930,7 +1016,7 @@ struct BucketRasterizer::Impl {
   // Exact coverage test of micropolygon mi against the first n sample indices in `candidates`.
   void testCandidates(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, uint8_t flags, size_t n) {
     stats.sampleTests += n;
-    if (vectorKernels && mp.seg.twoKnots) {
+    if (vectorKernels && mp.times.seg.twoKnots) {
       testCandidatesVector(mp, mi, c, tri, flags, n);
       return;
     }
@@ -949,7 +1035,7 @@ struct BucketRasterizer::Impl {
     static_assert(sizeof(EdgeQuad) == 9 * sizeof(double), "EdgeQuad is e0 e1 e2, three dvec3s");
     kernels::LinearEdges edges;
     std::memcpy(edges.c, q, sizeof edges.c);
-    const kernels::EdgeTestSetup setup{candT.data(), candX.data(), candY.data(), mp.seg.fOffset, mp.seg.fScale, tri,
+    const kernels::EdgeTestSetup setup{candT.data(), candX.data(), candY.data(), mp.times.seg.fOffset, mp.times.seg.fScale, tri,
                                        opt.backfaceCull && !(flags & store::kTwoSided)};
     float za[4] = {}, zb[4] = {};
     for (int j = 0; j < (tri ? 3 : 4); ++j) za[j] = part.position(0, c[j]).z, zb[j] = part.position(1, c[j]).z;
@@ -983,7 +1069,7 @@ struct BucketRasterizer::Impl {
   // Exact coverage test of micropolygon mi against one sample, in scalar double precision.
   void testCandidate(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, uint8_t flags, uint32_t idx) {
     const TilePart& part = mp.part;
-    const SegmentMap& seg = mp.seg;
+    const SegmentMap& seg = mp.times.seg;
     const float t = st[idx];
     uint32_t k = 0;
     float f;
@@ -1016,12 +1102,16 @@ struct BucketRasterizer::Impl {
     recordHit(mp.hc, idx, mi, tv, b, z);
   }
 
-  // Raster positions of vertex v at every theta time (projX/projY[v * T + ti]); NaN x marks a
-  // position before the near plane. Float arithmetic: pixelRange() widens by the relative error.
-  void projectVertexPath(const TilePart& part, uint32_t v, size_t T) {
-    float* __restrict xs = &projX[size_t(v) * T];
-    float* __restrict ys = &projY[size_t(v) * T];
-    const float* __restrict fs = thetaF.data();
+  // Raster positions of the chunk's vertex vi (vBase + vi) at every theta time (projX/projY
+  // [vi * T + ti]); NaN x marks a position before the near plane. Float arithmetic: pixelRange()
+  // widens by the relative error.
+  void projectVertexPath(const MovingTimes& mt, const TilePart& part, uint32_t vBase, uint32_t vi) {
+    const size_t T = mt.thetaTimes.size();
+    const uint32_t v = vBase + vi;
+    const auto& thetaSeg = mt.thetaSeg;
+    float* __restrict xs = &projX[size_t(vi) * T];
+    float* __restrict ys = &projY[size_t(vi) * T];
+    const float* __restrict fs = mt.thetaF.data();
     const float ax = float(view.ax), bx = float(view.bx), ay = float(view.ay), by = float(view.by), nearZ = view.nearClip;
     float* __restrict zd = depthScratch.data();
     size_t ti = 0;
@@ -1052,7 +1142,7 @@ struct BucketRasterizer::Impl {
       if (!std::isfinite(xs[i]) || !std::isfinite(ys[i])) xs[i] = NAN;
     if (!view.perspective) return;
     // The perspective lag of each theta interval (i, i+1).
-    float* __restrict rho = &projRho[size_t(v) * T];
+    float* __restrict rho = &projRho[size_t(vi) * T];
     const float* __restrict zs = depthScratch.data();
     for (size_t i = 0; i + 1 < T; ++i) rho[i] = perspectiveLag(zs[i], zs[i + 1]);
     rho[T - 1] = 0.f;
@@ -1075,17 +1165,53 @@ struct BucketRasterizer::Impl {
     }
   }
 
-  void rasterize(const Source& src, const TileEntry& entry, const TilePart& part) {
+  // Queues a part: its chunks of kChunkSize micropolygons, each with its nearest depth at any
+  // knot and its vertex range.
+  void add(const Source& src, const TileEntry& entry, const TilePart& part) {
+    const uint32_t index = uint32_t(queued.size());
+    queued.push_back({&src, &entry, &part});
+    ++stats.parts;
+    stats.micropolygons += part.numMicropolygons;
+    if (entry.effects & store::kEffectTransparent) ++stats.transparentParts;
+    const uint32_t K = part.numKnots;
+    for (uint32_t m0 = 0; m0 < part.numMicropolygons; m0 += kChunkSize) {
+      Chunk ch{INFINITY, index, m0, std::min(part.numMicropolygons, m0 + kChunkSize), ~0u, 0};
+      for (uint32_t m = ch.m0; m < ch.m1; ++m)
+        for (int j = 0; j < 4; ++j) {
+          const uint32_t v = part.corners[size_t(m) * 4 + j];
+          if (v != kNoCorner) ch.vLo = std::min(ch.vLo, v), ch.vHi = std::max(ch.vHi, v);
+        }
+      if (ch.vLo > ch.vHi) continue;  // no corners: nothing to draw
+      // The range's vertices (a grid's rows: few the chunk does not use) bound its depth.
+      for (uint32_t k = 0; k < K; ++k)
+        for (uint32_t v = ch.vLo; v <= ch.vHi; ++v) ch.zNear = std::min(ch.zNear, part.position(k, v).z);
+      if (std::isnan(ch.zNear)) ch.zNear = -INFINITY;  // the sort needs a strict weak order
+      chunks.push_back(ch);
+    }
+  }
+
+  // Draws the queued chunks nearest first, so that occlusion culling finds most hidden surfaces'
+  // occluders already drawn. Equal depths keep queue order: the resampler queues parts in store
+  // order, so a depth tie resolves the same way in every bucket.
+  void rasterizeQueued() {
+    std::sort(chunks.begin(), chunks.end(), [](const Chunk& a, const Chunk& b) {
+      return a.zNear != b.zNear ? a.zNear < b.zNear : a.part != b.part ? a.part < b.part : a.m0 < b.m0;
+    });
+    for (const Chunk& ch : chunks) {
+      const QueuedPart& q = queued[ch.part];
+      rasterizeChunk(*q.src, *q.entry, *q.part, ch);
+    }
+    queued.clear(), chunks.clear();
+  }
+
+  void rasterizeChunk(const Source& src, const TileEntry& entry, const TilePart& part, const Chunk& ch) {
     const auto& meta = src.store->meta();
     const auto& knots = meta.schedules[entry.schedule];
     const HitContext hc = hitContext(meta, entry, part);
-    ++stats.parts;
-    stats.micropolygons += part.numMicropolygons;
-    if (hc.transparentPart) ++stats.transparentParts;
     const bool moving = (entry.effects & store::kEffectMoving) && part.numKnots > 1;
     if (!moving) {
       // Knot 0 holds every knot's positions: one pass serves all samples, all groups.
-      rasterizeStatic(src, part, hc, part.positions.data(), -1);
+      rasterizeStatic(src, part, hc, &part.positions[ch.vLo], -1, ch);
       return;
     }
     const int G = int(shutter.groups().size());
@@ -1094,11 +1220,11 @@ struct BucketRasterizer::Impl {
       if (shutter.instantaneous(g)) {
         // A zero-length shutter: the exact instantaneous image, no time sampling.
         const double tau = shutter.groups()[size_t(g)].open - double(src.frame);
-        std::vector<glm::vec3> pos(part.numVertices);
-        for (uint32_t v = 0; v < part.numVertices; ++v) pos[v] = positionAt(part, knots, v, tau);
-        rasterizeStatic(src, part, hc, pos.data(), G > 1 ? g : -1);
+        instantPos.resize(ch.vHi - ch.vLo + 1);
+        for (uint32_t v = ch.vLo; v <= ch.vHi; ++v) instantPos[v - ch.vLo] = positionAt(part, knots, v, tau);
+        rasterizeStatic(src, part, hc, instantPos.data(), G > 1 ? g : -1, ch);
       } else {
-        rasterizeMoving(src, part, knots, hc, g);
+        rasterizeMoving(timesFor(src, entry.schedule, knots, g), part, knots, hc, ch);
       }
     }
   }
@@ -1112,6 +1238,7 @@ struct BucketRasterizer::Impl {
   }
 
   const ResolvedSamples& resolve() {
+    if (!chunks.empty()) rasterizeQueued();
     const size_t slots = size_t(P) * N;
     out.x0 = x0, out.y0 = y0, out.width = w, out.height = h, out.spp = N;
     out.r.resize(slots), out.g.resize(slots), out.b.resize(slots), out.a.resize(slots), out.z.resize(slots);
@@ -1280,7 +1407,8 @@ BucketRasterizer::~BucketRasterizer() = default;
 void BucketRasterizer::begin(int x0, int y0, int w, int h) { impl_->begin(x0, y0, w, h); }
 double BucketRasterizer::earliestTime() const { return impl_->tMin; }
 double BucketRasterizer::latestTime() const { return impl_->tMax; }
-void BucketRasterizer::rasterize(const Source& source, const TileEntry& entry, const TilePart& part) { impl_->rasterize(source, entry, part); }
+void BucketRasterizer::add(const Source& source, const TileEntry& entry, const TilePart& part) { impl_->add(source, entry, part); }
+void BucketRasterizer::rasterizeQueued() { impl_->rasterizeQueued(); }
 const ResolvedSamples& BucketRasterizer::resolve() { return impl_->resolve(); }
 void BucketRasterizer::visitFragments(const std::function<void(size_t, const SampleFragment*, size_t)>& fn) { impl_->visitFragments(fn); }
 const RasterStats& BucketRasterizer::stats() const { return impl_->stats; }

@@ -22,6 +22,10 @@
 // (Pixar's INTERVAL idea). Inside one knot segment the bound comes from the corners' projections
 // at the interval's two ends (a perspective-widened lerp), and each sample is first checked
 // against the box at its own time; otherwise vertices are projected at every stratum boundary.
+//
+// Occlusion culling: parts are queued, split into runs of 64 micropolygons and drawn nearest run
+// first; the gathers drop every sample whose nearest opaque surface is already no farther than
+// the micropolygon can come (an early depth test), which changes no output bit.
 #pragma once
 
 #include <cstdint>
@@ -80,6 +84,9 @@ struct RasterOptions {
   /// Keep the object and grid id of each sample's opaque surface for visitFragments() (deep
   /// output); a flat render turns it off to keep the bucket's working set small.
   bool surfaceIds = true;
+  /// Occlusion culling: draw nearest first and skip samples already covered by a nearer opaque
+  /// surface. Exact (the same image either way); off only to measure what it saves.
+  bool occlusionCulling = true;
 };
 
 /// Counters for --stats; summed over buckets.
@@ -125,14 +132,20 @@ class BucketRasterizer {
   /// Earliest and latest sample time of the prepared region (for gathering parts).
   double earliestTime() const;
   double latestTime() const;
-  /// Rasterizes one decoded part of `source` (entry flags tell which shortcuts apply).
-  void rasterize(const Source& source, const store::TileEntry& entry, const store::TilePart& part);
-  /// Composites each sample's surfaces front to back and returns the region's samples.
+  /// Queues one decoded part of `source` (entry flags tell which shortcuts apply); it must stay
+  /// alive until rasterizeQueued() or resolve().
+  void add(const Source& source, const store::TileEntry& entry, const store::TilePart& part);
+  /// Rasterizes the queued parts in runs of micropolygons, nearest first, so that occlusion
+  /// culling skips most hidden surfaces. Depth ties keep the surface drawn first (store order
+  /// among runs of equal nearest depth, given parts queued in store order).
+  void rasterizeQueued();
+  /// Composites each sample's surfaces front to back and returns the region's samples
+  /// (rasterizing what is still queued first).
   const ResolvedSamples& resolve();
   /// For deep output, after rasterize(): calls fn(slot, fragments, count) for every sample of the
   /// region (slot = pixel * spp + i, pixel row-major in the region) with the surfaces it saw
   /// front to back, cut after the first that makes it opaque (opacity threshold). Depth ties keep
-  /// store order, so the lists are deterministic.
+  /// draw order, so the lists are deterministic.
   void visitFragments(const std::function<void(size_t slot, const SampleFragment* fragments, size_t count)>& fn);
   const RasterStats& stats() const;
 

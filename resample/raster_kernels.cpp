@@ -63,6 +63,7 @@ RESHUTTER_AVX2 inline size_t appendLanes(__m256 in, __m256i live, __m256i idx, _
 // The rows of `rows` against box `b`: the body of both gathers, inlined so that the box is
 // broadcast once per micropolygon, not once per stratum.
 RESHUTTER_AVX2 __attribute__((always_inline)) inline size_t gatherRows(const BoxLanes& b, const SampleRows& r, const Candidates& out, size_t n) {
+  const __m256 zCull = _mm256_set1_ps(r.zCull);
   if (r.cols <= 4) {
     // Narrow boxes (a small micropolygon's stratum box is 2 - 4 pixels wide): two rows per
     // vector, four lanes each, so that half the lanes are not idle.
@@ -72,9 +73,10 @@ RESHUTTER_AVX2 __attribute__((always_inline)) inline size_t gatherRows(const Box
     auto rowPair = [&](size_t lo, size_t hi, bool pair) RESHUTTER_AVX2 {
       const __m256 t = _mm256_loadu2_m128(r.st + hi, r.st + lo), x = _mm256_loadu2_m128(r.sx + hi, r.sx + lo),
                    y = _mm256_loadu2_m128(r.sy + hi, r.sy + lo);
+      const __m256 visible = _mm256_cmp_ps(_mm256_loadu2_m128(r.depth + hi, r.depth + lo), zCull, _CMP_GT_OQ);
       const __m256i live = pair ? colLive : _mm256_and_si256(colLive, lowHalf);
       const __m256i idx = _mm256_add_epi32(_mm256_setr_m128i(_mm_set1_epi32(int(uint32_t(lo))), _mm_set1_epi32(int(uint32_t(hi)))), quad);
-      n = appendLanes(insideAtOwnTime(b, t, x, y), live, idx, t, x, y, out, n);
+      n = appendLanes(_mm256_and_ps(insideAtOwnTime(b, t, x, y), visible), live, idx, t, x, y, out, n);
     };
     for (int plane = 0; plane < r.planes; ++plane) {
       const size_t planeBase = r.first + size_t(plane) * r.planeStride;
@@ -109,8 +111,9 @@ RESHUTTER_AVX2 __attribute__((always_inline)) inline size_t gatherRows(const Box
     for (int c = 0; c < r.cols; c += 8) {
       const size_t at = base + size_t(c);
       const __m256 t = _mm256_loadu_ps(r.st + at), x = _mm256_loadu_ps(r.sx + at), y = _mm256_loadu_ps(r.sy + at);
+      const __m256 visible = _mm256_cmp_ps(_mm256_loadu_ps(r.depth + at), zCull, _CMP_GT_OQ);
       const __m256i live = _mm256_cmpgt_epi32(_mm256_set1_epi32(r.cols - c), lane);
-      n = appendLanes(insideAtOwnTime(b, t, x, y), live, _mm256_add_epi32(_mm256_set1_epi32(int(uint32_t(at))), lane), t, x, y, out, n);
+      n = appendLanes(_mm256_and_ps(insideAtOwnTime(b, t, x, y), visible), live, _mm256_add_epi32(_mm256_set1_epi32(int(uint32_t(at))), lane), t, x, y, out, n);
     }
   }
   return n;

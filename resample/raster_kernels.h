@@ -12,6 +12,7 @@
 // every other CPU; a SIMD framework's multi-target build machinery would outweigh them.
 #pragma once
 
+#include <cmath>
 #include <cstddef>
 #include <cstdint>
 
@@ -40,6 +41,10 @@ struct SampleRows {
   uint8_t group = 0;
   int planes = 1;
   size_t planeStride = 0;
+  // Early depth test: only samples whose nearest surface so far (`depth`, indexed like st) lies
+  // beyond zCull are kept; a surface no nearer than zCull cannot change the others.
+  const float* depth = nullptr;
+  float zCull = -INFINITY;
 };
 
 /// A list of candidate samples: each one's index and a copy of its time and position, so that
@@ -52,8 +57,8 @@ struct Candidates {
 };
 
 /// Appends to `out` from position n the samples in `rows` (plane by plane) that lie inside `box`
-/// at their own time; returns the new count. Reads up to 7 floats past a row's end (arrays need
-/// that padding) and writes up to 7 entries past the returned count.
+/// at their own time and pass the early depth test; returns the new count. Reads up to 7 floats
+/// past a row's end (arrays need that padding) and writes up to 7 entries past the returned count.
 size_t gatherInBox(const SampleRows& rows, const MovingBox& box, const Candidates& out, size_t n);
 
 /// The strata of one moving box: stratum s covers box times u in [u0[s], u1[s]] and its

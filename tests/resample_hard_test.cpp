@@ -9,6 +9,7 @@
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
+#include "resample/deep.h"
 #include "resample/raster_kernels.h"
 #include "store/synthetic.h"
 #include "store/writer.h"
@@ -51,6 +52,17 @@ TestMp cameraQuad(std::vector<std::array<glm::dvec3, 4>> knots, glm::vec3 ci = {
   mp.ci = ci;
   mp.flags = store::kTwoSided;
   return mp;
+}
+
+// A synthetic store (store/synthetic.h) written under `dir`.
+std::shared_ptr<const store::StoreReader> syntheticStore(const ScratchDir& dir, const std::string& name, const store::SyntheticOptions& so) {
+  const std::string path = dir.path(name + ".mps");
+  {
+    store::StoreWriter writer(path, store::syntheticMeta(so));
+    store::generateSynthetic(so, writer);
+    writer.close();
+  }
+  return std::make_shared<const store::StoreReader>(path);
 }
 
 std::array<glm::dvec3, 4> square(double cx, double cy, double half, double z) {
@@ -173,7 +185,7 @@ TEST(ResampleHard, ExactDepthTiesResolveDeterministically) {
     expectFinite(r);
     const auto& R = channel(r, "R").f;
     const auto& B = channel(r, "B").f;
-    // Every sample takes one surface whole: the earlier in store order.
+    // Every sample takes one surface whole: the earlier in store order (equal nearest depths).
     for (size_t p = 0; p < R.size(); ++p) {
       EXPECT_FLOAT_EQ(R[p], 1.f);
       EXPECT_EQ(B[p], 0.f);
@@ -282,13 +294,7 @@ TEST(ResampleHard, VectorAndScalarKernelsAgree) {
     store::SyntheticOptions so;
     so.micropolygons = 40000, so.width = 160, so.height = 120, so.knots = c.knots, so.maxMotionPx = c.motion;
     so.transparentFraction = c.transparent, so.seed = 7;
-    const std::string path = dir.path(std::string(c.name) + ".mps");
-    {
-      store::StoreWriter writer(path, store::syntheticMeta(so));
-      store::generateSynthetic(so, writer);
-      writer.close();
-    }
-    auto reader = std::make_shared<const store::StoreReader>(path);
+    auto reader = syntheticStore(dir, c.name, so);
     for (int shutter = 0; shutter < 3; ++shutter) {
       RenderSpec spec = specFor(reader, 0.0, 1.0, 4, 4, 11);
       spec.filter = FilterSpec::parse("gaussian:2x2", "test");
@@ -309,6 +315,80 @@ TEST(ResampleHard, VectorAndScalarKernelsAgree) {
         for (const char* ch : {"R", "G", "B", "A", "Z"})
           EXPECT_EQ(channel(results[i], ch).f, channel(results[0], ch).f) << c.name << " shutter " << shutter << " run " << i << " " << ch;
     }
+  }
+}
+
+// Occlusion culling (nearest chunks first, early depth test) must change no bit of any output -
+// colour, depth, an output variable and the deep samples' surface ids - while skipping most
+// hidden surfaces of a scene ~2.5 layers deep: moving (two and three knots), static, transparent,
+// a sub-interval, interlaced fields and a zero-length shutter.
+TEST(ResampleHard, OcclusionCullingIsExact) {
+  ScratchDir dir;
+  struct Case {
+    const char* name;
+    int knots;
+    double motion, transparent;
+  };
+  for (const Case& c : {Case{"two-knots", 2, 40, 0.0}, Case{"three-knots", 3, 40, 0.0}, Case{"static", 1, 0, 0.0},
+                        Case{"transparent", 2, 25, 0.4}}) {
+    store::SyntheticOptions so;
+    so.micropolygons = 60000, so.width = 160, so.height = 120, so.knots = c.knots, so.maxMotionPx = c.motion;
+    so.transparentFraction = c.transparent, so.seed = 5;
+    auto reader = syntheticStore(dir, c.name, so);
+    for (int shutter = 0; shutter < 4; ++shutter) {
+      RenderSpec spec = specFor(reader, 0.0, 1.0, 4, 4, 11);
+      spec.filter = FilterSpec::parse("gaussian:2x2", "test");
+      spec.aovs = {AovRequest::parse("z", "test"), AovRequest::parse("id", "test")};
+      spec.deep = true;
+      if (shutter == 1) spec.shutter = ShutterModel::progressive(1.3, 1.55);
+      if (shutter == 2) spec.shutter = ShutterModel::fields({1.0, 1.25}, {1.5, 1.75}, 0);
+      if (shutter == 3) spec.shutter = ShutterModel::progressive(1.6, 1.6);
+      spec.raster.occlusionCulling = true;
+      const RenderResult culled = render(spec);
+      spec.raster.occlusionCulling = false;
+      const RenderResult all = render(spec);
+      const std::string what = std::string(c.name) + " shutter " + std::to_string(shutter);
+      ASSERT_EQ(culled.image.channels.size(), all.image.channels.size());
+      for (size_t i = 0; i < all.image.channels.size(); ++i) {
+        EXPECT_EQ(culled.image.channels[i].f, all.image.channels[i].f) << what << " " << all.image.channels[i].name;
+        EXPECT_EQ(culled.image.channels[i].u, all.image.channels[i].u) << what << " " << all.image.channels[i].name;
+      }
+      ASSERT_EQ(culled.deep.totalSamples(), all.deep.totalSamples()) << what;
+      DeepPixel a, b;
+      for (int y = all.deep.y0; y < all.deep.y0 + all.deep.height; ++y)
+        for (int x = all.deep.x0; x < all.deep.x0 + all.deep.width; ++x) {
+          culled.deep.getPixel(x, y, a), all.deep.getPixel(x, y, b);
+          ASSERT_EQ(a.f, b.f) << what << " deep pixel " << x << " " << y;
+          ASSERT_EQ(a.u, b.u) << what << " deep pixel " << x << " " << y;
+        }
+      // Hidden surfaces were skipped, not drawn and then lost.
+      EXPECT_GT(all.stats.raster.hits, 100000u) << what;
+      EXPECT_LT(double(culled.stats.raster.hits), 0.8 * double(all.stats.raster.hits)) << what;
+    }
+  }
+}
+
+// Layers written farthest first (the worst order for a depth buffer), overlapping in depth,
+// moving across each other, one flying through the eye plane: the culled render must still agree
+// with the ray caster, which knows nothing of draw order. With knots 1e-7 frames apart a sample's
+// rounded time can land anywhere in the jump, which the early depth test must allow for.
+TEST(ResampleHard, OcclusionKeepsNearerSurfacesDrawnLast) {
+  ScratchDir dir;
+  for (std::vector<double> knots : {std::vector<double>{0.0, 1.0}, std::vector<double>{0.5, 0.5 + 1e-7}}) {
+    TestScene s = makeScene(40, 30, knots);
+    for (int layer = 0; layer < 6; ++layer) {
+      const double z = 30.0 - 4.0 * layer, x = 2.0 + 3.0 * layer;
+      const glm::vec3 ci(0.15f * float(layer), 0.9f - 0.12f * float(layer), 0.5f);
+      // Tilted in depth by more than the spacing, so neighbouring layers' depth ranges overlap.
+      s.mps.push_back(cameraQuad({{s.cam(x, 3, z), s.cam(x + 16, 3, z + 5), s.cam(x + 16, 25, z + 5), s.cam(x, 25, z)},
+                                  {s.cam(x + 9, 4, z - 3), s.cam(x + 25, 4, z + 2), s.cam(x + 25, 26, z + 2), s.cam(x + 9, 26, z - 3)}},
+                                 ci));
+    }
+    s.mps.push_back(cameraQuad({{glm::dvec3(-3, -2, -4), glm::dvec3(3, -2, -3), glm::dvec3(3, 2, -2), glm::dvec3(-3, 2, -3)},
+                                {glm::dvec3(-3, -2, 3), glm::dvec3(3, -2, 4), glm::dvec3(3, 2, 5), glm::dvec3(-3, 2, 4)}},
+                               {0.1f, 0.1f, 0.9f}));
+    for (auto [a, b] : {std::pair{0.0, 1.0}, std::pair{0.3, 0.55}, std::pair{0.5, 0.5 + 1e-7}, std::pair{0.5 + 3e-8, 0.5 + 6e-8}})
+      EXPECT_LT(compareWithRayCaster(s, dir.path("layers.mps"), a, b), 3e-3) << knots[1] << " " << a << ":" << b;
   }
 }
 
