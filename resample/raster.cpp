@@ -96,7 +96,7 @@ struct SurfaceColour {
 
 // A run of consecutive micropolygons of one queued part, drawn as a unit in depth order.
 struct Chunk {
-  float zNear;         // nearest camera depth of any corner at any knot
+  float zNear;         // nearest camera depth of any vertex in [vLo, vHi] at any knot (the draw order)
   uint32_t part;       // queue index
   uint32_t m0, m1;     // micropolygons [m0, m1)
   uint32_t vLo, vHi;   // the vertices their corners use lie in [vLo, vHi]
@@ -184,17 +184,17 @@ struct BucketRasterizer::Impl {
 
   // Per-chunk scratch, indexed by vertex - the chunk's first vertex.
   std::vector<glm::dvec3> hom;         // homogeneous vertex coordinates at one time
-  std::vector<float> projX, projY;     // [v * T + theta]; projX NaN = before the near plane
-  std::vector<float> projRho;          // [v * T + theta]: perspective lag bound of theta interval (theta, theta+1)
+  std::vector<float> projX, projY;     // [(v - vBase) * T + theta]; projX NaN = before the near plane
+  std::vector<float> projRho;          // [(v - vBase) * T + theta]: perspective lag bound of theta interval (theta, theta+1)
   std::vector<float> depthScratch;     // one vertex's depths at the theta times
   SkewedArray<uint32_t> candidates{28};   // sample indices that pass the box test, per micropolygon
   SkewedArray<float> candT{36}, candX{44}, candY{52};  // and their times and positions, for the vector edge test
   std::vector<kernels::EdgeHit> edgeHits;
-  std::vector<float> cullZ;            // [cull time * nV + v]: camera depth
+  std::vector<float> cullZ;            // [cull time * nV + v - vBase]: camera depth
   std::vector<EdgeQuad> segEdges;      // [segment * 5 + edge] for the current micropolygon
   std::vector<uint8_t> segReady;
-  std::vector<float> cullX, cullY;     // [cull time * nV + v]; cullX NaN = before the near plane
-  std::vector<uint8_t> vertexStamp;    // theta projections computed for this vertex
+  std::vector<float> cullX, cullY;     // [cull time * nV + v - vBase]; cullX NaN = before the near plane
+  std::vector<uint8_t> vertexStamp;    // [v - vBase]: theta projections computed for this vertex
   std::vector<float> thetaBox;         // current micropolygon's raster box per theta: x0[T] y0[T] x1[T] y1[T]
 
   Impl(const SamplePattern& p, const ShutterModel& s, const View& v, const std::vector<AovChannel>& a, const RasterOptions& o)

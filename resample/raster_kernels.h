@@ -41,8 +41,9 @@ struct SampleRows {
   uint8_t group = 0;
   int planes = 1;
   size_t planeStride = 0;
-  // Early depth test: only samples whose nearest surface so far (`depth`, indexed like st) lies
-  // beyond zCull are kept; a surface no nearer than zCull cannot change the others.
+  // Early depth test (required: the gathers always read `depth`): only samples whose nearest
+  // surface so far (indexed like st) lies beyond zCull are kept; a surface no nearer than zCull
+  // cannot change the others. zCull = -INFINITY keeps every sample.
   const float* depth = nullptr;
   float zCull = -INFINITY;
 };

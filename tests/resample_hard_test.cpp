@@ -54,15 +54,37 @@ TestMp cameraQuad(std::vector<std::array<glm::dvec3, 4>> knots, glm::vec3 ci = {
   return mp;
 }
 
-// A synthetic store (store/synthetic.h) written under `dir`.
-std::shared_ptr<const store::StoreReader> syntheticStore(const ScratchDir& dir, const std::string& name, const store::SyntheticOptions& so) {
-  const std::string path = dir.path(name + ".mps");
+// The synthetic scenes (store/synthetic.h, 160×120, ~2.5 layers deep) that the two-way
+// comparisons render: moving with two and three knots, static, and partly transparent.
+struct SyntheticCase {
+  const char* name;
+  int knots;
+  double motion, transparent;
+};
+constexpr SyntheticCase kSyntheticCases[] = {{"two-knots", 2, 40, 0.0}, {"three-knots", 3, 40, 0.0}, {"static", 1, 0, 0.0}, {"transparent", 2, 25, 0.4}};
+
+std::shared_ptr<const store::StoreReader> syntheticStore(const ScratchDir& dir, const SyntheticCase& c, uint64_t micropolygons, uint64_t seed) {
+  store::SyntheticOptions so;
+  so.micropolygons = micropolygons, so.width = 160, so.height = 120, so.knots = c.knots, so.maxMotionPx = c.motion;
+  so.transparentFraction = c.transparent, so.seed = seed;
+  const std::string path = dir.path(std::string(c.name) + ".mps");
   {
     store::StoreWriter writer(path, store::syntheticMeta(so));
     store::generateSynthetic(so, writer);
     writer.close();
   }
   return std::make_shared<const store::StoreReader>(path);
+}
+
+// A 16 spp gaussian 2×2 render of frame 1 with shutter 0: the full frame; 1: a sub-interval;
+// 2: interlaced fields; 3: a zero-length shutter.
+RenderSpec comparisonSpec(std::shared_ptr<const store::StoreReader> reader, int shutter) {
+  RenderSpec spec = specFor(reader, 0.0, 1.0, 4, 4, 11);
+  spec.filter = FilterSpec::parse("gaussian:2x2", "test");
+  if (shutter == 1) spec.shutter = ShutterModel::progressive(1.3, 1.55);
+  if (shutter == 2) spec.shutter = ShutterModel::fields({1.0, 1.25}, {1.5, 1.75}, 0);
+  if (shutter == 3) spec.shutter = ShutterModel::progressive(1.6, 1.6);
+  return spec;
 }
 
 std::array<glm::dvec3, 4> square(double cx, double cy, double half, double z) {
@@ -284,22 +306,10 @@ TEST(ResampleHard, NonFiniteAttributesAreRejectedNamingGridAndAttribute) {
 TEST(ResampleHard, VectorAndScalarKernelsAgree) {
   if (!kernels::available()) GTEST_SKIP() << "this CPU has no AVX2: only the scalar loops run";
   ScratchDir dir;
-  struct Case {
-    const char* name;
-    int knots;
-    double motion, transparent;
-  };
-  for (const Case& c : {Case{"two-knots", 2, 40, 0.0}, Case{"three-knots", 3, 40, 0.0}, Case{"static", 1, 0, 0.0},
-                        Case{"transparent", 2, 25, 0.4}}) {
-    store::SyntheticOptions so;
-    so.micropolygons = 40000, so.width = 160, so.height = 120, so.knots = c.knots, so.maxMotionPx = c.motion;
-    so.transparentFraction = c.transparent, so.seed = 7;
-    auto reader = syntheticStore(dir, c.name, so);
+  for (const SyntheticCase& c : kSyntheticCases) {
+    auto reader = syntheticStore(dir, c, 40000, 7);
     for (int shutter = 0; shutter < 3; ++shutter) {
-      RenderSpec spec = specFor(reader, 0.0, 1.0, 4, 4, 11);
-      spec.filter = FilterSpec::parse("gaussian:2x2", "test");
-      if (shutter == 1) spec.shutter = ShutterModel::progressive(1.3, 1.55);
-      if (shutter == 2) spec.shutter = ShutterModel::fields({1.0, 1.25}, {1.5, 1.75}, 0);
+      RenderSpec spec = comparisonSpec(reader, shutter);
       std::vector<RenderResult> results;
       for (bool vector : {true, false})
         for (int bucket : {16, 96}) {
@@ -324,25 +334,12 @@ TEST(ResampleHard, VectorAndScalarKernelsAgree) {
 // a sub-interval, interlaced fields and a zero-length shutter.
 TEST(ResampleHard, OcclusionCullingIsExact) {
   ScratchDir dir;
-  struct Case {
-    const char* name;
-    int knots;
-    double motion, transparent;
-  };
-  for (const Case& c : {Case{"two-knots", 2, 40, 0.0}, Case{"three-knots", 3, 40, 0.0}, Case{"static", 1, 0, 0.0},
-                        Case{"transparent", 2, 25, 0.4}}) {
-    store::SyntheticOptions so;
-    so.micropolygons = 60000, so.width = 160, so.height = 120, so.knots = c.knots, so.maxMotionPx = c.motion;
-    so.transparentFraction = c.transparent, so.seed = 5;
-    auto reader = syntheticStore(dir, c.name, so);
+  for (const SyntheticCase& c : kSyntheticCases) {
+    auto reader = syntheticStore(dir, c, 60000, 5);
     for (int shutter = 0; shutter < 4; ++shutter) {
-      RenderSpec spec = specFor(reader, 0.0, 1.0, 4, 4, 11);
-      spec.filter = FilterSpec::parse("gaussian:2x2", "test");
+      RenderSpec spec = comparisonSpec(reader, shutter);
       spec.aovs = {AovRequest::parse("z", "test"), AovRequest::parse("id", "test")};
       spec.deep = true;
-      if (shutter == 1) spec.shutter = ShutterModel::progressive(1.3, 1.55);
-      if (shutter == 2) spec.shutter = ShutterModel::fields({1.0, 1.25}, {1.5, 1.75}, 0);
-      if (shutter == 3) spec.shutter = ShutterModel::progressive(1.6, 1.6);
       spec.raster.occlusionCulling = true;
       const RenderResult culled = render(spec);
       spec.raster.occlusionCulling = false;
