@@ -37,7 +37,7 @@ std::string RenderStats::report() const {
     << raster.linearMicropolygons << " bounded from their interval ends), "
     << raster.parts << " parts (" << raster.transparentParts << " transparent)\n";
   s << "  fragments          " << raster.fragments << " transparent\n";
-  s << "  parts              " << partsFetched << " fetched, " << partsDecoded << " decoded\n";
+  s << "  parts              " << partsFetched << " fetched, " << partsDecoded << " decoded, " << partsWaited << " waited for (another thread was decoding them)\n";
   s << "  time (thread-sum)  set-up " << setupSeconds << " s, parts " << partsSeconds << " s (decode, or wait for another thread's), rasterize "
     << rasterSeconds << " s, resolve " << resolveSeconds << " s, filter " << filterSeconds << " s\n";
   s << "  wall               " << wallSeconds << " s";
@@ -430,8 +430,8 @@ RenderResult render(const RenderSpec& spec) {
     ++ts.stats.buckets;
     if (showProgress) progress.advance();
   };
-  std::map<const store::StoreReader*, uint64_t> missesBefore;
-  for (const Source& src : spec.sources) missesBefore.emplace(src.store.get(), src.store->cacheStats().misses);
+  std::map<const store::StoreReader*, store::CacheStats> cacheBefore;
+  for (const Source& src : spec.sources) cacheBefore.emplace(src.store.get(), src.store->cacheStats());
   tbb::parallel_for(tbb::blocked_range<size_t>(0, buckets.size(), 1), [&](const tbb::blocked_range<size_t>& range) {
     for (size_t b = range.begin(); b != range.end(); ++b) processBucket(buckets[b]);
   });
@@ -449,7 +449,11 @@ RenderResult render(const RenderSpec& spec) {
     result.stats.filterSeconds += ts.stats.filterSeconds;
   }
   result.stats.wallSeconds = std::chrono::duration<double>(clock::now() - wallStart).count();
-  for (const auto& [store, before] : missesBefore) result.stats.partsDecoded += store->cacheStats().misses - before;
+  for (const auto& [store, before] : cacheBefore) {
+    const store::CacheStats now = store->cacheStats();
+    result.stats.partsDecoded += now.misses - before.misses;
+    result.stats.partsWaited += now.waits - before.waits;
+  }
 
   ImageProvenance& pv = result.provenance;
   pv.worldToCamera = cam.worldToCamera;

@@ -60,6 +60,7 @@ struct RenderStats {
   // which is decoding them, or waiting while another thread decodes one both buckets need.
   double setupSeconds = 0, partsSeconds = 0, rasterSeconds = 0, resolveSeconds = 0, filterSeconds = 0;
   uint64_t partsFetched = 0, partsDecoded = 0;  // decoded: the store caches' misses during the render
+  uint64_t partsWaited = 0;                     // fetches that waited for another thread's decode
   double wallSeconds = 0;
   uint64_t samples = 0;
   std::string report() const;  // the --stats text

@@ -174,6 +174,7 @@ struct StoreReader::Impl {
       if (it != slots.end()) {
         ++stats.hits;
         if (it->second.ready) lru.splice(lru.begin(), lru, it->second.lru);
+        else ++stats.waits;
         auto f = it->second.future;
         lock.unlock();
         return f.get();

@@ -26,6 +26,7 @@ struct ReaderOptions {
 
 struct CacheStats {
   uint64_t hits = 0, misses = 0, evictions = 0;
+  uint64_t waits = 0;  // hits on a part another thread was still decoding (the caller waited)
   size_t bytes = 0, peakBytes = 0;
 };
 
@@ -50,7 +51,7 @@ class StoreReader {
 
   /// Decodes a part without the cache, validating checksum, sizes, indices and finiteness.
   TilePart decode(size_t entry) const;
-  /// Cached decode.
+  /// Cached decode. A part another thread is decoding is waited for.
   std::shared_ptr<const TilePart> part(size_t entry) const;
   CacheStats cacheStats() const;
 
