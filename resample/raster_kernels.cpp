@@ -52,6 +52,7 @@ RESHUTTER_AVX2 inline __m256 insideAtOwnTime(const BoxLanes& b, __m256 t, __m256
 // Appends the lanes that are in and live to out from position n; returns the new count.
 RESHUTTER_AVX2 inline size_t appendLanes(__m256 in, __m256i live, __m256i idx, __m256 t, __m256 x, __m256 y, const Candidates& out, size_t n) {
   const unsigned mask = unsigned(_mm256_movemask_ps(_mm256_and_ps(in, _mm256_castsi256_ps(live))));
+  if (!mask) return n;
   const __m256i perm = _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompress.perm[mask]));
   _mm256_storeu_si256(reinterpret_cast<__m256i*>(out.index + n), _mm256_permutevar8x32_epi32(idx, perm));
   _mm256_storeu_ps(out.t + n, _mm256_permutevar8x32_ps(t, perm));
@@ -152,15 +153,20 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
     _mm256_store_si256(reinterpret_cast<__m256i*>(px1 + s), _mm256_cvttps_epi32(_mm256_floor_ps(cx1)));
     _mm256_store_si256(reinterpret_cast<__m256i*>(py1 + s), _mm256_cvttps_epi32(_mm256_floor_ps(cy1)));
   }
-  const Candidates list = out;  // a local: the stores may alias anything
+  // Locals, so that the candidate stores (which may alias anything) do not force reloads.
+  const Candidates list = out;
+  SampleRows r = region;
+  r.planes = 1;
+  const size_t first = region.first, planeStride = region.planeStride, stride = region.stride;
+  const uint8_t* rowGroup = region.rowGroup;
+  const int rx = sp.x0, ry = sp.y0;
   size_t n = 0;
   for (int s = 0; s < N; ++s) {
-    if (px0[s] > px1[s] || py0[s] > py1[s]) continue;
-    SampleRows r = region;
-    r.first = region.first + size_t(s) * region.planeStride + size_t(py0[s] - sp.y0) * region.stride + size_t(px0[s] - sp.x0);
-    r.cols = px1[s] - px0[s] + 1, r.rows = py1[s] - py0[s] + 1;
-    r.planes = 1;
-    if (region.rowGroup) r.rowGroup = region.rowGroup + (py0[s] - sp.y0);
+    const int c0 = px0[s], r0 = py0[s];
+    if (c0 > px1[s] || r0 > py1[s]) continue;
+    r.first = first + size_t(s) * planeStride + size_t(r0 - ry) * stride + size_t(c0 - rx);
+    r.cols = px1[s] - c0 + 1, r.rows = py1[s] - r0 + 1;
+    if (rowGroup) r.rowGroup = rowGroup + (r0 - ry);
     n = gatherRows(lanes, r, list, n);
   }
   return n;
