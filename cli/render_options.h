@@ -25,7 +25,7 @@ struct RenderOptions {
   double opacityThreshold = 0.996;
   bool backfaceCull = false;
   bool half = false;
-  std::string compression = "zip";
+  std::string compression = "piz";
   std::vector<std::string> previews;  // PATH or PATH=CHANNELS
   std::string quantize = "0,255,0,255";
   double dither = 0.5;
