@@ -502,6 +502,28 @@ TEST(ResampleCli, ImagesOpenInAnIndependentReader) {
   EXPECT_NE(pinfo.out.find("4 channel, uint16 png"), std::string::npos) << pinfo.out;  // --quantize up to 65535: 16 bits
 }
 
+// Every lossless codec gives back exactly the pixels of the uncompressed file, as an independent
+// reader sees them, and the header names the codec; the default is PIZ.
+TEST(ResampleCli, LosslessCompressionsKeepEveryPixel) {
+  ScratchDir dir;
+  const std::string store = dir.path("gen.mps");
+  ASSERT_EQ(runReshutter("generate -n 4000 --width 96 --height 64 --transparent 0.3 -o " + store).exitCode, 0);
+  const std::string args = " --spp 9 --aov z --aov id --aov Ci:average";
+  const std::string plain = dir.path("none.exr");
+  ASSERT_EQ(runReshutter("resample " + store + " -o " + plain + args + " --compression none").exitCode, 0);
+  for (const std::string codec : {"rle", "zips", "zip", "piz", "default"}) {
+    const std::string out = dir.path(codec + ".exr");
+    CommandResult r = runReshutter("resample " + store + " -o " + out + args + (codec == "default" ? "" : " --compression " + codec));
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    CommandResult info = runImageTool("iinfo -v " + out);
+    ASSERT_EQ(info.exitCode, 0) << info.err;
+    const std::string want = "compression: \"" + (codec == "default" ? std::string("piz") : codec) + "\"";
+    EXPECT_NE(info.out.find(want), std::string::npos) << want << " not in\n" << info.out;
+    CommandResult diff = runImageTool("idiff -q -fail 0 -failpercent 0 -warn 0 " + plain + " " + out);
+    EXPECT_EQ(diff.exitCode, 0) << codec << ": " << diff.out << diff.err;
+  }
+}
+
 // Every output is checked before the render: one that cannot be written (its directory is
 // missing, or a bad quantize for a preview) fails the command before anything is rendered or
 // written, so the flat EXR that could have been written is not left behind either.
