@@ -21,6 +21,7 @@ void RasterStats::add(const RasterStats& o) {
   fragments += o.fragments;
   staticMicropolygons += o.staticMicropolygons;
   linearMicropolygons += o.linearMicropolygons;
+  chunkCulledMicropolygons += o.chunkCulledMicropolygons;
   transparentParts += o.transparentParts;
 }
 
@@ -794,6 +795,24 @@ struct BucketRasterizer::Impl {
     return mt;
   }
 
+  // True when the chunk's vertex positions at every cull time (cullX / cullY, n entries) lie
+  // wholly outside the region: then so does every micropolygon's path, since within a knot
+  // segment each corner moves along the straight screen segment between two cull positions. The
+  // margin is twice the one the per-micropolygon culls use for float rounding. A vertex before
+  // the near plane (NaN) keeps the chunk.
+  bool chunkMissesRegion(size_t n) const {
+    float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
+    bool nan = false;
+    for (size_t i = 0; i < n; ++i) {
+      const float x = cullX[i], y = cullY[i];
+      nan |= x != x;
+      bx0 = std::min(bx0, x), bx1 = std::max(bx1, x), by0 = std::min(by0, y), by1 = std::max(by1, y);
+    }
+    if (nan) return false;
+    const float mm = 2e-3f + 2e-6f * std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1)));
+    return bx1 + mm < float(x0) || bx0 - mm >= float(x0 + w) || by1 + mm < float(y0) || by0 - mm >= float(y0 + h);
+  }
+
   // Micropolygons [ch.m0, ch.m1) of a moving part in shutter group mt.g. Per-vertex work covers
   // the chunk's vertices [ch.vLo, ch.vHi] only.
   void rasterizeMoving(const MovingTimes& mt, const TilePart& part, const store::Schedule& knots, const HitContext& hc, const Chunk& ch) {
@@ -817,6 +836,10 @@ struct BucketRasterizer::Impl {
         else cullX[ci * nV + i] = NAN;
         cullZ[ci * nV + i] = p.z;
       }
+    }
+    if (chunkMissesRegion(C * nV)) {
+      stats.chunkCulledMicropolygons += ch.m1 - ch.m0;
+      return;
     }
     projX.resize(T * nV), projY.resize(T * nV), projRho.resize(T * nV), depthScratch.resize(T);
     thetaBox.resize(4 * T);

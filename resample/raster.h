@@ -94,6 +94,7 @@ struct RasterStats {
   uint64_t sampleTests = 0, hits = 0, micropolygons = 0, parts = 0, fragments = 0;
   uint64_t staticMicropolygons = 0, transparentParts = 0;
   uint64_t linearMicropolygons = 0;  // moving ones bounded from their interval ends (one knot segment)
+  uint64_t chunkCulledMicropolygons = 0;  // moving ones skipped with their whole chunk (its path misses the region)
   void add(const RasterStats& o);
 };
 
