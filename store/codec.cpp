@@ -81,12 +81,12 @@ void shuffle(const uint8_t* in, size_t n, uint8_t* out) {
   for (size_t i = 0; i < n; ++i)
     for (size_t b = 0; b < W; ++b) out[b * n + i] = in[i * W + b];
 }
+// Element-major: W sequential read streams and one sequential write (plane-major wrote every
+// byte W apart, W passes over the output), and the compiler vectorises the byte interleave.
 template <size_t W>
 void unshuffle(const uint8_t* in, size_t n, uint8_t* out) {
-  for (size_t b = 0; b < W; ++b) {
-    const uint8_t* plane = in + b * n;
-    for (size_t i = 0; i < n; ++i) out[i * W + b] = plane[i];
-  }
+  for (size_t i = 0; i < n; ++i)
+    for (size_t b = 0; b < W; ++b) out[i * W + b] = in[b * n + i];
 }
 
 inline uint32_t bitsOf(float f) { return std::bit_cast<uint32_t>(f); }
