@@ -141,4 +141,59 @@ FilterTable::FilterTable(const FilterSpec& spec, const SamplePattern& pattern) :
       }
 }
 
+namespace {
+
+// accumulateTaps() for a fixed channel count and, when NN > 0, a fixed sample count: the loops
+// unroll and the sums live in registers, not in the caller's arrays.
+template <int NC, int NN>
+inline __attribute__((always_inline)) void accumulateFixed(int nRuntime, const float* const* in, const float* const* w, const size_t* offset, int taps,
+                                                           float lanes[8][8], float tail[8]) {
+  constexpr int kLanes = 8;
+  const int n = NN > 0 ? NN : nRuntime;
+  const int vecN = n / kLanes * kLanes;
+  float acc[NC][kLanes], rest[NC];
+  for (int c = 0; c < NC; ++c) {
+    for (int k = 0; k < kLanes; ++k) acc[c][k] = lanes[c][k];
+    rest[c] = tail[c];
+  }
+  for (int j = 0; j < taps; ++j) {
+    const float* wt = w[j];
+    for (int c = 0; c < NC; ++c) {
+      const float* v = in[c] + offset[j];
+      for (int i = 0; i < vecN; i += kLanes)
+        for (int k = 0; k < kLanes; ++k) acc[c][k] += wt[i + k] * v[i + k];
+      for (int i = vecN; i < n; ++i) rest[c] += wt[i] * v[i];
+    }
+  }
+  for (int c = 0; c < NC; ++c) {
+    for (int k = 0; k < kLanes; ++k) lanes[c][k] = acc[c][k];
+    tail[c] = rest[c];
+  }
+}
+
+}  // namespace
+
+#if defined(__x86_64__) && !defined(__clang__)
+__attribute__((target_clones("avx2", "default")))
+#endif
+void accumulateTaps(int n, int nc, const float* const* in, const float* const* w, const size_t* offset, int taps, float lanes[8][8], float tail[8]) {
+  if (n == 16 && nc == 4) return accumulateFixed<4, 16>(n, in, w, offset, taps, lanes, tail);  // RGBA at 16 spp, the common case
+  switch (nc) {
+    case 1: return accumulateFixed<1, 0>(n, in, w, offset, taps, lanes, tail);
+    case 2: return accumulateFixed<2, 0>(n, in, w, offset, taps, lanes, tail);
+    case 3: return accumulateFixed<3, 0>(n, in, w, offset, taps, lanes, tail);
+    case 4: return accumulateFixed<4, 0>(n, in, w, offset, taps, lanes, tail);
+    default: break;
+  }
+  constexpr int kLanes = 8;
+  const int vecN = n / kLanes * kLanes;
+  for (int j = 0; j < taps; ++j)
+    for (int c = 0; c < nc; ++c) {
+      const float* v = in[c] + offset[j];
+      for (int i = 0; i < vecN; i += kLanes)
+        for (int k = 0; k < kLanes; ++k) lanes[c][k] += w[j][i + k] * v[i + k];
+      for (int i = vecN; i < n; ++i) tail[c] += w[j][i] * v[i];
+    }
+}
+
 }  // namespace reshutter::resample

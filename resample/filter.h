@@ -51,4 +51,13 @@ class FilterTable {
   std::vector<float> weights_, sums_;
 };
 
+/// One pixel's weighted sums over its neighbourhood. For neighbour j < taps (weights w[j], one per
+/// sample; the channel values at in[c] + offset[j]) and channel c < nc <= 8:
+/// lanes[c][k] += w[j][i + k] * v[i + k] for i = 0, 8, ... below n rounded down to 8, and tail[c]
+/// over the samples past that, neighbour by neighbour. Eight running sums per channel, because a
+/// single running sum is a serial chain of adds. Compiled for the x86-64 baseline and for AVX2,
+/// picked when the program loads; both do the same IEEE operations in the same order (no fused
+/// multiply-add), so the bits are the same.
+void accumulateTaps(int n, int nc, const float* const* in, const float* const* w, const size_t* offset, int taps, float lanes[8][8], float tail[8]);
+
 }  // namespace reshutter::resample

@@ -189,6 +189,8 @@ struct ThreadState {
   std::vector<int> patterns;
   std::vector<std::pair<size_t, size_t>> parts;  // (source, entry)
   std::vector<std::shared_ptr<const store::TilePart>> held;  // the bucket's decoded parts
+  std::vector<const float*> tapWeights;  // one pixel's filter neighbourhood (accumulateTaps)
+  std::vector<size_t> tapOffsets;
 };
 
 }  // namespace
@@ -334,27 +336,26 @@ RenderResult render(const RenderSpec& spec) {
     auto filterInto = [&](const FilterTable& table, const std::vector<const std::vector<float>*>& in, const std::vector<float*>& outPx, int px,
                           int py) {
       const int m = table.margin();
-      // Eight partial sums per channel over every neighbour, added up once at the end: the
-      // compiler keeps them in vector registers (a single running sum is a serial chain of adds).
-      constexpr int kLanes = 8;
-      float lanes[8][kLanes] = {};
+      // Eight partial sums per channel over every neighbour (accumulateTaps), added up once at the end.
+      float lanes[8][8] = {};
       float tail[8] = {};
       float wsum = 0;
       const size_t nc = in.size();
-      const int vecN = N / kLanes * kLanes;
+      const int taps = table.span() * table.span();
+      ts.tapWeights.resize(size_t(taps)), ts.tapOffsets.resize(size_t(taps));
+      const float** tapWeight = ts.tapWeights.data();
+      size_t* tapOffset = ts.tapOffsets.data();
       for (int dy = -m; dy <= m; ++dy)
         for (int dx = -m; dx <= m; ++dx) {
           const size_t q = size_t(py - ry0 + dy) * rw + size_t(px - rx0 + dx);
           const int pat = ts.patterns[q];
-          const float* wt = table.weights(pat, dx, dy);
+          *tapWeight++ = table.weights(pat, dx, dy);
+          *tapOffset++ = q * N;
           wsum += table.weightSum(pat, dx, dy);
-          for (size_t c = 0; c < nc; ++c) {
-            const float* v = in[c]->data() + q * N;
-            for (int i = 0; i < vecN; i += kLanes)
-              for (int k = 0; k < kLanes; ++k) lanes[c][k] += wt[i + k] * v[i + k];
-            for (int i = vecN; i < N; ++i) tail[c] += wt[i] * v[i];
-          }
         }
+      const float* channels[8];
+      for (size_t c = 0; c < nc; ++c) channels[c] = in[c]->data();
+      accumulateTaps(N, int(nc), channels, ts.tapWeights.data(), ts.tapOffsets.data(), taps, lanes, tail);
       float acc[8];
       for (size_t c = 0; c < nc; ++c) {
         const float* l = lanes[c];

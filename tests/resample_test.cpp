@@ -5,6 +5,7 @@
 #include <cmath>
 #include <filesystem>
 #include <numeric>
+#include <tuple>
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
@@ -387,6 +388,44 @@ TEST(ResampleFilters, FilterShapesAreWhatTheyClaim) {
   }
   EXPECT_LT(filter1D(FilterKind::CatmullRom, 1.5f, 4.f), 0.f);  // the negative lobe exists
   EXPECT_FLOAT_EQ(filter1D(FilterKind::Triangle, 0.5f, 2.f), 0.5f * filter1D(FilterKind::Triangle, 0.f, 2.f));
+}
+
+// The filter's dot products (whichever of the baseline and AVX2 builds runs, and whichever of
+// its channel- and sample-count specialisations): each lane and the tail hold exactly the
+// documented running sums, in neighbour order, and the total is the weighted sum of the samples.
+TEST(ResampleFilters, TapSumsAreTheWeightedSamples) {
+  Rng rng(11);
+  for (auto [n, nc, taps] : {std::tuple{16, 4, 9}, std::tuple{16, 3, 25}, std::tuple{9, 4, 9}, std::tuple{4, 1, 49}, std::tuple{64, 4, 9},
+                             std::tuple{17, 6, 9}, std::tuple{16, 8, 4}, std::tuple{24, 2, 1}}) {
+    std::vector<std::vector<float>> values(static_cast<size_t>(nc), std::vector<float>(static_cast<size_t>(n * taps * 2)));
+    for (auto& v : values)
+      for (float& x : v) x = float(rng.uniform(0.0, 10.0));
+    std::vector<std::vector<float>> weights(static_cast<size_t>(taps), std::vector<float>(static_cast<size_t>(n)));
+    for (auto& wt : weights)
+      for (float& x : wt) x = float(rng.uniform(-0.5, 1.0));
+    std::vector<const float*> w, in;
+    std::vector<size_t> offset;
+    for (int j = 0; j < taps; ++j) w.push_back(weights[size_t(j)].data()), offset.push_back(size_t(2 * taps - 1 - 2 * j) * size_t(n));
+    for (auto& v : values) in.push_back(v.data());
+    float lanes[8][8] = {}, tail[8] = {};
+    accumulateTaps(n, nc, in.data(), w.data(), offset.data(), taps, lanes, tail);
+    const int vecN = n / 8 * 8;
+    for (int c = 0; c < nc; ++c) {
+      float want[8] = {}, wantTail = 0;
+      double exact = 0;
+      for (int j = 0; j < taps; ++j) {
+        const float* v = in[size_t(c)] + offset[size_t(j)];
+        for (int i = 0; i < vecN; ++i) want[i % 8] += w[size_t(j)][i] * v[i];
+        for (int i = vecN; i < n; ++i) wantTail += w[size_t(j)][i] * v[i];
+        for (int i = 0; i < n; ++i) exact += double(w[size_t(j)][i]) * double(v[i]);
+      }
+      for (int k = 0; k < 8; ++k) EXPECT_EQ(lanes[c][k], want[k]) << "n " << n << " nc " << nc << " channel " << c << " lane " << k;
+      EXPECT_EQ(tail[c], wantTail) << "n " << n << " nc " << nc << " channel " << c;
+      double total = wantTail;
+      for (int k = 0; k < 8; ++k) total += lanes[c][k];
+      EXPECT_NEAR(total, exact, 1e-5 * std::max(1.0, std::abs(exact))) << "n " << n << " nc " << nc;
+    }
+  }
 }
 
 TEST(ResampleAov, OutputVariablesAndSpecialFilters) {
