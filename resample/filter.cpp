@@ -1,5 +1,6 @@
 #include "resample/filter.h"
 
+#include <algorithm>
 #include <cmath>
 #include <sstream>
 
@@ -178,22 +179,15 @@ __attribute__((target_clones("avx2", "default")))
 #endif
 void accumulateTaps(int n, int nc, const float* const* in, const float* const* w, const size_t* offset, int taps, float lanes[8][8], float tail[8]) {
   if (n == 16 && nc == 4) return accumulateFixed<4, 16>(n, in, w, offset, taps, lanes, tail);  // RGBA at 16 spp, the common case
-  switch (nc) {
-    case 1: return accumulateFixed<1, 0>(n, in, w, offset, taps, lanes, tail);
-    case 2: return accumulateFixed<2, 0>(n, in, w, offset, taps, lanes, tail);
-    case 3: return accumulateFixed<3, 0>(n, in, w, offset, taps, lanes, tail);
-    case 4: return accumulateFixed<4, 0>(n, in, w, offset, taps, lanes, tail);
-    default: break;
-  }
-  constexpr int kLanes = 8;
-  const int vecN = n / kLanes * kLanes;
-  for (int j = 0; j < taps; ++j)
-    for (int c = 0; c < nc; ++c) {
-      const float* v = in[c] + offset[j];
-      for (int i = 0; i < vecN; i += kLanes)
-        for (int k = 0; k < kLanes; ++k) lanes[c][k] += w[j][i + k] * v[i + k];
-      for (int i = vecN; i < n; ++i) tail[c] += w[j][i] * v[i];
+  // Channels never mix, so up to four at a time give the same sums.
+  for (int c = 0; c < nc; c += 4) {
+    switch (std::min(4, nc - c)) {
+      case 1: accumulateFixed<1, 0>(n, in + c, w, offset, taps, lanes + c, tail + c); break;
+      case 2: accumulateFixed<2, 0>(n, in + c, w, offset, taps, lanes + c, tail + c); break;
+      case 3: accumulateFixed<3, 0>(n, in + c, w, offset, taps, lanes + c, tail + c); break;
+      default: accumulateFixed<4, 0>(n, in + c, w, offset, taps, lanes + c, tail + c); break;
     }
+  }
 }
 
 }  // namespace reshutter::resample
