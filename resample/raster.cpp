@@ -1007,8 +1007,10 @@ struct BucketRasterizer::Impl {
     const float motion = std::max(mvx, mvy), size = std::max(std::max(ax1 - ax0, ay1 - ay0), 1.f);
     const int span = motion > 0.f ? std::clamp(int(0.5f * size * float(N) / motion), 1, N) : N;
     size_t n = 0;
-    if (span == 1 && vectorKernels && !mp.times.cover.check && N <= 64) {
-      // Every stratum's pixel range and samples in one vector pass.
+    if (span < N && vectorKernels && !mp.times.cover.check && N <= 64) {
+      // Every stratum's pixel range and samples in one vector pass: cheaper than the shared
+      // ranges below whenever the micropolygon moves at all (the ranges are computed eight at a
+      // time; cachegrind: -3 % on a quarter shutter), though not when one range serves all strata.
       const kernels::SampleRows region{st.data(), sx.data(), sy.data(), 0, size_t(w), w, h, multiGroup ? rowGroup.data() : nullptr,
                                        uint8_t(mp.g), N, PS, zbuf.data(), zCull};
       const kernels::StrataSpans spans{mp.times.stratumU0.data(), mp.times.stratumU1.data(), N, x0, y0, w, h, 1e-3f + 1e-6f * mag};
