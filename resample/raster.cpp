@@ -571,8 +571,9 @@ struct BucketRasterizer::Impl {
         stats.sampleTests += n;
         kernels::LinearEdges edges{};
         for (int k = 0; k < 5; ++k) edges.c[k][0] = E[k].x, edges.c[k][1] = E[k].y, edges.c[k][2] = E[k].z;
-        const kernels::EdgeTestSetup setup{candT.data(), candX.data(), candY.data(), 0.f, 0.f, tri, opt.backfaceCull && !(part.flags[m] & store::kTwoSided), true};
-        recordKernelHits(hc, m, c, setup, edges, n, zv, zv, [&](uint32_t idx) { testStatic(hc, m, c, tri, E, zv, idx); });
+        kernels::EdgeTestSetup setup{candT.data(), candX.data(), candY.data(), 0.f, 0.f, tri, opt.backfaceCull && !(part.flags[m] & store::kTwoSided), true};
+        std::copy(zv, zv + 4, setup.za), std::copy(zv, zv + 4, setup.zb);
+        recordKernelHits(hc, m, c, setup, edges, n, [&](uint32_t idx) { testStatic(hc, m, c, tri, E, zv, idx); });
         continue;
       }
       for (int py = py0; py <= py1; ++py) {
@@ -1060,20 +1061,19 @@ struct BucketRasterizer::Impl {
     static_assert(sizeof(EdgeQuad) == 9 * sizeof(double), "EdgeQuad is e0 e1 e2, three dvec3s");
     kernels::LinearEdges edges;
     std::memcpy(edges.c, q, sizeof edges.c);
-    const kernels::EdgeTestSetup setup{candT.data(), candX.data(), candY.data(), mp.times.seg.fOffset, mp.times.seg.fScale, tri,
-                                       opt.backfaceCull && !(flags & store::kTwoSided)};
-    float za[4] = {}, zb[4] = {};
-    for (int j = 0; j < (tri ? 3 : 4); ++j) za[j] = part.position(0, c[j]).z, zb[j] = part.position(1, c[j]).z;
-    recordKernelHits(mp.hc, mi, c, setup, edges, n, za, zb, [&](uint32_t idx) { testCandidate(mp, mi, c, tri, flags, idx); });
+    kernels::EdgeTestSetup setup{candT.data(), candX.data(), candY.data(), mp.times.seg.fOffset, mp.times.seg.fScale, tri,
+                                 opt.backfaceCull && !(flags & store::kTwoSided)};
+    for (int j = 0; j < (tri ? 3 : 4); ++j) setup.za[j] = part.position(0, c[j]).z, setup.zb[j] = part.position(1, c[j]).z;
+    recordKernelHits(mp.hc, mi, c, setup, edges, n, [&](uint32_t idx) { testCandidate(mp, mi, c, tri, flags, idx); });
   }
 
-  // Runs the vector edge test of micropolygon m over the first n candidates and records its hits:
-  // corner depths za / zb at the segment's two ends (equal when fixed), exact ties to `scalarTest`.
-  // The depth is the scalar paths' arithmetic: zv_j = za_j + f (zb_j - za_j), z = sum b_j zv_j
-  // (for fixed edges f = 0, so zv_j = za_j exactly).
+  // Runs the vector edge test of micropolygon m over the first n candidates and records its hits,
+  // exact ties to `scalarTest`. The kernel interpolates the depth from setup.za / setup.zb with
+  // the scalar paths' arithmetic: zv_j = za_j + f (zb_j - za_j), z = sum b_j zv_j (for fixed
+  // edges f = 0, so zv_j = za_j exactly).
   template <class ScalarTest>
   void recordKernelHits(const HitContext& hc, uint32_t m, const uint32_t* c, const kernels::EdgeTestSetup& setup, const kernels::LinearEdges& edges,
-                        size_t n, const float za[4], const float zb[4], ScalarTest scalarTest) {
+                        size_t n, ScalarTest scalarTest) {
     const size_t hits = kernels::testLinearEdges(setup, edges, n, edgeHits.data());
     for (size_t hi = 0; hi < hits; ++hi) {
       const kernels::EdgeHit& eh = edgeHits[hi];
@@ -1082,11 +1082,9 @@ struct BucketRasterizer::Impl {
         scalarTest(idx);
         continue;
       }
-      const int j1 = eh.triangle ? 2 : 1, j2 = eh.triangle ? 3 : 2;
-      const float f = eh.f;
-      const float z = eh.b[0] * (za[0] + f * (zb[0] - za[0])) + eh.b[1] * (za[j1] + f * (zb[j1] - za[j1])) + eh.b[2] * (za[j2] + f * (zb[j2] - za[j2]));
+      const float z = eh.z;
       if (!(z >= view.nearClip && z <= view.farClip)) continue;
-      const uint32_t tv[3] = {c[0], c[j1], c[j2]};
+      const uint32_t tv[3] = {c[0], c[eh.triangle ? 2 : 1], c[eh.triangle ? 3 : 2]};
       recordHit(hc, idx, m, tv, eh.b, z);
     }
   }

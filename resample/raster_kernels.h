@@ -90,17 +90,19 @@ struct EdgeTestSetup {
   bool triangle;          // edges 23 and 30 unused
   bool cullBackFaces;     // back-face knock-out applies to this micropolygon
   bool fixed = false;     // a static micropolygon: the edges are c[e][0..2] at any time (f = 0)
+  float za[4] = {}, zb[4] = {};  // corner depths at the segment's two ends (equal when fixed)
 };
 
 /// One decided candidate: which triangle it hit (0: p0 p1 p2, 1: p0 p2 p3), its barycentrics
-/// and segment parameter; `undecided` when an edge value was exactly zero and the tie rule
-/// (which needs the edge vectors) must decide in scalar code.
+/// and depth; `undecided` when an edge value was exactly zero and the tie rule (which needs the
+/// edge vectors) must decide in scalar code. The depth is the scalar paths' float arithmetic at
+/// the segment parameter f: zv_j = za_j + f (zb_j - za_j), z = (b0 zv_0 + b1 zv_j1) + b2 zv_j2.
 struct EdgeHit {
   uint32_t candidate;  // position in the candidate list
   uint8_t triangle;
   bool undecided;
-  float f;
   float b[3];
+  float z;
 };
 
 /// Tests candidates 0..n) and appends the hits and undecided ones, in candidate order, to `hits`;
