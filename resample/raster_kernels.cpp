@@ -128,13 +128,20 @@ RESHUTTER_AVX2 size_t gatherInBoxAvx2(const SampleRows& rows, const MovingBox& b
 
 RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpans& sp, const MovingBox& b, const Candidates& out) {
   // Pixel ranges of every stratum, eight at a time: the box over [u0, u1] (min / max of its two
-  // ends, as the corners move linearly), widened, clamped to the region and floored.
-  alignas(32) int px0[64], py0[64], px1[64], py1[64];
+  // ends, as the corners move linearly), widened, clamped to the region and floored; then each
+  // range's first sample, size and whether it is empty, still eight at a time.
+  alignas(32) int first[64], cols[64], rows[64], rowOffset[64];
+  uint64_t nonEmpty = 0;
   const int N = sp.strata;
   const __m256 m = _mm256_set1_ps(sp.margin);
   const __m256 lox = _mm256_set1_ps(float(sp.x0)), hix = _mm256_set1_ps(float(sp.x0 + sp.w));
   const __m256 loy = _mm256_set1_ps(float(sp.y0)), hiy = _mm256_set1_ps(float(sp.y0 + sp.h));
   const __m256 one = _mm256_set1_ps(1.f);
+  const __m256i ione = _mm256_set1_epi32(1), izero = _mm256_setzero_si256();
+  const __m256i regionX = _mm256_set1_epi32(sp.x0), regionY = _mm256_set1_epi32(sp.y0);
+  // Sample indices fit 32 bits: the rasterizer stores them as uint32.
+  const __m256i planeStride = _mm256_set1_epi32(int(region.planeStride)), stride = _mm256_set1_epi32(int(region.stride));
+  const __m256i base = _mm256_set1_epi32(int(region.first));
   const BoxLanes lanes = boxLanes(b);
   const __m256 x0 = lanes.x0, dx0 = lanes.dx0, x1 = lanes.x1, dx1 = lanes.dx1, y0 = lanes.y0, dy0 = lanes.dy0, y1 = lanes.y1, dy1 = lanes.dy1;
   for (int s = 0; s < N; s += 8) {
@@ -148,26 +155,33 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
     const __m256 cy0 = _mm256_min_ps(_mm256_max_ps(_mm256_sub_ps(ay0, m), loy), hiy);
     const __m256 cx1 = _mm256_min_ps(_mm256_max_ps(_mm256_add_ps(ax1, m), _mm256_sub_ps(lox, one)), _mm256_sub_ps(hix, one));
     const __m256 cy1 = _mm256_min_ps(_mm256_max_ps(_mm256_add_ps(ay1, m), _mm256_sub_ps(loy, one)), _mm256_sub_ps(hiy, one));
-    _mm256_store_si256(reinterpret_cast<__m256i*>(px0 + s), _mm256_cvttps_epi32(_mm256_floor_ps(cx0)));
-    _mm256_store_si256(reinterpret_cast<__m256i*>(py0 + s), _mm256_cvttps_epi32(_mm256_floor_ps(cy0)));
-    _mm256_store_si256(reinterpret_cast<__m256i*>(px1 + s), _mm256_cvttps_epi32(_mm256_floor_ps(cx1)));
-    _mm256_store_si256(reinterpret_cast<__m256i*>(py1 + s), _mm256_cvttps_epi32(_mm256_floor_ps(cy1)));
+    const __m256i px0 = _mm256_cvttps_epi32(_mm256_floor_ps(cx0)), py0 = _mm256_cvttps_epi32(_mm256_floor_ps(cy0));
+    const __m256i px1 = _mm256_cvttps_epi32(_mm256_floor_ps(cx1)), py1 = _mm256_cvttps_epi32(_mm256_floor_ps(cy1));
+    const __m256i c = _mm256_add_epi32(_mm256_sub_epi32(px1, px0), ione), r = _mm256_add_epi32(_mm256_sub_epi32(py1, py0), ione);
+    const __m256i dy = _mm256_sub_epi32(py0, regionY);
+    const __m256i plane = _mm256_add_epi32(_mm256_set1_epi32(s), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+    const __m256i at = _mm256_add_epi32(_mm256_add_epi32(base, _mm256_mullo_epi32(plane, planeStride)),
+                                        _mm256_add_epi32(_mm256_mullo_epi32(dy, stride), _mm256_sub_epi32(px0, regionX)));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(first + s), at);
+    _mm256_store_si256(reinterpret_cast<__m256i*>(cols + s), c);
+    _mm256_store_si256(reinterpret_cast<__m256i*>(rows + s), r);
+    _mm256_store_si256(reinterpret_cast<__m256i*>(rowOffset + s), dy);
+    const __m256i live = _mm256_and_si256(_mm256_cmpgt_epi32(c, izero), _mm256_cmpgt_epi32(r, izero));
+    nonEmpty |= uint64_t(unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(live)))) << s;
   }
+  if (N < 64) nonEmpty &= (uint64_t(1) << N) - 1;  // the padding lanes past the last stratum
   // Locals, so that the candidate stores (which may alias anything) do not force reloads.
   const Candidates list = out;
-  SampleRows r = region;
-  r.planes = 1;
-  const size_t first = region.first, planeStride = region.planeStride, stride = region.stride;
+  SampleRows rr = region;
+  rr.planes = 1;
   const uint8_t* rowGroup = region.rowGroup;
-  const int rx = sp.x0, ry = sp.y0;
   size_t n = 0;
-  for (int s = 0; s < N; ++s) {
-    const int c0 = px0[s], r0 = py0[s];
-    if (c0 > px1[s] || r0 > py1[s]) continue;
-    r.first = first + size_t(s) * planeStride + size_t(r0 - ry) * stride + size_t(c0 - rx);
-    r.cols = px1[s] - c0 + 1, r.rows = py1[s] - r0 + 1;
-    if (rowGroup) r.rowGroup = rowGroup + (r0 - ry);
-    n = gatherRows(lanes, r, list, n);
+  for (uint64_t todo = nonEmpty; todo; todo &= todo - 1) {
+    const int s = __builtin_ctzll(todo);
+    rr.first = size_t(uint32_t(first[s]));
+    rr.cols = cols[s], rr.rows = rows[s];
+    if (rowGroup) rr.rowGroup = rowGroup + rowOffset[s];
+    n = gatherRows(lanes, rr, list, n);
   }
   return n;
 }
