@@ -24,7 +24,7 @@ void RenderOptions::addTo(CLI::App* app) {
   app->add_option("--crop", crop, "Render only pixels x0 <= x < x1, y0 <= y < y1 (the EXR data window)")->expected(4)->group("Outputs");
   app->add_flag("--half", half, "Write R G B A as half floats")->group("Outputs");
   app->add_option("--compression", compression, "OpenEXR compression: none rle zips zip piz pxr24 b44 b44a dwaa dwab\n"
-                  "(piz: lossless, the fastest to write and smallest on noisy float renders; see bench/RESULTS.md)")
+                  "(piz: lossless; on noisy float renders smaller and faster to write than zip, see bench/RESULTS.md)")
       ->capture_default_str()->group("Outputs");
   app->add_option("--preview", previews,
                   "Also write an 8/16-bit PNG or TIFF: PATH or PATH=CHANNELS (default R,G,B,A; e.g. n.png=N.X,N.Y,N.Z)")
