@@ -809,8 +809,14 @@ struct BucketRasterizer::Impl {
       nan |= x != x;
       bx0 = std::min(bx0, x), bx1 = std::max(bx1, x), by0 = std::min(by0, y), by1 = std::max(by1, y);
     }
-    if (nan) return false;
-    const float mm = 2e-3f + 2e-6f * std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1)));
+    return !nan && boxMissesRegion(bx0, by0, bx1, by1, 2.f);
+  }
+
+  // True when the raster box [bx0, bx1] × [by0, by1] of float-projected positions lies outside
+  // the region by more than `scale` times the culls' rounding margin (1e-3 px plus 1e-6 of the
+  // coordinates' magnitude).
+  bool boxMissesRegion(float bx0, float by0, float bx1, float by1, float scale) const {
+    const float mm = scale * 1e-3f + scale * 1e-6f * std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1)));
     return bx1 + mm < float(x0) || bx0 - mm >= float(x0 + w) || by1 + mm < float(y0) || by0 - mm >= float(y0 + h);
   }
 
@@ -873,8 +879,7 @@ struct BucketRasterizer::Impl {
             const float y = cullY[ci * nV + (c[j] - vBase)];
             bx0 = std::min(bx0, x), by0 = std::min(by0, y), bx1 = std::max(bx1, x), by1 = std::max(by1, y);
           }
-        const float mm = m + 1e-6f * std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1)));
-        if (bounded && (bx1 + mm < float(x0) || bx0 - mm >= float(x0 + w) || by1 + mm < float(y0) || by0 - mm >= float(y0 + h))) continue;
+        if (bounded && boxMissesRegion(bx0, by0, bx1, by1, 1.f)) continue;
         // The nearest depth over the whole path (depths are linear between the cull times too).
         float zNear = INFINITY;
         for (size_t ci = 0; ci < C; ++ci)

@@ -176,8 +176,8 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
   rr.planes = 1;
   const uint8_t* rowGroup = region.rowGroup;
   size_t n = 0;
-  for (uint64_t todo = nonEmpty; todo; todo &= todo - 1) {
-    const int s = __builtin_ctzll(todo);
+  for (uint64_t strataLeft = nonEmpty; strataLeft; strataLeft &= strataLeft - 1) {
+    const int s = __builtin_ctzll(strataLeft);
     rr.first = size_t(uint32_t(first[s]));
     rr.cols = cols[s], rr.rows = rows[s];
     if (rowGroup) rr.rowGroup = rowGroup + rowOffset[s];
