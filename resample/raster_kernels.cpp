@@ -50,8 +50,7 @@ RESHUTTER_AVX2 inline __m256 insideAtOwnTime(const BoxLanes& b, __m256 t, __m256
   return _mm256_and_ps(in, _mm256_cmp_ps(y, _mm256_add_ps(b.y1, _mm256_mul_ps(u, b.dy1)), _CMP_LE_OQ));
 }
 // Appends the lanes that are in and live to out from position n; returns the new count.
-RESHUTTER_AVX2 inline size_t appendLanes(__m256 in, __m256i live, __m256i idx, __m256 t, __m256 x, __m256 y, const Candidates& out, size_t n) {
-  const unsigned mask = unsigned(_mm256_movemask_ps(_mm256_and_ps(in, _mm256_castsi256_ps(live))));
+RESHUTTER_AVX2 inline size_t appendMasked(unsigned mask, __m256i idx, __m256 t, __m256 x, __m256 y, const Candidates& out, size_t n) {
   if (!mask) return n;
   const __m256i perm = _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompress.perm[mask]));
   _mm256_storeu_si256(reinterpret_cast<__m256i*>(out.index + n), _mm256_permutevar8x32_epi32(idx, perm));
@@ -59,6 +58,9 @@ RESHUTTER_AVX2 inline size_t appendLanes(__m256 in, __m256i live, __m256i idx, _
   _mm256_storeu_ps(out.x + n, _mm256_permutevar8x32_ps(x, perm));
   _mm256_storeu_ps(out.y + n, _mm256_permutevar8x32_ps(y, perm));
   return n + size_t(__builtin_popcount(mask));
+}
+RESHUTTER_AVX2 inline size_t appendLanes(__m256 in, __m256i live, __m256i idx, __m256 t, __m256 x, __m256 y, const Candidates& out, size_t n) {
+  return appendMasked(unsigned(_mm256_movemask_ps(_mm256_and_ps(in, _mm256_castsi256_ps(live)))), idx, t, x, y, out, n);
 }
 
 // The rows of `rows` against box `b`: the body of both gathers, inlined so that the box is
@@ -130,8 +132,8 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
   // Pixel ranges of every stratum, eight at a time: the box over [u0, u1] (min / max of its two
   // ends, as the corners move linearly), widened, clamped to the region and floored; then each
   // range's first sample, size and whether it is empty, still eight at a time.
-  alignas(32) int first[64], cols[64], rows[64], rowOffset[64];
-  uint64_t nonEmpty = 0;
+  alignas(32) int first[64], cols[64], rows[64], rowOffset[64], second[64], laneMask[64];
+  uint64_t nonEmpty = 0, oneVector = 0;
   const int N = sp.strata;
   const __m256 m = _mm256_set1_ps(sp.margin);
   const __m256 lox = _mm256_set1_ps(float(sp.x0)), hix = _mm256_set1_ps(float(sp.x0 + sp.w));
@@ -168,16 +170,41 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
     _mm256_store_si256(reinterpret_cast<__m256i*>(rowOffset + s), dy);
     const __m256i live = _mm256_and_si256(_mm256_cmpgt_epi32(c, izero), _mm256_cmpgt_epi32(r, izero));
     nonEmpty |= uint64_t(unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(live)))) << s;
+    // Strata of at most two rows of at most four pixels (most of them, for small micropolygons
+    // and short intervals) fill one vector: row 0 in lanes 0-3, row 1 (or row 0 again, masked
+    // off) in lanes 4-7. Their second row's start and their lane mask, eight at a time too.
+    const __m256i twoRows = _mm256_cmpgt_epi32(r, ione);
+    const __m256i fits = _mm256_andnot_si256(_mm256_or_si256(_mm256_cmpgt_epi32(c, _mm256_set1_epi32(4)), _mm256_cmpgt_epi32(r, _mm256_set1_epi32(2))), live);
+    oneVector |= uint64_t(unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(fits)))) << s;
+    _mm256_store_si256(reinterpret_cast<__m256i*>(second + s), _mm256_add_epi32(at, _mm256_and_si256(twoRows, stride)));
+    const __m256i colBits = _mm256_sub_epi32(_mm256_sllv_epi32(ione, _mm256_min_epi32(c, _mm256_set1_epi32(4))), ione);
+    _mm256_store_si256(reinterpret_cast<__m256i*>(laneMask + s),
+                       _mm256_or_si256(colBits, _mm256_and_si256(twoRows, _mm256_slli_epi32(colBits, 4))));
   }
   if (N < 64) nonEmpty &= (uint64_t(1) << N) - 1;  // the padding lanes past the last stratum
+  if (region.rowGroup) oneVector = 0;  // fields: gatherRows() skips the other group's rows
   // Locals, so that the candidate stores (which may alias anything) do not force reloads.
   const Candidates list = out;
   SampleRows rr = region;
   rr.planes = 1;
   const uint8_t* rowGroup = region.rowGroup;
   size_t n = 0;
+  const __m256i quad = _mm256_setr_epi32(0, 1, 2, 3, 0, 1, 2, 3);
+  const __m256 zCull = _mm256_set1_ps(region.zCull);
   for (uint64_t strataLeft = nonEmpty; strataLeft; strataLeft &= strataLeft - 1) {
     const int s = __builtin_ctzll(strataLeft);
+    if ((oneVector >> s) & 1) {
+      // gatherRows()' row pair, with the stratum's lanes known in advance (same candidates, same
+      // order).
+      const size_t lo = size_t(uint32_t(first[s])), hi = size_t(uint32_t(second[s]));
+      const __m256 t = _mm256_loadu2_m128(rr.st + hi, rr.st + lo), x = _mm256_loadu2_m128(rr.sx + hi, rr.sx + lo),
+                   y = _mm256_loadu2_m128(rr.sy + hi, rr.sy + lo);
+      const __m256 visible = _mm256_cmp_ps(_mm256_loadu2_m128(rr.depth + hi, rr.depth + lo), zCull, _CMP_GT_OQ);
+      const unsigned mask = unsigned(_mm256_movemask_ps(_mm256_and_ps(insideAtOwnTime(lanes, t, x, y), visible))) & unsigned(laneMask[s]);
+      const __m256i idx = _mm256_add_epi32(_mm256_setr_m128i(_mm_set1_epi32(int(uint32_t(lo))), _mm_set1_epi32(int(uint32_t(hi)))), quad);
+      n = appendMasked(mask, idx, t, x, y, list, n);
+      continue;
+    }
     rr.first = size_t(uint32_t(first[s]));
     rr.cols = cols[s], rr.rows = rows[s];
     if (rowGroup) rr.rowGroup = rowGroup + rowOffset[s];
