@@ -534,8 +534,12 @@ struct BucketRasterizer::Impl {
     const double covLo = src.coverStart(), covHi = src.coverEnd();
     const bool checkCover = tMin < covLo || tMax > covHi;
     const uint32_t vBase = ch.vLo, nV = ch.vHi - ch.vLo + 1;
-    hom.resize(nV);
-    for (size_t i = 0; i < nV; ++i) hom[i] = homogeneous(chunkPos[i]);
+    hom.resize(nV), projX.resize(nV), projY.resize(nV);
+    // Each vertex is projected once, not once per micropolygon that shares it (about four).
+    for (size_t i = 0; i < nV; ++i) {
+      hom[i] = homogeneous(chunkPos[i]);
+      if (!project(chunkPos[i], projX[i], projY[i])) projX[i] = NAN;
+    }
     for (uint32_t m = ch.m0; m < ch.m1; ++m) {
       const uint32_t* c = &part.corners[size_t(m) * 4];
       const bool tri = c[3] == kNoCorner;
@@ -549,10 +553,10 @@ struct BucketRasterizer::Impl {
       float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
       bool bounded = true;
       for (int j = 0; j < nc; ++j) {
-        const glm::vec3& p = chunkPos[c[j] - vBase];
-        zv[j] = p.z;
-        float x, y;
-        if (!project(p, x, y)) bounded = false;
+        const uint32_t v = c[j] - vBase;
+        zv[j] = chunkPos[v].z;
+        const float x = projX[v], y = projY[v];
+        if (std::isnan(x)) bounded = false;
         else bx0 = std::min(bx0, x), by0 = std::min(by0, y), bx1 = std::max(bx1, x), by1 = std::max(by1, y);
       }
       if (tri) zv[3] = zv[2];

@@ -41,6 +41,14 @@ RESHUTTER_AVX2 inline BoxLanes boxLanes(const MovingBox& b) {
   return {_mm256_set1_ps(b.thetaA), _mm256_set1_ps(b.invLen), _mm256_set1_ps(b.x0), _mm256_set1_ps(b.dx0), _mm256_set1_ps(b.x1),
           _mm256_set1_ps(b.dx1),    _mm256_set1_ps(b.y0),     _mm256_set1_ps(b.dy0), _mm256_set1_ps(b.y1), _mm256_set1_ps(b.dy1)};
 }
+// A fixed box (no motion, invLen 0, as the static path builds it): the same answer as
+// insideAtOwnTime() for any finite time, as x0 + u * 0 is x0, with no time at all.
+RESHUTTER_AVX2 inline __m256 insideFixed(const BoxLanes& b, __m256 x, __m256 y) {
+  __m256 in = _mm256_cmp_ps(x, b.x0, _CMP_GE_OQ);
+  in = _mm256_and_ps(in, _mm256_cmp_ps(x, b.x1, _CMP_LE_OQ));
+  in = _mm256_and_ps(in, _mm256_cmp_ps(y, b.y0, _CMP_GE_OQ));
+  return _mm256_and_ps(in, _mm256_cmp_ps(y, b.y1, _CMP_LE_OQ));
+}
 RESHUTTER_AVX2 inline __m256 insideAtOwnTime(const BoxLanes& b, __m256 t, __m256 x, __m256 y) {
   // u = min(max((t - thetaA) invLen, 0), 1), operand order as std::max / std::min.
   const __m256 u = _mm256_min_ps(_mm256_set1_ps(1.f), _mm256_max_ps(_mm256_setzero_ps(), _mm256_mul_ps(_mm256_sub_ps(t, b.thetaA), b.invLen)));
@@ -65,8 +73,31 @@ RESHUTTER_AVX2 inline size_t appendLanes(__m256 in, __m256i live, __m256i idx, _
 
 // The rows of `rows` against box `b`: the body of both gathers, inlined so that the box is
 // broadcast once per micropolygon, not once per stratum.
+// kFixed: the box does not move (insideFixed()). The candidates still carry their times: a
+// moving micropolygon that crosses the near plane is gathered with a fixed box.
+template <bool kFixed = false>
 RESHUTTER_AVX2 __attribute__((always_inline)) inline size_t gatherRows(const BoxLanes& b, const SampleRows& r, const Candidates& out, size_t n) {
   const __m256 zCull = _mm256_set1_ps(r.zCull);
+  if constexpr (kFixed) {
+    if (r.cols <= 4 && r.rows <= 2 && !r.rowGroup) {
+      // A static micropolygon's box (one or two pixels each way, usually): one vector per plane,
+      // rows 0 and 1 (or row 0 twice, masked off) in its halves.
+      const __m256i quad = _mm256_setr_epi32(0, 1, 2, 3, 0, 1, 2, 3);
+      const unsigned colBits = (1u << r.cols) - 1, lanes = r.rows == 2 ? colBits | colBits << 4 : colBits;
+      const size_t second = r.rows == 2 ? r.stride : 0;
+      for (int plane = 0; plane < r.planes; ++plane) {
+        const size_t lo = r.first + size_t(plane) * r.planeStride, hi = lo + second;
+        const __m256 t = _mm256_loadu2_m128(r.st + hi, r.st + lo), x = _mm256_loadu2_m128(r.sx + hi, r.sx + lo),
+                     y = _mm256_loadu2_m128(r.sy + hi, r.sy + lo);
+        const __m256 visible = _mm256_cmp_ps(_mm256_loadu2_m128(r.depth + hi, r.depth + lo), zCull, _CMP_GT_OQ);
+        const unsigned mask = unsigned(_mm256_movemask_ps(_mm256_and_ps(insideFixed(b, x, y), visible))) & lanes;
+        if (!mask) continue;
+        const __m256i idx = _mm256_add_epi32(_mm256_setr_m128i(_mm_set1_epi32(int(uint32_t(lo))), _mm_set1_epi32(int(uint32_t(hi)))), quad);
+        n = appendMasked(mask, idx, t, x, y, out, n);
+      }
+      return n;
+    }
+  }
   if (r.cols <= 4) {
     // Narrow boxes (a small micropolygon's stratum box is 2 - 4 pixels wide): two rows per
     // vector, four lanes each, so that half the lanes are not idle.
@@ -125,6 +156,7 @@ RESHUTTER_AVX2 __attribute__((always_inline)) inline size_t gatherRows(const Box
 RESHUTTER_AVX2 size_t gatherInBoxAvx2(const SampleRows& rows, const MovingBox& box, const Candidates& candidates, size_t n) {
   const SampleRows r = rows;  // locals: the stores below may alias anything
   const Candidates out = candidates;
+  if (box.invLen == 0.f && box.dx0 == 0.f && box.dx1 == 0.f && box.dy0 == 0.f && box.dy1 == 0.f) return gatherRows<true>(boxLanes(box), r, out, n);
   return gatherRows(boxLanes(box), r, out, n);
 }
 
