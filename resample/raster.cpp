@@ -128,6 +128,7 @@ struct BucketRasterizer::Impl {
   const int N;
   const bool vectorKernels;  // the AVX2 loops of raster_kernels.h (same results as the scalar ones)
   const double invAx, invAy;  // 1 / view.ax, 1 / view.ay
+  const kernels::RasterScale rasterScale;  // toRaster() for the edge kernel
   int aovFloatCount = 0, aovUIntCount = 0;
   std::vector<int> aovFloatBase, aovUIntBase;  // per AOV channel: first component slot
 
@@ -200,7 +201,7 @@ struct BucketRasterizer::Impl {
 
   Impl(const SamplePattern& p, const ShutterModel& s, const View& v, const std::vector<AovChannel>& a, const RasterOptions& o)
       : pattern(p), shutter(s), view(v), aovs(a), opt(o), N(p.spp()), vectorKernels(o.vectorKernels && kernels::available()),
-        invAx(1.0 / v.ax), invAy(1.0 / v.ay),
+        invAx(1.0 / v.ax), invAy(1.0 / v.ay), rasterScale{invAx, invAy, v.bx, v.by, v.perspective},
         tBase(std::floor(s.earliest())) {
     for (const auto& ch : aovs) {
       if (ch.isUInt) {
@@ -574,7 +575,7 @@ struct BucketRasterizer::Impl {
         if (!n) continue;
         stats.sampleTests += n;
         kernels::LinearEdges edges{};
-        for (int k = 0; k < 5; ++k) edges.c[k][0] = E[k].x, edges.c[k][1] = E[k].y, edges.c[k][2] = E[k].z;
+        for (int k = 0; k < 5; ++k) edges.c[0][k] = E[k].x, edges.c[1][k] = E[k].y, edges.c[2][k] = E[k].z;
         kernels::EdgeTestSetup setup{candT.data(), candX.data(), candY.data(), 0.f, 0.f, tri, opt.backfaceCull && !(part.flags[m] & store::kTwoSided), true};
         std::copy(zv, zv + 4, setup.za), std::copy(zv, zv + 4, setup.zb);
         recordKernelHits(hc, m, c, setup, edges, n, [&](uint32_t idx) { testStatic(hc, m, c, tri, E, zv, idx); });
@@ -1062,14 +1063,15 @@ struct BucketRasterizer::Impl {
   // Two-knot schedules through the vector kernel; the rare exact ties go to testCandidate().
   void testCandidatesVector(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, uint8_t flags, size_t n) {
     const TilePart& part = mp.part;
-    EdgeQuad* q = &segEdges[0];
-    if (!segReady[0]) {
-      prepareEdges(part, c, tri, 0, q);
-      segReady[0] = 1;
+    // prepareEdges()' values, four edges at a time (the scalar tie test still prepares its own).
+    const float* at[4];
+    const float* to[4];
+    for (int j = 0; j < 4; ++j) {
+      const uint32_t v = c[tri && j == 3 ? 2 : j];
+      at[j] = &part.position(0, v).x, to[j] = &part.position(1, v).x;
     }
-    static_assert(sizeof(EdgeQuad) == 9 * sizeof(double), "EdgeQuad is e0 e1 e2, three dvec3s");
     kernels::LinearEdges edges;
-    std::memcpy(edges.c, q, sizeof edges.c);
+    kernels::linearEdges(at, to, rasterScale, edges);
     kernels::EdgeTestSetup setup{candT.data(), candX.data(), candY.data(), mp.times.seg.fOffset, mp.times.seg.fScale, tri,
                                  opt.backfaceCull && !(flags & store::kTwoSided)};
     for (int j = 0; j < (tri ? 3 : 4); ++j) setup.za[j] = part.position(0, c[j]).z, setup.zb[j] = part.position(1, c[j]).z;

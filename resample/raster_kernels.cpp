@@ -248,13 +248,59 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
 // One edge's value at four samples: E(f) = c0 + f (c3 + f c6) per component, then
 // (x Ex + y Ey) + Ez at raster position (x, y), as edgeAt() and EdgeQuad::at() compute it.
 template <bool kFixed>
-RESHUTTER_AVX2 inline __m256d edgeValue(const double* c, __m256d f, __m256d rx, __m256d ry) {
-  if constexpr (kFixed)
-    return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(rx, _mm256_set1_pd(c[0])), _mm256_mul_pd(ry, _mm256_set1_pd(c[1]))), _mm256_set1_pd(c[2]));
-  const __m256d ex = _mm256_add_pd(_mm256_set1_pd(c[0]), _mm256_mul_pd(f, _mm256_add_pd(_mm256_set1_pd(c[3]), _mm256_mul_pd(f, _mm256_set1_pd(c[6])))));
-  const __m256d ey = _mm256_add_pd(_mm256_set1_pd(c[1]), _mm256_mul_pd(f, _mm256_add_pd(_mm256_set1_pd(c[4]), _mm256_mul_pd(f, _mm256_set1_pd(c[7])))));
-  const __m256d ez = _mm256_add_pd(_mm256_set1_pd(c[2]), _mm256_mul_pd(f, _mm256_add_pd(_mm256_set1_pd(c[5]), _mm256_mul_pd(f, _mm256_set1_pd(c[8])))));
+RESHUTTER_AVX2 inline __m256d edgeValue(const LinearEdges& E, int e, __m256d f, __m256d rx, __m256d ry) {
+  __m256d c[9];
+  for (int k = 0; k < (kFixed ? 3 : 9); ++k) c[k] = _mm256_set1_pd(E.c[k][e]);
+  if constexpr (kFixed) return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(rx, c[0]), _mm256_mul_pd(ry, c[1])), c[2]);
+  const __m256d ex = _mm256_add_pd(c[0], _mm256_mul_pd(f, _mm256_add_pd(c[3], _mm256_mul_pd(f, c[6]))));
+  const __m256d ey = _mm256_add_pd(c[1], _mm256_mul_pd(f, _mm256_add_pd(c[4], _mm256_mul_pd(f, c[7]))));
+  const __m256d ez = _mm256_add_pd(c[2], _mm256_mul_pd(f, _mm256_add_pd(c[5], _mm256_mul_pd(f, c[8]))));
   return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(rx, ex), _mm256_mul_pd(ry, ey)), ez);
+}
+
+// Cross products of four corner pairs at once (lane = pair), glm::cross's operations.
+struct Lanes3 {
+  __m256d x, y, z;
+};
+RESHUTTER_AVX2 inline Lanes3 crossLanes(const Lanes3& a, const Lanes3& b) {
+  return {_mm256_sub_pd(_mm256_mul_pd(a.y, b.z), _mm256_mul_pd(a.z, b.y)), _mm256_sub_pd(_mm256_mul_pd(a.z, b.x), _mm256_mul_pd(a.x, b.z)),
+          _mm256_sub_pd(_mm256_mul_pd(a.x, b.y), _mm256_mul_pd(a.y, b.x))};
+}
+
+// Edges (a_e, b_e) of four lanes: the three raster coefficient vectors of each power of f,
+// stored to lanes [lane0, lane0 + 4) of out.
+RESHUTTER_AVX2 inline void edgeLanes(const Lanes3& A, const Lanes3& D, const Lanes3& Ab, const Lanes3& Db, const RasterScale& m, LinearEdges& out,
+                                     int lane0) {
+  const __m256d invAx = _mm256_set1_pd(m.invAx), invAy = _mm256_set1_pd(m.invAy), bx = _mm256_set1_pd(m.bx), by = _mm256_set1_pd(m.by);
+  const Lanes3 c0 = crossLanes(A, Ab), c1a = crossLanes(A, Db), c1b = crossLanes(D, Ab), c2 = crossLanes(D, Db);
+  const Lanes3 c1{_mm256_add_pd(c1a.x, c1b.x), _mm256_add_pd(c1a.y, c1b.y), _mm256_add_pd(c1a.z, c1b.z)};
+  const Lanes3* powers[3] = {&c0, &c1, &c2};
+  for (int p = 0; p < 3; ++p) {
+    const __m256d ex = _mm256_mul_pd(powers[p]->x, invAx), ey = _mm256_mul_pd(powers[p]->y, invAy);
+    _mm256_storeu_pd(&out.c[3 * p][lane0], ex);
+    _mm256_storeu_pd(&out.c[3 * p + 1][lane0], ey);
+    _mm256_storeu_pd(&out.c[3 * p + 2][lane0], _mm256_sub_pd(_mm256_sub_pd(powers[p]->z, _mm256_mul_pd(ex, bx)), _mm256_mul_pd(ey, by)));
+  }
+}
+
+// Component k of four corners, lane j = corner j.
+RESHUTTER_AVX2 inline __m256d cornerColumn(const float* const p[4], int k) { return _mm256_cvtps_pd(_mm_setr_ps(p[0][k], p[1][k], p[2][k], p[3][k])); }
+// Lanes rotated: lane j takes lane j + 1 (0x39) or j + 2 (0x4E), mod 4.
+template <int kImm>
+RESHUTTER_AVX2 inline Lanes3 rotateLanes(const Lanes3& v) {
+  return {_mm256_permute4x64_pd(v.x, kImm), _mm256_permute4x64_pd(v.y, kImm), _mm256_permute4x64_pd(v.z, kImm)};
+}
+
+RESHUTTER_AVX2 void linearEdgesAvx2(const float* const at[4], const float* const to[4], const RasterScale& m, LinearEdges& out) {
+  const __m256d one = _mm256_set1_pd(1.0);
+  // Lane j = corner j: A = homogeneous(at), D = homogeneous(to) - A (z motion 0 without perspective).
+  const Lanes3 A{cornerColumn(at, 0), cornerColumn(at, 1), m.perspective ? cornerColumn(at, 2) : one};
+  const Lanes3 D{_mm256_sub_pd(cornerColumn(to, 0), A.x), _mm256_sub_pd(cornerColumn(to, 1), A.y),
+                 m.perspective ? _mm256_sub_pd(cornerColumn(to, 2), A.z) : _mm256_setzero_pd()};
+  // Edges 01 12 23 30: corner j with corner j + 1.
+  edgeLanes(A, D, rotateLanes<0x39>(A), rotateLanes<0x39>(D), m, out, 0);
+  // Edge 02 in lane 4: corner 0 with corner 2 (lanes 5-7 are padding).
+  edgeLanes(A, D, rotateLanes<0x4E>(A), rotateLanes<0x4E>(D), m, out, 4);
 }
 
 // Coverage of one triangle from its oriented edge values, as triangleCovers() decides it:
@@ -302,7 +348,7 @@ RESHUTTER_AVX2 size_t testLinearEdgesAvx2(const EdgeTestSetup& s, const LinearEd
     if constexpr (!kFixed) f = _mm_min_ps(one, _mm_max_ps(zero, _mm_mul_ps(_mm_add_ps(_mm_loadu_ps(s.st + i), fOffset), fScale)));
     const __m256d fd = _mm256_cvtps_pd(f);
     const __m256d rx = _mm256_cvtps_pd(_mm_loadu_ps(s.sx + i)), ry = _mm256_cvtps_pd(_mm_loadu_ps(s.sy + i));
-    const __m256d e0 = edgeValue<kFixed>(E.c[0], fd, rx, ry), e1 = edgeValue<kFixed>(E.c[1], fd, rx, ry), e4 = edgeValue<kFixed>(E.c[4], fd, rx, ry);
+    const __m256d e0 = edgeValue<kFixed>(E, 0, fd, rx, ry), e1 = edgeValue<kFixed>(E, 1, fd, rx, ry), e4 = edgeValue<kFixed>(E, 4, fd, rx, ry);
     const int liveMask = (1 << live) - 1;
     // Triangle A = (p0 p1 p2) with edges 12, 20 (= -02), 01.
     const TriangleMasks A = triangleMasks(e1, _mm256_xor_pd(e4, sign), e0, s.cullBackFaces);
@@ -311,7 +357,7 @@ RESHUTTER_AVX2 size_t testLinearEdgesAvx2(const EdgeTestSetup& s, const LinearEd
     const int needB = liveMask & ~hitA & ~undecided;
     if (!s.triangle && needB) {
       // Triangle B = (p0 p2 p3) with edges 23, 30, 02.
-      B = triangleMasks(edgeValue<kFixed>(E.c[2], fd, rx, ry), edgeValue<kFixed>(E.c[3], fd, rx, ry), e4, s.cullBackFaces);
+      B = triangleMasks(edgeValue<kFixed>(E, 2, fd, rx, ry), edgeValue<kFixed>(E, 3, fd, rx, ry), e4, s.cullBackFaces);
       hitB = B.hit & needB;
       undecided |= B.tie & needB;
       hitB &= ~undecided;
@@ -354,6 +400,10 @@ size_t gatherStrata(const SampleRows& region, const StrataSpans& spans, const Mo
   return gatherStrataAvx2(region, spans, box, out);
 }
 
+void linearEdges(const float* const at[4], const float* const to[4], const RasterScale& scale, LinearEdges& out) {
+  linearEdgesAvx2(at, to, scale, out);
+}
+
 size_t testLinearEdges(const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits) {
   return setup.fixed ? testLinearEdgesAvx2<true>(setup, edges, n, hits) : testLinearEdgesAvx2<false>(setup, edges, n, hits);
 }
@@ -363,6 +413,9 @@ size_t testLinearEdges(const EdgeTestSetup& setup, const LinearEdges& edges, siz
 bool available() { return false; }
 size_t gatherInBox(const SampleRows&, const MovingBox&, const Candidates&, size_t) { fail("rasterizer", "vector kernels called on a CPU without them"); }
 size_t gatherStrata(const SampleRows&, const StrataSpans&, const MovingBox&, const Candidates&) {
+  fail("rasterizer", "vector kernels called on a CPU without them");
+}
+void linearEdges(const float* const[4], const float* const[4], const RasterScale&, LinearEdges&) {
   fail("rasterizer", "vector kernels called on a CPU without them");
 }
 size_t testLinearEdges(const EdgeTestSetup&, const LinearEdges&, size_t, EdgeHit*) {

@@ -76,11 +76,25 @@ struct StrataSpans {
 /// them: one call per micropolygon instead of one per stratum.
 size_t gatherStrata(const SampleRows& region, const StrataSpans& spans, const MovingBox& box, const Candidates& out);
 
-/// A micropolygon's edges over one knot segment: edge e's cross product is
-/// c[e][0..2] + f (c[e][3..5] + f c[e][6..8]) at segment parameter f (edges 01 12 23 30 02).
+/// A micropolygon's edges over one knot segment, component-major: edge e's cross product is
+/// c[0..2][e] + f (c[3..5][e] + f c[6..8][e]) at segment parameter f (edges 01 12 23 30 02;
+/// lanes 5-7 are padding).
 struct LinearEdges {
-  double c[5][9];
+  double c[9][8];
 };
+
+/// The camera's map from homogeneous camera space to raster edges, as the rasterizer's
+/// toRaster() applies it to a cross product e: (e.x invAx, e.y invAy, (e.z - ex bx) - ey by).
+struct RasterScale {
+  double invAx, invAy, bx, by;
+  bool perspective;  // homogeneous point (x, y, z); otherwise (x, y, 1)
+};
+
+/// The edges of the micropolygon with corners at[j] at a knot segment's start and to[j] at its end
+/// (camera-space xyz; a triangle passes corner 2 as corner 3, and edges 23 and 30 are then
+/// meaningless): E = A_a × A_b + f (A_a × D_b + D_a × A_b) + f² D_a × D_b with D = to - at, in
+/// the rasterizer's prepareEdges() operations and order, so bit-identical to it.
+void linearEdges(const float* const at[4], const float* const to[4], const RasterScale& scale, LinearEdges& out);
 
 struct EdgeTestSetup {
   const float* st;  // the candidates' times and raster positions (Candidates::t, x, y)
