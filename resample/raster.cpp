@@ -545,11 +545,13 @@ struct BucketRasterizer::Impl {
       const uint32_t* c = &part.corners[size_t(m) * 4];
       const bool tri = c[3] == kNoCorner;
       const int nc = tri ? 3 : 4;
+      // The edges, made only for micropolygons that reach the sample tests (most of a part's miss
+      // a given bucket).
       glm::dvec3 E[5] = {};
-      for (int k = 0; k < 5; ++k) {
-        if (tri && (k == 2 || k == 3)) continue;
-        E[k] = toRaster(cross(hom[c[kEdgeVerts[k][0]] - vBase], hom[c[kEdgeVerts[k][1]] - vBase]));
-      }
+      auto makeEdges = [&] {
+        for (int k = 0; k < 5; ++k)
+          if (!tri || !(k == 2 || k == 3)) E[k] = toRaster(cross(hom[c[kEdgeVerts[k][0]] - vBase], hom[c[kEdgeVerts[k][1]] - vBase]));
+      };
       float zv[4];
       float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
       bool bounded = true;
@@ -574,13 +576,21 @@ struct BucketRasterizer::Impl {
         const size_t n = gatherCandidates(0, N, onlyGroup, px0, py0, px1, py1, box, Coverage{false, 0, 0}, zCull, 0);
         if (!n) continue;
         stats.sampleTests += n;
-        kernels::LinearEdges edges{};
-        for (int k = 0; k < 5; ++k) edges.c[0][k] = E[k].x, edges.c[1][k] = E[k].y, edges.c[2][k] = E[k].z;
+        // makeEdges()' values, four edges at a time; the scalar tie test makes its own.
+        const float* at[4];
+        for (int j = 0; j < 4; ++j) at[j] = &chunkPos[c[tri && j == 3 ? 2 : j] - vBase].x;
+        kernels::LinearEdges edges;
+        kernels::fixedEdges(at, rasterScale, edges);
         kernels::EdgeTestSetup setup{candT.data(), candX.data(), candY.data(), 0.f, 0.f, tri, opt.backfaceCull && !(part.flags[m] & store::kTwoSided), true};
         std::copy(zv, zv + 4, setup.za), std::copy(zv, zv + 4, setup.zb);
-        recordKernelHits(hc, m, c, setup, edges, n, [&](uint32_t idx) { testStatic(hc, m, c, tri, E, zv, idx); });
+        bool edgesMade = false;
+        recordKernelHits(hc, m, c, setup, edges, n, [&](uint32_t idx) {
+          if (!edgesMade) makeEdges(), edgesMade = true;
+          testStatic(hc, m, c, tri, E, zv, idx);
+        });
         continue;
       }
+      makeEdges();
       for (int py = py0; py <= py1; ++py) {
         if (onlyGroup >= 0 && rowGroup[size_t(py - y0)] != onlyGroup) continue;
         for (int px = px0; px <= px1; ++px) {

@@ -269,13 +269,20 @@ RESHUTTER_AVX2 inline Lanes3 crossLanes(const Lanes3& a, const Lanes3& b) {
 
 // Edges (a_e, b_e) of four lanes: the three raster coefficient vectors of each power of f,
 // stored to lanes [lane0, lane0 + 4) of out.
+// kFixed: the constant term only (D unused).
+template <bool kFixed = false>
 RESHUTTER_AVX2 inline void edgeLanes(const Lanes3& A, const Lanes3& D, const Lanes3& Ab, const Lanes3& Db, const RasterScale& m, LinearEdges& out,
                                      int lane0) {
   const __m256d invAx = _mm256_set1_pd(m.invAx), invAy = _mm256_set1_pd(m.invAy), bx = _mm256_set1_pd(m.bx), by = _mm256_set1_pd(m.by);
-  const Lanes3 c0 = crossLanes(A, Ab), c1a = crossLanes(A, Db), c1b = crossLanes(D, Ab), c2 = crossLanes(D, Db);
-  const Lanes3 c1{_mm256_add_pd(c1a.x, c1b.x), _mm256_add_pd(c1a.y, c1b.y), _mm256_add_pd(c1a.z, c1b.z)};
+  const Lanes3 c0 = crossLanes(A, Ab);
+  Lanes3 c1{}, c2{};
+  if constexpr (!kFixed) {
+    const Lanes3 c1a = crossLanes(A, Db), c1b = crossLanes(D, Ab);
+    c1 = {_mm256_add_pd(c1a.x, c1b.x), _mm256_add_pd(c1a.y, c1b.y), _mm256_add_pd(c1a.z, c1b.z)};
+    c2 = crossLanes(D, Db);
+  }
   const Lanes3* powers[3] = {&c0, &c1, &c2};
-  for (int p = 0; p < 3; ++p) {
+  for (int p = 0; p < (kFixed ? 1 : 3); ++p) {
     const __m256d ex = _mm256_mul_pd(powers[p]->x, invAx), ey = _mm256_mul_pd(powers[p]->y, invAy);
     _mm256_storeu_pd(&out.c[3 * p][lane0], ex);
     _mm256_storeu_pd(&out.c[3 * p + 1][lane0], ey);
@@ -301,6 +308,12 @@ RESHUTTER_AVX2 void linearEdgesAvx2(const float* const at[4], const float* const
   edgeLanes(A, D, rotateLanes<0x39>(A), rotateLanes<0x39>(D), m, out, 0);
   // Edge 02 in lane 4: corner 0 with corner 2 (lanes 5-7 are padding).
   edgeLanes(A, D, rotateLanes<0x4E>(A), rotateLanes<0x4E>(D), m, out, 4);
+}
+
+RESHUTTER_AVX2 void fixedEdgesAvx2(const float* const at[4], const RasterScale& m, LinearEdges& out) {
+  const Lanes3 A{cornerColumn(at, 0), cornerColumn(at, 1), m.perspective ? cornerColumn(at, 2) : _mm256_set1_pd(1.0)};
+  edgeLanes<true>(A, A, rotateLanes<0x39>(A), A, m, out, 0);
+  edgeLanes<true>(A, A, rotateLanes<0x4E>(A), A, m, out, 4);
 }
 
 // Coverage of one triangle from its oriented edge values, as triangleCovers() decides it:
@@ -403,6 +416,7 @@ size_t gatherStrata(const SampleRows& region, const StrataSpans& spans, const Mo
 void linearEdges(const float* const at[4], const float* const to[4], const RasterScale& scale, LinearEdges& out) {
   linearEdgesAvx2(at, to, scale, out);
 }
+void fixedEdges(const float* const at[4], const RasterScale& scale, LinearEdges& out) { fixedEdgesAvx2(at, scale, out); }
 
 size_t testLinearEdges(const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits) {
   return setup.fixed ? testLinearEdgesAvx2<true>(setup, edges, n, hits) : testLinearEdgesAvx2<false>(setup, edges, n, hits);
@@ -418,6 +432,7 @@ size_t gatherStrata(const SampleRows&, const StrataSpans&, const MovingBox&, con
 void linearEdges(const float* const[4], const float* const[4], const RasterScale&, LinearEdges&) {
   fail("rasterizer", "vector kernels called on a CPU without them");
 }
+void fixedEdges(const float* const[4], const RasterScale&, LinearEdges&) { fail("rasterizer", "vector kernels called on a CPU without them"); }
 size_t testLinearEdges(const EdgeTestSetup&, const LinearEdges&, size_t, EdgeHit*) {
   fail("rasterizer", "vector kernels called on a CPU without them");
 }

@@ -95,6 +95,9 @@ struct RasterScale {
 /// meaningless): E = A_a × A_b + f (A_a × D_b + D_a × A_b) + f² D_a × D_b with D = to - at, in
 /// the rasterizer's prepareEdges() operations and order, so bit-identical to it.
 void linearEdges(const float* const at[4], const float* const to[4], const RasterScale& scale, LinearEdges& out);
+/// A static micropolygon's edges: c[0..2] only (A_a × A_b), the rasterizer's static-path
+/// operations and order.
+void fixedEdges(const float* const at[4], const RasterScale& scale, LinearEdges& out);
 
 struct EdgeTestSetup {
   const float* st;  // the candidates' times and raster positions (Candidates::t, x, y)

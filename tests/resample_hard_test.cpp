@@ -330,37 +330,41 @@ TEST(ResampleHard, VectorAndScalarKernelsAgree) {
 }
 
 // The same agreement through an orthographic camera, whose homogeneous corners are (x, y, 1)
-// with no depth in the edge functions: random moving quads and triangles, some tilted in depth,
-// over the whole shutter and a sub-interval.
+// with no depth in the edge functions: random quads and triangles, some tilted in depth, moving
+// (over the whole shutter and a sub-interval) and static.
 TEST(ResampleHard, VectorAndScalarKernelsAgreeOrthographic) {
   if (!kernels::available()) GTEST_SKIP() << "this CPU has no AVX2: only the scalar loops run";
   ScratchDir dir;
-  TestScene s = makeScene(48, 32);
-  s.meta.cameras[0].projection = store::Projection::Orthographic;
-  reshutter::Rng rng(17);
-  for (int i = 0; i < 400; ++i) {
-    const double x = rng.uniform(-4, 52), y = rng.uniform(-4, 36), size = rng.uniform(0.3, 3), z = rng.uniform(2, 20);
-    const double mx = rng.uniform(-8, 8), my = rng.uniform(-8, 8), tilt = rng.uniform(-1, 1);
-    TestMp mp;
-    for (double u : {0.0, 1.0}) {
-      const double ox = x + u * mx, oy = y + u * my;
-      mp.knots.push_back({s.cam(ox, oy, z), s.cam(ox + size, oy + 0.2 * size, z + tilt), s.cam(ox + size, oy + size, z),
-                          s.cam(ox - 0.1 * size, oy + size, z - tilt)});
+  for (bool moving : {true, false}) {
+    TestScene s = moving ? makeScene(48, 32) : makeScene(48, 32, {0.0});
+    s.meta.cameras[0].projection = store::Projection::Orthographic;
+    reshutter::Rng rng(17);
+    for (int i = 0; i < 400; ++i) {
+      const double x = rng.uniform(-4, 52), y = rng.uniform(-4, 36), size = rng.uniform(0.3, 3), z = rng.uniform(2, 20);
+      const double mx = rng.uniform(-8, 8), my = rng.uniform(-8, 8), tilt = rng.uniform(-1, 1);
+      TestMp mp;
+      for (double u : moving ? std::vector<double>{0.0, 1.0} : std::vector<double>{0.0}) {
+        const double ox = x + u * mx, oy = y + u * my;
+        mp.knots.push_back({s.cam(ox, oy, z), s.cam(ox + size, oy + 0.2 * size, z + tilt), s.cam(ox + size, oy + size, z),
+                            s.cam(ox - 0.1 * size, oy + size, z - tilt)});
+      }
+      mp.triangle = i % 3 == 0;
+      mp.ci = {float(rng.uniform()), float(rng.uniform()), float(rng.uniform())};
+      s.mps.push_back(mp);
     }
-    mp.triangle = i % 3 == 0;
-    mp.ci = {float(rng.uniform()), float(rng.uniform()), float(rng.uniform())};
-    s.mps.push_back(mp);
-  }
-  auto reader = writeScene(s, dir.path("ortho.mps"));
-  for (auto [open, close] : {std::pair{0.0, 1.0}, std::pair{0.3, 0.45}}) {
-    RenderSpec spec = specFor(reader, open, close, 4, 4, 3);
-    std::vector<RenderResult> results;
-    for (bool vector : {true, false}) {
-      spec.raster.vectorKernels = vector;
-      results.push_back(render(spec));
+    auto reader = writeScene(s, dir.path(moving ? "ortho-moving.mps" : "ortho-static.mps"));
+    for (auto [open, close] : {std::pair{0.0, 1.0}, std::pair{0.3, 0.45}}) {
+      RenderSpec spec = specFor(reader, open, close, 4, 4, 3);
+      std::vector<RenderResult> results;
+      for (bool vector : {true, false}) {
+        spec.raster.vectorKernels = vector;
+        results.push_back(render(spec));
+      }
+      const std::string what = std::string(moving ? "moving " : "static ") + std::to_string(open) + ":" + std::to_string(close);
+      EXPECT_GT(results[0].stats.raster.hits, 5000u) << what;
+      if (!moving) EXPECT_GT(results[0].stats.raster.staticMicropolygons, 100u) << what;
+      for (const char* ch : {"R", "G", "B", "A", "Z"}) EXPECT_EQ(channel(results[1], ch).f, channel(results[0], ch).f) << what << " " << ch;
     }
-    EXPECT_GT(results[0].stats.raster.hits, 5000u);
-    for (const char* ch : {"R", "G", "B", "A", "Z"}) EXPECT_EQ(channel(results[1], ch).f, channel(results[0], ch).f) << open << ":" << close << " " << ch;
   }
 }
 
