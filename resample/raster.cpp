@@ -196,6 +196,16 @@ struct BucketRasterizer::Impl {
   std::vector<EdgeQuad> segEdges;      // [segment * 5 + edge] for the current micropolygon
   std::vector<uint8_t> segReady;
   std::vector<float> cullX, cullY;     // [cull time * nV + v - vBase]; cullX NaN = before the near plane
+  // The linear path's per-vertex terms (rasterizeLinear), made once per chunk rather than once per
+  // micropolygon corner: ends[] = raster x, y at the interval's two ends; reach[] = |motion| in x
+  // and y, perspective lag, |depth change|; depth = nearer end depth; unbounded = before the
+  // near plane at an end.
+  struct LinearVertex {
+    float ends[4], reach[4];
+  };
+  std::vector<LinearVertex> linearVertex;
+  std::vector<float> linearDepth;
+  std::vector<uint8_t> linearUnbounded;
   std::vector<uint8_t> vertexStamp;    // [v - vBase]: theta projections computed for this vertex
   std::vector<float> thetaBox;         // current micropolygon's raster box per theta: x0[T] y0[T] x1[T] y1[T]
 
@@ -863,6 +873,7 @@ struct BucketRasterizer::Impl {
       stats.chunkCulledMicropolygons += ch.m1 - ch.m0;
       return;
     }
+    if (mt.linearPath) prepareLinearVertices(nV);
     projX.resize(T * nV), projY.resize(T * nV), projRho.resize(T * nV), depthScratch.resize(T);
     thetaBox.resize(4 * T);
     vertexStamp.assign(nV, 0u);
@@ -986,21 +997,40 @@ struct BucketRasterizer::Impl {
   // |B_j - A_j|: the box at any time is the lerped end boxes widened by that margin. Each
   // stratum tests only its samples inside the box at the sample's own time. False (nothing
   // done) when a corner lies before the near plane at either end: the general path handles it.
-  bool rasterizeLinear(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, int nc) {
-    const uint32_t nV = mp.nV;
-    const LinearInterval& li = mp.times.li;
-    float ax0 = INFINITY, ay0 = INFINITY, ax1 = -INFINITY, ay1 = -INFINITY;
-    float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
-    float rho = 0.f, mvx = 0.f, mvy = 0.f;
-    for (int j = 0; j < nc; ++j) {
-      const uint32_t v = c[j] - mp.vBase;
-      const float xa = cullX[v], ya = cullY[v], xb = cullX[nV + v], yb = cullY[nV + v];
-      if (std::isnan(xa) || std::isnan(xb)) return false;
-      ax0 = std::min(ax0, xa), ax1 = std::max(ax1, xa), ay0 = std::min(ay0, ya), ay1 = std::max(ay1, ya);
-      bx0 = std::min(bx0, xb), bx1 = std::max(bx1, xb), by0 = std::min(by0, yb), by1 = std::max(by1, yb);
-      mvx = std::max(mvx, std::abs(xb - xa)), mvy = std::max(mvy, std::abs(yb - ya));
-      if (view.perspective) rho = std::max(rho, perspectiveLag(cullZ[v], cullZ[nV + v]));
+  // The per-vertex terms of rasterizeLinear() for the chunk's nV vertices (cull rows 0 and 1).
+  void prepareLinearVertices(uint32_t nV) {
+    linearVertex.resize(nV), linearDepth.resize(nV), linearUnbounded.resize(nV);
+    for (uint32_t v = 0; v < nV; ++v) {
+      const float xa = cullX[v], ya = cullY[v], xb = cullX[nV + v], yb = cullY[nV + v], za = cullZ[v], zb = cullZ[nV + v];
+      linearUnbounded[v] = std::isnan(xa) || std::isnan(xb);
+      linearVertex[v] = {{xa, ya, xb, yb}, {std::abs(xb - xa), std::abs(yb - ya), view.perspective ? perspectiveLag(za, zb) : 0.f, std::abs(zb - za)}};
+      linearDepth[v] = std::min(za, zb);
     }
+  }
+
+  bool rasterizeLinear(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, int nc) {
+    const LinearInterval& li = mp.times.li;
+    // Min and max of the corners' end positions and max of their reach, four lanes each (the
+    // compiler vectorises the fixed-size loops).
+    float lo[4], hi[4], reach[4];
+    float zNear;
+    {
+      const uint32_t v = c[0] - mp.vBase;
+      bool unbounded = linearUnbounded[v];
+      zNear = linearDepth[v];
+      const LinearVertex& first = linearVertex[v];
+      for (int k = 0; k < 4; ++k) lo[k] = hi[k] = first.ends[k], reach[k] = first.reach[k];
+      for (int j = 1; j < nc; ++j) {
+        const uint32_t vj = c[j] - mp.vBase;
+        const LinearVertex& lv = linearVertex[vj];
+        unbounded |= linearUnbounded[vj];
+        zNear = std::min(zNear, linearDepth[vj]);
+        for (int k = 0; k < 4; ++k) lo[k] = std::min(lo[k], lv.ends[k]), hi[k] = std::max(hi[k], lv.ends[k]), reach[k] = std::max(reach[k], lv.reach[k]);
+      }
+      if (unbounded) return false;
+    }
+    const float ax0 = lo[0], ay0 = lo[1], bx0 = lo[2], by0 = lo[3], ax1 = hi[0], ay1 = hi[1], bx1 = hi[2], by1 = hi[3];
+    const float mvx = reach[0], mvy = reach[1], rho = reach[2], dz = reach[3];
     const float mag = std::max(std::max(std::max(std::abs(ax0), std::abs(ax1)), std::max(std::abs(ay0), std::abs(ay1))),
                                std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1))));
     const float slack = rho + li.uErr + 1e-5f;
@@ -1012,11 +1042,6 @@ struct BucketRasterizer::Impl {
       return true;
     ++stats.linearMicropolygons;
     // Depths are linear over the interval; a sample's rounded time may stray li.uErr of it.
-    float zNear = INFINITY, dz = 0.f;
-    for (int j = 0; j < nc; ++j) {
-      const float za = cullZ[c[j] - mp.vBase], zb = cullZ[nV + c[j] - mp.vBase];
-      zNear = std::min({zNear, za, zb}), dz = std::max(dz, std::abs(zb - za));
-    }
     const float zCull = cullDepth(zNear) - li.uErr * dz;
     const MovingBox box{ax0 - mx, bx0 - ax0, ax1 + mx, bx1 - ax1, ay0 - my, by0 - ay0, ay1 + my, by1 - ay1, li.thetaA, li.invLen};
     std::fill(segReady.begin(), segReady.end(), 0);
