@@ -1319,6 +1319,22 @@ struct BucketRasterizer::Impl {
     // The depths the single-closest filters compare: only when there are output variables.
     if (anyAovs) out.aovZ.assign(slots, INFINITY);
     const float far = view.farClip;
+    if (!anyFragments && !anyAovs) {
+      // Opaque surfaces only, no output variables (the common case): each sample is its nearest
+      // surface's colour or empty, as the general loop below computes it, without its branches.
+      for (size_t slot = 0; slot < slots; ++slot) {
+        const size_t k = idxOf[slot];
+        const float zo = zbuf[k];
+        const SurfaceColour& nh = colour[k];
+        const bool hit = zo < INFINITY, visible = hit && !nh.matte;
+        out.r[slot] = visible ? nh.r : 0.f;
+        out.g[slot] = visible ? nh.g : 0.f;
+        out.b[slot] = visible ? nh.b : 0.f;
+        out.a[slot] = visible ? 1.f : 0.f;
+        out.z[slot] = hit ? zo : far;
+      }
+      return out;
+    }
     const float stopT = 1.f - opt.opacityThreshold;
     std::vector<const Fragment*> list;
     for (size_t slot = 0; slot < slots; ++slot) {

@@ -240,6 +240,33 @@ TEST(ResampleCompositing, MatteCutsOutAndHidesWhatIsBehind) {
   EXPECT_NEAR(px("A", 26, 8), 1.0, 1e-6);
 }
 
+// Opaque surfaces only: the resolve takes its fast path without output variables and the
+// general one with them; both cut the matte out and keep its depth.
+TEST(ResampleCompositing, OpaqueMatteCutsOutWithAndWithoutOutputVariables) {
+  ScratchDir dir;
+  TestScene s = makeScene(32, 16, {0.0});
+  TestMp bg;
+  bg.knots = {s.rect(-2, -2, 34, 18, 30)};
+  bg.ci = {0.9f, 0.8f, 0.7f};
+  s.mps.push_back(bg);
+  TestMp matte;
+  matte.knots = {s.rect(8, 4, 24, 12, 10)};
+  matte.flags = store::kMatte;
+  s.mps.push_back(matte);
+  auto reader = writeScene(s, dir.path("matte.mps"));
+  for (bool withAov : {false, true}) {
+    RenderSpec spec = specFor(reader, 0, 0, 3, 3);
+    if (withAov) spec.aovs = {AovRequest::parse("id", "test")};
+    RenderResult r = render(spec);
+    auto px = [&](const char* c, int x, int y) { return channel(r, c).f[size_t(y) * 32 + x]; };
+    for (const char* c : {"R", "G", "B", "A"}) EXPECT_EQ(px(c, 12, 8), 0.f) << c << (withAov ? " with id" : "");
+    EXPECT_NEAR(px("Z", 12, 8), 10.0, 1e-4) << (withAov ? "with id" : "");
+    EXPECT_NEAR(px("R", 4, 8), 0.9, 1e-6);
+    EXPECT_NEAR(px("A", 4, 8), 1.0, 1e-6);
+    EXPECT_NEAR(px("Z", 4, 8), 30.0, 1e-4);
+  }
+}
+
 TEST(ResampleCompositing, BackfaceCullingKnocksOutUnlessTwoSided) {
   ScratchDir dir;
   TestScene s = makeScene(16, 16, {0.0});
