@@ -270,12 +270,21 @@ struct BucketRasterizer::Impl {
           sx[idx] = x, sy[idx] = y;
           const double t = shutter.time(g, y, u[size_t(i)]);
           st[idx] = float(t - tBase);
-          const double tc = tBase + double(st[idx]);
-          tMin = std::min(tMin, tc), tMax = std::max(tMax, tc);
-          const size_t gs = size_t(g) * N + stratumOf[size_t(i)];
-          stratumLo[gs] = std::min(stratumLo[gs], tc), stratumHi[gs] = std::max(stratumHi[gs], tc);
           idxOf[size_t(p) * N + i] = uint32_t(idx);
         }
+      }
+    // The widening, per stratum plane and row: tBase + double(st) rises with st (rounding is
+    // monotonic), so the extreme stored times are those of the extreme st, found in vectorisable
+    // row loops.
+    for (int s = 0; s < N; ++s)
+      for (int py = 0; py < h; ++py) {
+        const float* row = &st[size_t(s) * PS + size_t(py) * w];
+        float lo = row[0], hi = row[0];
+        for (int px = 1; px < w; ++px) lo = row[px] < lo ? row[px] : lo, hi = row[px] > hi ? row[px] : hi;
+        const double tcLo = tBase + double(lo), tcHi = tBase + double(hi);
+        const size_t gs = size_t(rowGroup[size_t(py)]) * N + size_t(s);
+        stratumLo[gs] = std::min(stratumLo[gs], tcLo), stratumHi[gs] = std::max(stratumHi[gs], tcHi);
+        tMin = std::min(tMin, tcLo), tMax = std::max(tMax, tcHi);
       }
 
     // One micropolygon's candidates: at most one per pixel and stratum, and the kernels write up
