@@ -164,7 +164,7 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
   // Pixel ranges of every stratum, eight at a time: the box over [u0, u1] (min / max of its two
   // ends, as the corners move linearly), widened, clamped to the region and floored; then each
   // range's first sample, size and whether it is empty, still eight at a time.
-  alignas(32) int first[64], cols[64], rows[64], rowOffset[64], second[64], laneMask[64];
+  alignas(32) int first[64], cols[64], rows[64], rowOffset[64], second[64], third[64], fourth[64], laneMask[64], laneMask2[64];
   uint64_t nonEmpty = 0, oneVector = 0;
   const int N = sp.strata;
   const __m256 m = _mm256_set1_ps(sp.margin);
@@ -202,16 +202,23 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
     _mm256_store_si256(reinterpret_cast<__m256i*>(rowOffset + s), dy);
     const __m256i live = _mm256_and_si256(_mm256_cmpgt_epi32(c, izero), _mm256_cmpgt_epi32(r, izero));
     nonEmpty |= uint64_t(unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(live)))) << s;
-    // Strata of at most two rows of at most four pixels (most of them, for small micropolygons
-    // and short intervals) fill one vector: row 0 in lanes 0-3, row 1 (or row 0 again, masked
-    // off) in lanes 4-7. Their second row's start and their lane mask, eight at a time too.
-    const __m256i twoRows = _mm256_cmpgt_epi32(r, ione);
-    const __m256i fits = _mm256_andnot_si256(_mm256_or_si256(_mm256_cmpgt_epi32(c, _mm256_set1_epi32(4)), _mm256_cmpgt_epi32(r, _mm256_set1_epi32(2))), live);
+    // Strata of at most four rows of at most four pixels (nearly all of them, for small
+    // micropolygons) fill one or two vectors: rows 0 and 1 in the first one's lanes 0-3 and 4-7,
+    // rows 2 and 3 in the second's; a missing row repeats the one before, masked off. The rows'
+    // starts and the lane masks, eight strata at a time too.
+    const __m256i twoRows = _mm256_cmpgt_epi32(r, ione), threeRows = _mm256_cmpgt_epi32(r, _mm256_set1_epi32(2)),
+                  fourRows = _mm256_cmpgt_epi32(r, _mm256_set1_epi32(3));
+    const __m256i fits = _mm256_andnot_si256(_mm256_or_si256(_mm256_cmpgt_epi32(c, _mm256_set1_epi32(4)), _mm256_cmpgt_epi32(r, _mm256_set1_epi32(4))), live);
     oneVector |= uint64_t(unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(fits)))) << s;
+    const __m256i row2 = _mm256_add_epi32(at, _mm256_and_si256(threeRows, _mm256_add_epi32(stride, stride)));
     _mm256_store_si256(reinterpret_cast<__m256i*>(second + s), _mm256_add_epi32(at, _mm256_and_si256(twoRows, stride)));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(third + s), row2);
+    _mm256_store_si256(reinterpret_cast<__m256i*>(fourth + s), _mm256_add_epi32(row2, _mm256_and_si256(fourRows, stride)));
     const __m256i colBits = _mm256_sub_epi32(_mm256_sllv_epi32(ione, _mm256_min_epi32(c, _mm256_set1_epi32(4))), ione);
     _mm256_store_si256(reinterpret_cast<__m256i*>(laneMask + s),
                        _mm256_or_si256(colBits, _mm256_and_si256(twoRows, _mm256_slli_epi32(colBits, 4))));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(laneMask2 + s),
+                       _mm256_or_si256(_mm256_and_si256(threeRows, colBits), _mm256_and_si256(fourRows, _mm256_slli_epi32(colBits, 4))));
   }
   if (N < 64) nonEmpty &= (uint64_t(1) << N) - 1;  // the padding lanes past the last stratum
   if (region.rowGroup) oneVector = 0;  // fields: gatherRows() skips the other group's rows
@@ -226,15 +233,18 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
   for (uint64_t strataLeft = nonEmpty; strataLeft; strataLeft &= strataLeft - 1) {
     const int s = __builtin_ctzll(strataLeft);
     if ((oneVector >> s) & 1) {
-      // gatherRows()' row pair, with the stratum's lanes known in advance (same candidates, same
+      // gatherRows()' row pairs, with the stratum's lanes known in advance (same candidates, same
       // order).
-      const size_t lo = size_t(uint32_t(first[s])), hi = size_t(uint32_t(second[s]));
-      const __m256 t = _mm256_loadu2_m128(rr.st + hi, rr.st + lo), x = _mm256_loadu2_m128(rr.sx + hi, rr.sx + lo),
-                   y = _mm256_loadu2_m128(rr.sy + hi, rr.sy + lo);
-      const __m256 visible = _mm256_cmp_ps(_mm256_loadu2_m128(rr.depth + hi, rr.depth + lo), zCull, _CMP_GT_OQ);
-      const unsigned mask = unsigned(_mm256_movemask_ps(_mm256_and_ps(insideAtOwnTime(lanes, t, x, y), visible))) & unsigned(laneMask[s]);
-      const __m256i idx = _mm256_add_epi32(_mm256_setr_m128i(_mm_set1_epi32(int(uint32_t(lo))), _mm_set1_epi32(int(uint32_t(hi)))), quad);
-      n = appendMasked(mask, idx, t, x, y, list, n);
+      auto rowPair = [&](size_t lo, size_t hi, unsigned lanesLive) RESHUTTER_AVX2 {
+        const __m256 t = _mm256_loadu2_m128(rr.st + hi, rr.st + lo), x = _mm256_loadu2_m128(rr.sx + hi, rr.sx + lo),
+                     y = _mm256_loadu2_m128(rr.sy + hi, rr.sy + lo);
+        const __m256 visible = _mm256_cmp_ps(_mm256_loadu2_m128(rr.depth + hi, rr.depth + lo), zCull, _CMP_GT_OQ);
+        const unsigned mask = unsigned(_mm256_movemask_ps(_mm256_and_ps(insideAtOwnTime(lanes, t, x, y), visible))) & lanesLive;
+        const __m256i idx = _mm256_add_epi32(_mm256_setr_m128i(_mm_set1_epi32(int(uint32_t(lo))), _mm_set1_epi32(int(uint32_t(hi)))), quad);
+        n = appendMasked(mask, idx, t, x, y, list, n);
+      };
+      rowPair(size_t(uint32_t(first[s])), size_t(uint32_t(second[s])), unsigned(laneMask[s]));
+      if (laneMask2[s]) rowPair(size_t(uint32_t(third[s])), size_t(uint32_t(fourth[s])), unsigned(laneMask2[s]));
       continue;
     }
     rr.first = size_t(uint32_t(first[s]));
