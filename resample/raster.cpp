@@ -129,6 +129,7 @@ struct BucketRasterizer::Impl {
   const bool vectorKernels;  // the AVX2 loops of raster_kernels.h (same results as the scalar ones)
   const double invAx, invAy;  // 1 / view.ax, 1 / view.ay
   const kernels::RasterScale rasterScale;  // toRaster() for the edge kernel
+  const kernels::ProjectionScale projectionScale;  // project() for the projection kernel
   int aovFloatCount = 0, aovUIntCount = 0;
   std::vector<int> aovFloatBase, aovUIntBase;  // per AOV channel: first component slot
 
@@ -212,6 +213,7 @@ struct BucketRasterizer::Impl {
   Impl(const SamplePattern& p, const ShutterModel& s, const View& v, const std::vector<AovChannel>& a, const RasterOptions& o)
       : pattern(p), shutter(s), view(v), aovs(a), opt(o), N(p.spp()), vectorKernels(o.vectorKernels && kernels::available()),
         invAx(1.0 / v.ax), invAy(1.0 / v.ay), rasterScale{invAx, invAy, v.bx, v.by, v.perspective},
+        projectionScale{v.ax, v.bx, v.ay, v.by, v.nearClip, v.perspective},
         tBase(std::floor(s.earliest())) {
     for (const auto& ch : aovs) {
       if (ch.isUInt) {
@@ -866,19 +868,35 @@ struct BucketRasterizer::Impl {
     const Coverage& cover = mt.cover;
     const size_t T = thetaTimes.size(), C = mt.cullTheta.size();
     cullX.resize(C * nV), cullY.resize(C * nV), cullZ.resize(C * nV);
-    for (size_t ci = 0; ci < C; ++ci) {
-      const uint32_t k = mt.thetaSeg[mt.cullTheta[ci]];
-      const float f = mt.thetaF[mt.cullTheta[ci]];
-      for (uint32_t i = 0; i < nV; ++i) {
-        const glm::vec3& a = part.position(k, vBase + i);
-        const glm::vec3 p = a + f * (part.position(k + 1, vBase + i) - a);
-        float x, y;
-        if (project(p, x, y)) cullX[ci * nV + i] = x, cullY[ci * nV + i] = y;
-        else cullX[ci * nV + i] = NAN;
-        cullZ[ci * nV + i] = p.z;
+    bool missesRegion;
+    if (vectorKernels) {
+      // project()'s values four vertices at a time, with the chunk's box.
+      bool unbounded = false;
+      float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
+      for (size_t ci = 0; ci < C; ++ci) {
+        const uint32_t k = mt.thetaSeg[mt.cullTheta[ci]];
+        float box[4];
+        unbounded |= kernels::projectLerped(&part.position(k, vBase).x, &part.position(k + 1, vBase).x, mt.thetaF[mt.cullTheta[ci]], nV, projectionScale,
+                                            &cullX[ci * nV], &cullY[ci * nV], &cullZ[ci * nV], box);
+        bx0 = std::min(bx0, box[0]), by0 = std::min(by0, box[1]), bx1 = std::max(bx1, box[2]), by1 = std::max(by1, box[3]);
       }
+      missesRegion = !unbounded && boxMissesRegion(bx0, by0, bx1, by1, 2.f);
+    } else {
+      for (size_t ci = 0; ci < C; ++ci) {
+        const uint32_t k = mt.thetaSeg[mt.cullTheta[ci]];
+        const float f = mt.thetaF[mt.cullTheta[ci]];
+        for (uint32_t i = 0; i < nV; ++i) {
+          const glm::vec3& a = part.position(k, vBase + i);
+          const glm::vec3 p = a + f * (part.position(k + 1, vBase + i) - a);
+          float x, y;
+          if (project(p, x, y)) cullX[ci * nV + i] = x, cullY[ci * nV + i] = y;
+          else cullX[ci * nV + i] = NAN;
+          cullZ[ci * nV + i] = p.z;
+        }
+      }
+      missesRegion = chunkMissesRegion(C * nV);
     }
-    if (chunkMissesRegion(C * nV)) {
+    if (missesRegion) {
       stats.chunkCulledMicropolygons += ch.m1 - ch.m0;
       return;
     }

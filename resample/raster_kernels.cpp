@@ -1,5 +1,7 @@
 #include "resample/raster_kernels.h"
 
+#include <algorithm>
+
 #include "common/error.h"
 
 #if defined(__x86_64__) || defined(__i386__)
@@ -409,6 +411,54 @@ RESHUTTER_AVX2 size_t testLinearEdgesAvx2(const EdgeTestSetup& s, const LinearEd
   return h;
 }
 
+RESHUTTER_AVX2 bool projectLerpedAvx2(const float* a, const float* b, float f, size_t n, const ProjectionScale& s, float* xo, float* yo, float* zo,
+                                     float box[4]) {
+  const __m128 fv = _mm_set1_ps(f), nearClip = _mm_set1_ps(s.nearClip), inf = _mm_set1_ps(INFINITY), absMask = _mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF));
+  const __m256d ax = _mm256_set1_pd(s.ax), bx = _mm256_set1_pd(s.bx), ay = _mm256_set1_pd(s.ay), by = _mm256_set1_pd(s.by), one = _mm256_set1_pd(1.0);
+  __m128 lo_x = inf, lo_y = inf, hi_x = _mm_set1_ps(-INFINITY), hi_y = hi_x;
+  int bad = 0;
+  for (size_t i = 0; i < n; i += 4) {
+    // Lanes past n repeat the last point (harmless to the box) and are not stored.
+    size_t at[4];
+    for (size_t l = 0; l < 4; ++l) at[l] = 3 * (i + l < n ? i + l : n - 1);
+    auto lane = [&](const float* p, int k) RESHUTTER_AVX2 { return _mm_setr_ps(p[at[0] + k], p[at[1] + k], p[at[2] + k], p[at[3] + k]); };
+    __m128 p[3];
+    for (int k = 0; k < 3; ++k) {
+      const __m128 pa = lane(a, k);
+      p[k] = _mm_add_ps(pa, _mm_mul_ps(fv, _mm_sub_ps(lane(b, k), pa)));  // a + f * (b - a), glm's order
+    }
+    const __m256d px = _mm256_cvtps_pd(p[0]), py = _mm256_cvtps_pd(p[1]);
+    __m128 x, y, ok;
+    if (s.perspective) {
+      const __m256d iz = _mm256_div_pd(one, _mm256_cvtps_pd(p[2]));
+      x = _mm256_cvtpd_ps(_mm256_add_pd(_mm256_mul_pd(ax, _mm256_mul_pd(px, iz)), bx));
+      y = _mm256_cvtpd_ps(_mm256_add_pd(_mm256_mul_pd(ay, _mm256_mul_pd(py, iz)), by));
+      ok = _mm_cmp_ps(p[2], nearClip, _CMP_GE_OQ);
+    } else {
+      x = _mm256_cvtpd_ps(_mm256_add_pd(_mm256_mul_pd(ax, px), bx));
+      y = _mm256_cvtpd_ps(_mm256_add_pd(_mm256_mul_pd(ay, py), by));
+      ok = _mm_castsi128_ps(_mm_set1_epi32(-1));
+    }
+    ok = _mm_and_ps(ok, _mm_and_ps(_mm_cmp_ps(_mm_and_ps(x, absMask), inf, _CMP_LT_OQ), _mm_cmp_ps(_mm_and_ps(y, absMask), inf, _CMP_LT_OQ)));
+    x = _mm_blendv_ps(_mm_set1_ps(NAN), x, ok);
+    bad |= _mm_movemask_ps(ok) ^ 0xF;
+    lo_x = _mm_min_ps(lo_x, _mm_blendv_ps(inf, x, ok)), hi_x = _mm_max_ps(hi_x, _mm_blendv_ps(_mm_set1_ps(-INFINITY), x, ok));
+    lo_y = _mm_min_ps(lo_y, _mm_blendv_ps(inf, y, ok)), hi_y = _mm_max_ps(hi_y, _mm_blendv_ps(_mm_set1_ps(-INFINITY), y, ok));
+    if (i + 4 <= n) {
+      _mm_storeu_ps(xo + i, x), _mm_storeu_ps(yo + i, y), _mm_storeu_ps(zo + i, p[2]);
+    } else {
+      alignas(16) float tx[4], ty[4], tz[4];
+      _mm_store_ps(tx, x), _mm_store_ps(ty, y), _mm_store_ps(tz, p[2]);
+      for (size_t l = 0; i + l < n; ++l) xo[i + l] = tx[l], yo[i + l] = ty[l], zo[i + l] = tz[l];
+    }
+  }
+  alignas(16) float r[4][4];
+  _mm_store_ps(r[0], lo_x), _mm_store_ps(r[1], lo_y), _mm_store_ps(r[2], hi_x), _mm_store_ps(r[3], hi_y);
+  box[0] = std::min({r[0][0], r[0][1], r[0][2], r[0][3]}), box[1] = std::min({r[1][0], r[1][1], r[1][2], r[1][3]});
+  box[2] = std::max({r[2][0], r[2][1], r[2][2], r[2][3]}), box[3] = std::max({r[3][0], r[3][1], r[3][2], r[3][3]});
+  return bad != 0;
+}
+
 }  // namespace
 
 bool available() {
@@ -427,6 +477,9 @@ void linearEdges(const float* const at[4], const float* const to[4], const Raste
   linearEdgesAvx2(at, to, scale, out);
 }
 void fixedEdges(const float* const at[4], const RasterScale& scale, LinearEdges& out) { fixedEdgesAvx2(at, scale, out); }
+bool projectLerped(const float* a, const float* b, float f, size_t n, const ProjectionScale& scale, float* x, float* y, float* z, float box[4]) {
+  return projectLerpedAvx2(a, b, f, n, scale, x, y, z, box);
+}
 
 size_t testLinearEdges(const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits) {
   return setup.fixed ? testLinearEdgesAvx2<true>(setup, edges, n, hits) : testLinearEdgesAvx2<false>(setup, edges, n, hits);
@@ -443,6 +496,9 @@ void linearEdges(const float* const[4], const float* const[4], const RasterScale
   fail("rasterizer", "vector kernels called on a CPU without them");
 }
 void fixedEdges(const float* const[4], const RasterScale&, LinearEdges&) { fail("rasterizer", "vector kernels called on a CPU without them"); }
+bool projectLerped(const float*, const float*, float, size_t, const ProjectionScale&, float*, float*, float*, float[4]) {
+  fail("rasterizer", "vector kernels called on a CPU without them");
+}
 size_t testLinearEdges(const EdgeTestSetup&, const LinearEdges&, size_t, EdgeHit*) {
   fail("rasterizer", "vector kernels called on a CPU without them");
 }

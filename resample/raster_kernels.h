@@ -95,6 +95,22 @@ struct RasterScale {
 /// meaningless): E = A_a × A_b + f (A_a × D_b + D_a × A_b) + f² D_a × D_b with D = to - at, in
 /// the rasterizer's prepareEdges() operations and order, so bit-identical to it.
 void linearEdges(const float* const at[4], const float* const to[4], const RasterScale& scale, LinearEdges& out);
+/// The camera's map from camera space to raster, as the rasterizer's project() applies it:
+/// x = float(ax (x / z) + bx) with the division as 1 / z in double (perspective), or
+/// float(ax x + bx); a point before the near plane, or one that lands off the float range, has
+/// no raster position.
+struct ProjectionScale {
+  double ax, bx, ay, by;
+  float nearClip;
+  bool perspective;
+};
+
+/// Points p_i = a_i + f (b_i - a_i) for i < n (a and b: xyz triples), projected: x[i], y[i] their
+/// raster position (x[i] NaN where there is none, y[i] then unspecified), z[i] the depth p_i.z;
+/// project()'s operations, bit for bit. Returns whether any x is NaN; box = min x, min y, max x,
+/// max y over the others.
+bool projectLerped(const float* a, const float* b, float f, size_t n, const ProjectionScale& scale, float* x, float* y, float* z, float box[4]);
+
 /// A static micropolygon's edges: c[0..2] only (A_a × A_b), the rasterizer's static-path
 /// operations and order.
 void fixedEdges(const float* const at[4], const RasterScale& scale, LinearEdges& out);

@@ -362,7 +362,9 @@ TEST(ResampleHard, VectorAndScalarKernelsAgreeOrthographic) {
       }
       const std::string what = std::string(moving ? "moving " : "static ") + std::to_string(open) + ":" + std::to_string(close);
       EXPECT_GT(results[0].stats.raster.hits, 5000u) << what;
-      if (!moving) EXPECT_GT(results[0].stats.raster.staticMicropolygons, 100u) << what;
+      if (!moving) {
+        EXPECT_GT(results[0].stats.raster.staticMicropolygons, 100u) << what;
+      }
       for (const char* ch : {"R", "G", "B", "A", "Z"}) EXPECT_EQ(channel(results[1], ch).f, channel(results[0], ch).f) << what << " " << ch;
     }
   }
