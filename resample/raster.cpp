@@ -7,6 +7,10 @@
 #include "common/error.h"
 #include "resample/raster_kernels.h"
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 namespace reshutter::resample {
 
 using store::kNoCorner;
@@ -1039,13 +1043,34 @@ struct BucketRasterizer::Impl {
     const LinearInterval& li = mp.times.li;
     // Min and max of the corners' end positions and max of their reach, four lanes each (the
     // compiler vectorises the fixed-size loops).
-    float lo[4], hi[4], reach[4];
-    float zNear;
+    alignas(16) float lo[4], hi[4], reach[4];
+    float zNear, mag;
     {
       const uint32_t v = c[0] - mp.vBase;
       bool unbounded = linearUnbounded[v];
       zNear = linearDepth[v];
       const LinearVertex& first = linearVertex[v];
+#if defined(__SSE2__)
+      // std::min(a, b) is _mm_min_ps(b, a) and std::max(a, b) is _mm_max_ps(b, a), NaN and
+      // signed zeros included.
+      __m128 l = _mm_loadu_ps(first.ends), u = l, r = _mm_loadu_ps(first.reach);
+      for (int j = 1; j < nc; ++j) {
+        const uint32_t vj = c[j] - mp.vBase;
+        const LinearVertex& lv = linearVertex[vj];
+        unbounded |= linearUnbounded[vj];
+        zNear = std::min(zNear, linearDepth[vj]);
+        const __m128 e = _mm_loadu_ps(lv.ends);
+        l = _mm_min_ps(e, l), u = _mm_max_ps(e, u), r = _mm_max_ps(_mm_loadu_ps(lv.reach), r);
+      }
+      if (unbounded) return false;
+      _mm_store_ps(lo, l), _mm_store_ps(hi, u), _mm_store_ps(reach, r);
+      // The largest magnitude of the eight box ends (max is exact: any order gives the same).
+      const __m128 absMask = _mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF));
+      __m128 m = _mm_max_ps(_mm_and_ps(l, absMask), _mm_and_ps(u, absMask));
+      m = _mm_max_ps(m, _mm_shuffle_ps(m, m, _MM_SHUFFLE(1, 0, 3, 2)));
+      m = _mm_max_ps(m, _mm_shuffle_ps(m, m, _MM_SHUFFLE(2, 3, 0, 1)));
+      mag = _mm_cvtss_f32(m);
+#else
       for (int k = 0; k < 4; ++k) lo[k] = hi[k] = first.ends[k], reach[k] = first.reach[k];
       for (int j = 1; j < nc; ++j) {
         const uint32_t vj = c[j] - mp.vBase;
@@ -1055,11 +1080,12 @@ struct BucketRasterizer::Impl {
         for (int k = 0; k < 4; ++k) lo[k] = std::min(lo[k], lv.ends[k]), hi[k] = std::max(hi[k], lv.ends[k]), reach[k] = std::max(reach[k], lv.reach[k]);
       }
       if (unbounded) return false;
+      mag = 0.f;
+      for (int k = 0; k < 4; ++k) mag = std::max({mag, std::abs(lo[k]), std::abs(hi[k])});
+#endif
     }
     const float ax0 = lo[0], ay0 = lo[1], bx0 = lo[2], by0 = lo[3], ax1 = hi[0], ay1 = hi[1], bx1 = hi[2], by1 = hi[3];
     const float mvx = reach[0], mvy = reach[1], rho = reach[2], dz = reach[3];
-    const float mag = std::max(std::max(std::max(std::abs(ax0), std::abs(ax1)), std::max(std::abs(ay0), std::abs(ay1))),
-                               std::max(std::max(std::abs(bx0), std::abs(bx1)), std::max(std::abs(by0), std::abs(by1))));
     const float slack = rho + li.uErr + 1e-5f;
     const float mx = 1e-3f + 1e-6f * mag + slack * mvx, my = 1e-3f + 1e-6f * mag + slack * mvy;
     if (!(std::isfinite(mx) && std::isfinite(my))) return false;
