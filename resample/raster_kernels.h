@@ -1,6 +1,7 @@
 // The bucket rasterizer's vectorised inner loops: gathering one time stratum's samples that lie in
-// a micropolygon's moving box, row by row, and the exact double-precision edge test of a list of
-// candidates against a micropolygon moving linearly inside one knot segment.
+// a micropolygon's moving box, row by row; the exact double-precision edge test of a list of
+// candidates against a micropolygon moving linearly inside one knot segment; and their set-up
+// (projecting a chunk's vertices, a micropolygon's edge functions).
 //
 // They are written with AVX2 intrinsics in functions compiled for AVX2 only, chosen at run time
 // (kernels::available()), so the binary still runs on any x86-64 node; raster.cpp keeps the scalar
@@ -95,6 +96,10 @@ struct RasterScale {
 /// meaningless): E = A_a × A_b + f (A_a × D_b + D_a × A_b) + f² D_a × D_b with D = to - at, in
 /// the rasterizer's prepareEdges() operations and order, so bit-identical to it.
 void linearEdges(const float* const at[4], const float* const to[4], const RasterScale& scale, LinearEdges& out);
+/// A static micropolygon's edges: c[0..2] only (A_a × A_b), the rasterizer's static-path
+/// operations and order.
+void fixedEdges(const float* const at[4], const RasterScale& scale, LinearEdges& out);
+
 /// The camera's map from camera space to raster, as the rasterizer's project() applies it:
 /// x = float(ax (x / z) + bx) with the division as 1 / z in double (perspective), or
 /// float(ax x + bx); a point before the near plane, or one that lands off the float range, has
@@ -110,10 +115,6 @@ struct ProjectionScale {
 /// project()'s operations, bit for bit. Returns whether any x is NaN; box = min x, min y, max x,
 /// max y over the others.
 bool projectLerped(const float* a, const float* b, float f, size_t n, const ProjectionScale& scale, float* x, float* y, float* z, float box[4]);
-
-/// A static micropolygon's edges: c[0..2] only (A_a × A_b), the rasterizer's static-path
-/// operations and order.
-void fixedEdges(const float* const at[4], const RasterScale& scale, LinearEdges& out);
 
 struct EdgeTestSetup {
   const float* st;  // the candidates' times and raster positions (Candidates::t, x, y)
