@@ -190,7 +190,6 @@ struct BucketRasterizer::Impl {
   std::vector<glm::vec3> instantPos;   // a chunk's vertices at an instantaneous group's time
 
   // Per-chunk scratch, indexed by vertex - the chunk's first vertex.
-  std::vector<glm::dvec3> hom;         // homogeneous vertex coordinates at one time
   std::vector<float> projX, projY;     // [(v - vBase) * T + theta]; projX NaN = before the near plane
   std::vector<float> projRho;          // [(v - vBase) * T + theta]: perspective lag bound of theta interval (theta, theta+1)
   std::vector<float> depthScratch;     // one vertex's depths at the theta times
@@ -280,8 +279,7 @@ struct BucketRasterizer::Impl {
         }
       }
     // The widening, per stratum plane and row: tBase + double(st) rises with st (rounding is
-    // monotonic), so the extreme stored times are those of the extreme st, found in vectorisable
-    // row loops.
+    // monotonic), so the extreme stored times are those of the extreme st, found row by row.
     for (int s = 0; s < N; ++s)
       for (int py = 0; py < h; ++py) {
         const float* row = &st[size_t(s) * PS + size_t(py) * w];
@@ -573,12 +571,10 @@ struct BucketRasterizer::Impl {
     const double covLo = src.coverStart(), covHi = src.coverEnd();
     const bool checkCover = tMin < covLo || tMax > covHi;
     const uint32_t vBase = ch.vLo, nV = ch.vHi - ch.vLo + 1;
-    hom.resize(nV), projX.resize(nV), projY.resize(nV);
+    projX.resize(nV), projY.resize(nV);
     // Each vertex is projected once, not once per micropolygon that shares it (about four).
-    for (size_t i = 0; i < nV; ++i) {
-      hom[i] = homogeneous(chunkPos[i]);
+    for (size_t i = 0; i < nV; ++i)
       if (!project(chunkPos[i], projX[i], projY[i])) projX[i] = NAN;
-    }
     for (uint32_t m = ch.m0; m < ch.m1; ++m) {
       const uint32_t* c = &part.corners[size_t(m) * 4];
       const bool tri = c[3] == kNoCorner;
@@ -588,7 +584,8 @@ struct BucketRasterizer::Impl {
       glm::dvec3 E[5] = {};
       auto makeEdges = [&] {
         for (int k = 0; k < 5; ++k)
-          if (!tri || !(k == 2 || k == 3)) E[k] = toRaster(cross(hom[c[kEdgeVerts[k][0]] - vBase], hom[c[kEdgeVerts[k][1]] - vBase]));
+          if (!tri || !(k == 2 || k == 3))
+            E[k] = toRaster(cross(homogeneous(chunkPos[c[kEdgeVerts[k][0]] - vBase]), homogeneous(chunkPos[c[kEdgeVerts[k][1]] - vBase])));
       };
       float zv[4];
       float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
@@ -1054,8 +1051,7 @@ struct BucketRasterizer::Impl {
 
   bool rasterizeLinear(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, int nc) {
     const LinearInterval& li = mp.times.li;
-    // Min and max of the corners' end positions and max of their reach, four lanes each (the
-    // compiler vectorises the fixed-size loops).
+    // Min and max of the corners' end positions and max of their reach, four lanes each.
     alignas(16) float lo[4], hi[4], reach[4];
     float zNear, mag;
     {

@@ -211,8 +211,11 @@ TEST(ResampleCompositing, TransparentLayersOverAnOpaqueOne) {
   EXPECT_NEAR(channel(r, "Z").f[8 * 16 + 8], 20.0, 1e-4);
 }
 
-TEST(ResampleCompositing, MatteCutsOutAndHidesWhatIsBehind) {
-  ScratchDir dir;
+namespace {
+
+// A 32×16 static scene: an opaque background (0.9, 0.8, 0.7) at depth 30 and a matte over
+// x 8..24, y 4..12 at depth 10.
+TestScene matteOverBackground() {
   TestScene s = makeScene(32, 16, {0.0});
   TestMp bg;
   bg.knots = {s.rect(-2, -2, 34, 18, 30)};
@@ -222,6 +225,14 @@ TEST(ResampleCompositing, MatteCutsOutAndHidesWhatIsBehind) {
   matte.knots = {s.rect(8, 4, 24, 12, 10)};
   matte.flags = store::kMatte;
   s.mps.push_back(matte);
+  return s;
+}
+
+}  // namespace
+
+TEST(ResampleCompositing, MatteCutsOutAndHidesWhatIsBehind) {
+  ScratchDir dir;
+  TestScene s = matteOverBackground();
   TestMp glass;  // a semi-transparent surface in front of the matte still shows
   glass.knots = {s.rect(20, 0, 28, 16, 5)};
   glass.ci = {0.2f, 0.2f, 0.2f}, glass.oi = {0.5f, 0.5f, 0.5f};
@@ -244,16 +255,7 @@ TEST(ResampleCompositing, MatteCutsOutAndHidesWhatIsBehind) {
 // general one with them; both cut the matte out and keep its depth.
 TEST(ResampleCompositing, OpaqueMatteCutsOutWithAndWithoutOutputVariables) {
   ScratchDir dir;
-  TestScene s = makeScene(32, 16, {0.0});
-  TestMp bg;
-  bg.knots = {s.rect(-2, -2, 34, 18, 30)};
-  bg.ci = {0.9f, 0.8f, 0.7f};
-  s.mps.push_back(bg);
-  TestMp matte;
-  matte.knots = {s.rect(8, 4, 24, 12, 10)};
-  matte.flags = store::kMatte;
-  s.mps.push_back(matte);
-  auto reader = writeScene(s, dir.path("matte.mps"));
+  auto reader = writeScene(matteOverBackground(), dir.path("matte.mps"));
   for (bool withAov : {false, true}) {
     RenderSpec spec = specFor(reader, 0, 0, 3, 3);
     if (withAov) spec.aovs = {AovRequest::parse("id", "test")};
