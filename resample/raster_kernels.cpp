@@ -167,7 +167,7 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
   // ends, as the corners move linearly), widened, clamped to the region and floored; then each
   // range's first sample, size and whether it is empty, still eight at a time.
   alignas(32) int first[64], cols[64], rows[64], rowOffset[64], second[64], third[64], fourth[64], laneMask[64], laneMask2[64];
-  uint64_t nonEmpty = 0, oneVector = 0;
+  uint64_t nonEmpty = 0, oneVector = 0, halfVector = 0;
   const int N = sp.strata;
   const __m256 m = _mm256_set1_ps(sp.margin);
   const __m256 lox = _mm256_set1_ps(float(sp.x0)), hix = _mm256_set1_ps(float(sp.x0 + sp.w));
@@ -212,6 +212,9 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
                   fourRows = _mm256_cmpgt_epi32(r, _mm256_set1_epi32(3));
     const __m256i fits = _mm256_andnot_si256(_mm256_or_si256(_mm256_cmpgt_epi32(c, _mm256_set1_epi32(4)), _mm256_cmpgt_epi32(r, _mm256_set1_epi32(4))), live);
     oneVector |= uint64_t(unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(fits)))) << s;
+    const __m256i two = _mm256_set1_epi32(2);
+    const __m256i halfFits = _mm256_andnot_si256(_mm256_or_si256(_mm256_cmpgt_epi32(c, two), _mm256_cmpgt_epi32(r, two)), live);
+    halfVector |= uint64_t(unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(halfFits)))) << s;
     const __m256i row2 = _mm256_add_epi32(at, _mm256_and_si256(threeRows, _mm256_add_epi32(stride, stride)));
     _mm256_store_si256(reinterpret_cast<__m256i*>(second + s), _mm256_add_epi32(at, _mm256_and_si256(twoRows, stride)));
     _mm256_store_si256(reinterpret_cast<__m256i*>(third + s), row2);
@@ -222,8 +225,8 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
     _mm256_store_si256(reinterpret_cast<__m256i*>(laneMask2 + s),
                        _mm256_or_si256(_mm256_and_si256(threeRows, colBits), _mm256_and_si256(fourRows, _mm256_slli_epi32(colBits, 4))));
   }
-  if (N < 64) nonEmpty &= (uint64_t(1) << N) - 1;  // the padding lanes past the last stratum
-  if (region.rowGroup) oneVector = 0;  // fields: gatherRows() skips the other group's rows
+  if (N < 64) nonEmpty &= (uint64_t(1) << N) - 1, halfVector &= (uint64_t(1) << N) - 1;  // the padding lanes past the last stratum
+  if (region.rowGroup) oneVector = 0, halfVector = 0;  // fields: gatherRows() skips the other group's rows
   // Locals, so that the candidate stores (which may alias anything) do not force reloads.
   const Candidates list = out;
   SampleRows rr = region;
@@ -232,6 +235,33 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
   size_t n = 0;
   const __m256i quad = _mm256_setr_epi32(0, 1, 2, 3, 0, 1, 2, 3);
   const __m256 zCull = _mm256_set1_ps(region.zCull);
+  // Strata of at most two rows of at most two pixels (most of them when the box moves less than a
+  // pixel per stratum, as over a short shutter) go two to a vector: stratum a's rows in lanes
+  // 0-1 and 4-5, stratum b's in lanes 2-3 and 6-7. The candidates then come in another order
+  // than stratum by stratum; each sample still comes once, and what a hit does depends only on
+  // its own sample.
+  auto pairedRows = [&](const float* v, size_t alo, size_t ahi, size_t blo, size_t bhi) RESHUTTER_AVX2 {
+    const __m128 lo = _mm_loadh_pi(_mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(v + alo))), reinterpret_cast<const __m64*>(v + blo));
+    const __m128 hi = _mm_loadh_pi(_mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(v + ahi))), reinterpret_cast<const __m64*>(v + bhi));
+    return _mm256_set_m128(hi, lo);
+  };
+  const __m256i pairSpread = _mm256_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3), pairStep = _mm256_setr_epi32(0, 1, 0, 1, 0, 1, 0, 1);
+  uint64_t halves = halfVector;
+  while (halves & (halves - 1)) {
+    const int a = __builtin_ctzll(halves);
+    halves &= halves - 1;
+    const int b = __builtin_ctzll(halves);
+    halves &= halves - 1;
+    const size_t alo = size_t(uint32_t(first[a])), ahi = size_t(uint32_t(second[a])), blo = size_t(uint32_t(first[b])), bhi = size_t(uint32_t(second[b]));
+    const __m256 t = pairedRows(rr.st, alo, ahi, blo, bhi), x = pairedRows(rr.sx, alo, ahi, blo, bhi), y = pairedRows(rr.sy, alo, ahi, blo, bhi);
+    const __m256 visible = _mm256_cmp_ps(pairedRows(rr.depth, alo, ahi, blo, bhi), zCull, _CMP_GT_OQ);
+    const unsigned mask = unsigned(_mm256_movemask_ps(_mm256_and_ps(insideAtOwnTime(lanes, t, x, y), visible))) & unsigned(laneMask[a] | laneMask[b] << 2);
+    if (!mask) continue;
+    const __m256i rowStarts = _mm256_castsi128_si256(_mm_setr_epi32(int(uint32_t(alo)), int(uint32_t(blo)), int(uint32_t(ahi)), int(uint32_t(bhi))));
+    n = appendMasked(mask, _mm256_add_epi32(_mm256_permutevar8x32_epi32(rowStarts, pairSpread), pairStep), t, x, y, list, n);
+  }
+  // An unpaired one is left to the loop below.
+  nonEmpty &= ~(halfVector & ~halves);
   for (uint64_t strataLeft = nonEmpty; strataLeft; strataLeft &= strataLeft - 1) {
     const int s = __builtin_ctzll(strataLeft);
     if ((oneVector >> s) & 1) {
