@@ -1192,7 +1192,7 @@ struct BucketRasterizer::Impl {
       }
       const float z = eh.z;
       if (!(z >= view.nearClip && z <= view.farClip)) continue;
-      const uint32_t tv[3] = {c[0], c[eh.triangle ? 2 : 1], c[eh.triangle ? 3 : 2]};
+      const uint32_t tv[3] = {c[0], c[1 + eh.triangle], c[2 + eh.triangle]};  // an index, not a branch: the triangle is a coin toss
       recordHit(hc, idx, m, tv, eh.b, z);
     }
   }

@@ -419,23 +419,26 @@ RESHUTTER_AVX2 size_t testLinearEdgesAvx2(const EdgeTestSetup& s, const LinearEd
     }
     int any = hitA | hitB | undecided;
     if (!any) continue;
-    alignas(16) float bA[3][4], bB[3][4], zA[4], zB[4];
-    for (int k = 0; k < 3; ++k) _mm_store_ps(bA[k], A.b[k]), _mm_store_ps(bB[k], B.b[k]);
+    // Per triangle (A, B): barycentrics b0 b1 b2 and depth, by lane. Which triangle a sample hit
+    // is a coin toss, so the copy below indexes by it rather than branching on it.
+    alignas(16) float bz[2][4][4];
+    for (int k = 0; k < 3; ++k) _mm_store_ps(bz[0][k], A.b[k]), _mm_store_ps(bz[1][k], B.b[k]);
     // Depths, as recordKernelHits() and the scalar tests compute them (operand order kept).
     __m128 zv[4];
     for (int j = 0; j < 4; ++j) zv[j] = _mm_add_ps(_mm_set1_ps(s.za[j]), _mm_mul_ps(f, _mm_set1_ps(s.zb[j] - s.za[j])));
-    _mm_store_ps(zA, _mm_add_ps(_mm_add_ps(_mm_mul_ps(A.b[0], zv[0]), _mm_mul_ps(A.b[1], zv[1])), _mm_mul_ps(A.b[2], zv[2])));
-    _mm_store_ps(zB, _mm_add_ps(_mm_add_ps(_mm_mul_ps(B.b[0], zv[0]), _mm_mul_ps(B.b[1], zv[2])), _mm_mul_ps(B.b[2], zv[3])));
+    _mm_store_ps(bz[0][3], _mm_add_ps(_mm_add_ps(_mm_mul_ps(A.b[0], zv[0]), _mm_mul_ps(A.b[1], zv[1])), _mm_mul_ps(A.b[2], zv[2])));
+    _mm_store_ps(bz[1][3], _mm_add_ps(_mm_add_ps(_mm_mul_ps(B.b[0], zv[0]), _mm_mul_ps(B.b[1], zv[2])), _mm_mul_ps(B.b[2], zv[3])));
     while (any) {
       const int l = __builtin_ctz(unsigned(any));
       any &= any - 1;
       EdgeHit& out = hits[h++];
       out.candidate = uint32_t(i + size_t(l));
       out.undecided = (undecided >> l) & 1;
-      out.triangle = (hitB >> l) & 1;
-      const auto& b = out.triangle ? bB : bA;
+      const int tri = (hitB >> l) & 1;
+      out.triangle = uint8_t(tri);
+      const float(*b)[4] = bz[tri];
       out.b[0] = b[0][l], out.b[1] = b[1][l], out.b[2] = b[2][l];
-      out.z = out.triangle ? zB[l] : zA[l];
+      out.z = b[3][l];
     }
   }
   return h;
