@@ -167,7 +167,7 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
   // ends, as the corners move linearly), widened, clamped to the region and floored; then each
   // range's first sample, size and whether it is empty, still eight at a time.
   alignas(32) int first[64], cols[64], rows[64], rowOffset[64], second[64], third[64], fourth[64], laneMask[64], laneMask2[64];
-  uint64_t nonEmpty = 0, oneVector = 0, halfVector = 0;
+  uint64_t nonEmpty = 0, oneVector = 0, halfVector = 0, twoVectors = 0;
   const int N = sp.strata;
   const __m256 m = _mm256_set1_ps(sp.margin);
   const __m256 lox = _mm256_set1_ps(float(sp.x0)), hix = _mm256_set1_ps(float(sp.x0 + sp.w));
@@ -212,6 +212,7 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
                   fourRows = _mm256_cmpgt_epi32(r, _mm256_set1_epi32(3));
     const __m256i fits = _mm256_andnot_si256(_mm256_or_si256(_mm256_cmpgt_epi32(c, _mm256_set1_epi32(4)), _mm256_cmpgt_epi32(r, _mm256_set1_epi32(4))), live);
     oneVector |= uint64_t(unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(fits)))) << s;
+    twoVectors |= uint64_t(unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_and_si256(threeRows, fits))))) << s;
     const __m256i two = _mm256_set1_epi32(2);
     const __m256i halfFits = _mm256_andnot_si256(_mm256_or_si256(_mm256_cmpgt_epi32(c, two), _mm256_cmpgt_epi32(r, two)), live);
     halfVector |= uint64_t(unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(halfFits)))) << s;
@@ -262,23 +263,29 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
   }
   // An unpaired one is left to the loop below.
   nonEmpty &= ~(halfVector & ~halves);
-  for (uint64_t strataLeft = nonEmpty; strataLeft; strataLeft &= strataLeft - 1) {
-    const int s = __builtin_ctzll(strataLeft);
-    if ((oneVector >> s) & 1) {
-      // gatherRows()' row pairs, with the stratum's lanes known in advance (same candidates, same
-      // order).
-      auto rowPair = [&](size_t lo, size_t hi, unsigned lanesLive) RESHUTTER_AVX2 {
-        const __m256 t = _mm256_loadu2_m128(rr.st + hi, rr.st + lo), x = _mm256_loadu2_m128(rr.sx + hi, rr.sx + lo),
-                     y = _mm256_loadu2_m128(rr.sy + hi, rr.sy + lo);
-        const __m256 visible = _mm256_cmp_ps(_mm256_loadu2_m128(rr.depth + hi, rr.depth + lo), zCull, _CMP_GT_OQ);
-        const unsigned mask = unsigned(_mm256_movemask_ps(_mm256_and_ps(insideAtOwnTime(lanes, t, x, y), visible))) & lanesLive;
-        const __m256i idx = _mm256_add_epi32(_mm256_setr_m128i(_mm_set1_epi32(int(uint32_t(lo))), _mm_set1_epi32(int(uint32_t(hi)))), quad);
-        n = appendMasked(mask, idx, t, x, y, list, n);
-      };
-      rowPair(size_t(uint32_t(first[s])), size_t(uint32_t(second[s])), unsigned(laneMask[s]));
-      if (laneMask2[s]) rowPair(size_t(uint32_t(third[s])), size_t(uint32_t(fourth[s])), unsigned(laneMask2[s]));
-      continue;
-    }
+  // gatherRows()' row pairs, with each stratum's lanes known in advance: every one-vector
+  // stratum's first vector, then the second vectors of those with three or four rows, then the
+  // wider strata; loops over bit sets rather than branches on each stratum's kind, which the
+  // predictor would lose.
+  auto rowPair = [&](size_t lo, size_t hi, unsigned lanesLive) RESHUTTER_AVX2 {
+    const __m256 t = _mm256_loadu2_m128(rr.st + hi, rr.st + lo), x = _mm256_loadu2_m128(rr.sx + hi, rr.sx + lo),
+                 y = _mm256_loadu2_m128(rr.sy + hi, rr.sy + lo);
+    const __m256 visible = _mm256_cmp_ps(_mm256_loadu2_m128(rr.depth + hi, rr.depth + lo), zCull, _CMP_GT_OQ);
+    const unsigned mask = unsigned(_mm256_movemask_ps(_mm256_and_ps(insideAtOwnTime(lanes, t, x, y), visible))) & lanesLive;
+    const __m256i idx = _mm256_add_epi32(_mm256_setr_m128i(_mm_set1_epi32(int(uint32_t(lo))), _mm_set1_epi32(int(uint32_t(hi)))), quad);
+    n = appendMasked(mask, idx, t, x, y, list, n);
+  };
+  const uint64_t single = nonEmpty & oneVector;
+  for (uint64_t left = single; left; left &= left - 1) {
+    const int s = __builtin_ctzll(left);
+    rowPair(size_t(uint32_t(first[s])), size_t(uint32_t(second[s])), unsigned(laneMask[s]));
+  }
+  for (uint64_t left = single & twoVectors; left; left &= left - 1) {
+    const int s = __builtin_ctzll(left);
+    rowPair(size_t(uint32_t(third[s])), size_t(uint32_t(fourth[s])), unsigned(laneMask2[s]));
+  }
+  for (uint64_t left = nonEmpty & ~oneVector; left; left &= left - 1) {
+    const int s = __builtin_ctzll(left);
     rr.first = size_t(uint32_t(first[s]));
     rr.cols = cols[s], rr.rows = rows[s];
     if (rowGroup) rr.rowGroup = rowGroup + rowOffset[s];
