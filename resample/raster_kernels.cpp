@@ -435,10 +435,10 @@ RESHUTTER_AVX2 size_t testLinearEdgesAvx2(const EdgeTestSetup& s, const LinearEd
     for (int j = 0; j < 4; ++j) zv[j] = _mm_add_ps(_mm_set1_ps(s.za[j]), _mm_mul_ps(f, _mm_set1_ps(s.zb[j] - s.za[j])));
     _mm_store_ps(bz[0][3], _mm_add_ps(_mm_add_ps(_mm_mul_ps(A.b[0], zv[0]), _mm_mul_ps(A.b[1], zv[1])), _mm_mul_ps(A.b[2], zv[2])));
     _mm_store_ps(bz[1][3], _mm_add_ps(_mm_add_ps(_mm_mul_ps(B.b[0], zv[0]), _mm_mul_ps(B.b[1], zv[2])), _mm_mul_ps(B.b[2], zv[3])));
-    while (any) {
-      const int l = __builtin_ctz(unsigned(any));
-      any &= any - 1;
-      EdgeHit& out = hits[h++];
+    // Every lane is written and the count advances by whether it is kept: how many of the four
+    // hit is data the predictor cannot learn. (The list has room for n + 3 entries.)
+    for (int l = 0; l < 4; ++l) {
+      EdgeHit& out = hits[h];
       out.candidate = uint32_t(i + size_t(l));
       out.undecided = (undecided >> l) & 1;
       const int tri = (hitB >> l) & 1;
@@ -446,6 +446,7 @@ RESHUTTER_AVX2 size_t testLinearEdgesAvx2(const EdgeTestSetup& s, const LinearEd
       const float(*b)[4] = bz[tri];
       out.b[0] = b[0][l], out.b[1] = b[1][l], out.b[2] = b[2][l];
       out.z = b[3][l];
+      h += size_t((any >> l) & 1);
     }
   }
   return h;
