@@ -261,7 +261,7 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
     const __m256i rowStarts = _mm256_castsi128_si256(_mm_setr_epi32(int(uint32_t(alo)), int(uint32_t(blo)), int(uint32_t(ahi)), int(uint32_t(bhi))));
     n = appendMasked(mask, _mm256_add_epi32(_mm256_permutevar8x32_epi32(rowStarts, pairSpread), pairStep), t, x, y, list, n);
   }
-  // An unpaired one is left to the loop below.
+  // An unpaired one is left to the loops below.
   nonEmpty &= ~(halfVector & ~halves);
   // gatherRows()' row pairs, with each stratum's lanes known in advance: every one-vector
   // stratum's first vector, then the second vectors of those with three or four rows, then the

@@ -74,7 +74,8 @@ struct StrataSpans {
 };
 
 /// For each stratum, the pixels its part of the box's path touches, then gatherInBox() over
-/// them: one call per micropolygon instead of one per stratum.
+/// them: one call per micropolygon instead of one per stratum. The same candidates, in an order
+/// of its own (small strata share vectors, and the strata are visited kind by kind).
 size_t gatherStrata(const SampleRows& region, const StrataSpans& spans, const MovingBox& box, const Candidates& out);
 
 /// A micropolygon's edges over one knot segment, component-major: edge e's cross product is
