@@ -581,11 +581,12 @@ struct BucketRasterizer::Impl {
       const int nc = tri ? 3 : 4;
       // The edges, made only for micropolygons that reach the sample tests (most of a part's miss
       // a given bucket).
-      glm::dvec3 E[5] = {};
+      glm::dvec3 E[5];  // set by makeEdges(), not per micropolygon
       auto makeEdges = [&] {
         for (int k = 0; k < 5; ++k)
-          if (!tri || !(k == 2 || k == 3))
-            E[k] = toRaster(cross(homogeneous(chunkPos[c[kEdgeVerts[k][0]] - vBase]), homogeneous(chunkPos[c[kEdgeVerts[k][1]] - vBase])));
+          E[k] = tri && (k == 2 || k == 3)
+                     ? glm::dvec3(0.0)
+                     : toRaster(cross(homogeneous(chunkPos[c[kEdgeVerts[k][0]] - vBase]), homogeneous(chunkPos[c[kEdgeVerts[k][1]] - vBase])));
       };
       float zv[4];
       float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
@@ -1030,14 +1031,6 @@ struct BucketRasterizer::Impl {
     }
   }
 
-  // Micropolygon mi over a group interval inside one knot segment, from its corners' raster
-  // positions A and B at the interval's ends (cullX/cullY rows 0 and 1). Corner j's raster
-  // position at fraction u is x_j(u) = A_j + (B_j - A_j) g_j(u), a straight line in screen space;
-  // with perspective g_j(u) - u = u (1 - u) (zB - zA) / z(u), at most |dz| / (4 z_min) = rho_j.
-  // As min of lerps >= lerp of mins, min_j x_j(u) >= lerp(min_j A_j, min_j B_j, u) - max_j rho_j
-  // |B_j - A_j|: the box at any time is the lerped end boxes widened by that margin. Each
-  // stratum tests only its samples inside the box at the sample's own time. False (nothing
-  // done) when a corner lies before the near plane at either end: the general path handles it.
   // The per-vertex terms of rasterizeLinear() for the chunk's nV vertices (cull rows 0 and 1).
   void prepareLinearVertices(uint32_t nV) {
     linearVertex.resize(nV), linearDepth.resize(nV), linearUnbounded.resize(nV);
@@ -1049,6 +1042,14 @@ struct BucketRasterizer::Impl {
     }
   }
 
+  // Micropolygon mi over a group interval inside one knot segment, from its corners' raster
+  // positions A and B at the interval's ends (cullX/cullY rows 0 and 1). Corner j's raster
+  // position at fraction u is x_j(u) = A_j + (B_j - A_j) g_j(u), a straight line in screen space;
+  // with perspective g_j(u) - u = u (1 - u) (zB - zA) / z(u), at most |dz| / (4 z_min) = rho_j.
+  // As min of lerps >= lerp of mins, min_j x_j(u) >= lerp(min_j A_j, min_j B_j, u) - max_j rho_j
+  // |B_j - A_j|: the box at any time is the lerped end boxes widened by that margin. Each
+  // stratum tests only its samples inside the box at the sample's own time. False (nothing
+  // done) when a corner lies before the near plane at either end: the general path handles it.
   bool rasterizeLinear(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, int nc) {
     const LinearInterval& li = mp.times.li;
     // Min and max of the corners' end positions and max of their reach, four lanes each.

@@ -73,6 +73,22 @@ RESHUTTER_AVX2 inline size_t appendLanes(__m256 in, __m256i live, __m256i idx, _
   return appendMasked(unsigned(_mm256_movemask_ps(_mm256_and_ps(in, _mm256_castsi256_ps(live)))), idx, t, x, y, out, n);
 }
 
+// Samples lo..lo+3 in lanes 0-3 and hi..hi+3 in lanes 4-7 against box `b` (kFixed:
+// insideFixed()) and the early depth test; appends those among lanesLive. The two-row step of
+// every narrow gather.
+template <bool kFixed = false>
+RESHUTTER_AVX2 __attribute__((always_inline)) inline size_t appendRowPair(const BoxLanes& b, const SampleRows& r, __m256 zCull, size_t lo, size_t hi,
+                                                                          unsigned lanesLive, const Candidates& out, size_t n) {
+  const __m256 t = _mm256_loadu2_m128(r.st + hi, r.st + lo), x = _mm256_loadu2_m128(r.sx + hi, r.sx + lo), y = _mm256_loadu2_m128(r.sy + hi, r.sy + lo);
+  const __m256 visible = _mm256_cmp_ps(_mm256_loadu2_m128(r.depth + hi, r.depth + lo), zCull, _CMP_GT_OQ);
+  const __m256 in = kFixed ? insideFixed(b, x, y) : insideAtOwnTime(b, t, x, y);
+  const unsigned mask = unsigned(_mm256_movemask_ps(_mm256_and_ps(in, visible))) & lanesLive;
+  if (!mask) return n;
+  const __m256i quad = _mm256_setr_epi32(0, 1, 2, 3, 0, 1, 2, 3);
+  const __m256i idx = _mm256_add_epi32(_mm256_setr_m128i(_mm_set1_epi32(int(uint32_t(lo))), _mm_set1_epi32(int(uint32_t(hi)))), quad);
+  return appendMasked(mask, idx, t, x, y, out, n);
+}
+
 // The rows of `rows` against box `b`: the body of both gathers, inlined so that the box is
 // broadcast once per micropolygon, not once per stratum.
 // kFixed: the box does not move (insideFixed()). The candidates still carry their times: a
@@ -84,18 +100,11 @@ RESHUTTER_AVX2 __attribute__((always_inline)) inline size_t gatherRows(const Box
     if (r.cols <= 4 && r.rows <= 2 && !r.rowGroup) {
       // A static micropolygon's box (one or two pixels each way, usually): one vector per plane,
       // rows 0 and 1 (or row 0 twice, masked off) in its halves.
-      const __m256i quad = _mm256_setr_epi32(0, 1, 2, 3, 0, 1, 2, 3);
       const unsigned colBits = (1u << r.cols) - 1, lanes = r.rows == 2 ? colBits | colBits << 4 : colBits;
       const size_t second = r.rows == 2 ? r.stride : 0;
       for (int plane = 0; plane < r.planes; ++plane) {
-        const size_t lo = r.first + size_t(plane) * r.planeStride, hi = lo + second;
-        const __m256 t = _mm256_loadu2_m128(r.st + hi, r.st + lo), x = _mm256_loadu2_m128(r.sx + hi, r.sx + lo),
-                     y = _mm256_loadu2_m128(r.sy + hi, r.sy + lo);
-        const __m256 visible = _mm256_cmp_ps(_mm256_loadu2_m128(r.depth + hi, r.depth + lo), zCull, _CMP_GT_OQ);
-        const unsigned mask = unsigned(_mm256_movemask_ps(_mm256_and_ps(insideFixed(b, x, y), visible))) & lanes;
-        if (!mask) continue;
-        const __m256i idx = _mm256_add_epi32(_mm256_setr_m128i(_mm_set1_epi32(int(uint32_t(lo))), _mm_set1_epi32(int(uint32_t(hi)))), quad);
-        n = appendMasked(mask, idx, t, x, y, out, n);
+        const size_t lo = r.first + size_t(plane) * r.planeStride;
+        n = appendRowPair<true>(b, r, zCull, lo, lo + second, lanes, out, n);
       }
       return n;
     }
@@ -103,16 +112,9 @@ RESHUTTER_AVX2 __attribute__((always_inline)) inline size_t gatherRows(const Box
   if (r.cols <= 4) {
     // Narrow boxes (a small micropolygon's stratum box is 2 - 4 pixels wide): two rows per
     // vector, four lanes each, so that half the lanes are not idle.
-    const __m256i quad = _mm256_setr_epi32(0, 1, 2, 3, 0, 1, 2, 3);
-    const __m256i colLive = _mm256_cmpgt_epi32(_mm256_set1_epi32(r.cols), quad);
-    const __m256i lowHalf = _mm256_setr_epi32(-1, -1, -1, -1, 0, 0, 0, 0);
+    const unsigned colBits = (1u << r.cols) - 1;
     auto rowPair = [&](size_t lo, size_t hi, bool pair) RESHUTTER_AVX2 {
-      const __m256 t = _mm256_loadu2_m128(r.st + hi, r.st + lo), x = _mm256_loadu2_m128(r.sx + hi, r.sx + lo),
-                   y = _mm256_loadu2_m128(r.sy + hi, r.sy + lo);
-      const __m256 visible = _mm256_cmp_ps(_mm256_loadu2_m128(r.depth + hi, r.depth + lo), zCull, _CMP_GT_OQ);
-      const __m256i live = pair ? colLive : _mm256_and_si256(colLive, lowHalf);
-      const __m256i idx = _mm256_add_epi32(_mm256_setr_m128i(_mm_set1_epi32(int(uint32_t(lo))), _mm_set1_epi32(int(uint32_t(hi)))), quad);
-      n = appendLanes(_mm256_and_ps(insideAtOwnTime(b, t, x, y), visible), live, idx, t, x, y, out, n);
+      n = appendRowPair(b, r, zCull, lo, hi, pair ? colBits | colBits << 4 : colBits, out, n);
     };
     for (int plane = 0; plane < r.planes; ++plane) {
       const size_t planeBase = r.first + size_t(plane) * r.planeStride;
@@ -234,7 +236,6 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
   rr.planes = 1;
   const uint8_t* rowGroup = region.rowGroup;
   size_t n = 0;
-  const __m256i quad = _mm256_setr_epi32(0, 1, 2, 3, 0, 1, 2, 3);
   const __m256 zCull = _mm256_set1_ps(region.zCull);
   // Strata of at most two rows of at most two pixels (most of them when the box moves less than a
   // pixel per stratum, as over a short shutter) go two to a vector: stratum a's rows in lanes
@@ -267,14 +268,7 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
   // stratum's first vector, then the second vectors of those with three or four rows, then the
   // wider strata; loops over bit sets rather than branches on each stratum's kind, which the
   // predictor would lose.
-  auto rowPair = [&](size_t lo, size_t hi, unsigned lanesLive) RESHUTTER_AVX2 {
-    const __m256 t = _mm256_loadu2_m128(rr.st + hi, rr.st + lo), x = _mm256_loadu2_m128(rr.sx + hi, rr.sx + lo),
-                 y = _mm256_loadu2_m128(rr.sy + hi, rr.sy + lo);
-    const __m256 visible = _mm256_cmp_ps(_mm256_loadu2_m128(rr.depth + hi, rr.depth + lo), zCull, _CMP_GT_OQ);
-    const unsigned mask = unsigned(_mm256_movemask_ps(_mm256_and_ps(insideAtOwnTime(lanes, t, x, y), visible))) & lanesLive;
-    const __m256i idx = _mm256_add_epi32(_mm256_setr_m128i(_mm_set1_epi32(int(uint32_t(lo))), _mm_set1_epi32(int(uint32_t(hi)))), quad);
-    n = appendMasked(mask, idx, t, x, y, list, n);
-  };
+  auto rowPair = [&](size_t lo, size_t hi, unsigned lanesLive) RESHUTTER_AVX2 { n = appendRowPair(lanes, rr, zCull, lo, hi, lanesLive, list, n); };
   const uint64_t single = nonEmpty & oneVector;
   for (uint64_t left = single; left; left &= left - 1) {
     const int s = __builtin_ctzll(left);
