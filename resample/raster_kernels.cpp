@@ -89,6 +89,27 @@ RESHUTTER_AVX2 __attribute__((always_inline)) inline size_t appendRowPair(const 
   return appendMasked(mask, idx, t, x, y, out, n);
 }
 
+// Two small strata (or planes) a and b of at most two rows of at most two pixels in one vector:
+// a's rows (starting at alo, ahi) in lanes 0-1 and 4-5, b's (blo, bhi) in lanes 2-3 and 6-7;
+// tested as appendRowPair() does and appended among lanesLive.
+template <bool kFixed = false>
+RESHUTTER_AVX2 __attribute__((always_inline)) inline size_t appendPlanePair(const BoxLanes& b, const SampleRows& r, __m256 zCull, size_t alo, size_t ahi,
+                                                                            size_t blo, size_t bhi, unsigned lanesLive, const Candidates& out, size_t n) {
+  auto pairedRows = [&](const float* v) RESHUTTER_AVX2 {
+    const __m128 lo = _mm_loadh_pi(_mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(v + alo))), reinterpret_cast<const __m64*>(v + blo));
+    const __m128 hi = _mm_loadh_pi(_mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(v + ahi))), reinterpret_cast<const __m64*>(v + bhi));
+    return _mm256_set_m128(hi, lo);
+  };
+  const __m256 t = pairedRows(r.st), x = pairedRows(r.sx), y = pairedRows(r.sy);
+  const __m256 visible = _mm256_cmp_ps(pairedRows(r.depth), zCull, _CMP_GT_OQ);
+  const __m256 in = kFixed ? insideFixed(b, x, y) : insideAtOwnTime(b, t, x, y);
+  const unsigned mask = unsigned(_mm256_movemask_ps(_mm256_and_ps(in, visible))) & lanesLive;
+  if (!mask) return n;
+  const __m256i rowStarts = _mm256_castsi128_si256(_mm_setr_epi32(int(uint32_t(alo)), int(uint32_t(blo)), int(uint32_t(ahi)), int(uint32_t(bhi))));
+  const __m256i spread = _mm256_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3), step = _mm256_setr_epi32(0, 1, 0, 1, 0, 1, 0, 1);
+  return appendMasked(mask, _mm256_add_epi32(_mm256_permutevar8x32_epi32(rowStarts, spread), step), t, x, y, out, n);
+}
+
 // The rows of `rows` against box `b`: the body of both gathers, inlined so that the box is
 // broadcast once per micropolygon, not once per stratum.
 // kFixed: the box does not move (insideFixed()). The candidates still carry their times: a
@@ -97,9 +118,26 @@ template <bool kFixed = false>
 RESHUTTER_AVX2 __attribute__((always_inline)) inline size_t gatherRows(const BoxLanes& b, const SampleRows& r, const Candidates& out, size_t n) {
   const __m256 zCull = _mm256_set1_ps(r.zCull);
   if constexpr (kFixed) {
+    if (r.cols <= 2 && r.rows <= 2 && !r.rowGroup) {
+      // A static micropolygon's box (one or two pixels each way, usually): two planes per
+      // vector (appendPlanePair()), rows 0 and 1 (or row 0 twice, masked off).
+      const unsigned colBits = (1u << r.cols) - 1, planeBits = colBits | colBits << 2;
+      const unsigned lanes = r.rows == 2 ? planeBits | planeBits << 4 : planeBits;
+      const size_t second = r.rows == 2 ? r.stride : 0;
+      int plane = 0;
+      for (; plane + 1 < r.planes; plane += 2) {
+        const size_t pa = r.first + size_t(plane) * r.planeStride, pb = pa + r.planeStride;
+        n = appendPlanePair<true>(b, r, zCull, pa, pa + second, pb, pb + second, lanes, out, n);
+      }
+      if (plane < r.planes) {
+        const size_t lo = r.first + size_t(plane) * r.planeStride;
+        n = appendRowPair<true>(b, r, zCull, lo, lo + second, r.rows == 2 ? colBits | colBits << 4 : colBits, out, n);
+      }
+      return n;
+    }
     if (r.cols <= 4 && r.rows <= 2 && !r.rowGroup) {
-      // A static micropolygon's box (one or two pixels each way, usually): one vector per plane,
-      // rows 0 and 1 (or row 0 twice, masked off) in its halves.
+      // Three or four pixels wide: one vector per plane, rows 0 and 1 (or row 0 twice, masked
+      // off) in its halves.
       const unsigned colBits = (1u << r.cols) - 1, lanes = r.rows == 2 ? colBits | colBits << 4 : colBits;
       const size_t second = r.rows == 2 ? r.stride : 0;
       for (int plane = 0; plane < r.planes; ++plane) {
@@ -242,25 +280,14 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
   // 0-1 and 4-5, stratum b's in lanes 2-3 and 6-7. The candidates then come in another order
   // than stratum by stratum; each sample still comes once, and what a hit does depends only on
   // its own sample.
-  auto pairedRows = [&](const float* v, size_t alo, size_t ahi, size_t blo, size_t bhi) RESHUTTER_AVX2 {
-    const __m128 lo = _mm_loadh_pi(_mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(v + alo))), reinterpret_cast<const __m64*>(v + blo));
-    const __m128 hi = _mm_loadh_pi(_mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(v + ahi))), reinterpret_cast<const __m64*>(v + bhi));
-    return _mm256_set_m128(hi, lo);
-  };
-  const __m256i pairSpread = _mm256_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3), pairStep = _mm256_setr_epi32(0, 1, 0, 1, 0, 1, 0, 1);
   uint64_t halves = halfVector;
   while (halves & (halves - 1)) {
     const int a = __builtin_ctzll(halves);
     halves &= halves - 1;
     const int b = __builtin_ctzll(halves);
     halves &= halves - 1;
-    const size_t alo = size_t(uint32_t(first[a])), ahi = size_t(uint32_t(second[a])), blo = size_t(uint32_t(first[b])), bhi = size_t(uint32_t(second[b]));
-    const __m256 t = pairedRows(rr.st, alo, ahi, blo, bhi), x = pairedRows(rr.sx, alo, ahi, blo, bhi), y = pairedRows(rr.sy, alo, ahi, blo, bhi);
-    const __m256 visible = _mm256_cmp_ps(pairedRows(rr.depth, alo, ahi, blo, bhi), zCull, _CMP_GT_OQ);
-    const unsigned mask = unsigned(_mm256_movemask_ps(_mm256_and_ps(insideAtOwnTime(lanes, t, x, y), visible))) & unsigned(laneMask[a] | laneMask[b] << 2);
-    if (!mask) continue;
-    const __m256i rowStarts = _mm256_castsi128_si256(_mm_setr_epi32(int(uint32_t(alo)), int(uint32_t(blo)), int(uint32_t(ahi)), int(uint32_t(bhi))));
-    n = appendMasked(mask, _mm256_add_epi32(_mm256_permutevar8x32_epi32(rowStarts, pairSpread), pairStep), t, x, y, list, n);
+    n = appendPlanePair(lanes, rr, zCull, size_t(uint32_t(first[a])), size_t(uint32_t(second[a])), size_t(uint32_t(first[b])), size_t(uint32_t(second[b])),
+                        unsigned(laneMask[a] | laneMask[b] << 2), list, n);
   }
   // An unpaired one is left to the loops below.
   nonEmpty &= ~(halfVector & ~halves);
