@@ -573,8 +573,17 @@ struct BucketRasterizer::Impl {
     const uint32_t vBase = ch.vLo, nV = ch.vHi - ch.vLo + 1;
     projX.resize(nV), projY.resize(nV);
     // Each vertex is projected once, not once per micropolygon that shares it (about four).
+    float cx0 = INFINITY, cy0 = INFINITY, cx1 = -INFINITY, cy1 = -INFINITY;
+    bool chunkBounded = true;
     for (size_t i = 0; i < nV; ++i)
-      if (!project(chunkPos[i], projX[i], projY[i])) projX[i] = NAN;
+      if (!project(chunkPos[i], projX[i], projY[i])) projX[i] = NAN, chunkBounded = false;
+      else cx0 = std::min(cx0, projX[i]), cy0 = std::min(cy0, projY[i]), cx1 = std::max(cx1, projX[i]), cy1 = std::max(cy1, projY[i]);
+    // A chunk wholly outside the region (a part's edge beyond the bucket, usually) is dropped
+    // whole: its box and margin bound every micropolygon's, so testArea() would reject each.
+    if (chunkBounded && boxMissesRegion(cx0, cy0, cx1, cy1, 1.f)) {
+      stats.chunkCulledMicropolygons += ch.m1 - ch.m0;
+      return;
+    }
     for (uint32_t m = ch.m0; m < ch.m1; ++m) {
       const uint32_t* c = &part.corners[size_t(m) * 4];
       const bool tri = c[3] == kNoCorner;

@@ -34,9 +34,10 @@ void expectFinite(const RenderResult& r) {
 }
 
 // Mean absolute difference per pixel and channel against the ray caster; returns it.
-double compareWithRayCaster(const TestScene& s, const std::string& path, double a, double b, int n = 4) {
+double compareWithRayCaster(const TestScene& s, const std::string& path, double a, double b, int n = 4, int bucket = 0) {
   auto reader = writeScene(s, path);
   RenderSpec spec = specFor(reader, a, b, n, n, 9);
+  if (bucket > 0) spec.bucketSize = bucket;
   RenderResult r = render(spec);
   expectFinite(r);
   const int W = s.meta.cameras[0].width, H = s.meta.cameras[0].height;
@@ -107,6 +108,19 @@ TEST(ResampleHard, EyePlaneCrossingDuringTheShutter) {
                              {0.1f, 0.9f, 0.1f}));
   for (auto [a, b] : {std::pair{0.0, 1.0}, std::pair{0.4, 0.6}, std::pair{0.55, 0.55}})
     EXPECT_LT(compareWithRayCaster(s, dir.path("eye.mps"), a, b), 3e-3) << a << ":" << b;
+}
+
+// A motion-free wall from behind the camera to depth 20: its two corners in front project into
+// one 8-pixel bucket, yet it covers every bucket to their right. A bucket must not drop it because
+// its projected corners miss the bucket (the static path's chunk cull).
+TEST(ResampleHard, StaticWallThroughTheEyePlaneInSmallBuckets) {
+  ScratchDir dir;
+  TestScene s = makeScene(32, 24, {0.0});
+  const glm::dvec3 top = s.cam(17, -4, 20), bottom = s.cam(17, 28, 20);
+  s.mps.push_back(cameraQuad({{glm::dvec3(top.x, top.y, -3), glm::dvec3(top.x, top.y, 20), glm::dvec3(top.x, bottom.y, 20),
+                               glm::dvec3(top.x, bottom.y, -3)}}));
+  EXPECT_LT(compareWithRayCaster(s, dir.path("wall.mps"), 0, 1, 4, 8), 3e-3);
+  EXPECT_LT(compareWithRayCaster(s, dir.path("wall.mps"), 0.5, 0.5, 4, 8), 3e-3);
 }
 
 TEST(ResampleHard, BehindTheCameraAndFarOffScreen) {
