@@ -58,8 +58,9 @@ struct Candidates {
   float* y;
 };
 
-/// Appends to `out` from position n the samples in `rows` (plane by plane) that lie inside `box`
-/// at their own time and pass the early depth test; returns the new count. Reads up to 7 floats
+/// Appends to `out` from position n the samples in `rows` (plane by plane; a fixed box of at most
+/// 2×2 pixels takes two planes at a time, their candidates interleaved) that lie inside `box` at
+/// their own time and pass the early depth test; returns the new count. Reads up to 7 floats
 /// past a row's end (arrays need that padding) and writes up to 7 entries past the returned count.
 size_t gatherInBox(const SampleRows& rows, const MovingBox& box, const Candidates& out, size_t n);
 
