@@ -573,14 +573,11 @@ struct BucketRasterizer::Impl {
     const uint32_t vBase = ch.vLo, nV = ch.vHi - ch.vLo + 1;
     projX.resize(nV), projY.resize(nV);
     // Each vertex is projected once, not once per micropolygon that shares it (about four).
-    float cx0 = INFINITY, cy0 = INFINITY, cx1 = -INFINITY, cy1 = -INFINITY;
-    bool chunkBounded = true;
     for (size_t i = 0; i < nV; ++i)
-      if (!project(chunkPos[i], projX[i], projY[i])) projX[i] = NAN, chunkBounded = false;
-      else cx0 = std::min(cx0, projX[i]), cy0 = std::min(cy0, projY[i]), cx1 = std::max(cx1, projX[i]), cy1 = std::max(cy1, projY[i]);
+      if (!project(chunkPos[i], projX[i], projY[i])) projX[i] = NAN;
     // A chunk wholly outside the region (a part's edge beyond the bucket, usually) is dropped
     // whole: its box and margin bound every micropolygon's, so testArea() would reject each.
-    if (chunkBounded && boxMissesRegion(cx0, cy0, cx1, cy1, 1.f)) {
+    if (pointsMissRegion(projX.data(), projY.data(), nV, 1.f)) {
       stats.chunkCulledMicropolygons += ch.m1 - ch.m0;
       return;
     }
@@ -856,20 +853,21 @@ struct BucketRasterizer::Impl {
     return mt;
   }
 
-  // True when the chunk's vertex positions at every cull time (cullX / cullY, n entries) lie
-  // wholly outside the region: then so does every micropolygon's path, since within a knot
+  // True when a chunk's raster vertex positions (xs / ys, n entries; a moving chunk's at every cull
+  // time) lie wholly outside the region: then so does every micropolygon's path, since within a knot
   // segment each corner moves along the straight screen segment between two cull positions. The
-  // margin is twice the one the per-micropolygon culls use for float rounding. A vertex before
-  // the near plane (NaN) keeps the chunk.
-  bool chunkMissesRegion(size_t n) const {
+  // margin is twice the one the per-micropolygon culls use for float rounding (the static path's
+  // chunks, whose vertices do not move, use the culls' own). A vertex before the near plane (x
+  // NaN) keeps the chunk.
+  bool pointsMissRegion(const float* xs, const float* ys, size_t n, float scale) const {
     float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
     bool nan = false;
     for (size_t i = 0; i < n; ++i) {
-      const float x = cullX[i], y = cullY[i];
+      const float x = xs[i], y = ys[i];
       nan |= x != x;
       bx0 = std::min(bx0, x), bx1 = std::max(bx1, x), by0 = std::min(by0, y), by1 = std::max(by1, y);
     }
-    return !nan && boxMissesRegion(bx0, by0, bx1, by1, 2.f);
+    return !nan && boxMissesRegion(bx0, by0, bx1, by1, scale);
   }
 
   // True when the raster box [bx0, bx1] × [by0, by1] of float-projected positions lies outside
@@ -918,7 +916,7 @@ struct BucketRasterizer::Impl {
           cullZ[ci * nV + i] = p.z;
         }
       }
-      missesRegion = chunkMissesRegion(C * nV);
+      missesRegion = pointsMissRegion(cullX.data(), cullY.data(), C * nV, 2.f);
     }
     if (missesRegion) {
       stats.chunkCulledMicropolygons += ch.m1 - ch.m0;
