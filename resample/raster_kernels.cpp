@@ -135,24 +135,13 @@ RESHUTTER_AVX2 __attribute__((always_inline)) inline size_t gatherRows(const Box
       }
       return n;
     }
-    if (r.cols <= 4 && r.rows <= 2 && !r.rowGroup) {
-      // Three or four pixels wide: one vector per plane, rows 0 and 1 (or row 0 twice, masked
-      // off) in its halves.
-      const unsigned colBits = (1u << r.cols) - 1, lanes = r.rows == 2 ? colBits | colBits << 4 : colBits;
-      const size_t second = r.rows == 2 ? r.stride : 0;
-      for (int plane = 0; plane < r.planes; ++plane) {
-        const size_t lo = r.first + size_t(plane) * r.planeStride;
-        n = appendRowPair<true>(b, r, zCull, lo, lo + second, lanes, out, n);
-      }
-      return n;
-    }
   }
   if (r.cols <= 4) {
     // Narrow boxes (a small micropolygon's stratum box is 2 - 4 pixels wide): two rows per
     // vector, four lanes each, so that half the lanes are not idle.
     const unsigned colBits = (1u << r.cols) - 1;
     auto rowPair = [&](size_t lo, size_t hi, bool pair) RESHUTTER_AVX2 {
-      n = appendRowPair(b, r, zCull, lo, hi, pair ? colBits | colBits << 4 : colBits, out, n);
+      n = appendRowPair<kFixed>(b, r, zCull, lo, hi, pair ? colBits | colBits << 4 : colBits, out, n);
     };
     for (int plane = 0; plane < r.planes; ++plane) {
       const size_t planeBase = r.first + size_t(plane) * r.planeStride;
