@@ -6,6 +6,7 @@
 #include "common/atomic_file.h"
 #include "common/error.h"
 #include "common/frame_range.h"
+#include "resample/raster_kernels.h"
 
 namespace reshutter::cli {
 
@@ -42,6 +43,10 @@ void RenderOptions::addTo(CLI::App* app) {
   app->add_flag("--backface-cull", backfaceCull, "Knock out micropolygons facing away (unless two-sided)")->group("Compositing");
   app->add_option("--bucket", bucket, "Bucket size in pixels")->capture_default_str()->group("Performance");
   app->add_option("--cache-mb", cacheMb, "Decoded tile cache per store, MB")->capture_default_str()->group("Performance");
+  app->add_option("--simd", simd,
+                  "Instruction set of the rasterizer's inner loops: auto (the widest this CPU runs), avx512, avx2 or none\n"
+                  "(scalar); every choice gives the same image, bit for bit")
+      ->capture_default_str()->check(CLI::IsMember({"auto", "avx512", "avx2", "none"}))->group("Performance");
   app->add_flag("--stats", stats, "Print sample tests, hits, efficiency and time per phase")->group("Performance");
 }
 
@@ -95,6 +100,11 @@ void RenderOptions::applyTo(resample::RenderSpec& spec) const {
   spec.bucketSize = bucket;
   spec.raster.opacityThreshold = float(opacityThreshold);
   spec.raster.backfaceCull = backfaceCull;
+  spec.raster.vectorKernels = simd != "none";
+  spec.raster.avx512Kernels = simd == "auto" || simd == "avx512";
+  if (simd == "avx512" && !resample::kernels::available(resample::kernels::Isa::Avx512))
+    fail("--simd", "this CPU does not run AVX-512 (F, BW, DQ, VL); use auto, avx2 or none");
+  if (simd == "avx2" && !resample::kernels::available()) fail("--simd", "this CPU does not run AVX2; use auto or none");
   spec.halfColor = half;
   spec.cacheBytes = size_t(cacheMb * 1e6);
   resample::parseExrCompression(compression, "--compression");

@@ -31,6 +31,7 @@ struct RenderOptions {
   double dither = 0.5;
   bool stats = false;
   double cacheMb = 256;
+  std::string simd = "auto";          // inner-loop instruction set: auto avx512 avx2 none
   std::string deep;                   // deep OpenEXR path ("" = none)
   std::string deepCompression = "zips";
   double deepTolerance = 0.01;

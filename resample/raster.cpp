@@ -63,7 +63,7 @@ inline bool ownsTie(const glm::dvec3& e, bool flip) {
 }
 
 constexpr uint8_t kHitOpaque = 1, kHitMatte = 2;  // what resolve() finds at a sample
-constexpr size_t kPad = 8;
+constexpr size_t kPad = 16;
 
 // A per-sample array whose first element lies `skewLines` cache lines into its allocation. The
 // rasterizer reads and writes several per-sample arrays at one sample index; large allocations
@@ -131,6 +131,7 @@ struct BucketRasterizer::Impl {
   RasterOptions opt;
   const int N;
   const bool vectorKernels;  // the AVX2 loops of raster_kernels.h (same results as the scalar ones)
+  const kernels::Isa isa;    // with vectorKernels: AVX-512 where the CPU and the options allow
   const double invAx, invAy;  // 1 / view.ax, 1 / view.ay
   const kernels::RasterScale rasterScale;  // toRaster() for the edge kernel
   const kernels::ProjectionScale projectionScale;  // project() for the projection kernel
@@ -215,6 +216,7 @@ struct BucketRasterizer::Impl {
 
   Impl(const SamplePattern& p, const ShutterModel& s, const View& v, const std::vector<AovChannel>& a, const RasterOptions& o)
       : pattern(p), shutter(s), view(v), aovs(a), opt(o), N(p.spp()), vectorKernels(o.vectorKernels && kernels::available()),
+        isa(o.avx512Kernels && kernels::available(kernels::Isa::Avx512) ? kernels::Isa::Avx512 : kernels::Isa::Avx2),
         invAx(1.0 / v.ax), invAy(1.0 / v.ay), rasterScale{invAx, invAy, v.bx, v.by, v.perspective},
         projectionScale{v.ax, v.bx, v.ay, v.by, v.nearClip, v.perspective},
         tBase(std::floor(s.earliest())) {
@@ -745,7 +747,7 @@ struct BucketRasterizer::Impl {
       const kernels::SampleRows rows{st.data(), sx.data(), sy.data(), size_t(s0) * PS + size_t(py0 - y0) * w + size_t(px0 - x0), size_t(w),
                                      px1 - px0 + 1, py1 - py0 + 1, multiGroup && g >= 0 ? &rowGroup[size_t(py0 - y0)] : nullptr, uint8_t(g),
                                      s1 - s0, PS, zbuf.data(), zCull};
-      return kernels::gatherInBox(rows, box, candidateList(), n);
+      return kernels::gatherInBox(isa, rows, box, candidateList(), n);
     }
     uint32_t* __restrict cand = candidates.data();
     float* __restrict ct = candT.data();
@@ -1130,7 +1132,7 @@ struct BucketRasterizer::Impl {
       const kernels::SampleRows region{st.data(), sx.data(), sy.data(), 0, size_t(w), w, h, multiGroup ? rowGroup.data() : nullptr,
                                        uint8_t(mp.g), N, PS, zbuf.data(), zCull};
       const kernels::StrataSpans spans{mp.times.stratumU0.data(), mp.times.stratumU1.data(), N, x0, y0, w, h, 1e-3f + 1e-6f * mag};
-      n = kernels::gatherStrata(region, spans, box, candidateList());
+      n = kernels::gatherStrata(isa, region, spans, box, candidateList());
       if (n) testCandidates(mp, mi, c, tri, flags, n);
       return true;
     }
@@ -1190,7 +1192,7 @@ struct BucketRasterizer::Impl {
   template <class ScalarTest>
   void recordKernelHits(const HitContext& hc, uint32_t m, const uint32_t* c, const kernels::EdgeTestSetup& setup, const kernels::LinearEdges& edges,
                         size_t n, ScalarTest scalarTest) {
-    const size_t hits = kernels::testLinearEdges(setup, edges, n, edgeHits.data());
+    const size_t hits = kernels::testLinearEdges(isa, setup, edges, n, edgeHits.data());
     for (size_t hi = 0; hi < hits; ++hi) {
       const kernels::EdgeHit& eh = edgeHits[hi];
       const uint32_t idx = candidates[eh.candidate];

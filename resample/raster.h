@@ -81,6 +81,9 @@ struct RasterOptions {
   /// Use the AVX2 inner loops (resample/raster_kernels.h) where the CPU has them; off = the
   /// scalar loops. Same image either way.
   bool vectorKernels = true;
+  /// With vectorKernels: the AVX-512 gathers and edge test where the CPU has them (else AVX2).
+  /// Same image either way.
+  bool avx512Kernels = true;
   /// Keep the object and grid id of each sample's opaque surface for visitFragments() (deep
   /// output); a flat render turns it off to keep the bucket's working set small.
   bool surfaceIds = true;

@@ -19,8 +19,16 @@
 
 namespace reshutter::resample::kernels {
 
+/// The instruction sets of the kernels: AVX2 for all of them; AVX-512 (F, BW, DQ, VL) for the
+/// gathers (sixteen lanes, as four row segments of up to four samples) and the edge test (eight
+/// candidates), the set-up kernels staying AVX2. Every set gives the same candidates and hits,
+/// so the same image; AVX-512 only where the CPU has it (server x86 since 2017).
+enum class Isa : uint8_t { Avx2, Avx512 };
+
 /// True when this CPU runs the AVX2 kernels (checked once).
 bool available();
+/// True when this CPU runs the kernels of `isa`.
+bool available(Isa isa);
 
 /// An axis-aligned box moving linearly over a time span: [x0 + u dx0, x1 + u dx1] ×
 /// [y0 + u dy0, y1 + u dy1] at u = clamp((st - thetaA) invLen, 0, 1). A fixed box has zero d's.
@@ -61,8 +69,8 @@ struct Candidates {
 /// Appends to `out` from position n the samples in `rows` (plane by plane; a fixed box of at most
 /// 2×2 pixels takes two planes at a time, their candidates interleaved) that lie inside `box` at
 /// their own time and pass the early depth test; returns the new count. Reads up to 7 floats
-/// past a row's end (arrays need that padding) and writes up to 7 entries past the returned count.
-size_t gatherInBox(const SampleRows& rows, const MovingBox& box, const Candidates& out, size_t n);
+/// past a row's end (arrays need that padding) and writes up to 15 entries past the returned count.
+size_t gatherInBox(Isa isa, const SampleRows& rows, const MovingBox& box, const Candidates& out, size_t n);
 
 /// The strata of one moving box: stratum s covers box times u in [u0[s], u1[s]] and its
 /// samples are plane s of `rows` (whose first/cols/rows describe the whole region).
@@ -77,7 +85,7 @@ struct StrataSpans {
 /// For each stratum, the pixels its part of the box's path touches, then gatherInBox() over
 /// them: one call per micropolygon instead of one per stratum. The same candidates, in an order
 /// of its own (small strata share vectors, and the strata are visited kind by kind).
-size_t gatherStrata(const SampleRows& region, const StrataSpans& spans, const MovingBox& box, const Candidates& out);
+size_t gatherStrata(Isa isa, const SampleRows& region, const StrataSpans& spans, const MovingBox& box, const Candidates& out);
 
 /// A micropolygon's edges over one knot segment, component-major: edge e's cross product is
 /// c[0..2][e] + f (c[3..5][e] + f c[6..8][e]) at segment parameter f (edges 01 12 23 30 02;
@@ -142,8 +150,8 @@ struct EdgeHit {
 };
 
 /// Tests candidates 0..n) and appends the hits and undecided ones, in candidate order, to `hits`;
-/// returns how many. The list needs room for n + 3 entries, the candidate arrays 3 readable
+/// returns how many. The list needs room for n + 7 entries, the candidate arrays 7 readable
 /// entries past n.
-size_t testLinearEdges(const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits);
+size_t testLinearEdges(Isa isa, const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits);
 
 }  // namespace reshutter::resample::kernels

@@ -3,6 +3,7 @@
 // of 1e-6 px and 5000 px, knots 1e-7 frames apart, exact depth ties, filters whose weights sum to
 // ~0 at the border. Each asserts finite output and agreement with the brute-force ray caster
 // (tests/resample_test_util.h) within a stated bound.
+#include <iostream>
 #include <cmath>
 #include <filesystem>
 
@@ -315,20 +316,36 @@ TEST(ResampleHard, NonFiniteAttributesAreRejectedNamingGridAndAttribute) {
     }
 }
 
-// The AVX2 kernels (resample/raster_kernels.h) and the scalar loops are two implementations of
-// one computation: every channel must come out identical, for moving (two and three knots),
-// static, transparent and interlaced renders, whatever the bucket size.
+// The kernel sets this CPU runs, widest first: AVX-512 (where present), AVX2, the scalar loops.
+struct KernelSet {
+  const char* name;
+  bool vector, avx512;
+};
+std::vector<KernelSet> kernelSets() {
+  std::vector<KernelSet> sets;
+  if (kernels::available(kernels::Isa::Avx512)) sets.push_back({"avx512", true, true});
+  sets.push_back({"avx2", true, false});
+  sets.push_back({"scalar", false, false});
+  return sets;
+}
+
+// The vector kernels (resample/raster_kernels.h: AVX2, and AVX-512 where the CPU has it) and the
+// scalar loops are implementations of one computation: every channel must come out identical,
+// for moving (two and three knots), static, transparent and interlaced renders, whatever the
+// bucket size.
 TEST(ResampleHard, VectorAndScalarKernelsAgree) {
   if (!kernels::available()) GTEST_SKIP() << "this CPU has no AVX2: only the scalar loops run";
+  if (!kernels::available(kernels::Isa::Avx512)) std::cout << "note: this CPU has no AVX-512; comparing AVX2 with the scalar loops only\n";
   ScratchDir dir;
   for (const SyntheticCase& c : kSyntheticCases) {
     auto reader = syntheticStore(dir, c, 40000, 7);
     for (int shutter = 0; shutter < 3; ++shutter) {
       RenderSpec spec = comparisonSpec(reader, shutter);
       std::vector<RenderResult> results;
-      for (bool vector : {true, false})
+      for (const KernelSet& k : kernelSets())
         for (int bucket : {16, 96}) {
-          spec.raster.vectorKernels = vector;
+          spec.raster.vectorKernels = k.vector;
+          spec.raster.avx512Kernels = k.avx512;
           spec.bucketSize = bucket;
           results.push_back(render(spec));
         }
@@ -371,8 +388,9 @@ TEST(ResampleHard, VectorAndScalarKernelsAgreeOrthographic) {
     for (auto [open, close, grid] : {std::tuple{0.0, 1.0, 4}, std::tuple{0.3, 0.45, 4}, std::tuple{0.0, 1.0, 3}}) {
       RenderSpec spec = specFor(reader, open, close, grid, grid, 3);
       std::vector<RenderResult> results;
-      for (bool vector : {true, false}) {
-        spec.raster.vectorKernels = vector;
+      for (const KernelSet& k : kernelSets()) {
+        spec.raster.vectorKernels = k.vector;
+        spec.raster.avx512Kernels = k.avx512;
         results.push_back(render(spec));
       }
       const std::string what =
@@ -381,7 +399,9 @@ TEST(ResampleHard, VectorAndScalarKernelsAgreeOrthographic) {
       if (!moving) {
         EXPECT_GT(results[0].stats.raster.staticMicropolygons, 100u) << what;
       }
-      for (const char* ch : {"R", "G", "B", "A", "Z"}) EXPECT_EQ(channel(results[1], ch).f, channel(results[0], ch).f) << what << " " << ch;
+      for (size_t i = 1; i < results.size(); ++i)
+        for (const char* ch : {"R", "G", "B", "A", "Z"})
+          EXPECT_EQ(channel(results[i], ch).f, channel(results[0], ch).f) << what << " " << kernelSets()[i].name << " " << ch;
     }
   }
 }
@@ -463,8 +483,11 @@ TEST(ResampleHard, VectorEdgeTestHitsMissesAndDefersTies) {
   std::vector<float> st(16, 0.f), rx = {1, 5, 2, 0.5f}, ry = {1, 5, 0, 2.5f};
   rx.resize(16), ry.resize(16);
   const kernels::EdgeTestSetup setup{st.data(), rx.data(), ry.data(), 0.f, 0.f, true, false, true};
-  std::vector<kernels::EdgeHit> hits(8);
-  const size_t n = kernels::testLinearEdges(setup, edges, 4, hits.data());
+  for (kernels::Isa isa : {kernels::Isa::Avx2, kernels::Isa::Avx512}) {
+  if (!kernels::available(isa)) continue;
+  SCOPED_TRACE(isa == kernels::Isa::Avx512 ? "avx512" : "avx2");
+  std::vector<kernels::EdgeHit> hits(16);
+  const size_t n = kernels::testLinearEdges(isa, setup, edges, 4, hits.data());
   ASSERT_EQ(n, 3u);
   EXPECT_EQ(hits[0].candidate, 0u);
   EXPECT_FALSE(hits[0].undecided);
@@ -478,5 +501,6 @@ TEST(ResampleHard, VectorEdgeTestHitsMissesAndDefersTies) {
     const double x = hits[h].b[1] * 4.0, y = hits[h].b[2] * 4.0;
     EXPECT_NEAR(x, rx[hits[h].candidate], 1e-5);
     EXPECT_NEAR(y, ry[hits[h].candidate], 1e-5);
+  }
   }
 }
