@@ -270,12 +270,17 @@ struct BucketRasterizer::Impl {
         const int pat = pattern.patternOf(gx, gy);
         pattern.times(gx, gy, stratumOf.data(), u.data());
         const int g = rowGroup[size_t(py)];
+        // A global box shutter (the usual case): time() is open + u * length for every sample,
+        // the same sum, without its per-sample test.
+        const ShutterGroup& group = shutter.groups()[size_t(g)];
+        const bool globalBox = shutter.rolling().duration == 0.0 && group.shape.isBox();
+        const double open = group.open, length = group.length();
         for (int i = 0; i < N; ++i) {
           const size_t idx = size_t(stratumOf[size_t(i)]) * PS + size_t(p);
           glm::vec2 o = pattern.offset(pat, i);
           const float x = float(gx) + o.x, y = float(gy) + o.y;
           sx[idx] = x, sy[idx] = y;
-          const double t = shutter.time(g, y, u[size_t(i)]);
+          const double t = globalBox ? open + double(u[size_t(i)]) * length : shutter.time(g, y, u[size_t(i)]);
           st[idx] = float(t - tBase);
           idxOf[size_t(p) * N + i] = uint32_t(idx);
         }

@@ -1,6 +1,7 @@
 #include "resample/sampling.h"
 
 #include <cmath>
+#include <vector>
 
 #include "common/random.h"
 
@@ -30,17 +31,39 @@ int SamplePattern::patternOf(int px, int py) const {
   return int(h % kPatterns);
 }
 
+namespace {
+
+// Draws 1..n of the SplitMix64 stream Rng(key) gives, each on its own: draw k is
+// mix64(key + k·γ), so the n mixes do not wait on each other (the generator's loop would chain
+// them through its state) and the baseline x86-64 build vectorises them where the CPU allows.
+#if defined(__x86_64__) && !defined(__clang__)
+__attribute__((target_clones("arch=x86-64-v4", "default")))
+#endif
+void splitMixDraws(uint64_t key, int n, uint64_t* out) {
+  for (int k = 0; k < n; ++k) out[k] = mix64(key + uint64_t(k + 1) * 0x9E3779B97F4A7C15ull);
+}
+
+}  // namespace
+
 void SamplePattern::times(int px, int py, uint16_t* stratumOf, float* u) const {
   uint64_t key = hashCombine(seed_ ^ 0x7157000000000000ull, (uint64_t(uint32_t(px)) << 32) | uint32_t(py));
-  Rng rng(key);
+  // The same values as Rng(key): spp - 1 draws for the shuffle, then one jitter per sample.
+  constexpr int kLocal = 128;
+  uint64_t local[kLocal];
+  std::vector<uint64_t> heap;
+  const int draws = 2 * spp_ - 1;
+  uint64_t* r = local;
+  if (draws > kLocal) heap.resize(size_t(draws)), r = heap.data();
+  splitMixDraws(key, draws, r);
   for (int i = 0; i < spp_; ++i) stratumOf[i] = uint16_t(i);
-  for (int i = spp_ - 1; i > 0; --i) {  // Fisher-Yates with a deterministic generator
-    int j = int(rng.below(uint32_t(i + 1)));
+  for (int i = spp_ - 1, d = 0; i > 0; --i, ++d) {  // Fisher-Yates with a deterministic generator (Rng::below)
+    int j = int(uint32_t((r[d] >> 32) * uint64_t(uint32_t(i + 1)) >> 32));
     std::swap(stratumOf[i], stratumOf[j]);
   }
   const float inv = 1.0f / float(spp_);
+  const uint64_t* jitter = r + (spp_ - 1);
   for (int i = 0; i < spp_; ++i) {
-    float v = (float(stratumOf[i]) + toUnitFloat(rng.next())) * inv;
+    float v = (float(stratumOf[i]) + toUnitFloat(jitter[i])) * inv;
     u[i] = std::min(v, 0x1.fffffep-1f);
   }
 }
