@@ -26,6 +26,7 @@ void RasterStats::add(const RasterStats& o) {
   staticMicropolygons += o.staticMicropolygons;
   linearMicropolygons += o.linearMicropolygons;
   chunkCulledMicropolygons += o.chunkCulledMicropolygons;
+  chunkGatheredMicropolygons += o.chunkGatheredMicropolygons;
   transparentParts += o.transparentParts;
 }
 
@@ -209,6 +210,17 @@ struct BucketRasterizer::Impl {
     float ends[4], reach[4];
   };
   std::vector<LinearVertex> linearVertex;
+  // The linear path a chunk at a time (prepareLinearChunk()): every micropolygon's box and
+  // state, and, when the chunk's micropolygons move together, the chunk's candidates gathered
+  // once and sorted by cell of compensated position.
+  struct ChunkMicropolygon;
+  std::vector<ChunkMicropolygon> chunkMps;
+  bool chunkGathered = false;
+  kernels::CellGrid cellGrid{};
+  SkewedArray<uint32_t> chunkIndex{20}, sortedIndex{60};
+  SkewedArray<float> chunkT{2}, chunkX{10}, chunkY{18}, sortedT{26}, sortedX{34}, sortedY{42};
+  std::vector<uint32_t> cellStart;
+  std::vector<uint16_t> cellScratch;
   std::vector<float> linearDepth;
   std::vector<uint8_t> linearUnbounded;
   std::vector<uint8_t> vertexStamp;    // [v - vBase]: theta projections computed for this vertex
@@ -315,6 +327,9 @@ struct BucketRasterizer::Impl {
     // to 7 entries past the count.
     candidates.resize(slots + kPad), candT.resize(slots + kPad), candX.resize(slots + kPad), candY.resize(slots + kPad);
     edgeHits.resize(slots + kPad);
+    for (auto* a : {&chunkIndex, &sortedIndex}) a->resize(slots + kPad);
+    for (auto* a : {&chunkT, &chunkX, &chunkY, &sortedT, &sortedX, &sortedY}) a->resize(slots + kPad);
+    cellScratch.resize(slots + kPad);
     multiGroup = G > 1;
     zbuf.assign(slots + kPad, INFINITY);  // the gathers' early depth test reads up to 7 past a row's end
     colour.resize(slots);
@@ -941,11 +956,12 @@ struct BucketRasterizer::Impl {
     const float rx0 = float(x0) - m, ry0 = float(y0) - m, rx1 = float(x0 + w) + m, ry1 = float(y0 + h) + m;
     const MovingPart mp{part, knots, hc, mt, g, nV, vBase, rx0, ry0, rx1, ry1};
 
+    if (mt.linearPath) prepareLinearChunk(mp, ch);
     for (uint32_t mi = ch.m0; mi < ch.m1; ++mi) {
       const uint32_t* c = &part.corners[size_t(mi) * 4];
       const bool tri = c[3] == kNoCorner;
       const int nc = tri ? 3 : 4;
-      if (mt.linearPath && rasterizeLinear(mp, mi, c, tri, nc)) continue;
+      if (mt.linearPath && rasterizeLinearInChunk(mp, mi, ch, c, tri)) continue;
       // Cull against the region over the knots in range.
       float zCull;
       {
@@ -1064,7 +1080,16 @@ struct BucketRasterizer::Impl {
   // |B_j - A_j|: the box at any time is the lerped end boxes widened by that margin. Each
   // stratum tests only its samples inside the box at the sample's own time. False (nothing
   // done) when a corner lies before the near plane at either end: the general path handles it.
-  bool rasterizeLinear(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, int nc) {
+  //
+  // linearBox() makes that box (with the depth no hit can come nearer than, the pixel ranges'
+  // rounding margin, and the motion and size that choose between shared and per-stratum
+  // ranges); drawLinear() gathers and tests the micropolygon's samples.
+  struct LinearBox {
+    MovingBox box;
+    float zCull, rangeMargin, motion, size;
+  };
+  enum class LinearState : uint8_t { Unbounded, Misses, Draw };
+  LinearState linearBox(const MovingPart& mp, const uint32_t* c, int nc, LinearBox& out) const {
     const LinearInterval& li = mp.times.li;
     // Min and max of the corners' end positions and max of their reach, four lanes each.
     alignas(16) float lo[4], hi[4], reach[4];
@@ -1086,7 +1111,7 @@ struct BucketRasterizer::Impl {
         const __m128 e = _mm_loadu_ps(lv.ends);
         l = _mm_min_ps(e, l), u = _mm_max_ps(e, u), r = _mm_max_ps(_mm_loadu_ps(lv.reach), r);
       }
-      if (unbounded) return false;
+      if (unbounded) return LinearState::Unbounded;
       _mm_store_ps(lo, l), _mm_store_ps(hi, u), _mm_store_ps(reach, r);
       // The largest magnitude of the eight box ends (max is exact: any order gives the same).
       const __m128 absMask = _mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF));
@@ -1103,7 +1128,7 @@ struct BucketRasterizer::Impl {
         zNear = std::min(zNear, linearDepth[vj]);
         for (int k = 0; k < 4; ++k) lo[k] = std::min(lo[k], lv.ends[k]), hi[k] = std::max(hi[k], lv.ends[k]), reach[k] = std::max(reach[k], lv.reach[k]);
       }
-      if (unbounded) return false;
+      if (unbounded) return LinearState::Unbounded;
       mag = 0.f;
       for (int k = 0; k < 4; ++k) mag = std::max({mag, std::abs(lo[k]), std::abs(hi[k])});
 #endif
@@ -1112,22 +1137,41 @@ struct BucketRasterizer::Impl {
     const float mvx = reach[0], mvy = reach[1], rho = reach[2], dz = reach[3];
     const float slack = rho + li.uErr + 1e-5f;
     const float mx = 1e-3f + 1e-6f * mag + slack * mvx, my = 1e-3f + 1e-6f * mag + slack * mvy;
-    if (!(std::isfinite(mx) && std::isfinite(my))) return false;
+    if (!(std::isfinite(mx) && std::isfinite(my))) return LinearState::Unbounded;
     // The whole interval first: most parts' micropolygons miss a given bucket.
     if (std::max(ax1, bx1) + mx < mp.rx0 || std::min(ax0, bx0) - mx >= mp.rx1 || std::max(ay1, by1) + my < mp.ry0 ||
         std::min(ay0, by0) - my >= mp.ry1)
-      return true;
-    ++stats.linearMicropolygons;
+      return LinearState::Misses;
     // Depths are linear over the interval; a sample's rounded time may stray li.uErr of it.
-    const float zCull = cullDepth(zNear) - li.uErr * dz;
-    const MovingBox box{ax0 - mx, bx0 - ax0, ax1 + mx, bx1 - ax1, ay0 - my, by0 - ay0, ay1 + my, by1 - ay1, li.thetaA, li.invLen};
+    out.zCull = cullDepth(zNear) - li.uErr * dz;
+    out.box = MovingBox{ax0 - mx, bx0 - ax0, ax1 + mx, bx1 - ax1, ay0 - my, by0 - ay0, ay1 + my, by1 - ay1, li.thetaA, li.invLen};
+    out.rangeMargin = 1e-3f + 1e-6f * mag;
+    out.motion = std::max(mvx, mvy), out.size = std::max(std::max(ax1 - ax0, ay1 - ay0), 1.f);
+    return LinearState::Draw;
+  }
+
+  bool rasterizeLinear(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, int nc) {
+    LinearBox lb;
+    switch (linearBox(mp, c, nc, lb)) {
+      case LinearState::Unbounded: return false;
+      case LinearState::Misses: return true;
+      case LinearState::Draw: break;
+    }
+    drawLinear(mp, mi, c, tri, lb);
+    return true;
+  }
+
+  void drawLinear(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, const LinearBox& lb) {
+    ++stats.linearMicropolygons;
+    const float zCull = lb.zCull;
+    const MovingBox& box = lb.box;
     std::fill(segReady.begin(), segReady.end(), 0);
     const uint8_t flags = mp.part.flags[mi];
     // Strata share one pixel range while their combined motion stays under half the
     // micropolygon's size (at least half a pixel): short intervals and slow motion then pay the
     // per-bound set-up once for several strata instead of once each (the samples' own-time box
     // test below keeps the candidates as tight either way).
-    const float motion = std::max(mvx, mvy), size = std::max(std::max(ax1 - ax0, ay1 - ay0), 1.f);
+    const float motion = lb.motion, size = lb.size;
     const int span = motion > 0.f ? std::clamp(int(0.5f * size * float(N) / motion), 1, N) : N;
     size_t n = 0;
     if (span < N && vectorKernels && !mp.times.cover.check && N <= 64) {
@@ -1136,10 +1180,10 @@ struct BucketRasterizer::Impl {
       // time; cachegrind: -3 % on a quarter shutter), though not when one range serves all strata.
       const kernels::SampleRows region{st.data(), sx.data(), sy.data(), 0, size_t(w), w, h, multiGroup ? rowGroup.data() : nullptr,
                                        uint8_t(mp.g), N, PS, zbuf.data(), zCull};
-      const kernels::StrataSpans spans{mp.times.stratumU0.data(), mp.times.stratumU1.data(), N, x0, y0, w, h, 1e-3f + 1e-6f * mag};
+      const kernels::StrataSpans spans{mp.times.stratumU0.data(), mp.times.stratumU1.data(), N, x0, y0, w, h, lb.rangeMargin};
       n = kernels::gatherStrata(isa, region, spans, box, candidateList());
       if (n) testCandidates(mp, mi, c, tri, flags, n);
-      return true;
+      return;
     }
     for (int s0 = 0; s0 < N; s0 += span) {
       const int s1 = std::min(N, s0 + span);  // strata [s0, s1)
@@ -1158,6 +1202,118 @@ struct BucketRasterizer::Impl {
     }
     // Every stratum's candidates tested together: the vector test fills its lanes.
     if (n) testCandidates(mp, mi, c, tri, flags, n);
+  }
+
+  struct ChunkMicropolygon {
+    LinearState state;
+    LinearBox lb;
+    int cx0, cy0, cx1, cy1;  // cells of its compensated box (when the chunk was gathered)
+  };
+
+  // The linear path's boxes for the chunk's micropolygons, and - when they move together - one
+  // gather for all of them. A micropolygon's gather reads every sample of its strata's pixel
+  // ranges (a one-pixel micropolygon moving a pixel and a half per stratum: ~110 of them for
+  // ~6 candidates), and its neighbours read most of them again; the chunk reads each once:
+  // the samples inside the chunk's moving box (the union of its micropolygons' - min of lerps
+  // >= lerp of mins, as in rasterizeLinear()) at their own time that pass the loosest of their
+  // early depth tests. They are then sorted into cells of compensated position (the sample's
+  // position less its time times a reference motion), where each micropolygon's box over the
+  // whole interval is about its own size: a micropolygon's candidates are those of the few
+  // cells its compensated box touches that pass its own box and depth tests
+  // (filterCandidates()) - exactly the samples its own gather would have found, so the hits,
+  // the counts and the image are the same.
+  void prepareLinearChunk(const MovingPart& mp, const Chunk& ch) {
+    const uint32_t count = ch.m1 - ch.m0;
+    chunkMps.resize(count);
+    chunkGathered = false;
+    float x0a = INFINITY, x0b = INFINITY, x1a = -INFINITY, x1b = -INFINITY, y0a = INFINITY, y0b = INFINITY, y1a = -INFINITY, y1b = -INFINITY;
+    float zCull = INFINITY, margin = 0.f, mag = 0.f, spread = 0.f;
+    uint32_t drawn = 0;
+    for (uint32_t i = 0; i < count; ++i) {
+      const uint32_t* c = &mp.part.corners[size_t(ch.m0 + i) * 4];
+      ChunkMicropolygon& cm = chunkMps[i];
+      cm.state = linearBox(mp, c, c[3] == kNoCorner ? 3 : 4, cm.lb);
+      if (cm.state != LinearState::Draw) continue;
+      const MovingBox& b = cm.lb.box;
+      ++drawn;
+      x0a = std::min(x0a, b.x0), x0b = std::min(x0b, b.x0 + b.dx0), x1a = std::max(x1a, b.x1), x1b = std::max(x1b, b.x1 + b.dx1);
+      y0a = std::min(y0a, b.y0), y0b = std::min(y0b, b.y0 + b.dy0), y1a = std::max(y1a, b.y1), y1b = std::max(y1b, b.y1 + b.dy1);
+      zCull = std::min(zCull, cm.lb.zCull), margin = std::max(margin, cm.lb.rangeMargin);
+      spread += (b.x1 - b.x0 + 1.f) * (b.y1 - b.y0 + 1.f);
+    }
+    if (drawn < 8 || !vectorKernels || !opt.chunkGathers || mp.times.cover.check || N > 64) return;
+    mag = std::max({std::abs(x0a), std::abs(x0b), std::abs(x1a), std::abs(x1b), std::abs(y0a), std::abs(y0b), std::abs(y1a), std::abs(y1b)});
+    // Float rounding of the lerps: the chunk's box must hold every sample any of its
+    // micropolygons' boxes holds, as the float tests compute them.
+    const float e = 1e-5f + 2e-6f * mag;
+    const MovingBox box{x0a - e, x0b - x0a, x1a + e, x1b - x1a, y0a - e, y0b - y0a, y1a + e, y1b - y1a, mp.times.li.thetaA, mp.times.li.invLen};
+    // Worth it when the chunk's box is small next to its micropolygons' boxes together (it is
+    // about their union when they move together); else each gathers on its own.
+    const float motion = std::max({std::abs(box.dx0), std::abs(box.dx1), std::abs(box.dy0), std::abs(box.dy1)}) / float(N);
+    const float chunkArea = (box.x1 - box.x0 + motion + 1.f) * (box.y1 - box.y0 + motion + 1.f);
+    const float alone = spread + float(drawn) * (motion * motion + 2.f * motion);
+    if (!(chunkArea < 0.5f * alone)) return;
+    // Compensated boxes: x - u dx stays within [x0 + min(0, dx0 - dx), x1 + max(0, dx1 - dx)] for a
+    // sample inside the box at u; cells as large as the largest of them.
+    const float dx = 0.5f * (box.dx0 + box.dx1), dy = 0.5f * (box.dy0 + box.dy1);
+    const float ec = 1e-5f + 4e-6f * (mag + std::abs(dx) + std::abs(dy));
+    float gx0 = INFINITY, gy0 = INFINITY, gx1 = -INFINITY, gy1 = -INFINITY, size = 0.f;
+    for (uint32_t i = 0; i < count; ++i) {
+      ChunkMicropolygon& cm = chunkMps[i];
+      if (cm.state != LinearState::Draw) continue;
+      const MovingBox& b = cm.lb.box;
+      const float bx0 = b.x0 + std::min(0.f, b.dx0 - dx) - ec, bx1 = b.x1 + std::max(0.f, b.dx1 - dx) + ec;
+      const float by0 = b.y0 + std::min(0.f, b.dy0 - dy) - ec, by1 = b.y1 + std::max(0.f, b.dy1 - dy) + ec;
+      gx0 = std::min(gx0, bx0), gy0 = std::min(gy0, by0), gx1 = std::max(gx1, bx1), gy1 = std::max(gy1, by1);
+      size = std::max({size, bx1 - bx0, by1 - by0});
+      cm.cx0 = 0, cm.cy0 = 0, cm.cx1 = 0, cm.cy1 = 0;  // set below, once the grid is known
+    }
+    if (!(size > 0.f) || !std::isfinite(size) || size > 8.f) return;
+    const float invSize = 1.f / size;
+    const float colsF = std::floor((gx1 - gx0) * invSize) + 1.f, rowsF = std::floor((gy1 - gy0) * invSize) + 1.f;
+    if (!(colsF * rowsF <= 4096.f)) return;
+    cellGrid = kernels::CellGrid{gx0, gy0, invSize, int(colsF), int(rowsF), dx, dy, box.thetaA, box.invLen};
+    // A micropolygon's cells: its compensated box's, computed as sortByCell() places a sample
+    // (floor of the offset over the cell size, clamped), so that a sample inside the box lands
+    // inside its cell range.
+    auto cell = [&](float v, float origin, int cells) { return int(std::min(float(cells - 1), std::max(0.f, std::floor((v - origin) * invSize)))); };
+    for (uint32_t i = 0; i < count; ++i) {
+      ChunkMicropolygon& cm = chunkMps[i];
+      if (cm.state != LinearState::Draw) continue;
+      const MovingBox& b = cm.lb.box;
+      cm.cx0 = cell(b.x0 + std::min(0.f, b.dx0 - dx) - ec, gx0, cellGrid.cols), cm.cx1 = cell(b.x1 + std::max(0.f, b.dx1 - dx) + ec, gx0, cellGrid.cols);
+      cm.cy0 = cell(b.y0 + std::min(0.f, b.dy0 - dy) - ec, gy0, cellGrid.rows), cm.cy1 = cell(b.y1 + std::max(0.f, b.dy1 - dy) + ec, gy0, cellGrid.rows);
+    }
+    const kernels::SampleRows region{st.data(), sx.data(), sy.data(), 0, size_t(w), w, h, multiGroup ? rowGroup.data() : nullptr,
+                                     uint8_t(mp.g), N, PS, zbuf.data(), zCull};
+    const kernels::StrataSpans spans{mp.times.stratumU0.data(), mp.times.stratumU1.data(), N, x0, y0, w, h, margin + e};
+    const kernels::Candidates gathered{chunkIndex.data(), chunkT.data(), chunkX.data(), chunkY.data()};
+    const size_t n = kernels::gatherStrata(isa, region, spans, box, gathered);
+    cellStart.resize(size_t(cellGrid.cols) * size_t(cellGrid.rows) + 1);
+    kernels::sortByCell(isa, cellGrid, gathered, n, {sortedIndex.data(), sortedT.data(), sortedX.data(), sortedY.data()}, cellStart.data(), cellScratch.data());
+    chunkGathered = true;
+  }
+
+  // rasterizeLinear() for micropolygon mi of the chunk prepareLinearChunk() prepared.
+  bool rasterizeLinearInChunk(const MovingPart& mp, uint32_t mi, const Chunk& ch, const uint32_t* c, bool tri) {
+    const ChunkMicropolygon& cm = chunkMps[mi - ch.m0];
+    if (cm.state == LinearState::Unbounded) return false;
+    if (cm.state == LinearState::Misses) return true;
+    if (!chunkGathered) {
+      drawLinear(mp, mi, c, tri, cm.lb);
+      return true;
+    }
+    ++stats.linearMicropolygons;
+    ++stats.chunkGatheredMicropolygons;
+    std::fill(segReady.begin(), segReady.end(), 0);
+    const kernels::Candidates sorted{sortedIndex.data(), sortedT.data(), sortedX.data(), sortedY.data()};
+    size_t n = 0;
+    for (int cy = cm.cy0; cy <= cm.cy1; ++cy) {
+      const size_t row = size_t(cy) * size_t(cellGrid.cols);
+      n = kernels::filterCandidates(isa, sorted, cellStart[row + size_t(cm.cx0)], cellStart[row + size_t(cm.cx1) + 1], cm.lb.box, zbuf.data(), cm.lb.zCull,
+                                    candidateList(), n);
+    }
+    if (n) testCandidates(mp, mi, c, tri, mp.part.flags[mi], n);
     return true;
   }
 

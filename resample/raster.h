@@ -90,6 +90,10 @@ struct RasterOptions {
   /// Occlusion culling: draw nearest first and skip samples already covered by a nearer opaque
   /// surface. Exact (the same image either way); off only to measure what it saves.
   bool occlusionCulling = true;
+  /// With vectorKernels: micropolygons that move together gather their samples a chunk at a time
+  /// (one gather, sorted into cells) instead of one gather each. The same candidates, hits and
+  /// image either way; off only to measure what it saves.
+  bool chunkGathers = true;
 };
 
 /// Counters for --stats; summed over buckets.
@@ -98,6 +102,7 @@ struct RasterStats {
   uint64_t staticMicropolygons = 0, transparentParts = 0;
   uint64_t linearMicropolygons = 0;  // moving ones bounded from their interval ends (one knot segment)
   uint64_t chunkCulledMicropolygons = 0;  // moving ones skipped with their whole chunk (its path misses the region)
+  uint64_t chunkGatheredMicropolygons = 0;  // linear-path ones whose candidates came from their chunk's one gather
   void add(const RasterStats& o);
 };
 

@@ -310,6 +310,23 @@ RESHUTTER_AVX2 size_t gatherStrataAvx2(const SampleRows& region, const StrataSpa
   return n;
 }
 
+// filterCandidates() with eight lanes: the depths gathered by index, the survivors packed with
+// the permutation table.
+RESHUTTER_AVX2 size_t filterCandidatesAvx2(const Candidates& in, size_t begin, size_t end, const MovingBox& box, const float* depth, float zCull,
+                                          const Candidates& out, size_t n) {
+  const BoxLanes b = boxLanes(box);
+  const __m256 zc = _mm256_set1_ps(zCull);
+  const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+  for (size_t k = begin; k < end; k += 8) {
+    const __m256i live = _mm256_cmpgt_epi32(_mm256_set1_epi32(int(end - k)), lane);
+    const __m256i idx = _mm256_and_si256(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(in.index + k)), live);  // dead lanes read sample 0
+    const __m256 t = _mm256_loadu_ps(in.t + k), x = _mm256_loadu_ps(in.x + k), y = _mm256_loadu_ps(in.y + k);
+    const __m256 visible = _mm256_cmp_ps(_mm256_i32gather_ps(depth, idx, 4), zc, _CMP_GT_OQ);
+    n = appendLanes(_mm256_and_ps(insideAtOwnTime(b, t, x, y), visible), live, idx, t, x, y, out, n);
+  }
+  return n;
+}
+
 // ------------------------------------------------------------------------------------------
 // AVX-512: the moving gather with sixteen lanes, as four row segments of up to four samples.
 // Same box and depth tests, same operations in the same order per lane, so the same candidates
@@ -469,6 +486,26 @@ RESHUTTER_AVX512 size_t gatherInBoxAvx512(const SampleRows& rows, const MovingBo
   const Candidates out = candidates;
   if (box.invLen == 0.f && box.dx0 == 0.f && box.dx1 == 0.f && box.dy0 == 0.f && box.dy1 == 0.f) return gatherRows512<true>(boxLanes512(box), r, out, n);
   return gatherRows512<false>(boxLanes512(box), r, out, n);
+}
+
+// filterCandidates() with sixteen lanes.
+RESHUTTER_AVX512 size_t filterCandidatesAvx512(const Candidates& in, size_t begin, size_t end, const MovingBox& box, const float* depth, float zCull,
+                                              const Candidates& out, size_t n) {
+  const BoxLanes512 b = boxLanes512(box);
+  const __m512 zc = _mm512_set1_ps(zCull);
+  for (size_t k = begin; k < end; k += 16) {
+    const __mmask16 live = end - k >= 16 ? __mmask16(0xFFFF) : __mmask16((1u << (end - k)) - 1);
+    const __m512i idx = _mm512_maskz_loadu_epi32(live, in.index + k);
+    const __m512 t = _mm512_loadu_ps(in.t + k), x = _mm512_loadu_ps(in.x + k), y = _mm512_loadu_ps(in.y + k);
+    const __mmask16 visible = _mm512_mask_cmp_ps_mask(live, _mm512_mask_i32gather_ps(zc, live, idx, depth, 4), zc, _CMP_GT_OQ);
+    const __mmask16 keep = insideAtOwnTime512(visible, b, t, x, y);
+    _mm512_storeu_si512(out.index + n, _mm512_maskz_compress_epi32(keep, idx));
+    _mm512_storeu_ps(out.t + n, _mm512_maskz_compress_ps(keep, t));
+    _mm512_storeu_ps(out.x + n, _mm512_maskz_compress_ps(keep, x));
+    _mm512_storeu_ps(out.y + n, _mm512_maskz_compress_ps(keep, y));
+    n += size_t(__builtin_popcount(unsigned(keep)));
+  }
+  return n;
 }
 
 RESHUTTER_AVX512 size_t gatherStrataAvx512(const SampleRows& region, const StrataSpans& sp, const MovingBox& b, const Candidates& out) {
@@ -845,6 +882,35 @@ RESHUTTER_AVX2 bool projectLerpedAvx2(const float* a, const float* b, float f, s
 
 }  // namespace
 
+// sortByCell()'s cell of every candidate: MovingBox's u (insideAtOwnTime()'s operations), then
+// the compensated position's cell, clamped to the grid (a NaN clamps to the last cell: max and
+// min return their second operand). Eight and sixteen at a time.
+RESHUTTER_AVX2 void cellsOfAvx2(const CellGrid& g, const float* t, const float* x, const float* y, size_t n, uint16_t* cellOf) {
+  const __m256 thetaA = _mm256_set1_ps(g.thetaA), invLen = _mm256_set1_ps(g.invLen), one = _mm256_set1_ps(1.f), zero = _mm256_setzero_ps();
+  const __m256 dx = _mm256_set1_ps(g.dx), dy = _mm256_set1_ps(g.dy), gx = _mm256_set1_ps(g.x0), gy = _mm256_set1_ps(g.y0), inv = _mm256_set1_ps(g.invSize);
+  const __m256 maxCol = _mm256_set1_ps(float(g.cols - 1)), maxRow = _mm256_set1_ps(float(g.rows - 1)), cols = _mm256_set1_ps(float(g.cols));
+  for (size_t i = 0; i < n; i += 8) {
+    const __m256 u = _mm256_min_ps(one, _mm256_max_ps(zero, _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(t + i), thetaA), invLen)));
+    const __m256 cx = _mm256_min_ps(_mm256_max_ps(_mm256_floor_ps(_mm256_mul_ps(_mm256_sub_ps(_mm256_sub_ps(_mm256_loadu_ps(x + i), _mm256_mul_ps(u, dx)), gx), inv)), zero), maxCol);
+    const __m256 cy = _mm256_min_ps(_mm256_max_ps(_mm256_floor_ps(_mm256_mul_ps(_mm256_sub_ps(_mm256_sub_ps(_mm256_loadu_ps(y + i), _mm256_mul_ps(u, dy)), gy), inv)), zero), maxRow);
+    const __m256i cell = _mm256_cvttps_epi32(_mm256_add_ps(_mm256_mul_ps(cy, cols), cx));  // exact: cells < 2^16
+    const __m128i packed = _mm_packus_epi32(_mm256_castsi256_si128(cell), _mm256_extracti128_si256(cell, 1));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(cellOf + i), packed);
+  }
+}
+RESHUTTER_AVX512 void cellsOfAvx512(const CellGrid& g, const float* t, const float* x, const float* y, size_t n, uint16_t* cellOf) {
+  const __m512 thetaA = _mm512_set1_ps(g.thetaA), invLen = _mm512_set1_ps(g.invLen), one = _mm512_set1_ps(1.f), zero = _mm512_setzero_ps();
+  const __m512 dx = _mm512_set1_ps(g.dx), dy = _mm512_set1_ps(g.dy), gx = _mm512_set1_ps(g.x0), gy = _mm512_set1_ps(g.y0), inv = _mm512_set1_ps(g.invSize);
+  const __m512 maxCol = _mm512_set1_ps(float(g.cols - 1)), maxRow = _mm512_set1_ps(float(g.rows - 1)), cols = _mm512_set1_ps(float(g.cols));
+  constexpr int kFloor = _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC;
+  for (size_t i = 0; i < n; i += 16) {
+    const __m512 u = _mm512_min_ps(one, _mm512_max_ps(zero, _mm512_mul_ps(_mm512_sub_ps(_mm512_loadu_ps(t + i), thetaA), invLen)));
+    const __m512 cx = _mm512_min_ps(_mm512_max_ps(_mm512_roundscale_ps(_mm512_mul_ps(_mm512_sub_ps(_mm512_sub_ps(_mm512_loadu_ps(x + i), _mm512_mul_ps(u, dx)), gx), inv), kFloor), zero), maxCol);
+    const __m512 cy = _mm512_min_ps(_mm512_max_ps(_mm512_roundscale_ps(_mm512_mul_ps(_mm512_sub_ps(_mm512_sub_ps(_mm512_loadu_ps(y + i), _mm512_mul_ps(u, dy)), gy), inv), kFloor), zero), maxRow);
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(cellOf + i), _mm512_cvtepi32_epi16(_mm512_cvttps_epi32(_mm512_add_ps(_mm512_mul_ps(cy, cols), cx))));
+  }
+}
+
 bool available() {
   static const bool ok = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("popcnt");
   return ok;
@@ -874,6 +940,28 @@ bool projectLerped(const float* a, const float* b, float f, size_t n, const Proj
   return projectLerpedAvx2(a, b, f, n, scale, x, y, z, box);
 }
 
+size_t filterCandidates(Isa isa, const Candidates& in, size_t begin, size_t end, const MovingBox& box, const float* depth, float zCull,
+                        const Candidates& out, size_t n) {
+  return isa == Isa::Avx512 ? filterCandidatesAvx512(in, begin, end, box, depth, zCull, out, n)
+                            : filterCandidatesAvx2(in, begin, end, box, depth, zCull, out, n);
+}
+
+void sortByCell(Isa isa, const CellGrid& g, const Candidates& in, size_t n, const Candidates& out, uint32_t* cellStart, uint16_t* cellOf) {
+  if (isa == Isa::Avx512) cellsOfAvx512(g, in.t, in.x, in.y, n, cellOf);
+  else cellsOfAvx2(g, in.t, in.x, in.y, n, cellOf);
+  const int cells = g.cols * g.rows;
+  for (int k = 0; k <= cells; ++k) cellStart[k] = 0;
+  for (size_t i = 0; i < n; ++i) ++cellStart[cellOf[i] + 1];
+  for (int k = 0; k < cells; ++k) cellStart[k + 1] += cellStart[k];
+  // Scatter, counting up from each cell's start (then shifted back by one cell).
+  for (size_t i = 0; i < n; ++i) {
+    const uint32_t d = cellStart[cellOf[i]]++;
+    out.index[d] = in.index[i], out.t[d] = in.t[i], out.x[d] = in.x[i], out.y[d] = in.y[i];
+  }
+  for (int k = cells; k > 0; --k) cellStart[k] = cellStart[k - 1];
+  cellStart[0] = 0;
+}
+
 size_t testLinearEdges(Isa isa, const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits) {
   if (isa == Isa::Avx512)
     return setup.fixed ? testLinearEdgesAvx512<true>(setup, edges, n, hits) : testLinearEdgesAvx512<false>(setup, edges, n, hits);
@@ -893,6 +981,12 @@ void linearEdges(const float* const[4], const float* const[4], const RasterScale
 }
 void fixedEdges(const float* const[4], const RasterScale&, LinearEdges&) { fail("rasterizer", "vector kernels called on a CPU without them"); }
 bool projectLerped(const float*, const float*, float, size_t, const ProjectionScale&, float*, float*, float*, float[4]) {
+  fail("rasterizer", "vector kernels called on a CPU without them");
+}
+void sortByCell(Isa, const CellGrid&, const Candidates&, size_t, const Candidates&, uint32_t*, uint16_t*) {
+  fail("rasterizer", "vector kernels called on a CPU without them");
+}
+size_t filterCandidates(Isa, const Candidates&, size_t, size_t, const MovingBox&, const float*, float, const Candidates&, size_t) {
   fail("rasterizer", "vector kernels called on a CPU without them");
 }
 size_t testLinearEdges(Isa, const EdgeTestSetup&, const LinearEdges&, size_t, EdgeHit*) {

@@ -87,6 +87,31 @@ struct StrataSpans {
 /// of its own (small strata share vectors, and the strata are visited kind by kind).
 size_t gatherStrata(Isa isa, const SampleRows& region, const StrataSpans& spans, const MovingBox& box, const Candidates& out);
 
+/// Cells for the micropolygons of one chunk, in compensated position: a candidate at raster
+/// (x, y) and box time u (MovingBox's u) sits at (x - u dx, y - u dy), taking out a reference
+/// motion (dx, dy) that the chunk's micropolygons share more or less, so that each one's box over
+/// the whole interval, compensated, stays about its own size. Square cells of `size` pixels.
+struct CellGrid {
+  float x0, y0;     // compensated position of cell (0, 0)'s corner
+  float invSize;    // 1 / cell size
+  int cols, rows;   // cols * rows <= 65535
+  float dx, dy;     // the reference motion
+  float thetaA, invLen;
+};
+
+/// Sorts candidates [0, n) of `in` into `out` (same layout, room for n) by their cell, row-major;
+/// positions outside the grid clamp to its border cells. cellStart (cols * rows + 1 entries)
+/// receives each cell's first position in `out`, and the total at the end; `scratch` needs n + 16
+/// entries, `in` 15 readable entries past n.
+void sortByCell(Isa isa, const CellGrid& grid, const Candidates& in, size_t n, const Candidates& out, uint32_t* cellStart, uint16_t* scratch);
+
+/// Appends to `out` from position n the candidates [begin, end) of `in` that lie inside `box` at
+/// their own time (gatherInBox()'s test) and whose nearest surface so far, depth[index], lies
+/// beyond zCull; returns the new count. Reads up to 15 entries past `end`, writes up to 15 past
+/// the count.
+size_t filterCandidates(Isa isa, const Candidates& in, size_t begin, size_t end, const MovingBox& box, const float* depth, float zCull,
+                        const Candidates& out, size_t n);
+
 /// A micropolygon's edges over one knot segment, component-major: edge e's cross product is
 /// c[0..2][e] + f (c[3..5][e] + f c[6..8][e]) at segment parameter f (edges 01 12 23 30 02;
 /// lanes 5-7 are padding).

@@ -34,8 +34,8 @@ std::string RenderStats::report() const {
   s << "  hits               " << raster.hits << "\n";
   s << "  test efficiency    " << ste << " (hits / tests)\n";
   s << "  micropolygons      " << raster.micropolygons << " processed (" << raster.staticMicropolygons << " on the static path, "
-    << raster.linearMicropolygons << " bounded from their interval ends, " << raster.chunkCulledMicropolygons
-    << " skipped with their chunk), "
+    << raster.linearMicropolygons << " bounded from their interval ends, " << raster.chunkGatheredMicropolygons << " of those gathered by chunk, "
+    << raster.chunkCulledMicropolygons << " skipped with their chunk), "
     << raster.parts << " parts (" << raster.transparentParts << " transparent)\n";
   s << "  fragments          " << raster.fragments << " transparent\n";
   s << "  parts              " << partsFetched << " fetched, " << partsDecoded << " decoded, " << partsWaited << " waited for (another thread was decoding them)\n";

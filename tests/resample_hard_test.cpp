@@ -406,6 +406,48 @@ TEST(ResampleHard, VectorAndScalarKernelsAgreeOrthographic) {
   }
 }
 
+// Chunk gathers (one gather for micropolygons that move together, sorted into cells of
+// compensated position) must find exactly the samples each micropolygon's own gather finds: the
+// same sample tests, the same hits, every channel and deep sample the same - for motion from
+// none to fast (one knot segment: the linear path), a sub-interval, interlaced fields, with
+// both instruction sets; and most micropolygons must take the chunk gathers.
+TEST(ResampleHard, ChunkGathersFindEveryMicropolygonsSamples) {
+  if (!kernels::available()) GTEST_SKIP() << "chunk gathers run with the vector kernels only";
+  ScratchDir dir;
+  for (double motion : {0.5, 8.0, 40.0}) {
+    const SyntheticCase c{"chunks", 2, motion, 0.2};
+    auto reader = syntheticStore(dir, c, 50000, 9);
+    for (int shutter = 0; shutter < 3; ++shutter)
+      for (const KernelSet& k : kernelSets()) {
+        if (!k.vector) continue;
+        RenderSpec spec = comparisonSpec(reader, shutter);
+        spec.raster.avx512Kernels = k.avx512;
+        spec.aovs = {AovRequest::parse("id", "test")};
+        spec.deep = true;
+        spec.raster.chunkGathers = true;
+        const RenderResult chunked = render(spec);
+        spec.raster.chunkGathers = false;
+        const RenderResult alone = render(spec);
+        const std::string what = std::string(k.name) + " motion " + std::to_string(motion) + " shutter " + std::to_string(shutter);
+        EXPECT_GT(chunked.stats.raster.chunkGatheredMicropolygons, chunked.stats.raster.linearMicropolygons / 2) << what;
+        EXPECT_EQ(alone.stats.raster.chunkGatheredMicropolygons, 0u) << what;
+        EXPECT_EQ(chunked.stats.raster.sampleTests, alone.stats.raster.sampleTests) << what;
+        EXPECT_EQ(chunked.stats.raster.hits, alone.stats.raster.hits) << what;
+        for (size_t i = 0; i < alone.image.channels.size(); ++i) {
+          EXPECT_EQ(chunked.image.channels[i].f, alone.image.channels[i].f) << what << " " << alone.image.channels[i].name;
+          EXPECT_EQ(chunked.image.channels[i].u, alone.image.channels[i].u) << what << " " << alone.image.channels[i].name;
+        }
+        ASSERT_EQ(chunked.deep.totalSamples(), alone.deep.totalSamples()) << what;
+        DeepPixel a, b;
+        for (int y = alone.deep.y0; y < alone.deep.y0 + alone.deep.height; ++y)
+          for (int x = alone.deep.x0; x < alone.deep.x0 + alone.deep.width; ++x) {
+            chunked.deep.getPixel(x, y, a), alone.deep.getPixel(x, y, b);
+            ASSERT_EQ(a.f, b.f) << what << " deep pixel " << x << " " << y;
+          }
+      }
+  }
+}
+
 // Occlusion culling (nearest chunks first, early depth test) must change no bit of any output -
 // colour, depth, an output variable and the deep samples' surface ids - while skipping most
 // hidden surfaces of a scene ~2.5 layers deep: moving (two and three knots), static, transparent,
