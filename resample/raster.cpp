@@ -211,11 +211,10 @@ struct BucketRasterizer::Impl {
   };
   std::vector<LinearVertex> linearVertex;
   // The linear path a chunk at a time (prepareLinearChunk()): every micropolygon's box and
-  // state, and, when the chunk's micropolygons move together, the chunk's candidates gathered
-  // once and sorted by cell of compensated position.
+  // state, and, for a run of micropolygons of one grid that move together, the run's candidates
+  // gathered once and sorted by cell of compensated position (gatherRun()).
   struct ChunkMicropolygon;
   std::vector<ChunkMicropolygon> chunkMps;
-  bool chunkGathered = false;
   kernels::CellGrid cellGrid{};
   SkewedArray<uint32_t> chunkIndex{20}, sortedIndex{60};
   SkewedArray<float> chunkT{2}, chunkX{10}, chunkY{18}, sortedT{26}, sortedX{34}, sortedY{42};
@@ -1207,32 +1206,56 @@ struct BucketRasterizer::Impl {
   struct ChunkMicropolygon {
     LinearState state;
     LinearBox lb;
-    int cx0, cy0, cx1, cy1;  // cells of its compensated box (when the chunk was gathered)
+    uint32_t run;            // the run of the chunk's micropolygons of one grid it belongs to
+    int cx0, cy0, cx1, cy1;  // cells of its compensated box (when its run was gathered)
   };
 
-  // The linear path's boxes for the chunk's micropolygons, and - when they move together - one
-  // gather for all of them. A micropolygon's gather reads every sample of its strata's pixel
-  // ranges (a one-pixel micropolygon moving a pixel and a half per stratum: ~110 of them for
-  // ~6 candidates), and its neighbours read most of them again; the chunk reads each once:
-  // the samples inside the chunk's moving box (the union of its micropolygons' - min of lerps
-  // >= lerp of mins, as in rasterizeLinear()) at their own time that pass the loosest of their
-  // early depth tests. They are then sorted into cells of compensated position (the sample's
-  // position less its time times a reference motion), where each micropolygon's box over the
-  // whole interval is about its own size: a micropolygon's candidates are those of the few
-  // cells its compensated box touches that pass its own box and depth tests
-  // (filterCandidates()) - exactly the samples its own gather would have found, so the hits,
-  // the counts and the image are the same.
+  // The linear path's boxes for the chunk's micropolygons, and - for each run of them from one
+  // grid, which moves together - one gather for the run. A micropolygon's own gather reads every
+  // sample of its strata's pixel ranges (a one-pixel micropolygon moving a pixel and a half per
+  // stratum: ~110 of them for ~6 candidates), and its neighbours read most of them again; the
+  // run reads each once: the samples inside the run's moving box (the union of its
+  // micropolygons' - min of lerps >= lerp of mins, as in rasterizeLinear()) at their own time
+  // that pass the loosest of their early depth tests. They are then sorted into cells of
+  // compensated position (the sample's position less its time times a reference motion), where
+  // each micropolygon's box over the whole interval is about its own size: a micropolygon's
+  // candidates are those of the few cells its compensated box touches that pass its own box and
+  // depth tests (filterCandidates()) - exactly the samples its own gather would have found, so
+  // the hits, the counts and the image are the same. (Depths only fall, so gathering the run
+  // before its micropolygons draw keeps every sample any of them would keep.)
   void prepareLinearChunk(const MovingPart& mp, const Chunk& ch) {
     const uint32_t count = ch.m1 - ch.m0;
     chunkMps.resize(count);
-    chunkGathered = false;
-    float x0a = INFINITY, x0b = INFINITY, x1a = -INFINITY, x1b = -INFINITY, y0a = INFINITY, y0b = INFINITY, y1a = -INFINITY, y1b = -INFINITY;
-    float zCull = INFINITY, margin = 0.f, mag = 0.f, spread = 0.f;
-    uint32_t drawn = 0;
+    chunkRuns.clear();
+    gatheredRun = ~0u;
     for (uint32_t i = 0; i < count; ++i) {
-      const uint32_t* c = &mp.part.corners[size_t(ch.m0 + i) * 4];
+      const uint32_t m = ch.m0 + i;
+      const uint32_t* c = &mp.part.corners[size_t(m) * 4];
       ChunkMicropolygon& cm = chunkMps[i];
       cm.state = linearBox(mp, c, c[3] == kNoCorner ? 3 : 4, cm.lb);
+      if (i == 0 || mp.part.gridId[m] != mp.part.gridId[m - 1]) chunkRuns.push_back({i, i, false});
+      cm.run = uint32_t(chunkRuns.size() - 1);
+      chunkRuns.back().end = i + 1;
+    }
+  }
+
+  struct ChunkRun {
+    uint32_t begin, end;  // micropolygons [begin, end) of the chunk
+    bool gathered;        // its micropolygons filter the sorted cells (else each gathers alone)
+  };
+  std::vector<ChunkRun> chunkRuns;
+  uint32_t gatheredRun = ~0u;  // the run whose candidates the sorted arrays hold
+
+  // Gathers run r's candidates, when its micropolygons move together enough to pay.
+  void gatherRun(const MovingPart& mp, uint32_t r) {
+    ChunkRun& run = chunkRuns[r];
+    gatheredRun = r;
+    run.gathered = false;
+    float x0a = INFINITY, x0b = INFINITY, x1a = -INFINITY, x1b = -INFINITY, y0a = INFINITY, y0b = INFINITY, y1a = -INFINITY, y1b = -INFINITY;
+    float zCull = INFINITY, margin = 0.f, spread = 0.f;
+    uint32_t drawn = 0;
+    for (uint32_t i = run.begin; i < run.end; ++i) {
+      const ChunkMicropolygon& cm = chunkMps[i];
       if (cm.state != LinearState::Draw) continue;
       const MovingBox& b = cm.lb.box;
       ++drawn;
@@ -1241,32 +1264,31 @@ struct BucketRasterizer::Impl {
       zCull = std::min(zCull, cm.lb.zCull), margin = std::max(margin, cm.lb.rangeMargin);
       spread += (b.x1 - b.x0 + 1.f) * (b.y1 - b.y0 + 1.f);
     }
-    if (drawn < 8 || !vectorKernels || !opt.chunkGathers || mp.times.cover.check || N > 64) return;
-    mag = std::max({std::abs(x0a), std::abs(x0b), std::abs(x1a), std::abs(x1b), std::abs(y0a), std::abs(y0b), std::abs(y1a), std::abs(y1b)});
-    // Float rounding of the lerps: the chunk's box must hold every sample any of its
+    if (drawn < 4 || !vectorKernels || !opt.chunkGathers || mp.times.cover.check || N > 64) return;
+    const float mag = std::max({std::abs(x0a), std::abs(x0b), std::abs(x1a), std::abs(x1b), std::abs(y0a), std::abs(y0b), std::abs(y1a), std::abs(y1b)});
+    // Float rounding of the lerps: the run's box must hold every sample any of its
     // micropolygons' boxes holds, as the float tests compute them.
     const float e = 1e-5f + 2e-6f * mag;
     const MovingBox box{x0a - e, x0b - x0a, x1a + e, x1b - x1a, y0a - e, y0b - y0a, y1a + e, y1b - y1a, mp.times.li.thetaA, mp.times.li.invLen};
-    // Worth it when the chunk's box is small next to its micropolygons' boxes together (it is
+    // Worth it when the run's box is small next to its micropolygons' boxes together (it is
     // about their union when they move together); else each gathers on its own.
     const float motion = std::max({std::abs(box.dx0), std::abs(box.dx1), std::abs(box.dy0), std::abs(box.dy1)}) / float(N);
-    const float chunkArea = (box.x1 - box.x0 + motion + 1.f) * (box.y1 - box.y0 + motion + 1.f);
+    const float runArea = (box.x1 - box.x0 + motion + 1.f) * (box.y1 - box.y0 + motion + 1.f);
     const float alone = spread + float(drawn) * (motion * motion + 2.f * motion);
-    if (!(chunkArea < 0.5f * alone)) return;
+    if (!(runArea < 0.5f * alone)) return;
     // Compensated boxes: x - u dx stays within [x0 + min(0, dx0 - dx), x1 + max(0, dx1 - dx)] for a
     // sample inside the box at u; cells as large as the largest of them.
     const float dx = 0.5f * (box.dx0 + box.dx1), dy = 0.5f * (box.dy0 + box.dy1);
     const float ec = 1e-5f + 4e-6f * (mag + std::abs(dx) + std::abs(dy));
     float gx0 = INFINITY, gy0 = INFINITY, gx1 = -INFINITY, gy1 = -INFINITY, size = 0.f;
-    for (uint32_t i = 0; i < count; ++i) {
-      ChunkMicropolygon& cm = chunkMps[i];
+    for (uint32_t i = run.begin; i < run.end; ++i) {
+      const ChunkMicropolygon& cm = chunkMps[i];
       if (cm.state != LinearState::Draw) continue;
       const MovingBox& b = cm.lb.box;
       const float bx0 = b.x0 + std::min(0.f, b.dx0 - dx) - ec, bx1 = b.x1 + std::max(0.f, b.dx1 - dx) + ec;
       const float by0 = b.y0 + std::min(0.f, b.dy0 - dy) - ec, by1 = b.y1 + std::max(0.f, b.dy1 - dy) + ec;
       gx0 = std::min(gx0, bx0), gy0 = std::min(gy0, by0), gx1 = std::max(gx1, bx1), gy1 = std::max(gy1, by1);
       size = std::max({size, bx1 - bx0, by1 - by0});
-      cm.cx0 = 0, cm.cy0 = 0, cm.cx1 = 0, cm.cy1 = 0;  // set below, once the grid is known
     }
     if (!(size > 0.f) || !std::isfinite(size) || size > 8.f) return;
     const float invSize = 1.f / size;
@@ -1277,7 +1299,7 @@ struct BucketRasterizer::Impl {
     // (floor of the offset over the cell size, clamped), so that a sample inside the box lands
     // inside its cell range.
     auto cell = [&](float v, float origin, int cells) { return int(std::min(float(cells - 1), std::max(0.f, std::floor((v - origin) * invSize)))); };
-    for (uint32_t i = 0; i < count; ++i) {
+    for (uint32_t i = run.begin; i < run.end; ++i) {
       ChunkMicropolygon& cm = chunkMps[i];
       if (cm.state != LinearState::Draw) continue;
       const MovingBox& b = cm.lb.box;
@@ -1291,7 +1313,7 @@ struct BucketRasterizer::Impl {
     const size_t n = kernels::gatherStrata(isa, region, spans, box, gathered);
     cellStart.resize(size_t(cellGrid.cols) * size_t(cellGrid.rows) + 1);
     kernels::sortByCell(isa, cellGrid, gathered, n, {sortedIndex.data(), sortedT.data(), sortedX.data(), sortedY.data()}, cellStart.data(), cellScratch.data());
-    chunkGathered = true;
+    run.gathered = true;
   }
 
   // rasterizeLinear() for micropolygon mi of the chunk prepareLinearChunk() prepared.
@@ -1299,7 +1321,8 @@ struct BucketRasterizer::Impl {
     const ChunkMicropolygon& cm = chunkMps[mi - ch.m0];
     if (cm.state == LinearState::Unbounded) return false;
     if (cm.state == LinearState::Misses) return true;
-    if (!chunkGathered) {
+    if (cm.run != gatheredRun) gatherRun(mp, cm.run);
+    if (!chunkRuns[cm.run].gathered) {
       drawLinear(mp, mi, c, tri, cm.lb);
       return true;
     }
