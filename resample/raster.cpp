@@ -643,7 +643,7 @@ struct BucketRasterizer::Impl {
         const float* at[4];
         for (int j = 0; j < 4; ++j) at[j] = &chunkPos[c[tri && j == 3 ? 2 : j] - vBase].x;
         kernels::LinearEdges edges;
-        kernels::fixedEdges(at, rasterScale, edges);
+        kernels::fixedEdges(isa, at, rasterScale, edges);
         kernels::EdgeTestSetup setup{candT.data(), candX.data(), candY.data(), 0.f, 0.f, tri, opt.backfaceCull && !(part.flags[m] & store::kTwoSided), true};
         std::copy(zv, zv + 4, setup.za), std::copy(zv, zv + 4, setup.zb);
         bool edgesMade = false;
@@ -1362,7 +1362,7 @@ struct BucketRasterizer::Impl {
       at[j] = &part.position(0, v).x, to[j] = &part.position(1, v).x;
     }
     kernels::LinearEdges edges;
-    kernels::linearEdges(at, to, rasterScale, edges);
+    kernels::linearEdges(isa, at, to, rasterScale, edges);
     kernels::EdgeTestSetup setup{candT.data(), candX.data(), candY.data(), mp.times.seg.fOffset, mp.times.seg.fScale, tri,
                                  opt.backfaceCull && !(flags & store::kTwoSided)};
     for (int j = 0; j < (tri ? 3 : 4); ++j) setup.za[j] = part.position(0, c[j]).z, setup.zb[j] = part.position(1, c[j]).z;

@@ -8,9 +8,10 @@
 #if defined(__x86_64__) || defined(__i386__)
 #define RESHUTTER_X86 1
 // GCC 12's AVX-512 headers build their "undefined" vectors from self-initialised variables,
-// which -Wmaybe-uninitialized reports wherever they are inlined (a known false positive).
+// which -W(maybe-)uninitialized reports wherever they are inlined (a known false positive).
 #pragma GCC diagnostic push
 #pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
 #include <immintrin.h>
 #pragma GCC diagnostic pop
 #endif
@@ -743,6 +744,48 @@ RESHUTTER_AVX2 size_t testLinearEdgesAvx2(const EdgeTestSetup& s, const LinearEd
   return h;
 }
 
+// linearEdges() and fixedEdges() in one pass of eight lanes: lanes 0-3 pair corner j with corner
+// j + 1 (edges 01 12 23 30), lanes 4-7 with corner j + 2 (lane 4 is edge 02, the rest padding) -
+// the two passes of linearEdgesAvx2(), lane for lane.
+struct Lanes3x8 {
+  __m512d x, y, z;
+};
+RESHUTTER_AVX512 inline Lanes3x8 crossLanes512(const Lanes3x8& a, const Lanes3x8& b) {
+  return {_mm512_sub_pd(_mm512_mul_pd(a.y, b.z), _mm512_mul_pd(a.z, b.y)), _mm512_sub_pd(_mm512_mul_pd(a.z, b.x), _mm512_mul_pd(a.x, b.z)),
+          _mm512_sub_pd(_mm512_mul_pd(a.x, b.y), _mm512_mul_pd(a.y, b.x))};
+}
+// Component k of the corners, lane l = corner l mod 4 (first) or the corner it pairs with.
+RESHUTTER_AVX512 inline __m512d cornerLanes(const float* const p[4], int k, bool partner) {
+  const __m128 c = _mm_setr_ps(p[0][k], p[1][k], p[2][k], p[3][k]);
+  const __m256 lanes = partner ? _mm256_permutevar8x32_ps(_mm256_castps128_ps256(c), _mm256_setr_epi32(1, 2, 3, 0, 2, 3, 0, 1))
+                               : _mm256_permutevar8x32_ps(_mm256_castps128_ps256(c), _mm256_setr_epi32(0, 1, 2, 3, 0, 1, 2, 3));
+  return _mm512_cvtps_pd(lanes);
+}
+template <bool kFixed>
+RESHUTTER_AVX512 void edgesAvx512(const float* const at[4], const float* const to[4], const RasterScale& m, LinearEdges& out) {
+  const __m512d one = _mm512_set1_pd(1.0), zero = _mm512_setzero_pd();
+  const Lanes3x8 A{cornerLanes(at, 0, false), cornerLanes(at, 1, false), m.perspective ? cornerLanes(at, 2, false) : one};
+  const Lanes3x8 Ab{cornerLanes(at, 0, true), cornerLanes(at, 1, true), m.perspective ? cornerLanes(at, 2, true) : one};
+  const __m512d invAx = _mm512_set1_pd(m.invAx), invAy = _mm512_set1_pd(m.invAy), bx = _mm512_set1_pd(m.bx), by = _mm512_set1_pd(m.by);
+  Lanes3x8 powers[3];
+  powers[0] = crossLanes512(A, Ab);
+  if constexpr (!kFixed) {
+    const Lanes3x8 D{_mm512_sub_pd(cornerLanes(to, 0, false), A.x), _mm512_sub_pd(cornerLanes(to, 1, false), A.y),
+                     m.perspective ? _mm512_sub_pd(cornerLanes(to, 2, false), A.z) : zero};
+    const Lanes3x8 Db{_mm512_sub_pd(cornerLanes(to, 0, true), Ab.x), _mm512_sub_pd(cornerLanes(to, 1, true), Ab.y),
+                      m.perspective ? _mm512_sub_pd(cornerLanes(to, 2, true), Ab.z) : zero};
+    const Lanes3x8 c1a = crossLanes512(A, Db), c1b = crossLanes512(D, Ab);
+    powers[1] = {_mm512_add_pd(c1a.x, c1b.x), _mm512_add_pd(c1a.y, c1b.y), _mm512_add_pd(c1a.z, c1b.z)};
+    powers[2] = crossLanes512(D, Db);
+  }
+  for (int p = 0; p < (kFixed ? 1 : 3); ++p) {
+    const __m512d ex = _mm512_mul_pd(powers[p].x, invAx), ey = _mm512_mul_pd(powers[p].y, invAy);
+    _mm512_storeu_pd(out.c[3 * p], ex);
+    _mm512_storeu_pd(out.c[3 * p + 1], ey);
+    _mm512_storeu_pd(out.c[3 * p + 2], _mm512_sub_pd(_mm512_sub_pd(powers[p].z, _mm512_mul_pd(ex, bx)), _mm512_mul_pd(ey, by)));
+  }
+}
+
 // The edge test with eight candidates per iteration: testLinearEdgesAvx2()'s operations, lane
 // for lane, in AVX-512 (doubles in zmm, the floats of eight lanes in ymm).
 template <bool kFixed>
@@ -932,10 +975,14 @@ size_t gatherStrata(Isa isa, const SampleRows& region, const StrataSpans& spans,
   return isa == Isa::Avx512 ? gatherStrataAvx512(region, spans, box, out) : gatherStrataAvx2(region, spans, box, out);
 }
 
-void linearEdges(const float* const at[4], const float* const to[4], const RasterScale& scale, LinearEdges& out) {
-  linearEdgesAvx2(at, to, scale, out);
+void linearEdges(Isa isa, const float* const at[4], const float* const to[4], const RasterScale& scale, LinearEdges& out) {
+  if (isa == Isa::Avx512) edgesAvx512<false>(at, to, scale, out);
+  else linearEdgesAvx2(at, to, scale, out);
 }
-void fixedEdges(const float* const at[4], const RasterScale& scale, LinearEdges& out) { fixedEdgesAvx2(at, scale, out); }
+void fixedEdges(Isa isa, const float* const at[4], const RasterScale& scale, LinearEdges& out) {
+  if (isa == Isa::Avx512) edgesAvx512<true>(at, at, scale, out);
+  else fixedEdgesAvx2(at, scale, out);
+}
 bool projectLerped(const float* a, const float* b, float f, size_t n, const ProjectionScale& scale, float* x, float* y, float* z, float box[4]) {
   return projectLerpedAvx2(a, b, f, n, scale, x, y, z, box);
 }
@@ -976,10 +1023,10 @@ size_t gatherInBox(Isa, const SampleRows&, const MovingBox&, const Candidates&, 
 size_t gatherStrata(Isa, const SampleRows&, const StrataSpans&, const MovingBox&, const Candidates&) {
   fail("rasterizer", "vector kernels called on a CPU without them");
 }
-void linearEdges(const float* const[4], const float* const[4], const RasterScale&, LinearEdges&) {
+void linearEdges(Isa, const float* const[4], const float* const[4], const RasterScale&, LinearEdges&) {
   fail("rasterizer", "vector kernels called on a CPU without them");
 }
-void fixedEdges(const float* const[4], const RasterScale&, LinearEdges&) { fail("rasterizer", "vector kernels called on a CPU without them"); }
+void fixedEdges(Isa, const float* const[4], const RasterScale&, LinearEdges&) { fail("rasterizer", "vector kernels called on a CPU without them"); }
 bool projectLerped(const float*, const float*, float, size_t, const ProjectionScale&, float*, float*, float*, float[4]) {
   fail("rasterizer", "vector kernels called on a CPU without them");
 }

@@ -130,10 +130,10 @@ struct RasterScale {
 /// (camera-space xyz; a triangle passes corner 2 as corner 3, and edges 23 and 30 are then
 /// meaningless): E = A_a × A_b + f (A_a × D_b + D_a × A_b) + f² D_a × D_b with D = to - at, in
 /// the rasterizer's prepareEdges() operations and order, so bit-identical to it.
-void linearEdges(const float* const at[4], const float* const to[4], const RasterScale& scale, LinearEdges& out);
+void linearEdges(Isa isa, const float* const at[4], const float* const to[4], const RasterScale& scale, LinearEdges& out);
 /// A static micropolygon's edges: c[0..2] only (A_a × A_b), the rasterizer's static-path
 /// operations and order.
-void fixedEdges(const float* const at[4], const RasterScale& scale, LinearEdges& out);
+void fixedEdges(Isa isa, const float* const at[4], const RasterScale& scale, LinearEdges& out);
 
 /// The camera's map from camera space to raster, as the rasterizer's project() applies it:
 /// x = float(ax (x / z) + bx) with the division as 1 / z in double (perspective), or
