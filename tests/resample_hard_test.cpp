@@ -409,18 +409,20 @@ TEST(ResampleHard, VectorAndScalarKernelsAgreeOrthographic) {
 // Chunk gathers (one gather for micropolygons that move together, sorted into cells of
 // compensated position) must find exactly the samples each micropolygon's own gather finds: the
 // same sample tests, the same hits, every channel and deep sample the same - for motion from
-// none to fast (one knot segment: the linear path), a sub-interval, interlaced fields, with
-// both instruction sets; and most micropolygons must take the chunk gathers.
+// none to fast (one knot segment: the linear path), a sub-interval, interlaced fields, a rolling
+// read-out, with both instruction sets; and most micropolygons must take the chunk gathers.
 TEST(ResampleHard, ChunkGathersFindEveryMicropolygonsSamples) {
   if (!kernels::available()) GTEST_SKIP() << "chunk gathers run with the vector kernels only";
   ScratchDir dir;
   for (double motion : {0.5, 8.0, 40.0}) {
     const SyntheticCase c{"chunks", 2, motion, 0.2};
     auto reader = syntheticStore(dir, c, 50000, 9);
-    for (int shutter = 0; shutter < 3; ++shutter)
+    for (int shutter = 0; shutter < 4; ++shutter)
       for (const KernelSet& k : kernelSets()) {
         if (!k.vector) continue;
-        RenderSpec spec = comparisonSpec(reader, shutter);
+        // Shutters 0-2 as comparisonSpec(); 3: a rolling read-out over the sub-interval.
+        RenderSpec spec = comparisonSpec(reader, shutter == 3 ? 1 : shutter);
+        if (shutter == 3) spec.shutter.setRolling(RollingShutter{0.2, false, 120});
         spec.raster.avx512Kernels = k.avx512;
         spec.aovs = {AovRequest::parse("id", "test")};
         spec.deep = true;
