@@ -690,6 +690,28 @@ RESHUTTER_AVX2 inline TriangleMasks triangleMasks(__m256d a0, __m256d a1, __m256
   return m;
 }
 
+// Writes one group of L candidates' outcomes (candidates i .. i + L - 1) from hits[h]: bz[t][k]
+// holds triangle t's barycentrics (k = 0-2) and depth (k = 3) by lane. Every lane is written and
+// the count advances by whether it is kept: how many hit is data the predictor cannot learn, and
+// which triangle a sample hit is a coin toss, so it indexes rather than branches. (The list has
+// room for L - 1 entries past the last kept.)
+template <int L>
+inline __attribute__((always_inline)) size_t writeEdgeHits(const float (&bz)[2][4][L], unsigned undecided, unsigned hitB, unsigned any, size_t i,
+                                                            EdgeHit* hits, size_t h) {
+  for (int l = 0; l < L; ++l) {
+    EdgeHit& out = hits[h];
+    out.candidate = uint32_t(i + size_t(l));
+    out.undecided = (undecided >> l) & 1;
+    const int tri = (hitB >> l) & 1;
+    out.triangle = uint8_t(tri);
+    const float(*b)[L] = bz[tri];
+    out.b[0] = b[0][l], out.b[1] = b[1][l], out.b[2] = b[2][l];
+    out.z = b[3][l];
+    h += size_t((any >> l) & 1);
+  }
+  return h;
+}
+
 template <bool kFixed>
 RESHUTTER_AVX2 size_t testLinearEdgesAvx2(const EdgeTestSetup& s, const LinearEdges& E, size_t n, EdgeHit* hits) {
   const __m128 fOffset = _mm_set1_ps(s.fOffset), fScale = _mm_set1_ps(s.fScale), zero = _mm_setzero_ps(), one = _mm_set1_ps(1.f);
@@ -727,19 +749,7 @@ RESHUTTER_AVX2 size_t testLinearEdgesAvx2(const EdgeTestSetup& s, const LinearEd
     for (int j = 0; j < 4; ++j) zv[j] = _mm_add_ps(_mm_set1_ps(s.za[j]), _mm_mul_ps(f, _mm_set1_ps(s.zb[j] - s.za[j])));
     _mm_store_ps(bz[0][3], _mm_add_ps(_mm_add_ps(_mm_mul_ps(A.b[0], zv[0]), _mm_mul_ps(A.b[1], zv[1])), _mm_mul_ps(A.b[2], zv[2])));
     _mm_store_ps(bz[1][3], _mm_add_ps(_mm_add_ps(_mm_mul_ps(B.b[0], zv[0]), _mm_mul_ps(B.b[1], zv[2])), _mm_mul_ps(B.b[2], zv[3])));
-    // Every lane is written and the count advances by whether it is kept: how many of the four
-    // hit is data the predictor cannot learn. (The list has room for n + 3 entries.)
-    for (int l = 0; l < 4; ++l) {
-      EdgeHit& out = hits[h];
-      out.candidate = uint32_t(i + size_t(l));
-      out.undecided = (undecided >> l) & 1;
-      const int tri = (hitB >> l) & 1;
-      out.triangle = uint8_t(tri);
-      const float(*b)[4] = bz[tri];
-      out.b[0] = b[0][l], out.b[1] = b[1][l], out.b[2] = b[2][l];
-      out.z = b[3][l];
-      h += size_t((any >> l) & 1);
-    }
+    h = writeEdgeHits<4>(bz, unsigned(undecided), unsigned(hitB), unsigned(any), i, hits, h);
   }
   return h;
 }
@@ -860,17 +870,7 @@ RESHUTTER_AVX512 size_t testLinearEdgesAvx512(const EdgeTestSetup& s, const Line
     for (int j = 0; j < 4; ++j) zv[j] = _mm256_add_ps(zStart[j], _mm256_mul_ps(f, zDelta[j]));
     _mm256_store_ps(bz[0][3], _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(A.b[0], zv[0]), _mm256_mul_ps(A.b[1], zv[1])), _mm256_mul_ps(A.b[2], zv[2])));
     _mm256_store_ps(bz[1][3], _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(B.b[0], zv[0]), _mm256_mul_ps(B.b[1], zv[2])), _mm256_mul_ps(B.b[2], zv[3])));
-    for (int l = 0; l < 8; ++l) {
-      EdgeHit& out = hits[h];
-      out.candidate = uint32_t(i + size_t(l));
-      out.undecided = (undecided >> l) & 1;
-      const int tri = (hitB >> l) & 1;
-      out.triangle = uint8_t(tri);
-      const float(*b)[8] = bz[tri];
-      out.b[0] = b[0][l], out.b[1] = b[1][l], out.b[2] = b[2][l];
-      out.z = b[3][l];
-      h += size_t((any >> l) & 1);
-    }
+    h = writeEdgeHits<8>(bz, undecided, hitB, any, i, hits, h);
   }
   return h;
 }

@@ -406,6 +406,23 @@ TEST(ResampleHard, VectorAndScalarKernelsAgreeOrthographic) {
   }
 }
 
+// Every flat channel and every deep sample of two renders the same, bit for bit.
+void expectSameOutputs(const RenderResult& got, const RenderResult& want, const std::string& what) {
+  ASSERT_EQ(got.image.channels.size(), want.image.channels.size()) << what;
+  for (size_t i = 0; i < want.image.channels.size(); ++i) {
+    EXPECT_EQ(got.image.channels[i].f, want.image.channels[i].f) << what << " " << want.image.channels[i].name;
+    EXPECT_EQ(got.image.channels[i].u, want.image.channels[i].u) << what << " " << want.image.channels[i].name;
+  }
+  ASSERT_EQ(got.deep.totalSamples(), want.deep.totalSamples()) << what;
+  DeepPixel a, b;
+  for (int y = want.deep.y0; y < want.deep.y0 + want.deep.height; ++y)
+    for (int x = want.deep.x0; x < want.deep.x0 + want.deep.width; ++x) {
+      got.deep.getPixel(x, y, a), want.deep.getPixel(x, y, b);
+      ASSERT_EQ(a.f, b.f) << what << " deep pixel " << x << " " << y;
+      ASSERT_EQ(a.u, b.u) << what << " deep pixel " << x << " " << y;
+    }
+}
+
 // Chunk gathers (one gather for micropolygons that move together, sorted into cells of
 // compensated position) must find exactly the samples each micropolygon's own gather finds: the
 // same sample tests, the same hits, every channel and deep sample the same - for motion from
@@ -435,17 +452,7 @@ TEST(ResampleHard, ChunkGathersFindEveryMicropolygonsSamples) {
         EXPECT_EQ(alone.stats.raster.chunkGatheredMicropolygons, 0u) << what;
         EXPECT_EQ(chunked.stats.raster.sampleTests, alone.stats.raster.sampleTests) << what;
         EXPECT_EQ(chunked.stats.raster.hits, alone.stats.raster.hits) << what;
-        for (size_t i = 0; i < alone.image.channels.size(); ++i) {
-          EXPECT_EQ(chunked.image.channels[i].f, alone.image.channels[i].f) << what << " " << alone.image.channels[i].name;
-          EXPECT_EQ(chunked.image.channels[i].u, alone.image.channels[i].u) << what << " " << alone.image.channels[i].name;
-        }
-        ASSERT_EQ(chunked.deep.totalSamples(), alone.deep.totalSamples()) << what;
-        DeepPixel a, b;
-        for (int y = alone.deep.y0; y < alone.deep.y0 + alone.deep.height; ++y)
-          for (int x = alone.deep.x0; x < alone.deep.x0 + alone.deep.width; ++x) {
-            chunked.deep.getPixel(x, y, a), alone.deep.getPixel(x, y, b);
-            ASSERT_EQ(a.f, b.f) << what << " deep pixel " << x << " " << y;
-          }
+        expectSameOutputs(chunked, alone, what);
       }
   }
 }
@@ -467,19 +474,7 @@ TEST(ResampleHard, OcclusionCullingIsExact) {
       spec.raster.occlusionCulling = false;
       const RenderResult all = render(spec);
       const std::string what = std::string(c.name) + " shutter " + std::to_string(shutter);
-      ASSERT_EQ(culled.image.channels.size(), all.image.channels.size());
-      for (size_t i = 0; i < all.image.channels.size(); ++i) {
-        EXPECT_EQ(culled.image.channels[i].f, all.image.channels[i].f) << what << " " << all.image.channels[i].name;
-        EXPECT_EQ(culled.image.channels[i].u, all.image.channels[i].u) << what << " " << all.image.channels[i].name;
-      }
-      ASSERT_EQ(culled.deep.totalSamples(), all.deep.totalSamples()) << what;
-      DeepPixel a, b;
-      for (int y = all.deep.y0; y < all.deep.y0 + all.deep.height; ++y)
-        for (int x = all.deep.x0; x < all.deep.x0 + all.deep.width; ++x) {
-          culled.deep.getPixel(x, y, a), all.deep.getPixel(x, y, b);
-          ASSERT_EQ(a.f, b.f) << what << " deep pixel " << x << " " << y;
-          ASSERT_EQ(a.u, b.u) << what << " deep pixel " << x << " " << y;
-        }
+      expectSameOutputs(culled, all, what);
       // Hidden surfaces were skipped, not drawn and then lost.
       EXPECT_GT(all.stats.raster.hits, 100000u) << what;
       EXPECT_LT(double(culled.stats.raster.hits), 0.8 * double(all.stats.raster.hits)) << what;
