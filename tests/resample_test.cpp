@@ -12,6 +12,7 @@
 
 #include "common/error.h"
 #include "common/random.h"
+#include "resample/raster_kernels.h"
 #include "tests/resample_test_util.h"
 #include "tests/test_util.h"
 
@@ -612,6 +613,35 @@ TEST(ResampleCli, UnwritableOutputFailsBeforeAnythingIsWritten) {
   EXPECT_EQ(r.exitCode, 1);
   EXPECT_NE(r.err.find(dir.path("missing/flat.exr")), std::string::npos) << r.err;
   EXPECT_NE(r.err.find("no such directory"), std::string::npos) << r.err;
+}
+
+// --simd picks the inner loops' instruction set: every set this CPU runs writes the same file as
+// an independent reader sees it; one it does not run (AVX-512 on most desktops) is a one-line
+// error before anything is written.
+TEST(ResampleCli, EveryInstructionSetWritesTheSameImage) {
+  ScratchDir dir;
+  const std::string store = dir.path("gen.mps");
+  ASSERT_EQ(runReshutter("generate -n 20000 --width 120 --height 80 -o " + store).exitCode, 0);
+  const std::string scalar = dir.path("none.exr");
+  ASSERT_EQ(runReshutter("resample " + store + " -o " + scalar + " --spp 16 --simd none").exitCode, 0);
+  for (const std::string simd : {"auto", "avx2", "avx512"}) {
+    const std::string out = dir.path(simd + ".exr");
+    CommandResult r = runReshutter("resample " + store + " -o " + out + " --spp 16 --simd " + simd);
+    const bool runs = simd == "auto" || (simd == "avx2" ? kernels::available() : kernels::available(kernels::Isa::Avx512));
+    if (!runs) {
+      EXPECT_EQ(r.exitCode, 1) << simd;
+      EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+      EXPECT_NE(r.err.find("--simd"), std::string::npos) << r.err;
+      EXPECT_FALSE(std::filesystem::exists(out)) << simd;
+      continue;
+    }
+    ASSERT_EQ(r.exitCode, 0) << simd << ": " << r.err;
+    CommandResult diff = runImageTool("idiff -q -fail 0 -failpercent 0 -warn 0 " + scalar + " " + out);
+    EXPECT_EQ(diff.exitCode, 0) << simd << ": " << diff.out << diff.err;
+  }
+  CommandResult bad = runReshutter("resample " + store + " -o " + dir.path("x.exr") + " --simd sse9");
+  EXPECT_NE(bad.exitCode, 0);
+  EXPECT_NE(bad.err.find("--simd"), std::string::npos) << bad.err;
 }
 
 TEST(ResampleCli, BadArgumentsGiveOneLineAndNoOutput) {
