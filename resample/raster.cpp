@@ -919,7 +919,7 @@ struct BucketRasterizer::Impl {
       for (size_t ci = 0; ci < C; ++ci) {
         const uint32_t k = mt.thetaSeg[mt.cullTheta[ci]];
         float box[4];
-        unbounded |= kernels::projectLerped(&part.position(k, vBase).x, &part.position(k + 1, vBase).x, mt.thetaF[mt.cullTheta[ci]], nV, projectionScale,
+        unbounded |= kernels::projectLerped(isa, &part.position(k, vBase).x, &part.position(k + 1, vBase).x, mt.thetaF[mt.cullTheta[ci]], nV, projectionScale,
                                             &cullX[ci * nV], &cullY[ci * nV], &cullZ[ci * nV], box);
         bx0 = std::min(bx0, box[0]), by0 = std::min(by0, box[1]), bx1 = std::max(bx1, box[2]), by1 = std::max(by1, box[3]);
       }

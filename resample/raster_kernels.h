@@ -149,7 +149,7 @@ struct ProjectionScale {
 /// raster position (x[i] NaN where there is none, y[i] then unspecified), z[i] the depth p_i.z;
 /// project()'s operations, bit for bit. Returns whether any x is NaN; box = min x, min y, max x,
 /// max y over the others.
-bool projectLerped(const float* a, const float* b, float f, size_t n, const ProjectionScale& scale, float* x, float* y, float* z, float box[4]);
+bool projectLerped(Isa isa, const float* a, const float* b, float f, size_t n, const ProjectionScale& scale, float* x, float* y, float* z, float box[4]);
 
 struct EdgeTestSetup {
   const float* st;  // the candidates' times and raster positions (Candidates::t, x, y)
