@@ -202,7 +202,7 @@ struct BucketRasterizer::Impl {
   std::vector<EdgeQuad> segEdges;      // [segment * 5 + edge] for the current micropolygon
   std::vector<uint8_t> segReady;
   std::vector<float> cullX, cullY;     // [cull time * nV + v - vBase]; cullX NaN = before the near plane
-  // The linear path's per-vertex terms (rasterizeLinear), made once per chunk rather than once per
+  // The linear path's per-vertex terms (linearBox()), made once per chunk rather than once per
   // micropolygon corner: ends[] = raster x, y at the interval's two ends; reach[] = |motion| in x
   // and y, perspective lag, |depth change|; depth = nearer end depth; unbounded = before the
   // near plane at an end.
@@ -215,6 +215,12 @@ struct BucketRasterizer::Impl {
   // gathered once and sorted by cell of compensated position (gatherRun()).
   struct ChunkMicropolygon;
   std::vector<ChunkMicropolygon> chunkMps;
+  struct ChunkRun {
+    uint32_t begin, end;  // micropolygons [begin, end) of the chunk
+    bool gathered;        // its micropolygons filter the sorted cells (else each gathers alone)
+  };
+  std::vector<ChunkRun> chunkRuns;
+  uint32_t gatheredRun = ~0u;  // the run whose candidates the sorted arrays hold
   kernels::CellGrid cellGrid{};
   SkewedArray<uint32_t> chunkIndex{20}, sortedIndex{60};
   SkewedArray<float> chunkT{2}, chunkX{10}, chunkY{18}, sortedT{26}, sortedX{34}, sortedY{42};
@@ -724,7 +730,7 @@ struct BucketRasterizer::Impl {
     double toLocal;         // local time = st + toLocal
   };
 
-  // A group interval [theta0, theta1] that lies inside one knot segment, for rasterizeLinear().
+  // A group interval [theta0, theta1] that lies inside one knot segment, for the linear path (linearBox()).
   struct LinearInterval {
     float thetaA = 0, invLen = 0;  // u = (st - thetaA) * invLen
     float uErr = 0;                // rounding of u, as a fraction of the interval
@@ -853,7 +859,7 @@ struct BucketRasterizer::Impl {
 
     // The whole group interval inside one knot segment (always, for two-knot schedules): every
     // corner moves along one straight screen line over it, so the two end projections the cull
-    // made bound the micropolygon at any time (see rasterizeLinear), with no per-theta work.
+    // made bound the micropolygon at any time (see linearBox()), with no per-theta work.
     mt.linearPath = opt.perStratumBounds && C == 2 && thetaTimes[0] >= knots[0] && thetaTimes[T - 1] <= knots[K - 1];
     if (mt.linearPath) {
       LinearInterval& li = mt.li;
@@ -1060,7 +1066,7 @@ struct BucketRasterizer::Impl {
     }
   }
 
-  // The per-vertex terms of rasterizeLinear() for the chunk's nV vertices (cull rows 0 and 1).
+  // The per-vertex terms of linearBox() for the chunk's nV vertices (cull rows 0 and 1).
   void prepareLinearVertices(uint32_t nV) {
     linearVertex.resize(nV), linearDepth.resize(nV), linearUnbounded.resize(nV);
     for (uint32_t v = 0; v < nV; ++v) {
@@ -1071,18 +1077,19 @@ struct BucketRasterizer::Impl {
     }
   }
 
-  // Micropolygon mi over a group interval inside one knot segment, from its corners' raster
-  // positions A and B at the interval's ends (cullX/cullY rows 0 and 1). Corner j's raster
-  // position at fraction u is x_j(u) = A_j + (B_j - A_j) g_j(u), a straight line in screen space;
-  // with perspective g_j(u) - u = u (1 - u) (zB - zA) / z(u), at most |dz| / (4 z_min) = rho_j.
-  // As min of lerps >= lerp of mins, min_j x_j(u) >= lerp(min_j A_j, min_j B_j, u) - max_j rho_j
-  // |B_j - A_j|: the box at any time is the lerped end boxes widened by that margin. Each
-  // stratum tests only its samples inside the box at the sample's own time. False (nothing
-  // done) when a corner lies before the near plane at either end: the general path handles it.
+  // The linear path: a micropolygon over a group interval inside one knot segment, from its
+  // corners' raster positions A and B at the interval's ends (cullX/cullY rows 0 and 1). Corner
+  // j's raster position at fraction u is x_j(u) = A_j + (B_j - A_j) g_j(u), a straight line in
+  // screen space; with perspective g_j(u) - u = u (1 - u) (zB - zA) / z(u), at most |dz| / (4
+  // z_min) = rho_j. As min of lerps >= lerp of mins, min_j x_j(u) >= lerp(min_j A_j, min_j B_j, u)
+  // - max_j rho_j |B_j - A_j|: the box at any time is the lerped end boxes widened by that margin.
+  // Each stratum tests only its samples inside the box at the sample's own time.
   //
   // linearBox() makes that box (with the depth no hit can come nearer than, the pixel ranges'
   // rounding margin, and the motion and size that choose between shared and per-stratum
-  // ranges); drawLinear() gathers and tests the micropolygon's samples.
+  // ranges), Unbounded when a corner lies before the near plane at either end (the general path
+  // handles it); drawLinear() gathers and tests the micropolygon's samples on its own, and
+  // rasterizeLinearInChunk() through its run's chunk gather.
   struct LinearBox {
     MovingBox box;
     float zCull, rangeMargin, motion, size;
@@ -1149,17 +1156,6 @@ struct BucketRasterizer::Impl {
     return LinearState::Draw;
   }
 
-  bool rasterizeLinear(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, int nc) {
-    LinearBox lb;
-    switch (linearBox(mp, c, nc, lb)) {
-      case LinearState::Unbounded: return false;
-      case LinearState::Misses: return true;
-      case LinearState::Draw: break;
-    }
-    drawLinear(mp, mi, c, tri, lb);
-    return true;
-  }
-
   void drawLinear(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, const LinearBox& lb) {
     ++stats.linearMicropolygons;
     const float zCull = lb.zCull;
@@ -1215,7 +1211,7 @@ struct BucketRasterizer::Impl {
   // sample of its strata's pixel ranges (a one-pixel micropolygon moving a pixel and a half per
   // stratum: ~110 of them for ~6 candidates), and its neighbours read most of them again; the
   // run reads each once: the samples inside the run's moving box (the union of its
-  // micropolygons' - min of lerps >= lerp of mins, as in rasterizeLinear()) at their own time
+  // micropolygons' - min of lerps >= lerp of mins, as in linearBox()) at their own time
   // that pass the loosest of their early depth tests. They are then sorted into cells of
   // compensated position (the sample's position less its time times a reference motion), where
   // each micropolygon's box over the whole interval is about its own size: a micropolygon's
@@ -1238,13 +1234,6 @@ struct BucketRasterizer::Impl {
       chunkRuns.back().end = i + 1;
     }
   }
-
-  struct ChunkRun {
-    uint32_t begin, end;  // micropolygons [begin, end) of the chunk
-    bool gathered;        // its micropolygons filter the sorted cells (else each gathers alone)
-  };
-  std::vector<ChunkRun> chunkRuns;
-  uint32_t gatheredRun = ~0u;  // the run whose candidates the sorted arrays hold
 
   // Gathers run r's candidates, when its micropolygons move together enough to pay.
   void gatherRun(const MovingPart& mp, uint32_t r) {
@@ -1316,7 +1305,9 @@ struct BucketRasterizer::Impl {
     run.gathered = true;
   }
 
-  // rasterizeLinear() for micropolygon mi of the chunk prepareLinearChunk() prepared.
+  // Micropolygon mi of the chunk prepareLinearChunk() prepared, on the linear path: through its
+  // run's chunk gather, or on its own (drawLinear()). False (nothing done) when it is unbounded:
+  // the general path handles it.
   bool rasterizeLinearInChunk(const MovingPart& mp, uint32_t mi, const Chunk& ch, const uint32_t* c, bool tri) {
     const ChunkMicropolygon& cm = chunkMps[mi - ch.m0];
     if (cm.state == LinearState::Unbounded) return false;
