@@ -183,6 +183,9 @@ void addStoreCommands(CLI::App& app, Registry& registry) {
     sub->add_option("--motion", opt->maxMotionPx, "Largest motion over the shutter, pixels")->capture_default_str();
     sub->add_option("--knots", opt->knots, "Motion knots (1 = static)")->capture_default_str()->check(CLI::Range(1, 64));
     sub->add_option("--transparent", opt->transparentFraction, "Fraction of grids with opacity < 1")->capture_default_str()->check(CLI::Range(0.0, 1.0));
+    sub->add_option("--still", opt->stillFraction, "Fraction of grids that stand still but keep every knot (as P + blurP dumps write static objects)")
+        ->capture_default_str()
+        ->check(CLI::Range(0.0, 1.0));
     sub->add_option("--texture", opt->texture, "Relative per-vertex colour noise (texture detail)")->capture_default_str()->check(CLI::Range(0.0, 1.0));
     sub->add_option("--seed", opt->seed, "Random seed")->capture_default_str();
     sub->add_option("--zstd-level", *level, "zstd level")->capture_default_str()->check(CLI::Range(-7, 19));

@@ -49,12 +49,15 @@ uint64_t generateSynthetic(const SyntheticOptions& o, GridSink& writer) {
     Rng rng(hashCombine(o.seed, gi));
     const double x0 = rng.uniform(-g, o.width), y0 = rng.uniform(-g, o.height);
     const double z0 = rng.uniform(5.0, 50.0);
-    const double angle = rng.uniform(0.0, 2 * M_PI), motion = rng.uniform(0.0, o.maxMotionPx);
-    const double dz = rng.uniform(-0.02, 0.02) * z0;
+    const double angle = rng.uniform(0.0, 2 * M_PI);
+    double motion = rng.uniform(0.0, o.maxMotionPx);
+    double dz = rng.uniform(-0.02, 0.02) * z0;
     const double tilt = rng.uniform(-0.3, 0.3), bulge = rng.uniform(0.0, 0.5);
     const double hue = rng.uniform(0.0, 6.28);
     const bool transparent = rng.uniform() < o.transparentFraction;
     const float alpha = transparent ? float(rng.uniform(0.2, 0.8)) : 1.0f;
+    // Drawn last so that a scene without still grids keeps every other draw of its seed.
+    if (o.stillFraction > 0.0 && rng.uniform() < o.stillFraction) motion = 0.0, dz = 0.0;
     for (int j = 0; j < gv; ++j)
       for (int i = 0; i < gv; ++i) {
         const size_t v = size_t(j) * gv + size_t(i);

@@ -18,6 +18,9 @@ struct SyntheticOptions {
   double maxMotionPx = 50.0;
   int knots = 2;                     // 1 = static
   double transparentFraction = 0.0;  // share of grids with Oi < 1
+  /// Share of grids that stand still yet carry every knot, as a P + blurP dump writes its
+  /// static objects (blurP = P): the case the writer stores as static.
+  double stillFraction = 0.0;
   /// Relative amplitude of per-vertex colour noise standing in for texture detail: shaded colours
   /// of real scenes are not smooth down to the last mantissa bit, and compression must not be
   /// measured on data that is.
