@@ -954,7 +954,7 @@ void DumpHandler::emitPrim(const Prim& p) {
   sink_->addGrid(g);
   if (stats_) {
     stats_->micropolygons += nMp;
-    if (K > 1) stats_->movingMicropolygons += nMp;
+    if (K > 1 && !g.standsStill()) stats_->movingMicropolygons += nMp;  // the writer stores a still grid static
   }
 }
 

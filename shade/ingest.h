@@ -18,7 +18,8 @@
 // - Motion: MotionBegin [t0 … tn-1] around n copies of a primitive or of transforms; "blurP" (no
 //   motion block) is P at shutter close. Knots are the union of the primitive's and its moving
 //   transform's times, clipped to the shutter (positions interpolated at the shutter ends), as
-//   camera-space positions linear between knots.
+//   camera-space positions linear between knots. A grid whose knots are all equal (blurP = P: a
+//   static object) is stored static and not counted as moving.
 // - Appearance per knot: the first copy's variables (Cs, Os, N, …) are kept; if a later copy
 //   differs, a warning says so once. Positions are per knot.
 // - Variables: every declared variable of a primitive becomes a store attribute of the same name

@@ -249,8 +249,9 @@ ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::Gri
               stats.grids += 1;
               stats.micropolygons += in.numMicropolygons();
               stats.vertices += go.numVertices;
-              stats.movingGrids += schedule != 0;
-              stats.movingMicropolygons += schedule != 0 ? in.numMicropolygons() : 0;
+              const bool moves = schedule != 0 && !in.standsStill();  // the writer stores a still grid static
+              stats.movingGrids += moves;
+              stats.movingMicropolygons += moves ? in.numMicropolygons() : 0;
             }
           }));
   progress.finish();

@@ -1,6 +1,7 @@
 #include "store/model.h"
 
 #include <cmath>
+#include <cstring>
 #include <set>
 
 #include "common/error.h"
@@ -45,6 +46,14 @@ bool parseAttrCodec(const std::string& s, AttrCodec& out) {
       return true;
     }
   return false;
+}
+
+bool GridInput::standsStill() const {
+  if (numVertices == 0 || positions.size() <= numVertices) return true;
+  const size_t bytes = size_t(numVertices) * sizeof(glm::vec3);
+  for (size_t at = numVertices; at < positions.size(); at += numVertices)
+    if (std::memcmp(&positions[at], positions.data(), bytes) != 0) return false;
+  return true;
 }
 
 int Schema::find(const std::string& name) const {

@@ -152,6 +152,10 @@ struct GridInput {
   uint8_t flags = 0;                     // MpFlag bits, for every micropolygon of the grid
   std::vector<AttrValues> attrs;         // parallel to Schema::attrs
   size_t numMicropolygons() const { return corners.size() / 4; }
+  /// Every knot's positions equal the first's, bit for bit: the grid stands still although it
+  /// was given several knots (a P + blurP dump's static objects, a motion block that does not
+  /// move). The store writer keeps such a grid as static, so re-sampling takes the static path.
+  bool standsStill() const;
 };
 
 /// Where producers (the shading pass, dump ingest, synthetic scenes) send their grids. The store

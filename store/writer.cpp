@@ -200,6 +200,9 @@ struct StoreWriter::Impl {
   bool failed = false, closed = false;
   WriteStats stats;
   uint32_t stampCounter = 0;
+  // The grid being added: its schedule and positions as stored (static when it stands still).
+  uint32_t gridSchedule = 0;
+  std::span<const glm::vec3> gridPositions;
   // Per-grid scratch, reused.
   std::vector<glm::dvec2> raster;  // knot-major
   std::vector<uint8_t> inFront;    // knot-major
@@ -313,14 +316,21 @@ struct StoreWriter::Impl {
       failed = true;
       throw;
     }
-    const uint32_t nV = g.numVertices, K = uint32_t(meta.schedules[g.schedule].size());
     const size_t nMp = g.numMicropolygons();
     if (nMp == 0) return;
+    // A grid that stands still is stored static whatever knots it came with: one position per
+    // vertex, and parts whose effects say "static", which re-sampling draws on its static path.
+    gridSchedule = g.schedule, gridPositions = g.positions;
+    if (meta.schedules[g.schedule].size() > 1 && g.standsStill()) {
+      gridSchedule = 0, gridPositions = g.positions.first(g.numVertices);
+      stats.stillMicropolygons += nMp;
+    }
+    const uint32_t nV = g.numVertices, K = uint32_t(meta.schedules[gridSchedule].size());
 
     raster.resize(size_t(K) * nV);
     inFront.resize(size_t(K) * nV);
     for (size_t i = 0; i < size_t(K) * nV; ++i) {
-      glm::dvec3 p(g.positions[i]);
+      glm::dvec3 p(gridPositions[i]);
       bool front = !projector.perspective || p.z >= projector.nearClip;
       inFront[i] = front;
       raster[i] = front ? projector.project(p) : glm::dvec2(0.0);
@@ -334,7 +344,7 @@ struct StoreWriter::Impl {
     for (size_t i = 0; i < nMp; ++i) {
       const uint32_t* c = &g.corners[i * 4];
       int nc = c[3] == kNoCorner ? 3 : 4;
-      TileKey key{kBehindCameraTile, kBehindCameraTile, g.schedule};
+      TileKey key{kBehindCameraTile, kBehindCameraTile, gridSchedule};
       for (uint32_t k = 0; k < K; ++k) {
         size_t base = size_t(k) * nV;
         bool front = true;
@@ -441,10 +451,10 @@ struct StoreWriter::Impl {
     const auto& schema = meta.schema;
     const uint32_t nV = g.numVertices;
     uint32_t* r = b.vertices.append(chunks);
-    const glm::vec3& p0 = g.positions[v];
+    const glm::vec3& p0 = gridPositions[v];
     for (uint32_t k = 0; k < K; ++k) {
       const size_t src = size_t(k) * nV + v;
-      const glm::vec3& p = g.positions[src];
+      const glm::vec3& p = gridPositions[src];
       std::memcpy(r + 3 * k, &p, 12);
       if (p != p0) b.effects |= kEffectMoving;
       KnotBounds& kb = b.bounds[k];

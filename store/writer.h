@@ -27,6 +27,7 @@ struct WriterOptions {
 
 struct WriteStats {
   uint64_t micropolygons = 0, vertices = 0, parts = 0, tiles = 0;
+  uint64_t stillMicropolygons = 0;  // of grids given several knots that stood still, stored static
   uint64_t rawBytes = 0, fileBytes = 0;
   uint64_t peakBufferedBytes = 0;
 };

@@ -6,6 +6,7 @@
 #include <fstream>
 #include <map>
 #include <random>
+#include <set>
 
 #include <gtest/gtest.h>
 
@@ -198,6 +199,49 @@ TEST(IngestTest, ReferenceWorkflowDumpRoundTripsExactly) {
     }
   }
   EXPECT_EQ(found, total);
+}
+
+TEST(IngestTest, StillObjectsOfADumpAreStoredStatic) {
+  // The reference dump writes "blurP" for every grid; a static object's blurP equals its P. Those
+  // grids are stored static (one knot, schedule 0), and the ingest counts only the others moving.
+  test::ScratchDir dir;
+  SyntheticOptions so;
+  so.micropolygons = 20000;
+  so.width = 320, so.height = 240;
+  so.stillFraction = 0.5;
+  const StoreMeta src = syntheticMeta(so);
+  Capture truth;
+  {
+    bench::DumpRibWriter dump(dir.path("dump.rib.gz"), src, true);
+    truth.next = &dump;
+    generateSynthetic(so, truth);
+    dump.close();
+  }
+  std::set<uint32_t> stillGrids;
+  uint64_t still = 0, moving = 0;
+  for (size_t gi = 0; gi < truth.grids.size(); ++gi) {
+    const auto& g = truth.grids[gi];
+    const bool same = std::equal(g.positions.begin(), g.positions.begin() + g.numVertices, g.positions.begin() + g.numVertices);
+    (same ? still : moving) += g.corners.size() / 4;
+    if (same) stillGrids.insert(uint32_t(gi));
+  }
+  ASSERT_GT(still, 0u);
+  ASSERT_GT(moving, 0u);
+  shade::IngestStats st = shade::ingestDump(dir.path("dump.rib.gz"), dir.path("frame.mps"));
+  EXPECT_EQ(st.movingMicropolygons, moving);
+  EXPECT_EQ(st.write.stillMicropolygons, still);
+  StoreReader reader(dir.path("frame.mps"));
+  reader.verify();
+  uint64_t staticSeen = 0;
+  for (size_t e = 0; e < reader.entries().size(); ++e) {
+    const TilePart p = reader.decode(e);
+    for (uint32_t mp = 0; mp < p.numMicropolygons; ++mp) {
+      const bool isStill = stillGrids.count(p.gridId[mp]) == 1;
+      EXPECT_EQ(reader.entries()[e].schedule == 0, isStill) << "grid " << p.gridId[mp];
+      staticSeen += isStill;
+    }
+  }
+  EXPECT_EQ(staticSeen, still);
 }
 
 TEST(IngestTest, MotionBlocksWithAnyKnotTimes) {

@@ -4,6 +4,7 @@
 // and concurrent cached reads.
 #include <bit>
 #include <cmath>
+#include <set>
 
 #include <glm/geometric.hpp>
 #include <gtest/gtest.h>
@@ -147,6 +148,68 @@ TEST(StoreRoundTrip, MixedSchedulesTrianglesAndPartialAttributes) {
   bool sawTriangles = false;
   for (const auto& e : reader.entries()) sawTriangles |= (e.effects & kEffectTriangles) != 0;
   EXPECT_TRUE(sawTriangles);
+}
+
+TEST(StoreRoundTrip, StillGridsAreStoredStatic) {
+  // A P + blurP dump gives every grid two knots, the static ones two equal knots. The writer
+  // stores those static (schedule 0, one knot, parts whose effects say "not moving") so that
+  // re-sampling draws them on its static path; a grid one ulp away from still keeps its knots.
+  test::ScratchDir dir;
+  const Schema schema = test::fullSchema();
+  const StoreMeta meta = test::testMeta(schema);
+  StoreWriter writer(dir.path("still.mps"), meta, {});
+  const uint32_t twoKnots = writer.addSchedule({0.0, 1.0});
+  Rng rng(11);
+  FlatStore expected;
+  std::set<uint32_t> stillGrids;
+  uint32_t mpid = 0, gridId = 0;
+  uint64_t stillCount = 0;
+  for (int n = 0; n < 60; ++n) {
+    test::GridSpec spec;
+    spec.knots = 2, spec.schedule = twoKnots;
+    spec.spread = 0.5;  // small grids: still and moving ones share tiles
+    const int kind = n % 3;  // 0 still, 1 moving, 2 still but for one coordinate one ulp off
+    spec.motion = kind == 1 ? 0.5 : 0.0;
+    auto g = test::randomGrid(rng, schema, spec, gridId++, mpid);
+    if (kind == 2) {
+      float& x = g.positions[g.numVertices + g.numVertices / 2].x;
+      x = std::nextafter(x, INFINITY);
+    }
+    writer.addGrid(g.view());
+    FlatStore in;
+    test::flatten(g, schema, in);
+    for (auto& [id, mp] : in) {
+      if (kind == 0) mp.schedule = 0, mp.positions.resize(4);  // knot 0's corners
+      expected[id] = mp;
+    }
+    if (kind == 0) stillGrids.insert(g.gridId), stillCount += g.corners.size() / 4;
+  }
+  const WriteStats stats = writer.close();
+  EXPECT_EQ(stats.stillMicropolygons, stillCount);
+  StoreReader reader(dir.path("still.mps"));
+  reader.verify();
+  compareExact(expected, test::flatten(reader), schema);
+  size_t staticParts = 0, movingParts = 0;
+  for (size_t e = 0; e < reader.entries().size(); ++e) {
+    const auto& en = reader.entries()[e];
+    const TilePart part = reader.decode(e);
+    for (uint32_t m = 0; m < part.numMicropolygons; ++m)
+      EXPECT_EQ(en.schedule == 0, stillGrids.count(part.gridId[m]) == 1) << "grid " << part.gridId[m];
+    if (en.schedule == 0) {
+      ++staticParts;
+      EXPECT_EQ(part.numKnots, 1u);
+      EXPECT_FALSE(en.effects & kEffectMoving);
+    } else {
+      // Moving exactly when one of its vertices moves (a part of the nudged grid may not hold
+      // the nudged vertex).
+      bool moves = false;
+      for (uint32_t v = 0; v < part.numVertices; ++v) moves |= part.position(1, v) != part.position(0, v);
+      EXPECT_EQ((en.effects & kEffectMoving) != 0, moves);
+      movingParts += moves;
+    }
+  }
+  EXPECT_GT(staticParts, 0u);
+  EXPECT_GT(movingParts, 0u);
 }
 
 TEST(StoreRoundTrip, SameInputGivesIdenticalBytes) {
