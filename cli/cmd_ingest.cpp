@@ -48,7 +48,9 @@ struct IngestCommand {
     if (bar) bar->finish();
     const double secs = st.scanSeconds + st.ingestSeconds;
     note(cat("wrote ", output, ": ", grouped(st.micropolygons), " micropolygons (", grouped(st.quads), " quads, ", grouped(st.triangles),
-             " triangles; ", grouped(st.movingMicropolygons), " moving) from ", grouped(st.primitives), " primitives, ",
+             " triangles; ", grouped(st.movingMicropolygons), " moving",
+             st.write.stillMicropolygons ? cat(", ", grouped(st.write.stillMicropolygons), " with equal knots stored static") : std::string(), ") from ",
+             grouped(st.primitives), " primitives, ",
              humanBytes(double(st.write.fileBytes)), " (", humanBytes(double(fileBytes)), " RIB, ", humanBytes(double(st.ribBytes)),
              " decompressed) in ", secs, " s"));
     if (st.fannedPolygons || st.earClippedPolygons)
