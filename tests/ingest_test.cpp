@@ -100,6 +100,18 @@ std::string ingestError(const std::string& rib) {
   return {};
 }
 
+// A synthetic scene written as a reference-form dump (bench::DumpRibWriter, gzipped) at path;
+// returns the grids as generated, the truth to compare an ingest with.
+Capture dumpSynthetic(const SyntheticOptions& so, const std::string& path) {
+  Capture truth;
+  bench::DumpRibWriter dump(path, syntheticMeta(so), true);
+  truth.next = &dump;
+  generateSynthetic(so, truth);
+  dump.close();
+  truth.next = nullptr;
+  return truth;
+}
+
 const std::string kHeader = "Format 64 48 1\nProjection \"perspective\" \"fov\" [60]\nShutter 0 1\nWorldBegin\n";
 const std::string kSquare = "\"P\" [0 0 5  1 0 5  1 1 5  0 1 5]";
 
@@ -125,13 +137,7 @@ TEST(IngestTest, ReferenceWorkflowDumpRoundTripsExactly) {
   so.transparentFraction = 0.3;
   so.maxMotionPx = 20;
   const StoreMeta src = syntheticMeta(so);
-  Capture truth;
-  {
-    bench::DumpRibWriter dump(dir.path("dump.rib.gz"), src, true);
-    truth.next = &dump;
-    generateSynthetic(so, truth);
-    dump.close();
-  }
+  const Capture truth = dumpSynthetic(so, dir.path("dump.rib.gz"));
   size_t total = 0;
   for (const auto& g : truth.grids) total += g.corners.size() / 4;
   ASSERT_GE(total, 30000u);
@@ -209,14 +215,7 @@ TEST(IngestTest, StillObjectsOfADumpAreStoredStatic) {
   so.micropolygons = 20000;
   so.width = 320, so.height = 240;
   so.stillFraction = 0.5;
-  const StoreMeta src = syntheticMeta(so);
-  Capture truth;
-  {
-    bench::DumpRibWriter dump(dir.path("dump.rib.gz"), src, true);
-    truth.next = &dump;
-    generateSynthetic(so, truth);
-    dump.close();
-  }
+  const Capture truth = dumpSynthetic(so, dir.path("dump.rib.gz"));
   std::set<uint32_t> stillGrids;
   uint64_t still = 0, moving = 0;
   for (size_t gi = 0; gi < truth.grids.size(); ++gi) {

@@ -229,6 +229,20 @@ TestScene matteOverBackground() {
   return s;
 }
 
+// The render r of scene s agrees with the brute-force ray caster on the same samples: only
+// samples within float rounding of an edge may differ, a handful in 18 k.
+void expectRayCasterAgrees(const TestScene& s, const RenderSpec& spec, const RenderResult& r, int width, int height, const std::string& what) {
+  const Reference ref = rayCast(s, spec, width, height);
+  double diff = 0, maxDiff = 0;
+  for (size_t p = 0; p < ref.a.size(); ++p)
+    for (auto [name, vals] : {std::pair{"R", &ref.r}, std::pair{"G", &ref.g}, std::pair{"B", &ref.b}, std::pair{"A", &ref.a}}) {
+      const double d = std::abs(channel(r, name).f[p] - (*vals)[p]);
+      diff += d, maxDiff = std::max(maxDiff, d);
+    }
+  EXPECT_LT(diff / double(ref.a.size()), 2e-3) << what;
+  EXPECT_LE(maxDiff, 2.0 / 16 + 1e-5) << what;
+}
+
 }  // namespace
 
 TEST(ResampleCompositing, MatteCutsOutAndHidesWhatIsBehind) {
@@ -326,16 +340,7 @@ TEST(ResampleReference, AgreesWithABruteForceRayCaster) {
   for (auto [a, b] : {std::pair{0.0, 1.0}, std::pair{0.3, 0.55}, std::pair{0.8, 0.8}}) {
     RenderSpec spec = specFor(reader, a, b, 4, 4, 5);
     RenderResult r = render(spec);
-    Reference ref = rayCast(s, spec, 40, 28);
-    double diff = 0, maxDiff = 0;
-    for (size_t p = 0; p < ref.a.size(); ++p)
-      for (auto [name, vals] : {std::pair{"R", &ref.r}, std::pair{"G", &ref.g}, std::pair{"B", &ref.b}, std::pair{"A", &ref.a}}) {
-        const double d = std::abs(channel(r, name).f[p] - (*vals)[p]);
-        diff += d, maxDiff = std::max(maxDiff, d);
-      }
-    // Only samples within float rounding of an edge may differ: a handful in 18 k samples.
-    EXPECT_LT(diff / ref.a.size(), 2e-3) << "interval " << a << ":" << b;
-    EXPECT_LE(maxDiff, 2.0 / 16 + 1e-5) << "interval " << a << ":" << b;
+    expectRayCasterAgrees(s, spec, r, 40, 28, cat("interval ", a, ":", b));
   }
 }
 
@@ -413,15 +418,7 @@ TEST(ResampleStatic, StillMicropolygonsAmongMovingOnesTakeTheStaticPath) {
     if (a != b) {
       EXPECT_EQ(r.stats.raster.staticMicropolygons, uint64_t(still)) << "interval " << a << ":" << b;
     }
-    Reference ref = rayCast(s, spec, 40, 28);
-    double diff = 0, maxDiff = 0;
-    for (size_t p = 0; p < ref.a.size(); ++p)
-      for (auto [name, vals] : {std::pair{"R", &ref.r}, std::pair{"G", &ref.g}, std::pair{"B", &ref.b}, std::pair{"A", &ref.a}}) {
-        const double d = std::abs(channel(r, name).f[p] - (*vals)[p]);
-        diff += d, maxDiff = std::max(maxDiff, d);
-      }
-    EXPECT_LT(diff / ref.a.size(), 2e-3) << "interval " << a << ":" << b;
-    EXPECT_LE(maxDiff, 2.0 / 16 + 1e-5) << "interval " << a << ":" << b;
+    expectRayCasterAgrees(s, spec, r, 40, 28, cat("interval ", a, ":", b));
   }
 }
 
