@@ -106,6 +106,7 @@ struct Chunk {
   uint32_t part;       // queue index
   uint32_t m0, m1;     // micropolygons [m0, m1)
   uint32_t vLo, vHi;   // the vertices their corners use lie in [vLo, vHi]
+  bool still = false;  // every vertex in [vLo, vHi] is where it is at knot 0 at every knot
 };
 // 64 micropolygons are four rows of a 16×16 grid: small enough that depth order is fine-grained,
 // large enough that a chunk's per-vertex set-up is shared.
@@ -1491,7 +1492,7 @@ struct BucketRasterizer::Impl {
     if (entry.effects & store::kEffectTransparent) ++stats.transparentParts;
     const uint32_t K = part.numKnots;
     for (uint32_t m0 = 0; m0 < part.numMicropolygons; m0 += kChunkSize) {
-      Chunk ch{INFINITY, index, m0, std::min(part.numMicropolygons, m0 + kChunkSize), ~0u, 0};
+      Chunk ch{INFINITY, index, m0, std::min(part.numMicropolygons, m0 + kChunkSize), ~0u, 0, false};
       for (uint32_t m = ch.m0; m < ch.m1; ++m)
         for (int j = 0; j < 4; ++j) {
           const uint32_t v = part.corners[size_t(m) * 4 + j];
@@ -1501,6 +1502,13 @@ struct BucketRasterizer::Impl {
       // The range's vertices (a grid's rows: few the chunk does not use) bound its depth.
       for (uint32_t k = 0; k < K; ++k)
         for (uint32_t v = ch.vLo; v <= ch.vHi; ++v) ch.zNear = std::min(ch.zNear, part.position(k, v).z);
+      // Rows of a moving part that stand still (a deforming grid's pinned end, a store written
+      // before the writer kept still grids static) take the static path.
+      if (K > 1) {
+        const size_t bytes = size_t(ch.vHi - ch.vLo + 1) * sizeof(glm::vec3);
+        ch.still = true;
+        for (uint32_t k = 1; k < K && ch.still; ++k) ch.still = std::memcmp(&part.position(k, ch.vLo), &part.position(0, ch.vLo), bytes) == 0;
+      }
       if (std::isnan(ch.zNear)) ch.zNear = -INFINITY;  // the sort needs a strict weak order
       chunks.push_back(ch);
     }
@@ -1524,7 +1532,7 @@ struct BucketRasterizer::Impl {
     const auto& meta = src.store->meta();
     const auto& knots = meta.schedules[entry.schedule];
     const HitContext hc = hitContext(meta, entry, part);
-    const bool moving = (entry.effects & store::kEffectMoving) && part.numKnots > 1;
+    const bool moving = (entry.effects & store::kEffectMoving) && part.numKnots > 1 && !ch.still;
     if (!moving) {
       // Knot 0 holds every knot's positions: one pass serves all samples, all groups.
       rasterizeStatic(src, part, hc, &part.positions[ch.vLo], -1, ch);

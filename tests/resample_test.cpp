@@ -422,6 +422,35 @@ TEST(ResampleStatic, StillMicropolygonsAmongMovingOnesTakeTheStaticPath) {
   }
 }
 
+TEST(ResampleStatic, StillRowsOfAMovingGridTakeTheStaticPath) {
+  // One grid whose first 64 micropolygons (one chunk) stand still and whose next 64 move, in one
+  // tile: one moving part. The still chunk is drawn on the static path, and the frame is what the
+  // ray caster sees.
+  ScratchDir dir;
+  TestScene s = makeScene(32, 24, {0.0, 1.0});
+  s.meta.tileSize = 32;  // the whole image one tile
+  Rng rng(29);
+  for (int i = 0; i < 128; ++i) {
+    TestMp mp;
+    const double x = rng.uniform(0, 24), y = rng.uniform(0, 16), size = rng.uniform(1, 8), z = rng.uniform(3, 30);
+    const auto q = s.rect(x, y, x + size, y + size * 0.8, z);
+    const double vx = rng.uniform(-6, 6), vy = rng.uniform(-6, 6);
+    mp.knots = {q, i < 64 ? q : s.rect(x + vx, y + vy, x + vx + size, y + vy + size * 0.8, z)};
+    mp.ci = {float(rng.uniform()), float(rng.uniform()), float(rng.uniform())};
+    mp.flags = store::kTwoSided;
+    s.mps.push_back(mp);
+  }
+  auto reader = writeScene(s, dir.path("rows.mps"), true);
+  ASSERT_EQ(reader->entries().size(), 1u);
+  ASSERT_TRUE(reader->entries()[0].effects & store::kEffectMoving);
+  for (auto [a, b] : {std::pair{0.0, 1.0}, std::pair{0.2, 0.45}}) {
+    RenderSpec spec = specFor(reader, a, b, 4, 4, 3);
+    RenderResult r = render(spec);
+    EXPECT_EQ(r.stats.raster.staticMicropolygons, 64u) << "interval " << a << ":" << b;
+    expectRayCasterAgrees(s, spec, r, 32, 24, cat("interval ", a, ":", b));
+  }
+}
+
 TEST(ResampleFilters, ConstantImageStaysConstantForEveryFilter) {
   // A screen-filling opaque plane: every normalised filter must give exactly its colour, at the
   // borders too (samples exist beyond the image edge), with no NaN from negative lobes.

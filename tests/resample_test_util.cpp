@@ -32,36 +32,47 @@ TestScene makeScene(int width, int height, std::vector<double> knotTimes) {
   return s;
 }
 
-std::shared_ptr<const StoreReader> writeScene(const TestScene& scene, const std::string& path) {
+std::shared_ptr<const StoreReader> writeScene(const TestScene& scene, const std::string& path, bool asOneGrid) {
   {
     StoreWriter w(path, scene.meta);
     const uint32_t schedule = w.addSchedule(scene.knotTimes);
     const size_t K = scene.knotTimes.size();
+    // Each micropolygon's own vertices, appended to the grid being built.
+    std::vector<std::vector<glm::vec3>> pos(K);
+    std::vector<uint32_t> corners;
+    std::vector<float> ci, oi, n;
+    auto flush = [&](const TestMp& mp, uint32_t gridId) {
+      std::vector<glm::vec3> knotMajor;
+      for (const auto& p : pos) knotMajor.insert(knotMajor.end(), p.begin(), p.end());
+      GridInput g;
+      g.schedule = schedule;
+      g.numVertices = uint32_t(pos[0].size());
+      g.positions = knotMajor;
+      g.corners = corners;
+      g.objectId = mp.objectId;
+      g.gridId = gridId;
+      g.flags = mp.flags;
+      g.attrs = {AttrValues{ci, {}}, AttrValues{oi, {}}, AttrValues{n, {}}};
+      w.addGrid(g);
+      for (auto& p : pos) p.clear();
+      corners.clear(), ci.clear(), oi.clear(), n.clear();
+    };
     for (size_t i = 0; i < scene.mps.size(); ++i) {
       const TestMp& mp = scene.mps[i];
       EXPECT_EQ(mp.knots.size(), K);
       const int nc = mp.triangle ? 3 : 4;
-      std::vector<glm::vec3> pos;
+      const uint32_t v0 = uint32_t(pos[0].size());
       for (size_t k = 0; k < K; ++k)
-        for (int j = 0; j < nc; ++j) pos.push_back(glm::vec3(mp.knots[k][size_t(j)]));
-      std::vector<uint32_t> corners{0, 1, 2, mp.triangle ? kNoCorner : 3u};
-      std::vector<float> ci, oi, n;
+        for (int j = 0; j < nc; ++j) pos[k].push_back(glm::vec3(mp.knots[k][size_t(j)]));
+      corners.insert(corners.end(), {v0, v0 + 1, v0 + 2, mp.triangle ? kNoCorner : v0 + 3});
       for (int j = 0; j < nc; ++j) {
         ci.insert(ci.end(), {mp.ci.x, mp.ci.y, mp.ci.z});
         oi.insert(oi.end(), {mp.oi.x, mp.oi.y, mp.oi.z});
         n.insert(n.end(), {0.f, 0.f, -1.f});
       }
-      GridInput g;
-      g.schedule = schedule;
-      g.numVertices = uint32_t(nc);
-      g.positions = pos;
-      g.corners = corners;
-      g.objectId = mp.objectId;
-      g.gridId = mp.gridId ? mp.gridId : uint32_t(i);
-      g.flags = mp.flags;
-      g.attrs = {AttrValues{ci, {}}, AttrValues{oi, {}}, AttrValues{n, {}}};
-      w.addGrid(g);
+      if (!asOneGrid) flush(mp, mp.gridId ? mp.gridId : uint32_t(i));
     }
+    if (asOneGrid && !scene.mps.empty()) flush(scene.mps.front(), 0);
     w.close();
   }
   return std::make_shared<const StoreReader>(path);

@@ -39,8 +39,9 @@ struct TestScene {
 /// [0, 1], schema Ci, Oi (vertex colours) plus a vertex normal "N".
 TestScene makeScene(int width, int height, std::vector<double> knotTimes = {0.0, 1.0});
 
-/// Writes the scene as a store (each micropolygon its own grid: no shared vertices).
-std::shared_ptr<const store::StoreReader> writeScene(const TestScene& scene, const std::string& path);
+/// Writes the scene as a store: each micropolygon its own grid, or (asOneGrid) all of them one
+/// grid in scene order with the first one's object id and flags (no shared vertices either way).
+std::shared_ptr<const store::StoreReader> writeScene(const TestScene& scene, const std::string& path, bool asOneGrid = false);
 
 /// A render spec for one store over [open, close] (frame-relative), box filter 1×1.
 resample::RenderSpec specFor(std::shared_ptr<const store::StoreReader> reader, double open, double close, int nx, int ny, uint64_t seed = 0);
