@@ -27,14 +27,18 @@ inline size_t peakRssBytes() {
   return 0;
 }
 
+// The CPU a figure was measured on, with family and model: the VM lands on different hosts
+// between sessions under the same model name ("AMD EPYC" for Zen 4 and Zen 5 alike).
 inline std::string machineLine() {
   std::ifstream in("/proc/cpuinfo");
-  std::string line, model = "unknown CPU";
-  while (std::getline(in, line))
-    if (line.rfind("model name", 0) == 0) {
-      model = line.substr(line.find(':') + 2);
-      break;
-    }
+  std::string line, model = "unknown CPU", family, number;
+  auto value = [&] { return line.substr(line.find(':') + 2); };
+  while (std::getline(in, line) && (model == "unknown CPU" || family.empty() || number.empty())) {
+    if (line.rfind("model name", 0) == 0) model = value();
+    else if (line.rfind("cpu family", 0) == 0) family = value();
+    else if (line.rfind("model", 0) == 0 && line.find(':') != std::string::npos) number = value();
+  }
+  if (!family.empty()) model += " (family " + family + " model " + number + ")";
   return model + ", " + std::to_string(std::thread::hardware_concurrency()) + " hardware threads";
 }
 

@@ -22,6 +22,8 @@ bin="$build/reshutter"
 work=$(mktemp -d /tmp/reshutter-scaling.XXXXXX)
 trap 'rm -rf "$work"' EXIT
 
+source bench/host.sh
+host_line
 printf "| motion px | interval | CPU s | / full | render wall s | sample tests | hits | STE | drawn micropolygons |\n"
 printf "|---|---|---|---|---|---|---|---|---|\n"
 for motion in "${motions[@]}"; do

@@ -20,6 +20,8 @@ trap 'rm -rf "$work"' EXIT
 "$bin" -q generate -n "$mp" --motion 0 --knots 1 -o "$work/static.0001.mps"
 "$bin" -q generate -n "$mp" --transparent 0.3 -o "$work/transparent.0001.mps"
 
+source bench/host.sh
+host_line
 printf "| run | wall s | CPU s | M samples per CPU-second | sample tests | hits | STE | peak RSS MB |\n|---|---|---|---|---|---|---|---|\n"
 run() {  # name, reshutter arguments...
   local name=$1

@@ -15,6 +15,8 @@ a=$1 b=$2 moving=$3 static=$4
 work=$(mktemp -d /tmp/reshutter-frames.XXXXXX)
 trap 'rm -rf "$work"' EXIT
 
+source "$(dirname "$0")/host.sh"
+host_line
 for ((i = 1; i <= rounds; ++i)); do
   for run in full quarter instant motion-free; do
     case $run in
