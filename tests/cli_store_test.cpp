@@ -1,5 +1,9 @@
 // The store commands as a user meets them: info (human and JSON, checked with jq), verify, and
 // one-line errors with a non-zero exit for damaged or missing files.
+#include <filesystem>
+#include <string>
+#include <vector>
+
 #include <gtest/gtest.h>
 
 #include "tests/test_util.h"
@@ -56,9 +60,18 @@ TEST(CliStore, DamagedAndMissingFilesGiveOneLineErrors) {
 }
 
 TEST(CliStore, UsageErrorsExitTwoAndHelpTeaches) {
-  auto r = runReshutter("info");
-  EXPECT_EQ(r.exitCode, 2 > 0 ? r.exitCode : 2);
-  EXPECT_NE(r.exitCode, 0);
+  // Missing arguments, unknown options and out-of-range values: one line in the error model's
+  // form, exit status 2, and nothing written.
+  reshutter::test::ScratchDir dir;
+  const std::string out = dir.path("x.mps");
+  for (const std::string& args : std::vector<std::string>{"", "info", "resample", "generate -o " + out + " --still 2",
+                                                          "generate -o " + out + " --nonesuch", "generate -o " + out + " -n abc"}) {
+    auto r = runReshutter(args);
+    EXPECT_EQ(r.exitCode, 2) << args;
+    EXPECT_EQ(lines(r.err), 1u) << args << ": " << r.err;
+    EXPECT_EQ(r.err.rfind("reshutter: ", 0), 0u) << r.err;
+    EXPECT_FALSE(std::filesystem::exists(out)) << args;
+  }
   auto help = runReshutter("--help");
   EXPECT_EQ(help.exitCode, 0);
   EXPECT_NE(help.out.find("info"), std::string::npos);
