@@ -30,7 +30,7 @@ for motion in "${motions[@]}"; do
   "$bin" -q generate -n "$mp" --motion "$motion" -o "$work/scene.mps"
   full_cpu=""
   for interval in 0:1 0.25:0.75 0.25:0.5 0.5:0.5; do
-    best="" line=""
+    best=""
     for ((r = 0; r < rounds; ++r)); do
       out=$({ /usr/bin/time -f "CPU %U %S" "$bin" resample "$work/scene.mps" --spp 16 --filter gaussian:2x2 \
         --shutter "$interval" --stats -o "$work/out.exr" 2>&1; } 2>&1)

@@ -1504,11 +1504,7 @@ struct BucketRasterizer::Impl {
         for (uint32_t v = ch.vLo; v <= ch.vHi; ++v) ch.zNear = std::min(ch.zNear, part.position(k, v).z);
       // Rows of a moving part that stand still (a deforming grid's pinned end, a store written
       // before the writer kept still grids static) take the static path.
-      if (K > 1) {
-        const size_t bytes = size_t(ch.vHi - ch.vLo + 1) * sizeof(glm::vec3);
-        ch.still = true;
-        for (uint32_t k = 1; k < K && ch.still; ++k) ch.still = std::memcmp(&part.position(k, ch.vLo), &part.position(0, ch.vLo), bytes) == 0;
-      }
+      ch.still = K > 1 && store::verticesStandStill(part.positions, part.numVertices, ch.vLo, ch.vHi - ch.vLo + 1);
       if (std::isnan(ch.zNear)) ch.zNear = -INFINITY;  // the sort needs a strict weak order
       chunks.push_back(ch);
     }

@@ -48,13 +48,15 @@ bool parseAttrCodec(const std::string& s, AttrCodec& out) {
   return false;
 }
 
-bool GridInput::standsStill() const {
-  if (numVertices == 0 || positions.size() <= numVertices) return true;
-  const size_t bytes = size_t(numVertices) * sizeof(glm::vec3);
-  for (size_t at = numVertices; at < positions.size(); at += numVertices)
-    if (std::memcmp(&positions[at], positions.data(), bytes) != 0) return false;
+bool verticesStandStill(std::span<const glm::vec3> positions, size_t stride, size_t first, size_t count) {
+  if (stride == 0 || count == 0) return true;
+  const size_t bytes = count * sizeof(glm::vec3);
+  for (size_t at = stride + first; at + count <= positions.size(); at += stride)
+    if (std::memcmp(&positions[at], &positions[first], bytes) != 0) return false;
   return true;
 }
+
+bool GridInput::standsStill() const { return verticesStandStill(positions, numVertices, 0, numVertices); }
 
 int Schema::find(const std::string& name) const {
   for (size_t i = 0; i < attrs.size(); ++i)

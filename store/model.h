@@ -158,6 +158,11 @@ struct GridInput {
   bool standsStill() const;
 };
 
+/// Vertices [first, first + count) of knot-major positions (`stride` vertices per knot) are at
+/// every knot where they are at the first, bit for bit: the one rule by which the writer stores a
+/// grid static and the re-sampler draws a chunk of a moving part on its static path.
+bool verticesStandStill(std::span<const glm::vec3> positions, size_t stride, size_t first, size_t count);
+
 /// Where producers (the shading pass, dump ingest, synthetic scenes) send their grids. The store
 /// writer is one; tests and benchmarks plug in others.
 class GridSink {
