@@ -9,6 +9,7 @@
 
 #include "cli/commands.h"
 #include "common/atomic_file.h"
+#include "common/check.h"
 #include "common/error.h"
 #include "common/log.h"
 #include "resample/image.h"
@@ -69,6 +70,10 @@ int main(int argc, char** argv) {
     } catch (const std::bad_alloc&) {
       std::fprintf(stderr, "reshutter: out of memory\n");
       return 1;
+    } catch (const InternalError& e) {  // a broken invariant (common/check.h): reshutter's bug
+      flushWarningCounts();
+      std::fprintf(stderr, "reshutter: internal error: %s\n", e.what());
+      return 3;
     } catch (const std::exception& e) {
       std::fprintf(stderr, "reshutter: internal error: %s\n", e.what());
       return 3;

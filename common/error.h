@@ -1,7 +1,8 @@
 // The project's one error model: every failure a user can cause (bad input, bad arguments, I/O)
 // is a reshutter::Error carrying *where* (file, file:line, file:tile, option) and *what*, printed
-// by the CLI as a single line "reshutter: where: what" with a non-zero exit. Programming errors
-// (broken invariants inside the library) are asserts, not Errors.
+// by the CLI as a single line "reshutter: where: what" with exit status 1. Programming errors
+// (broken invariants inside the library) are CHECKs (common/check.h), never Errors: they exit 3
+// with "internal error" in the message.
 #pragma once
 
 #include <sstream>

@@ -4,7 +4,7 @@
 #include <cmath>
 #include <cstring>
 
-#include "common/error.h"
+#include "common/check.h"
 #include "resample/raster_kernels.h"
 
 #if defined(__SSE2__)
@@ -1676,7 +1676,7 @@ struct BucketRasterizer::Impl {
   }
 
   void visitFragments(const std::function<void(size_t, const SampleFragment*, size_t)>& fn) {
-    if (!opt.surfaceIds) fail("rasterizer", "visitFragments() needs RasterOptions::surfaceIds");
+    CHECK(opt.surfaceIds, "visitFragments() needs RasterOptions::surfaceIds");
     const size_t slots = size_t(P) * N;
     const float stopT = 1.f - opt.opacityThreshold;
     std::vector<const Fragment*> list;

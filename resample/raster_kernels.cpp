@@ -3,7 +3,7 @@
 #include <algorithm>
 #include <cstring>
 
-#include "common/error.h"
+#include "common/check.h"
 
 #if defined(__x86_64__) || defined(__i386__)
 #define RESHUTTER_X86 1
@@ -1032,7 +1032,7 @@ size_t gatherInBox(Isa isa, const SampleRows& rows, const MovingBox& box, const 
 }
 
 size_t gatherStrata(Isa isa, const SampleRows& region, const StrataSpans& spans, const MovingBox& box, const Candidates& out) {
-  if (spans.strata > 64) fail("rasterizer", "more than 64 time strata per pixel for the vector kernels");
+  CHECK(spans.strata <= 64, "more than 64 time strata per pixel for the vector kernels");
   return isa == Isa::Avx512 ? gatherStrataAvx512(region, spans, box, out) : gatherStrataAvx2(region, spans, box, out);
 }
 
@@ -1081,25 +1081,25 @@ size_t testLinearEdges(Isa isa, const EdgeTestSetup& setup, const LinearEdges& e
 
 bool available() { return false; }
 bool available(Isa) { return false; }
-size_t gatherInBox(Isa, const SampleRows&, const MovingBox&, const Candidates&, size_t) { fail("rasterizer", "vector kernels called on a CPU without them"); }
+size_t gatherInBox(Isa, const SampleRows&, const MovingBox&, const Candidates&, size_t) { CHECK(false, "vector kernels called on a CPU without them"); }
 size_t gatherStrata(Isa, const SampleRows&, const StrataSpans&, const MovingBox&, const Candidates&) {
-  fail("rasterizer", "vector kernels called on a CPU without them");
+  CHECK(false, "vector kernels called on a CPU without them");
 }
 void linearEdges(Isa, const float* const[4], const float* const[4], const RasterScale&, LinearEdges&) {
-  fail("rasterizer", "vector kernels called on a CPU without them");
+  CHECK(false, "vector kernels called on a CPU without them");
 }
-void fixedEdges(Isa, const float* const[4], const RasterScale&, LinearEdges&) { fail("rasterizer", "vector kernels called on a CPU without them"); }
+void fixedEdges(Isa, const float* const[4], const RasterScale&, LinearEdges&) { CHECK(false, "vector kernels called on a CPU without them"); }
 bool projectLerped(Isa, const float*, const float*, float, size_t, const ProjectionScale&, float*, float*, float*, float[4]) {
-  fail("rasterizer", "vector kernels called on a CPU without them");
+  CHECK(false, "vector kernels called on a CPU without them");
 }
 void sortByCell(Isa, const CellGrid&, const Candidates&, size_t, const Candidates&, uint32_t*, uint16_t*) {
-  fail("rasterizer", "vector kernels called on a CPU without them");
+  CHECK(false, "vector kernels called on a CPU without them");
 }
 size_t filterCandidates(Isa, const Candidates&, size_t, size_t, const MovingBox&, const float*, float, const Candidates&, size_t) {
-  fail("rasterizer", "vector kernels called on a CPU without them");
+  CHECK(false, "vector kernels called on a CPU without them");
 }
 size_t testLinearEdges(Isa, const EdgeTestSetup&, const LinearEdges&, size_t, EdgeHit*) {
-  fail("rasterizer", "vector kernels called on a CPU without them");
+  CHECK(false, "vector kernels called on a CPU without them");
 }
 
 #endif
