@@ -15,7 +15,8 @@
 
 #include "bench/bench_util.h"
 #include "common/random.h"
-#include "resample/raster_kernels.h"
+#include "resample/coverage.h"
+#include "resample/gather.h"
 
 using namespace reshutter;
 using namespace reshutter::resample;

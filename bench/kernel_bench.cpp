@@ -19,7 +19,8 @@
 #include <tbb/global_control.h>
 
 #include "bench/bench_util.h"
-#include "resample/raster_kernels.h"
+#include "resample/coverage.h"
+#include "resample/gather.h"
 #include "resample/resampler.h"
 #include "store/reader.h"
 

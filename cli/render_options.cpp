@@ -6,7 +6,7 @@
 #include "common/atomic_file.h"
 #include "common/error.h"
 #include "common/frame_range.h"
-#include "resample/raster_kernels.h"
+#include "resample/simd.h"
 
 namespace reshutter::cli {
 

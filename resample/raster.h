@@ -1,31 +1,20 @@
 // The bucket rasterizer: takes the samples of one bucket (plus the filter margin) and the tile
-// parts whose bounds touch it, and finds every sample each micropolygon covers.
+// parts whose bounds touch it, and finds every sample each micropolygon covers. From bucket to hit:
 //
-// Coverage is tested with homogeneous 2D edge functions: for a sample's view ray d and camera-
-// space vertices V_j(t), V_k(t), the edge value is e = d · (V_j(t) × V_k(t)). Between knots the
-// vertices move linearly, so each edge's cross product is a quadratic in the segment parameter,
-// precomputed per micropolygon; as d is affine in raster position, the edges are kept over
-// raster x, y and the test reads the samples' positions. The normalised edge values are the
-// perspective-correct barycentrics of the hit, and the hit depth follows from them, so
-// micropolygons crossing the eye plane need no clipping: a hit behind the near plane is simply
-// rejected. Quads are tested as the two triangles (p0 p1 p2) and (p0 p2 p3); attributes
-// interpolate linearly on each.
-//
-// Watertightness: an edge shared by two micropolygons is evaluated from the same vertex values in
-// opposite order, which yields exactly the negated value (cross products and sums are computed so
-// that negation is exact), and a sample exactly on an edge belongs to the side for which the
-// orientation-normalised edge vector is lexicographically positive - exactly one of the two.
-// The build uses -ffp-contract=off so no compiler contraction breaks that symmetry.
-//
-// Per-time-stratum bounds: each micropolygon is bounded separately for each of the N time strata
-// of the bucket and tested only against the one sample per pixel whose time falls in that stratum
-// (Pixar's INTERVAL idea). Inside one knot segment the bound comes from the corners' projections
-// at the interval's two ends (a perspective-widened lerp), and each sample is first checked
-// against the box at its own time; otherwise vertices are projected at every stratum boundary.
-//
-// Occlusion culling: parts are queued, split into runs of 64 micropolygons and drawn nearest run
-// first; the gathers drop every sample whose nearest opaque surface is already no farther than
-// the micropolygon can come (an early depth test), which changes no output bit.
+//  1. begin(): the region's samples, stratum-major, with each stratum's time range (bucket_samples.h).
+//  2. add(): each part is cut into chunks of 64 micropolygons with their nearest depth (raster.cpp).
+//  3. rasterizeQueued(): chunks drawn nearest first; each goes to one path (raster.cpp rasterizeChunk):
+//     - static (raster_static.cpp): parts that do not move, still chunks, exact instants;
+//     - linear (raster_linear.cpp): a moving chunk whose interval lies in one knot segment - each
+//       micropolygon's box lerped between the interval's ends; runs that move together gather once;
+//     - moving (raster_moving.cpp): other moving chunks, bounded per time stratum.
+//  4. Gather (gather.h): the samples inside a micropolygon's box at their own time, not yet hidden
+//     by a nearer opaque surface (the early depth test: exact, it changes no bit).
+//  5. Coverage (coverage.h): the exact edge-function test of each candidate at its time - the
+//     scalar reference or the vector kernels (simd.h: AVX2, AVX-512) - giving barycentrics and depth.
+//  6. Hit (hit_buffer.h): nearest opaque surface per sample, transparent fragments in front of it;
+//     resolve() composites front to back, visitFragments() hands deep output the fragment lists.
+// raster_impl.h holds the state those files share.
 #pragma once
 
 #include <cstdint>
@@ -78,7 +67,7 @@ struct RasterOptions {
   /// Bound moving micropolygons per time stratum (default) or once over the whole interval. Same
   /// image either way; the accuracy study measures what the per-stratum bounds save.
   bool perStratumBounds = true;
-  /// Use the AVX2 inner loops (resample/raster_kernels.h) where the CPU has them; off = the
+  /// Use the vector inner loops (resample/simd.h) where the CPU has them; off = the
   /// scalar loops. Same image either way.
   bool vectorKernels = true;
   /// With vectorKernels: the AVX-512 gathers and edge test where the CPU has them (else AVX2).

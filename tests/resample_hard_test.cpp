@@ -12,7 +12,8 @@
 
 #include "common/random.h"
 #include "resample/deep.h"
-#include "resample/raster_kernels.h"
+#include "resample/coverage.h"
+#include "resample/gather.h"
 #include "store/synthetic.h"
 #include "store/writer.h"
 #include "tests/resample_test_util.h"

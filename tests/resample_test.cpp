@@ -12,7 +12,8 @@
 
 #include "common/error.h"
 #include "common/random.h"
-#include "resample/raster_kernels.h"
+#include "resample/coverage.h"
+#include "resample/gather.h"
 #include "tests/resample_test_util.h"
 #include "tests/test_util.h"
 

@@ -1,34 +1,19 @@
-// The bucket rasterizer's vectorised inner loops: gathering one time stratum's samples that lie in
-// a micropolygon's moving box, row by row; the exact double-precision edge test of a list of
-// candidates against a micropolygon moving linearly inside one knot segment; and their set-up
-// (projecting a chunk's vertices, a micropolygon's edge functions).
-//
-// They are written with AVX2 intrinsics in functions compiled for AVX2 only, chosen at run time
-// (kernels::available()), so the binary still runs on any x86-64 node; raster.cpp keeps the scalar
-// loops as the fallback. Both compute every value with the same IEEE operations in the same order
-// (no fused multiply-adds: AVX2 does not imply FMA, and the module builds with -ffp-contract=off),
-// so the two paths give bit-identical images; ResampleHard.VectorAndScalarKernelsAgree checks it.
-// Hand-written rather than through Highway (libhwy-dev) or xsimd (libxsimd-dev), both in Debian:
-// these are two loops of a few dozen lines, x86 is the farm's ISA, and the scalar fallback serves
-// every other CPU; a SIMD framework's multi-target build machinery would outweigh them.
+// Sample gathering, the rasterizer's vectorised first step: of a bucket's samples, those that lie
+// inside a micropolygon's moving box at their own time and are not yet hidden (the early depth
+// test) - per stratum's pixel rows, per micropolygon over all its strata, or once for a run of
+// micropolygons that move together, sorted into cells of motion-compensated position and
+// filtered per micropolygon. Also the chunk set-up that projects a chunk's vertices. The exact
+// coverage test of the candidates is resample/coverage.h; the instruction sets and their dispatch
+// resample/simd.h.
 #pragma once
 
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
 
+#include "resample/simd.h"
+
 namespace reshutter::resample::kernels {
-
-/// The instruction sets of the kernels: AVX2 for all of them; AVX-512 (F, BW, DQ, VL) for the
-/// gathers (sixteen lanes, as four row segments of up to four samples) and the edge test (eight
-/// candidates), the set-up kernels staying AVX2. Every set gives the same candidates and hits,
-/// so the same image; AVX-512 only where the CPU has it (server x86 since 2017).
-enum class Isa : uint8_t { Avx2, Avx512 };
-
-/// True when this CPU runs the AVX2 kernels (checked once).
-bool available();
-/// True when this CPU runs the kernels of `isa`.
-bool available(Isa isa);
 
 /// An axis-aligned box moving linearly over a time span: [x0 + u dx0, x1 + u dx1] ×
 /// [y0 + u dy0, y1 + u dy1] at u = clamp((st - thetaA) invLen, 0, 1). A fixed box has zero d's.
@@ -112,29 +97,6 @@ void sortByCell(Isa isa, const CellGrid& grid, const Candidates& in, size_t n, c
 size_t filterCandidates(Isa isa, const Candidates& in, size_t begin, size_t end, const MovingBox& box, const float* depth, float zCull,
                         const Candidates& out, size_t n);
 
-/// A micropolygon's edges over one knot segment, component-major: edge e's cross product is
-/// c[0..2][e] + f (c[3..5][e] + f c[6..8][e]) at segment parameter f (edges 01 12 23 30 02;
-/// lanes 5-7 are padding).
-struct LinearEdges {
-  double c[9][8];
-};
-
-/// The camera's map from homogeneous camera space to raster edges, as the rasterizer's
-/// toRaster() applies it to a cross product e: (e.x invAx, e.y invAy, (e.z - ex bx) - ey by).
-struct RasterScale {
-  double invAx, invAy, bx, by;
-  bool perspective;  // homogeneous point (x, y, z); otherwise (x, y, 1)
-};
-
-/// The edges of the micropolygon with corners at[j] at a knot segment's start and to[j] at its end
-/// (camera-space xyz; a triangle passes corner 2 as corner 3, and edges 23 and 30 are then
-/// meaningless): E = A_a × A_b + f (A_a × D_b + D_a × A_b) + f² D_a × D_b with D = to - at, in
-/// the rasterizer's prepareEdges() operations and order, so bit-identical to it.
-void linearEdges(Isa isa, const float* const at[4], const float* const to[4], const RasterScale& scale, LinearEdges& out);
-/// A static micropolygon's edges: c[0..2] only (A_a × A_b), the rasterizer's static-path
-/// operations and order.
-void fixedEdges(Isa isa, const float* const at[4], const RasterScale& scale, LinearEdges& out);
-
 /// The camera's map from camera space to raster, as the rasterizer's project() applies it:
 /// x = float(ax (x / z) + bx) with the division as 1 / z in double (perspective), or
 /// float(ax x + bx); a point before the near plane, or one that lands off the float range, has
@@ -150,33 +112,5 @@ struct ProjectionScale {
 /// project()'s operations, bit for bit. Returns whether any x is NaN; box = min x, min y, max x,
 /// max y over the others.
 bool projectLerped(Isa isa, const float* a, const float* b, float f, size_t n, const ProjectionScale& scale, float* x, float* y, float* z, float box[4]);
-
-struct EdgeTestSetup {
-  const float* st;  // the candidates' times and raster positions (Candidates::t, x, y)
-  const float* sx;
-  const float* sy;
-  float fOffset, fScale;  // f = clamp((st + fOffset) fScale, 0, 1)
-  bool triangle;          // edges 23 and 30 unused
-  bool cullBackFaces;     // back-face knock-out applies to this micropolygon
-  bool fixed = false;     // a static micropolygon: the edges are c[e][0..2] at any time (f = 0)
-  float za[4] = {}, zb[4] = {};  // corner depths at the segment's two ends (equal when fixed)
-};
-
-/// One decided candidate: which triangle it hit (0: p0 p1 p2, 1: p0 p2 p3), its barycentrics
-/// and depth; `undecided` when an edge value was exactly zero and the tie rule (which needs the
-/// edge vectors) must decide in scalar code. The depth is the scalar paths' float arithmetic at
-/// the segment parameter f: zv_j = za_j + f (zb_j - za_j), z = (b0 zv_0 + b1 zv_j1) + b2 zv_j2.
-struct EdgeHit {
-  uint32_t candidate;  // position in the candidate list
-  uint8_t triangle;
-  bool undecided;
-  float b[3];
-  float z;
-};
-
-/// Tests candidates 0..n) and appends the hits and undecided ones, in candidate order, to `hits`;
-/// returns how many. The list needs room for n + 7 entries, the candidate arrays 7 readable
-/// entries past n.
-size_t testLinearEdges(Isa isa, const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits);
 
 }  // namespace reshutter::resample::kernels

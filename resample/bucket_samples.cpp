@@ -1,0 +1,104 @@
+#include "resample/bucket_samples.h"
+
+#include <algorithm>
+
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
+namespace reshutter::resample {
+
+BucketSamples::BucketSamples(const SamplePattern& p, const ShutterModel& s) : pattern(p), shutter(s), N(p.spp()), tBase(std::floor(s.earliest())) {}
+
+void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
+  x0 = rx0, y0 = ry0, w = rw, h = rh, P = w * h;
+  constexpr size_t kLine = 64 / sizeof(float);
+  PS = (size_t(P) + kLine - 1) / kLine * kLine;
+  if ((PS / kLine) % 2 == 0) PS += kLine;
+  const size_t slots = PS * N;
+  sampleSlots = slots;
+  // The vector kernels read up to 7 floats past a row's end.
+  sx.resize(slots + kPad), sy.resize(slots + kPad), st.resize(slots + kPad);
+  idxOf.resize(size_t(P) * N);
+  rowGroup.resize(size_t(h));
+  const int G = int(shutter.groups().size());
+  groupPresent.assign(size_t(G), 0);
+  for (int r = 0; r < h; ++r) {
+    rowGroup[size_t(r)] = uint8_t(shutter.groupOfRow(y0 + r));
+    groupPresent[rowGroup[size_t(r)]] = 1;
+  }
+  multiGroup = G > 1;
+  std::vector<uint16_t> stratumOf(static_cast<size_t>(N));
+  std::vector<float> u(static_cast<size_t>(N));
+  tMin = INFINITY, tMax = -INFINITY;
+  // Time range of each stratum over this region's rows (rolling shutter widens it), widened to
+  // the samples' stored times: a time rounded to float may leave its stratum's exact range, and
+  // a bound that missed it would drop the hit. The widening is taken in the sample loop below.
+  stratumLo.assign(size_t(G) * N, 0.0), stratumHi.assign(size_t(G) * N, 0.0);
+  for (int g = 0; g < G; ++g)
+    for (int s = 0; s < N; ++s) {
+      double lo, hi;
+      shutter.timeRange(g, double(y0), double(y0 + h), double(s) / N, double(s + 1) / N, lo, hi);
+      stratumLo[size_t(g) * N + s] = lo;
+      stratumHi[size_t(g) * N + s] = hi;
+    }
+  for (int py = 0; py < h; ++py)
+    for (int px = 0; px < w; ++px) {
+      const int p = py * w + px, gx = x0 + px, gy = y0 + py;
+      const int pat = pattern.patternOf(gx, gy);
+      pattern.times(gx, gy, stratumOf.data(), u.data());
+      const int g = rowGroup[size_t(py)];
+      // A global box shutter (the usual case): time() is open + u * length for every sample,
+      // the same sum, without its per-sample test.
+      const ShutterGroup& group = shutter.groups()[size_t(g)];
+      const bool globalBox = shutter.rolling().duration == 0.0 && group.shape.isBox();
+      const double open = group.open, length = group.length();
+      for (int i = 0; i < N; ++i) {
+        const size_t idx = size_t(stratumOf[size_t(i)]) * PS + size_t(p);
+        glm::vec2 o = pattern.offset(pat, i);
+        const float x = float(gx) + o.x, y = float(gy) + o.y;
+        sx[idx] = x, sy[idx] = y;
+        const double t = globalBox ? open + double(u[size_t(i)]) * length : shutter.time(g, y, u[size_t(i)]);
+        st[idx] = float(t - tBase);
+        idxOf[size_t(p) * N + i] = uint32_t(idx);
+      }
+    }
+  // The widening, per stratum plane and row: tBase + double(st) rises with st (rounding is
+  // monotonic), so the extreme stored times are those of the extreme st, found row by row.
+  for (int s = 0; s < N; ++s)
+    for (int py = 0; py < h; ++py) {
+      const float* row = &st[size_t(s) * PS + size_t(py) * w];
+      float lo = row[0], hi = row[0];
+      int px = 1;
+#if defined(__SSE2__)
+      // Four at a time (the compiler will not vectorise a float min without -ffast-math);
+      // times are finite and not -0, so the order of the comparisons does not matter.
+      __m128 lo4 = _mm_set1_ps(lo), hi4 = lo4;
+      for (; px + 4 <= w; px += 4) {
+        const __m128 v = _mm_loadu_ps(row + px);
+        lo4 = _mm_min_ps(v, lo4), hi4 = _mm_max_ps(v, hi4);
+      }
+      alignas(16) float l4[4], h4[4];
+      _mm_store_ps(l4, lo4), _mm_store_ps(h4, hi4);
+      for (int k = 0; k < 4; ++k) lo = std::min(lo, l4[k]), hi = std::max(hi, h4[k]);
+#endif
+      for (; px < w; ++px) lo = row[px] < lo ? row[px] : lo, hi = row[px] > hi ? row[px] : hi;
+      const double tcLo = tBase + double(lo), tcHi = tBase + double(hi);
+      const size_t gs = size_t(rowGroup[size_t(py)]) * N + size_t(s);
+      stratumLo[gs] = std::min(stratumLo[gs], tcLo), stratumHi[gs] = std::max(stratumHi[gs], tcHi);
+      tMin = std::min(tMin, tcLo), tMax = std::max(tMax, tcHi);
+    }
+}
+
+bool BucketSamples::pointsMissRegion(const float* xs, const float* ys, size_t n, float scale) const {
+  float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY;
+  bool nan = false;
+  for (size_t i = 0; i < n; ++i) {
+    const float x = xs[i], y = ys[i];
+    nan |= x != x;
+    bx0 = std::min(bx0, x), bx1 = std::max(bx1, x), by0 = std::min(by0, y), by1 = std::max(by1, y);
+  }
+  return !nan && boxMissesRegion(bx0, by0, bx1, by1, scale);
+}
+
+}  // namespace reshutter::resample

@@ -1,0 +1,314 @@
+#include "resample/hit_buffer.h"
+
+#include "common/check.h"
+
+namespace reshutter::resample {
+
+namespace {
+
+// Interpolates attribute `ai` for micropolygon m at barycentrics b over triangle verts v.
+void attrAt(const store::TilePart& part, const store::Schema& schema, int ai, uint32_t m, const uint32_t v[3], const float b[3],
+                   float* outv) {
+  const auto& decl = schema.attrs[size_t(ai)];
+  const auto& arr = part.attrs[size_t(ai)];
+  const int nc = store::componentCount(decl.type);
+  if (arr.f.empty()) {
+    for (int c = 0; c < nc; ++c) outv[c] = 0.f;
+    return;
+  }
+  if (decl.rate == store::AttrRate::Micropolygon) {
+    for (int c = 0; c < nc; ++c) outv[c] = arr.f[size_t(m) * nc + c];
+    return;
+  }
+  for (int c = 0; c < nc; ++c)
+    outv[c] = b[0] * arr.f[size_t(v[0]) * nc + c] + b[1] * arr.f[size_t(v[1]) * nc + c] + b[2] * arr.f[size_t(v[2]) * nc + c];
+}
+
+}  // namespace
+
+HitBuffer::HitBuffer(const std::vector<AovChannel>& a, const RasterOptions& options, float far, RasterStats& stats)
+    : aovs(a), opacityThreshold(options.opacityThreshold), surfaceIds(options.surfaceIds), farClip(far), counters(stats) {
+  for (const auto& ch : aovs) {
+    if (ch.isUInt) {
+      aovUIntBase.push_back(aovUIntCount);
+      aovFloatBase.push_back(-1);
+      aovUIntCount += 1;
+    } else {
+      aovFloatBase.push_back(aovFloatCount);
+      aovUIntBase.push_back(-1);
+      aovFloatCount += ch.components;
+    }
+  }
+}
+
+void HitBuffer::reset(size_t slots) {
+  hitSlots = slots;
+  zbuf.assign(slots + kPad, INFINITY);  // the gathers' early depth test reads up to 7 past a row's end
+  colour.resize(slots);
+  if (surfaceIds) objectOf.assign(slots, 0), gridOf.assign(slots, 0);
+  zAov.assign(slots * size_t(aovFloatCount), 0.f);
+  zAovU.assign(slots * size_t(aovUIntCount), 0u);
+  fragHead.assign(slots, -1);
+  frags.clear(), fragAov.clear(), fragAovU.clear();
+  fragSeq = 0;
+  anyFragments = false;
+}
+
+HitBuffer::HitContext HitBuffer::hitContext(const store::StoreMeta& meta, const store::TileEntry& entry, const store::TilePart& part) const {
+  HitContext hc{&part, &meta.schema, meta.schema.ci(), meta.schema.oi(), (entry.effects & store::kEffectTransparent) != 0};
+  if (!hc.transparentPart && !aovFloatCount && !aovUIntCount && hc.ci >= 0) {
+    const auto& decl = meta.schema.attrs[size_t(hc.ci)];
+    const auto& arr = part.attrs[size_t(hc.ci)].f;
+    if (decl.rate == store::AttrRate::Vertex && store::componentCount(decl.type) == 3 && !arr.empty()) hc.opaqueFast = true, hc.colour = arr.data();
+  }
+  return hc;
+}
+
+void HitBuffer::recordAnyHit(const HitContext& hc, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float z) {
+  ++counters.hits;
+  const store::TilePart& part = *hc.part;
+  const bool matte = part.flags[m] & store::kMatte;
+  float o[3] = {1.f, 1.f, 1.f};
+  if (hc.transparentPart) attrAt(part, *hc.schema, hc.oi, m, v, b, o);
+  const bool opaque = o[0] >= 1.f && o[1] >= 1.f && o[2] >= 1.f;
+  if (opaque) {
+    if (!(z < zbuf[sample])) return;  // ties keep the surface drawn first (rasterizeQueued)
+    float c[3];
+    attrAt(part, *hc.schema, hc.ci, m, v, b, c);
+    zbuf[sample] = z;
+    colour[sample] = {c[0], c[1], c[2], uint32_t(matte)};
+    if (surfaceIds) objectOf[sample] = part.objectId[m], gridOf[sample] = part.gridId[m];
+    if (aovFloatCount || aovUIntCount) {
+      float fv[64];
+      uint32_t uv[16];
+      aovValues(part, *hc.schema, m, v, b, z, fv, uv);
+      for (int c2 = 0; c2 < aovFloatCount; ++c2) zAov[size_t(c2) * hitSlots + sample] = fv[c2];
+      for (int c2 = 0; c2 < aovUIntCount; ++c2) zAovU[size_t(c2) * hitSlots + sample] = uv[c2];
+    }
+    return;
+  }
+  if (!(z < zbuf[sample])) return;  // hidden behind an opaque surface already found
+  for (float& x : o) x = std::clamp(x, 0.f, 1.f);
+  Fragment f;
+  f.z = z;
+  attrAt(part, *hc.schema, hc.ci, m, v, b, f.c);
+  std::copy(o, o + 3, f.o);
+  f.objectId = part.objectId[m];
+  f.gridId = part.gridId[m];
+  f.seq = fragSeq++;
+  f.matte = matte;
+  f.next = fragHead[sample];
+  f.aovOffset = uint32_t(fragAov.size());
+  f.aovUOffset = uint32_t(fragAovU.size());
+  if (aovFloatCount || aovUIntCount) {
+    float fv[64];
+    uint32_t uv[16];
+    aovValues(part, *hc.schema, m, v, b, z, fv, uv);
+    fragAov.insert(fragAov.end(), fv, fv + aovFloatCount);
+    fragAovU.insert(fragAovU.end(), uv, uv + aovUIntCount);
+  }
+  fragHead[sample] = int32_t(frags.size());
+  frags.push_back(f);
+  anyFragments = true;
+  ++counters.fragments;
+}
+
+void HitBuffer::aovValues(const store::TilePart& part, const store::Schema& schema, uint32_t m, const uint32_t v[3], const float b[3], float z,
+               float* f, uint32_t* u) const {
+  for (size_t a = 0; a < aovs.size(); ++a) {
+    const auto& ch = aovs[a];
+    if (ch.isUInt) {
+      uint32_t val = 0;
+      if (ch.builtin == AovChannel::Builtin::ObjectId) val = part.objectId[m];
+      else if (ch.schemaIndex >= 0 && !part.attrs[size_t(ch.schemaIndex)].u.empty()) {
+        const auto& arr = part.attrs[size_t(ch.schemaIndex)].u;
+        if (schema.attrs[size_t(ch.schemaIndex)].rate == store::AttrRate::Micropolygon) val = arr[m];
+        else val = arr[v[b[1] > b[0] ? (b[2] > b[1] ? 2 : 1) : (b[2] > b[0] ? 2 : 0)]];  // nearest vertex
+      }
+      u[aovUIntBase[a]] = val;
+    } else if (ch.builtin == AovChannel::Builtin::Depth) {
+      f[aovFloatBase[a]] = z;
+    } else {
+      attrAt(part, schema, ch.schemaIndex, m, v, b, f + aovFloatBase[a]);
+    }
+  }
+}
+
+const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
+  const int P = samples.P, N = samples.N;
+  const auto& idxOf = samples.idxOf;
+  const size_t slots = size_t(P) * N;
+  out.x0 = samples.x0, out.y0 = samples.y0, out.width = samples.w, out.height = samples.h, out.spp = N;
+  out.r.resize(slots), out.g.resize(slots), out.b.resize(slots), out.a.resize(slots), out.z.resize(slots);
+  out.aov.resize(size_t(aovFloatCount));
+  for (auto& v : out.aov) v.assign(slots, 0.f);
+  out.aovU.resize(size_t(aovUIntCount));
+  for (auto& v : out.aovU) v.assign(slots, 0u);
+  const bool anyAovs = aovFloatCount || aovUIntCount;
+  // The depths the single-closest filters compare: only when there are output variables.
+  if (anyAovs) out.aovZ.assign(slots, INFINITY);
+  const float far = farClip;
+  if (!anyFragments && !anyAovs) {
+    // Opaque surfaces only, no output variables (the common case): each sample is its nearest
+    // surface's colour or empty, as the general loop below computes it, without its branches.
+    for (size_t slot = 0; slot < slots; ++slot) {
+      const size_t k = idxOf[slot];
+      const float zo = zbuf[k];
+      const SurfaceColour& nh = colour[k];
+      const bool hit = zo < INFINITY, visible = hit && !nh.matte;
+      out.r[slot] = visible ? nh.r : 0.f;
+      out.g[slot] = visible ? nh.g : 0.f;
+      out.b[slot] = visible ? nh.b : 0.f;
+      out.a[slot] = visible ? 1.f : 0.f;
+      out.z[slot] = hit ? zo : far;
+    }
+    return out;
+  }
+  const float stopT = 1.f - opacityThreshold;
+  std::vector<const Fragment*> list;
+  for (size_t slot = 0; slot < slots; ++slot) {
+    const size_t k = idxOf[slot];  // the rasterizer keeps samples stratum-major
+    const float zo = zbuf[k];
+    const SurfaceColour& nh = colour[k];
+    const uint8_t s = hitState(k);
+    if (!anyFragments || fragHead[k] < 0) {
+      const bool visible = (s & kHitOpaque) && !(s & kHitMatte);
+      out.r[slot] = visible ? nh.r : 0.f;
+      out.g[slot] = visible ? nh.g : 0.f;
+      out.b[slot] = visible ? nh.b : 0.f;
+      const float a = visible ? 1.f : 0.f;
+      out.a[slot] = a;
+      out.z[slot] = (s & kHitOpaque) ? zo : far;
+      if ((s & kHitOpaque) && anyAovs) {
+        out.aovZ[slot] = zo;
+        for (int c = 0; c < aovFloatCount; ++c) out.aov[size_t(c)][slot] = zAov[size_t(c) * hitSlots + k];
+        for (int c = 0; c < aovUIntCount; ++c) out.aovU[size_t(c)][slot] = zAovU[size_t(c) * hitSlots + k];
+      }
+      // Composited AOVs of a matte surface are zero like its colour.
+      if ((s & kHitMatte)) zeroCompositedAovs(slot);
+      continue;
+    }
+    // Transparent surfaces in front of the nearest opaque one, front to back.
+    list.clear();
+    for (int32_t f = fragHead[k]; f >= 0; f = frags[size_t(f)].next)
+      if (frags[size_t(f)].z < zo) list.push_back(&frags[size_t(f)]);
+    std::sort(list.begin(), list.end(), [](const Fragment* a, const Fragment* b) { return a->z != b->z ? a->z < b->z : a->seq < b->seq; });
+    float T[3] = {1.f, 1.f, 1.f}, C[3] = {0.f, 0.f, 0.f}, A[3] = {0.f, 0.f, 0.f};
+    float closestZ = INFINITY;
+    bool closestChosen = false;
+    float aovAcc[64] = {};
+    bool opaqueReached = false;
+    auto takeSingle = [&](const float* fv, const uint32_t* uv, float z) {
+      closestChosen = true;
+      closestZ = z;
+      if (anyAovs) out.aovZ[slot] = z;
+      for (size_t a = 0; a < aovs.size(); ++a) {
+        if (aovs[a].isUInt) out.aovU[size_t(aovUIntBase[a])][slot] = uv[aovUIntBase[a]];
+        else if (!aovs[a].composited())
+          for (int c = 0; c < aovs[a].components; ++c) out.aov[size_t(aovFloatBase[a] + c)][slot] = fv[aovFloatBase[a] + c];
+      }
+    };
+    for (const Fragment* f : list) {
+      const float oAvg = (f->o[0] + f->o[1] + f->o[2]) / 3.f;
+      const float tAvg = (T[0] + T[1] + T[2]) / 3.f;
+      const float* fv = fragAov.data() + f->aovOffset;
+      const uint32_t* uv = fragAovU.data() + f->aovUOffset;
+      if (!f->matte) {
+        for (int c = 0; c < 3; ++c) C[c] += T[c] * f->c[c], A[c] += T[c] * f->o[c];
+        for (size_t a = 0; a < aovs.size(); ++a)
+          if (!aovs[a].isUInt && aovs[a].composited())
+            for (int c = 0; c < aovs[a].components; ++c) aovAcc[aovFloatBase[a] + c] += tAvg * oAvg * fv[aovFloatBase[a] + c];
+      }
+      if (!closestChosen && oAvg >= opacityThreshold) takeSingle(fv, uv, f->z);
+      for (int c = 0; c < 3; ++c) T[c] *= 1.f - f->o[c];
+      if (T[0] <= stopT && T[1] <= stopT && T[2] <= stopT) {
+        opaqueReached = true;
+        break;
+      }
+    }
+    if (!opaqueReached && (s & kHitOpaque)) {
+      const float tAvg = (T[0] + T[1] + T[2]) / 3.f;
+      if (!(s & kHitMatte)) {
+        C[0] += T[0] * nh.r, C[1] += T[1] * nh.g, C[2] += T[2] * nh.b;
+        for (int c = 0; c < 3; ++c) A[c] += T[c];
+        for (size_t a = 0; a < aovs.size(); ++a)
+          if (!aovs[a].isUInt && aovs[a].composited())
+            for (int c = 0; c < aovs[a].components; ++c) aovAcc[aovFloatBase[a] + c] += tAvg * zAov[size_t(aovFloatBase[a] + c) * hitSlots + k];
+      }
+      if (!closestChosen) {
+        float fv[64];
+        uint32_t uv[16];
+        for (int c = 0; c < aovFloatCount; ++c) fv[c] = zAov[size_t(c) * hitSlots + k];
+        for (int c = 0; c < aovUIntCount; ++c) uv[c] = zAovU[size_t(c) * hitSlots + k];
+        takeSingle(fv, uv, zo);
+      }
+    }
+    out.r[slot] = C[0], out.g[slot] = C[1], out.b[slot] = C[2];
+    out.a[slot] = (A[0] + A[1] + A[2]) / 3.f;
+    out.z[slot] = closestChosen ? closestZ : far;
+    for (size_t a = 0; a < aovs.size(); ++a)
+      if (!aovs[a].isUInt && aovs[a].composited())
+        for (int c = 0; c < aovs[a].components; ++c) out.aov[size_t(aovFloatBase[a] + c)][slot] = aovAcc[aovFloatBase[a] + c];
+  }
+  return out;
+}
+
+void HitBuffer::visitFragments(const BucketSamples& samples, const std::function<void(size_t, const SampleFragment*, size_t)>& fn) {
+  const int P = samples.P, N = samples.N;
+  const auto& idxOf = samples.idxOf;
+  CHECK(surfaceIds, "visitFragments() needs RasterOptions::surfaceIds");
+  const size_t slots = size_t(P) * N;
+  const float stopT = 1.f - opacityThreshold;
+  std::vector<const Fragment*> list;
+  std::vector<SampleFragment> outList;
+  std::vector<float> opaqueAov(static_cast<size_t>(aovFloatCount));
+  std::vector<uint32_t> opaqueAovU(static_cast<size_t>(aovUIntCount));
+  for (size_t slot = 0; slot < slots; ++slot) {
+    const size_t k = idxOf[slot];  // the rasterizer keeps samples stratum-major
+    const float zo = zbuf[k];
+    const SurfaceColour& nh = colour[k];
+    const uint8_t s = hitState(k);
+    list.clear();
+    outList.clear();
+    if (anyFragments)
+      for (int32_t f = fragHead[k]; f >= 0; f = frags[size_t(f)].next)
+        if (frags[size_t(f)].z < zo) list.push_back(&frags[size_t(f)]);
+    std::sort(list.begin(), list.end(), [](const Fragment* a, const Fragment* b) { return a->z != b->z ? a->z < b->z : a->seq < b->seq; });
+    float T[3] = {1.f, 1.f, 1.f};
+    bool opaqueReached = false;
+    for (const Fragment* f : list) {
+      SampleFragment sf;
+      sf.z = f->z;
+      for (int c = 0; c < 3; ++c) sf.c[c] = f->matte ? 0.f : f->c[c], sf.o[c] = f->o[c];
+      sf.objectId = f->objectId, sf.gridId = f->gridId, sf.matte = f->matte;
+      sf.aov = fragAov.data() + f->aovOffset;
+      sf.aovU = fragAovU.data() + f->aovUOffset;
+      outList.push_back(sf);
+      for (int c = 0; c < 3; ++c) T[c] *= 1.f - f->o[c];
+      if (T[0] <= stopT && T[1] <= stopT && T[2] <= stopT) {
+        opaqueReached = true;
+        break;
+      }
+    }
+    if (!opaqueReached && (s & kHitOpaque)) {
+      SampleFragment sf;
+      sf.z = zo;
+      const bool matte = s & kHitMatte;
+      sf.c[0] = matte ? 0.f : nh.r, sf.c[1] = matte ? 0.f : nh.g, sf.c[2] = matte ? 0.f : nh.b;
+      sf.objectId = objectOf[k], sf.gridId = gridOf[k], sf.matte = matte;
+      for (int c = 0; c < aovFloatCount; ++c) opaqueAov[size_t(c)] = zAov[size_t(c) * hitSlots + k];
+      for (int c = 0; c < aovUIntCount; ++c) opaqueAovU[size_t(c)] = zAovU[size_t(c) * hitSlots + k];
+      sf.aov = opaqueAov.data(), sf.aovU = opaqueAovU.data();
+      outList.push_back(sf);
+    }
+    fn(slot, outList.data(), outList.size());
+  }
+}
+
+void HitBuffer::zeroCompositedAovs(size_t slot) {
+  for (size_t a = 0; a < aovs.size(); ++a)
+    if (!aovs[a].isUInt && aovs[a].composited())
+      for (int c = 0; c < aovs[a].components; ++c) out.aov[size_t(aovFloatBase[a] + c)][slot] = 0.f;
+}
+
+}  // namespace reshutter::resample

@@ -1,0 +1,125 @@
+// What a bucket's samples saw: per sample the nearest opaque surface (depth, colour, ids, output
+// variables) and a list of the transparent surfaces in front of it; recording a hit into them,
+// and resolving them - front-to-back compositing into ResolvedSamples for the flat image, or the
+// fragment lists for deep output (visitFragments()).
+//
+// Indexed like the samples (stratum-major, s * PS + p: see bucket_samples.h), so a micropolygon's
+// hits land next to the sample data its tests just read; resolve() reorders them by pixel. The
+// depth is INFINITY until a surface is found; colours are read only where the depth is finite, so
+// they need no clearing per bucket.
+#pragma once
+
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <functional>
+#include <vector>
+
+#include "resample/bucket_samples.h"
+#include "resample/raster.h"
+
+namespace reshutter::resample {
+
+/// The colour of the nearest opaque surface a sample has seen (its depth is in a separate array,
+/// the only part a hit must read), and whether that surface is a matte.
+struct SurfaceColour {
+  float r, g, b;
+  uint32_t matte;
+};
+
+struct HitBuffer {
+  HitBuffer(const std::vector<AovChannel>& aovs, const RasterOptions& options, float farClip, RasterStats& counters);
+
+  /// Clears every sample's surfaces for a region of `slots` samples (BucketSamples::sampleSlots).
+  void reset(size_t slots);
+
+  /// What every hit of one micropolygon part shares.
+  struct HitContext {
+    const store::TilePart* part;
+    const store::Schema* schema;
+    int ci, oi;
+    bool transparentPart;
+    // The common case - an opaque part, per-vertex colour, no output variables - takes
+    // recordOpaqueHit() with the colour array at hand instead of the general attribute lookup.
+    bool opaqueFast = false;
+    const float* colour = nullptr;
+  };
+  HitContext hitContext(const store::StoreMeta& meta, const store::TileEntry& entry, const store::TilePart& part) const;
+
+  /// Records a hit of micropolygon m on a sample (its stratum-major index s * PS + p): triangle
+  /// vertices v, barycentrics b, camera depth z.
+  void recordHit(const HitContext& hc, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float z) {
+    if (hc.opaqueFast) recordOpaqueHit(hc, sample, m, v, b, z);
+    else recordAnyHit(hc, sample, m, v, b, z);
+  }
+
+  /// Composites each sample's surfaces front to back.
+  const ResolvedSamples& resolve(const BucketSamples& samples);
+  /// BucketRasterizer::visitFragments().
+  void visitFragments(const BucketSamples& samples, const std::function<void(size_t, const SampleFragment*, size_t)>& fn);
+
+  const std::vector<AovChannel>& aovs;
+  const float opacityThreshold;
+  const bool surfaceIds;
+  const float farClip;
+  RasterStats& counters;  // hits, fragments
+  int aovFloatCount = 0, aovUIntCount = 0;
+  std::vector<int> aovFloatBase, aovUIntBase;  // per AOV channel: first component slot
+
+  size_t hitSlots = 0;  // the length of every per-sample array
+  SkewedArray<float> zbuf{24};
+  SkewedArray<SurfaceColour> colour{32};
+  SurfaceColour discard{};  // where a hit behind the nearest surface writes its colour
+  SkewedArray<uint32_t> objectOf{56}, gridOf{4};
+  std::vector<float> zAov;      // [component * hitSlots + sample]
+  std::vector<uint32_t> zAovU;  // [component * hitSlots + sample]
+
+ private:
+  // A transparent surface in front of a sample's nearest opaque one.
+  struct Fragment {
+    float z;
+    float c[3];
+    float o[3];
+    uint32_t objectId, gridId;
+    uint32_t seq;
+    int32_t next;
+    uint32_t aovOffset, aovUOffset;
+    uint8_t matte;
+  };
+  static constexpr uint8_t kHitOpaque = 1, kHitMatte = 2;  // what resolve() finds at a sample
+
+  // Same values as recordAnyHit() gives an opaque surface (attrAt's arithmetic, in its order).
+  void recordOpaqueHit(const HitContext& hc, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float z) {
+    ++counters.hits;
+    const float *c0 = hc.colour + size_t(v[0]) * 3, *c1 = hc.colour + size_t(v[1]) * 3, *c2 = hc.colour + size_t(v[2]) * 3;
+    const store::TilePart& part = *hc.part;
+    const SurfaceColour c{b[0] * c0[0] + b[1] * c1[0] + b[2] * c2[0], b[0] * c0[1] + b[1] * c1[1] + b[2] * c2[1],
+                          b[0] * c0[2] + b[1] * c1[2] + b[2] * c2[2], uint32_t(part.flags[m] & store::kMatte)};
+    // No branch: whether a surface is nearer is a coin toss that the predictor loses, so the
+    // depth is a min and the colour goes to the sample or, when hidden, to a scratch record.
+    // Ties keep the surface drawn first: deterministic by draw order (rasterizeQueued).
+    const float old = zbuf[sample];
+    const bool nearer = z < old;
+    zbuf[sample] = nearer ? z : old;
+    *(nearer ? &colour[sample] : &discard) = c;
+    if (surfaceIds && nearer) objectOf[sample] = part.objectId[m], gridOf[sample] = part.gridId[m];
+  }
+  void recordAnyHit(const HitContext& hc, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float z);
+  void aovValues(const store::TilePart& part, const store::Schema& schema, uint32_t m, const uint32_t v[3], const float b[3], float z, float* f,
+                 uint32_t* u) const;
+  uint8_t hitState(size_t k) const {
+    if (!(zbuf[k] < INFINITY)) return 0;
+    return kHitOpaque | (colour[k].matte ? kHitMatte : 0);
+  }
+  void zeroCompositedAovs(size_t slot);
+
+  SkewedArray<int32_t> fragHead{12};
+  std::vector<Fragment> frags;
+  std::vector<float> fragAov;
+  std::vector<uint32_t> fragAovU;
+  uint32_t fragSeq = 0;
+  bool anyFragments = false;
+  ResolvedSamples out;
+};
+
+}  // namespace reshutter::resample

@@ -1,0 +1,264 @@
+// Inside the bucket rasterizer (the map is resample/raster.h): the state of one bucket and the
+// drawing paths' declarations, which are defined by topic -
+//   raster.cpp         the bucket: samples, queue, chunks in depth order, which path draws each
+//   raster_static.cpp  the static path (and exact instants): one set of positions for all samples
+//   raster_moving.cpp  the moving path: per-stratum time bounds, the exact moving test
+//   raster_linear.cpp  the linear path (one knot segment per interval) and its chunk gathers
+//   coverage.h         does a sample hit a micropolygon at a time (scalar reference; kernels)
+//   gather.h           which samples a moving box holds (vector kernels)
+//   bucket_samples.h   the bucket's samples;  hit_buffer.h  what they saw, and the resolve.
+// Only those files include this one.
+#pragma once
+
+#include <cmath>
+#include <cstdint>
+#include <memory>
+#include <vector>
+
+#include "resample/bucket_samples.h"
+#include "resample/coverage.h"
+#include "resample/gather.h"
+#include "resample/hit_buffer.h"
+#include "resample/raster.h"
+
+namespace reshutter::resample {
+
+/// A run of consecutive micropolygons of one queued part, drawn as a unit in depth order.
+struct Chunk {
+  float zNear;         // nearest camera depth of any vertex in [vLo, vHi] at any knot (the draw order)
+  uint32_t part;       // queue index
+  uint32_t m0, m1;     // micropolygons [m0, m1)
+  uint32_t vLo, vHi;   // the vertices their corners use lie in [vLo, vHi]
+  bool still = false;  // every vertex in [vLo, vHi] is where it is at knot 0 at every knot
+};
+/// 64 micropolygons are four rows of a 16×16 grid: small enough that depth order is fine-grained,
+/// large enough that a chunk's per-vertex set-up is shared.
+inline constexpr uint32_t kChunkSize = 64;
+
+using kernels::MovingBox;
+
+// The bucket's samples (BucketSamples) and what they saw (HitBuffer), with the drawing paths and
+// their scratch.
+struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
+  Impl(const SamplePattern& p, const ShutterModel& s, const View& v, const std::vector<AovChannel>& a, const RasterOptions& o);
+
+  View view;
+  RasterOptions opt;
+  const bool vectorKernels;  // the vector loops of gather.h / coverage.h (same results as the scalar ones)
+  const kernels::Isa isa;    // with vectorKernels: AVX-512 where the CPU and the options allow
+  const kernels::RasterScale rasterScale;          // toRaster() for the edge tests
+  const kernels::ProjectionScale projectionScale;  // project() for the projection kernel
+  RasterStats stats;  // HitBuffer counts its hits here too
+
+  // ------------------------------------------------------------------------------------------
+  // The bucket (raster.cpp)
+
+  void begin(int rx0, int ry0, int rw, int rh);
+  void add(const Source& src, const store::TileEntry& entry, const store::TilePart& part);
+  void rasterizeQueued();
+  void rasterizeChunk(const Source& src, const store::TileEntry& entry, const store::TilePart& part, const Chunk& ch);
+
+  // Parts queued for rasterizeQueued(), and their chunks of micropolygons.
+  struct QueuedPart {
+    const Source* src;
+    const store::TileEntry* entry;
+    const store::TilePart* part;
+  };
+  std::vector<QueuedPart> queued;
+  std::vector<Chunk> chunks;
+  std::vector<glm::vec3> instantPos;  // a chunk's vertices at an instantaneous group's time
+
+  // Raster position of a camera-space point; false if it lies before the near plane.
+  bool project(const glm::vec3& p, float& x, float& y) const {
+    if (view.perspective) {
+      if (!(p.z >= view.nearClip)) return false;
+      const double iz = 1.0 / double(p.z);  // one division: a bound, widened by pixelRange()'s margin
+      x = float(view.ax * (double(p.x) * iz) + view.bx);
+      y = float(view.ay * (double(p.y) * iz) + view.by);
+    } else {
+      x = float(view.ax * p.x + view.bx);
+      y = float(view.ay * p.y + view.by);
+    }
+    return std::isfinite(x) && std::isfinite(y);
+  }
+
+  // Occlusion culling: chunks are drawn nearest first (rasterizeQueued), and the gathers drop
+  // every sample whose nearest opaque surface so far is no farther than the micropolygon can
+  // come (the early depth test): such a hit would change nothing, as equal depths keep the
+  // earlier surface. Exact: the image is the same with it off.
+  // The depth a micropolygon whose corners are never nearer than zNear cannot hit in front of:
+  // a hit's depth is a float blend of corner depths (barycentrics summing to 1 within a few ulp).
+  float cullDepth(float zNear) const { return opt.occlusionCulling ? zNear - 1e-5f * std::abs(zNear) : -INFINITY; }
+
+  // The source's coverage in st units, where a render spans several stores.
+  struct Coverage {
+    bool check;
+    double lo, hi;
+  };
+
+  // Appends to `candidates` (from position n) the samples of strata [s0, s1) and group g (< 0:
+  // any) in pixels [px0, px1] × [py0, py1] that lie in `box` at their own time and inside the
+  // source's coverage; returns the new count.
+  size_t gatherCandidates(int s0, int s1, int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover, float zCull,
+                          size_t n);
+  kernels::Candidates candidateList() { return {candidates.data(), candT.data(), candX.data(), candY.data()}; }
+
+  // Runs the vector edge test of micropolygon m over the first n candidates and records its hits,
+  // exact ties to `scalarTest`. The kernel interpolates the depth from setup.za / setup.zb with
+  // the scalar paths' arithmetic: zv_j = za_j + f (zb_j - za_j), z = sum b_j zv_j (for fixed
+  // edges f = 0, so zv_j = za_j exactly).
+  template <class ScalarTest>
+  void recordKernelHits(const HitContext& hc, uint32_t m, const uint32_t* c, const kernels::EdgeTestSetup& setup, const kernels::LinearEdges& edges,
+                        size_t n, ScalarTest scalarTest) {
+    const size_t hits = kernels::testLinearEdges(isa, setup, edges, n, edgeHits.data());
+    for (size_t hi = 0; hi < hits; ++hi) {
+      const kernels::EdgeHit& eh = edgeHits[hi];
+      const uint32_t idx = candidates[eh.candidate];
+      if (eh.undecided) {
+        scalarTest(idx);
+        continue;
+      }
+      const float z = eh.z;
+      if (!(z >= view.nearClip && z <= view.farClip)) continue;
+      const uint32_t tv[3] = {c[0], c[1 + eh.triangle], c[2 + eh.triangle]};  // an index, not a branch: the triangle is a coin toss
+      recordHit(hc, idx, m, tv, eh.b, z);
+    }
+  }
+
+  // One micropolygon's candidates: at most one per pixel and stratum (plus kPad).
+  SkewedArray<uint32_t> candidates{28};                // sample indices that pass the box test
+  SkewedArray<float> candT{36}, candX{44}, candY{52};  // and their times and positions, for the vector edge test
+  std::vector<kernels::EdgeHit> edgeHits;
+
+  // ------------------------------------------------------------------------------------------
+  // The static path (raster_static.cpp)
+
+  void rasterizeStatic(const Source& src, const store::TilePart& part, const HitContext& hc, const glm::vec3* chunkPos, int onlyGroup,
+                       const Chunk& ch);
+  void testStatic(const HitContext& hc, uint32_t m, const uint32_t* c, bool tri, const glm::dvec3 E[5], const float zv[4], uint32_t idx);
+
+  std::vector<float> projX, projY;  // per chunk vertex (static) or [(v - vBase) * T + theta] (moving); projX NaN = before the near plane
+
+  // ------------------------------------------------------------------------------------------
+  // The moving path (raster_moving.cpp)
+
+  // Time mapping of one part's knot schedule for the exact sample tests.
+  struct SegmentMap {
+    bool twoKnots;
+    float fScale, fOffset;  // two knots: segment parameter f = (st + fOffset) * fScale
+    double toLocal;         // local time = st + toLocal
+  };
+
+  // A group interval [theta0, theta1] that lies inside one knot segment, for the linear path (linearBox()).
+  struct LinearInterval {
+    float thetaA = 0, invLen = 0;  // u = (st - thetaA) * invLen
+    float uErr = 0;                // rounding of u, as a fraction of the interval
+  };
+
+  // The moving path's time set-up for one source, knot schedule and shutter group: the same for
+  // every part that shares them, so made once per bucket (timesFor()).
+  struct MovingTimes {
+    const Source* src = nullptr;  // the key: source, schedule, group
+    uint32_t schedule = 0;
+    int g = 0;
+    std::vector<double> thetaTimes;               // distinct local times to project vertices at
+    std::vector<int> stratumFirst, stratumLast;   // theta index range per stratum
+    std::vector<uint32_t> thetaSeg;               // knot segment of each theta time
+    std::vector<float> thetaF;                    // and the parameter inside it
+    std::vector<uint32_t> cullTheta;              // theta indices the cull projects at
+    SegmentMap seg{};
+    Coverage cover{};
+    bool linearPath = false;
+    LinearInterval li{};
+    std::vector<float> stratumU0, stratumU1;      // linear path: stratum s's span [u0, u1] in the group interval, 0..1, padded to whole vectors
+  };
+  const MovingTimes& timesFor(const Source& src, uint32_t schedule, const store::Schedule& knots, int g);
+  std::vector<std::unique_ptr<MovingTimes>> movingTimes;  // this bucket's
+
+  // What every micropolygon of one chunk shares on the moving path for shutter group g.
+  struct MovingPart {
+    const store::TilePart& part;
+    const store::Schedule& knots;
+    const HitContext& hc;
+    const MovingTimes& times;
+    int g;
+    uint32_t nV, vBase;        // the chunk's vertices [vBase, vBase + nV): the per-vertex arrays' index base
+    float rx0, ry0, rx1, ry1;  // the region, widened by the projection margin
+  };
+
+  void rasterizeMoving(const MovingTimes& mt, const store::TilePart& part, const store::Schedule& knots, const HitContext& hc, const Chunk& ch);
+  void drawMoving(const MovingPart& mp, uint32_t mi);
+  void projectVertexPath(const MovingTimes& mt, const store::TilePart& part, uint32_t vBase, uint32_t vi);
+  void testCandidates(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, uint8_t flags, size_t n);
+  void testCandidatesVector(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, uint8_t flags, size_t n);
+  void testCandidate(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, uint8_t flags, uint32_t idx);
+
+  // How far perspective can make a projected corner stray from its linear schedule between
+  // depths za and zb, per pixel of its motion: x(u) = xa + (xb - xa) g(u) with
+  // g(u) - u = u (1 - u) (zb - za) / z(u), at most |dz| / (4 z_min). Inside one knot segment.
+  static float perspectiveLag(float za, float zb) { return std::abs(zb - za) / (4.f * std::min(za, zb)) * 1.001f; }
+
+  // Per-chunk scratch, indexed by vertex - the chunk's first vertex.
+  std::vector<float> projRho;       // [(v - vBase) * T + theta]: perspective lag bound of theta interval (theta, theta+1)
+  std::vector<float> depthScratch;  // one vertex's depths at the theta times
+  std::vector<float> cullX, cullY;  // [cull time * nV + v - vBase]; cullX NaN = before the near plane
+  std::vector<float> cullZ;         // [cull time * nV + v - vBase]: camera depth
+  std::vector<EdgeQuad> segEdges;   // [segment * 5 + edge] for the current micropolygon
+  std::vector<uint8_t> segReady;
+  std::vector<uint8_t> vertexStamp;  // [v - vBase]: theta projections computed for this vertex
+  std::vector<float> thetaBox;       // current micropolygon's raster box per theta: x0[T] y0[T] x1[T] y1[T]
+
+  // ------------------------------------------------------------------------------------------
+  // The linear path and chunk gathers (raster_linear.cpp)
+
+  // A micropolygon's moving box over the interval (linearBox()), with the depth no hit can come
+  // nearer than, the pixel ranges' rounding margin, and the motion and size that choose between
+  // shared and per-stratum ranges.
+  struct LinearBox {
+    MovingBox box;
+    float zCull, rangeMargin, motion, size;
+  };
+  enum class LinearState : uint8_t { Unbounded, Misses, Draw };
+  struct ChunkMicropolygon {
+    LinearState state;
+    LinearBox lb;
+    uint32_t run;            // the run of the chunk's micropolygons of one grid it belongs to
+    int cx0, cy0, cx1, cy1;  // cells of its compensated box (when its run was gathered)
+  };
+  struct ChunkRun {
+    uint32_t begin, end;  // micropolygons [begin, end) of the chunk
+    bool gathered;        // its micropolygons filter the sorted cells (else each gathers alone)
+  };
+
+  void drawLinearChunk(const MovingPart& mp, const Chunk& ch);
+  void prepareLinearVertices(uint32_t nV);
+  LinearState linearBox(const MovingPart& mp, const uint32_t* c, int nc, LinearBox& out) const;
+  void drawLinear(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, const LinearBox& lb);
+  void prepareLinearChunk(const MovingPart& mp, const Chunk& ch);
+  void gatherRun(const MovingPart& mp, uint32_t r);
+  bool rasterizeLinearInChunk(const MovingPart& mp, uint32_t mi, const Chunk& ch, const uint32_t* c, bool tri);
+
+  // The linear path's per-vertex terms (linearBox()), made once per chunk rather than once per
+  // micropolygon corner: ends[] = raster x, y at the interval's two ends; reach[] = |motion| in x
+  // and y, perspective lag, |depth change|; depth = nearer end depth; unbounded = before the
+  // near plane at an end.
+  struct LinearVertex {
+    float ends[4], reach[4];
+  };
+  std::vector<LinearVertex> linearVertex;
+  std::vector<float> linearDepth;
+  std::vector<uint8_t> linearUnbounded;
+  // The linear path a chunk at a time (prepareLinearChunk()): every micropolygon's box and
+  // state, and, for a run of micropolygons of one grid that move together, the run's candidates
+  // gathered once and sorted by cell of compensated position (gatherRun()).
+  std::vector<ChunkMicropolygon> chunkMps;
+  std::vector<ChunkRun> chunkRuns;
+  uint32_t gatheredRun = ~0u;  // the run whose candidates the sorted arrays hold
+  kernels::CellGrid cellGrid{};
+  SkewedArray<uint32_t> chunkIndex{20}, sortedIndex{60};
+  SkewedArray<float> chunkT{2}, chunkX{10}, chunkY{18}, sortedT{26}, sortedX{34}, sortedY{42};
+  std::vector<uint32_t> cellStart;
+  std::vector<uint16_t> cellScratch;
+};
+
+}  // namespace reshutter::resample

@@ -1,0 +1,538 @@
+// The vector kernels for AVX2 (with POPCNT): sample gathering (resample/gather.h) and the exact
+// coverage test (resample/coverage.h), eight float or four double lanes. This file alone is
+// compiled with -mavx2 -mpopcnt; simd_dispatch.cpp calls it only on CPUs that run it. See
+// simd_isa.h for what it may include.
+#include <cmath>
+
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
+#pragma GCC diagnostic ignored "-Wuninitialized"
+#include <immintrin.h>
+#pragma GCC diagnostic pop
+
+#include "resample/simd_isa.h"
+
+namespace reshutter::resample::kernels {
+namespace {
+
+// For each 8-bit lane mask, the lanes that are set, in order: the permutation that packs the
+// selected indices to the front of a vector (AVX2 has no compress instruction).
+struct CompressTable {
+  alignas(32) uint32_t perm[256][8];
+};
+constexpr CompressTable makeCompressTable() {
+  CompressTable t{};
+  for (uint32_t m = 0; m < 256; ++m) {
+    uint32_t k = 0;
+    for (uint32_t lane = 0; lane < 8; ++lane)
+      if (m & (1u << lane)) t.perm[m][k++] = lane;
+    for (; k < 8; ++k) t.perm[m][k] = 0;
+  }
+  return t;
+}
+constexpr CompressTable kCompress = makeCompressTable();
+
+// A MovingBox in vector registers, and its test: which of eight samples (time, x, y) lie inside
+// the box at their own time.
+struct BoxLanes {
+  __m256 thetaA, invLen, x0, dx0, x1, dx1, y0, dy0, y1, dy1;
+};
+inline BoxLanes boxLanes(const MovingBox& b) {
+  return {_mm256_set1_ps(b.thetaA), _mm256_set1_ps(b.invLen), _mm256_set1_ps(b.x0), _mm256_set1_ps(b.dx0), _mm256_set1_ps(b.x1),
+          _mm256_set1_ps(b.dx1),    _mm256_set1_ps(b.y0),     _mm256_set1_ps(b.dy0), _mm256_set1_ps(b.y1), _mm256_set1_ps(b.dy1)};
+}
+// A fixed box (no motion, invLen 0, as the static path builds it): the same answer as
+// insideAtOwnTime() for any finite time, as x0 + u * 0 is x0, with no time at all.
+inline __m256 insideFixed(const BoxLanes& b, __m256 x, __m256 y) {
+  __m256 in = _mm256_cmp_ps(x, b.x0, _CMP_GE_OQ);
+  in = _mm256_and_ps(in, _mm256_cmp_ps(x, b.x1, _CMP_LE_OQ));
+  in = _mm256_and_ps(in, _mm256_cmp_ps(y, b.y0, _CMP_GE_OQ));
+  return _mm256_and_ps(in, _mm256_cmp_ps(y, b.y1, _CMP_LE_OQ));
+}
+inline __m256 insideAtOwnTime(const BoxLanes& b, __m256 t, __m256 x, __m256 y) {
+  // u = min(max((t - thetaA) invLen, 0), 1), operand order as std::max / std::min.
+  const __m256 u = _mm256_min_ps(_mm256_set1_ps(1.f), _mm256_max_ps(_mm256_setzero_ps(), _mm256_mul_ps(_mm256_sub_ps(t, b.thetaA), b.invLen)));
+  __m256 in = _mm256_cmp_ps(x, _mm256_add_ps(b.x0, _mm256_mul_ps(u, b.dx0)), _CMP_GE_OQ);
+  in = _mm256_and_ps(in, _mm256_cmp_ps(x, _mm256_add_ps(b.x1, _mm256_mul_ps(u, b.dx1)), _CMP_LE_OQ));
+  in = _mm256_and_ps(in, _mm256_cmp_ps(y, _mm256_add_ps(b.y0, _mm256_mul_ps(u, b.dy0)), _CMP_GE_OQ));
+  return _mm256_and_ps(in, _mm256_cmp_ps(y, _mm256_add_ps(b.y1, _mm256_mul_ps(u, b.dy1)), _CMP_LE_OQ));
+}
+// Appends the lanes that are in and live to out from position n; returns the new count.
+inline size_t appendMasked(unsigned mask, __m256i idx, __m256 t, __m256 x, __m256 y, const Candidates& out, size_t n) {
+  if (!mask) return n;
+  const __m256i perm = _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompress.perm[mask]));
+  _mm256_storeu_si256(reinterpret_cast<__m256i*>(out.index + n), _mm256_permutevar8x32_epi32(idx, perm));
+  _mm256_storeu_ps(out.t + n, _mm256_permutevar8x32_ps(t, perm));
+  _mm256_storeu_ps(out.x + n, _mm256_permutevar8x32_ps(x, perm));
+  _mm256_storeu_ps(out.y + n, _mm256_permutevar8x32_ps(y, perm));
+  return n + size_t(__builtin_popcount(mask));
+}
+inline size_t appendLanes(__m256 in, __m256i live, __m256i idx, __m256 t, __m256 x, __m256 y, const Candidates& out, size_t n) {
+  return appendMasked(unsigned(_mm256_movemask_ps(_mm256_and_ps(in, _mm256_castsi256_ps(live)))), idx, t, x, y, out, n);
+}
+
+// Samples lo..lo+3 in lanes 0-3 and hi..hi+3 in lanes 4-7 against box `b` (kFixed:
+// insideFixed()) and the early depth test; appends those among lanesLive. The two-row step of
+// every narrow gather.
+template <bool kFixed = false>
+__attribute__((always_inline)) inline size_t appendRowPair(const BoxLanes& b, const SampleRows& r, __m256 zCull, size_t lo, size_t hi,
+                                                                          unsigned lanesLive, const Candidates& out, size_t n) {
+  const __m256 t = _mm256_loadu2_m128(r.st + hi, r.st + lo), x = _mm256_loadu2_m128(r.sx + hi, r.sx + lo), y = _mm256_loadu2_m128(r.sy + hi, r.sy + lo);
+  const __m256 visible = _mm256_cmp_ps(_mm256_loadu2_m128(r.depth + hi, r.depth + lo), zCull, _CMP_GT_OQ);
+  const __m256 in = kFixed ? insideFixed(b, x, y) : insideAtOwnTime(b, t, x, y);
+  const unsigned mask = unsigned(_mm256_movemask_ps(_mm256_and_ps(in, visible))) & lanesLive;
+  if (!mask) return n;
+  const __m256i quad = _mm256_setr_epi32(0, 1, 2, 3, 0, 1, 2, 3);
+  const __m256i idx = _mm256_add_epi32(_mm256_setr_m128i(_mm_set1_epi32(int(uint32_t(lo))), _mm_set1_epi32(int(uint32_t(hi)))), quad);
+  return appendMasked(mask, idx, t, x, y, out, n);
+}
+
+// Two small strata (or planes) a and b of at most two rows of at most two pixels in one vector:
+// a's rows (starting at alo, ahi) in lanes 0-1 and 4-5, b's (blo, bhi) in lanes 2-3 and 6-7;
+// tested as appendRowPair() does and appended among lanesLive.
+template <bool kFixed = false>
+__attribute__((always_inline)) inline size_t appendPlanePair(const BoxLanes& b, const SampleRows& r, __m256 zCull, size_t alo, size_t ahi,
+                                                                            size_t blo, size_t bhi, unsigned lanesLive, const Candidates& out, size_t n) {
+  auto pairedRows = [&](const float* v) {
+    const __m128 lo = _mm_loadh_pi(_mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(v + alo))), reinterpret_cast<const __m64*>(v + blo));
+    const __m128 hi = _mm_loadh_pi(_mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(v + ahi))), reinterpret_cast<const __m64*>(v + bhi));
+    return _mm256_set_m128(hi, lo);
+  };
+  const __m256 t = pairedRows(r.st), x = pairedRows(r.sx), y = pairedRows(r.sy);
+  const __m256 visible = _mm256_cmp_ps(pairedRows(r.depth), zCull, _CMP_GT_OQ);
+  const __m256 in = kFixed ? insideFixed(b, x, y) : insideAtOwnTime(b, t, x, y);
+  const unsigned mask = unsigned(_mm256_movemask_ps(_mm256_and_ps(in, visible))) & lanesLive;
+  if (!mask) return n;
+  const __m256i rowStarts = _mm256_castsi128_si256(_mm_setr_epi32(int(uint32_t(alo)), int(uint32_t(blo)), int(uint32_t(ahi)), int(uint32_t(bhi))));
+  const __m256i spread = _mm256_setr_epi32(0, 0, 1, 1, 2, 2, 3, 3), step = _mm256_setr_epi32(0, 1, 0, 1, 0, 1, 0, 1);
+  return appendMasked(mask, _mm256_add_epi32(_mm256_permutevar8x32_epi32(rowStarts, spread), step), t, x, y, out, n);
+}
+
+// The rows of `rows` against box `b`: the body of both gathers, inlined so that the box is
+// broadcast once per micropolygon, not once per stratum.
+// kFixed: the box does not move (insideFixed()). The candidates still carry their times: a
+// moving micropolygon that crosses the near plane is gathered with a fixed box.
+template <bool kFixed = false>
+__attribute__((always_inline)) inline size_t gatherRows(const BoxLanes& b, const SampleRows& r, const Candidates& out, size_t n) {
+  const __m256 zCull = _mm256_set1_ps(r.zCull);
+  if constexpr (kFixed) {
+    if (r.cols <= 2 && r.rows <= 2 && !r.rowGroup) {
+      // A static micropolygon's box (one or two pixels each way, usually): two planes per
+      // vector (appendPlanePair()), rows 0 and 1 (or row 0 twice, masked off).
+      const unsigned colBits = (1u << r.cols) - 1, planeBits = colBits | colBits << 2;
+      const unsigned lanes = r.rows == 2 ? planeBits | planeBits << 4 : planeBits;
+      const size_t second = r.rows == 2 ? r.stride : 0;
+      int plane = 0;
+      for (; plane + 1 < r.planes; plane += 2) {
+        const size_t pa = r.first + size_t(plane) * r.planeStride, pb = pa + r.planeStride;
+        n = appendPlanePair<true>(b, r, zCull, pa, pa + second, pb, pb + second, lanes, out, n);
+      }
+      if (plane < r.planes) {
+        const size_t lo = r.first + size_t(plane) * r.planeStride;
+        n = appendRowPair<true>(b, r, zCull, lo, lo + second, r.rows == 2 ? colBits | colBits << 4 : colBits, out, n);
+      }
+      return n;
+    }
+  }
+  if (r.cols <= 4) {
+    // Narrow boxes (a small micropolygon's stratum box is 2 - 4 pixels wide): two rows per
+    // vector, four lanes each, so that half the lanes are not idle.
+    const unsigned colBits = (1u << r.cols) - 1;
+    auto rowPair = [&](size_t lo, size_t hi, bool pair) {
+      n = appendRowPair<kFixed>(b, r, zCull, lo, hi, pair ? colBits | colBits << 4 : colBits, out, n);
+    };
+    for (int plane = 0; plane < r.planes; ++plane) {
+      const size_t planeBase = r.first + size_t(plane) * r.planeStride;
+      if (!r.rowGroup) {
+        for (int row = 0; row < r.rows; row += 2) {
+          const size_t lo = planeBase + size_t(row) * r.stride;
+          const bool pair = row + 1 < r.rows;
+          rowPair(lo, pair ? lo + r.stride : lo, pair);
+        }
+        continue;
+      }
+      // Fields: pairs of this group's rows.
+      int row = 0;
+      while (true) {
+        while (row < r.rows && r.rowGroup[row] != r.group) ++row;
+        if (row >= r.rows) break;
+        int second = row + 1;
+        while (second < r.rows && r.rowGroup[second] != r.group) ++second;
+        const bool pair = second < r.rows;
+        const size_t lo = planeBase + size_t(row) * r.stride;
+        rowPair(lo, pair ? planeBase + size_t(second) * r.stride : lo, pair);
+        row = pair ? second + 1 : r.rows;
+      }
+    }
+    return n;
+  }
+  const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+  for (int plane = 0; plane < r.planes; ++plane)
+  for (int row = 0; row < r.rows; ++row) {
+    if (r.rowGroup && r.rowGroup[row] != r.group) continue;
+    const size_t base = r.first + size_t(plane) * r.planeStride + size_t(row) * r.stride;
+    for (int c = 0; c < r.cols; c += 8) {
+      const size_t at = base + size_t(c);
+      const __m256 t = _mm256_loadu_ps(r.st + at), x = _mm256_loadu_ps(r.sx + at), y = _mm256_loadu_ps(r.sy + at);
+      const __m256 visible = _mm256_cmp_ps(_mm256_loadu_ps(r.depth + at), zCull, _CMP_GT_OQ);
+      const __m256i live = _mm256_cmpgt_epi32(_mm256_set1_epi32(r.cols - c), lane);
+      n = appendLanes(_mm256_and_ps(insideAtOwnTime(b, t, x, y), visible), live, _mm256_add_epi32(_mm256_set1_epi32(int(uint32_t(at))), lane), t, x, y, out, n);
+    }
+  }
+  return n;
+}
+
+size_t gatherInBoxAvx2(const SampleRows& rows, const MovingBox& box, const Candidates& candidates, size_t n) {
+  const SampleRows r = rows;  // locals: the stores below may alias anything
+  const Candidates out = candidates;
+  if (box.invLen == 0.f && box.dx0 == 0.f && box.dx1 == 0.f && box.dy0 == 0.f && box.dy1 == 0.f) return gatherRows<true>(boxLanes(box), r, out, n);
+  return gatherRows(boxLanes(box), r, out, n);
+}
+
+size_t gatherStrataAvx2(const SampleRows& region, const StrataSpans& sp, const MovingBox& b, const Candidates& out) {
+  // Pixel ranges of every stratum, eight at a time: the box over [u0, u1] (min / max of its two
+  // ends, as the corners move linearly), widened, clamped to the region and floored; then each
+  // range's first sample, size and whether it is empty, still eight at a time.
+  alignas(32) int first[64], cols[64], rows[64], rowOffset[64], second[64], third[64], fourth[64], laneMask[64], laneMask2[64];
+  uint64_t nonEmpty = 0, oneVector = 0, halfVector = 0, twoVectors = 0;
+  const int N = sp.strata;
+  const __m256 m = _mm256_set1_ps(sp.margin);
+  const __m256 lox = _mm256_set1_ps(float(sp.x0)), hix = _mm256_set1_ps(float(sp.x0 + sp.w));
+  const __m256 loy = _mm256_set1_ps(float(sp.y0)), hiy = _mm256_set1_ps(float(sp.y0 + sp.h));
+  const __m256 one = _mm256_set1_ps(1.f);
+  const __m256i ione = _mm256_set1_epi32(1), izero = _mm256_setzero_si256();
+  const __m256i regionX = _mm256_set1_epi32(sp.x0), regionY = _mm256_set1_epi32(sp.y0);
+  // Sample indices fit 32 bits: the rasterizer stores them as uint32.
+  const __m256i planeStride = _mm256_set1_epi32(int(region.planeStride)), stride = _mm256_set1_epi32(int(region.stride));
+  const __m256i base = _mm256_set1_epi32(int(region.first));
+  const BoxLanes lanes = boxLanes(b);
+  const __m256 x0 = lanes.x0, dx0 = lanes.dx0, x1 = lanes.x1, dx1 = lanes.dx1, y0 = lanes.y0, dy0 = lanes.dy0, y1 = lanes.y1, dy1 = lanes.dy1;
+  for (int s = 0; s < N; s += 8) {
+    const __m256 u0 = _mm256_loadu_ps(sp.u0 + s), u1 = _mm256_loadu_ps(sp.u1 + s);
+    const __m256 ax0 = _mm256_min_ps(_mm256_add_ps(x0, _mm256_mul_ps(u0, dx0)), _mm256_add_ps(x0, _mm256_mul_ps(u1, dx0)));
+    const __m256 ax1 = _mm256_max_ps(_mm256_add_ps(x1, _mm256_mul_ps(u0, dx1)), _mm256_add_ps(x1, _mm256_mul_ps(u1, dx1)));
+    const __m256 ay0 = _mm256_min_ps(_mm256_add_ps(y0, _mm256_mul_ps(u0, dy0)), _mm256_add_ps(y0, _mm256_mul_ps(u1, dy0)));
+    const __m256 ay1 = _mm256_max_ps(_mm256_add_ps(y1, _mm256_mul_ps(u0, dy1)), _mm256_add_ps(y1, _mm256_mul_ps(u1, dy1)));
+    // A NaN bound clamps to the region (max/min return their second operand for NaN).
+    const __m256 cx0 = _mm256_min_ps(_mm256_max_ps(_mm256_sub_ps(ax0, m), lox), hix);
+    const __m256 cy0 = _mm256_min_ps(_mm256_max_ps(_mm256_sub_ps(ay0, m), loy), hiy);
+    const __m256 cx1 = _mm256_min_ps(_mm256_max_ps(_mm256_add_ps(ax1, m), _mm256_sub_ps(lox, one)), _mm256_sub_ps(hix, one));
+    const __m256 cy1 = _mm256_min_ps(_mm256_max_ps(_mm256_add_ps(ay1, m), _mm256_sub_ps(loy, one)), _mm256_sub_ps(hiy, one));
+    const __m256i px0 = _mm256_cvttps_epi32(_mm256_floor_ps(cx0)), py0 = _mm256_cvttps_epi32(_mm256_floor_ps(cy0));
+    const __m256i px1 = _mm256_cvttps_epi32(_mm256_floor_ps(cx1)), py1 = _mm256_cvttps_epi32(_mm256_floor_ps(cy1));
+    const __m256i c = _mm256_add_epi32(_mm256_sub_epi32(px1, px0), ione), r = _mm256_add_epi32(_mm256_sub_epi32(py1, py0), ione);
+    const __m256i dy = _mm256_sub_epi32(py0, regionY);
+    const __m256i plane = _mm256_add_epi32(_mm256_set1_epi32(s), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7));
+    const __m256i at = _mm256_add_epi32(_mm256_add_epi32(base, _mm256_mullo_epi32(plane, planeStride)),
+                                        _mm256_add_epi32(_mm256_mullo_epi32(dy, stride), _mm256_sub_epi32(px0, regionX)));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(first + s), at);
+    _mm256_store_si256(reinterpret_cast<__m256i*>(cols + s), c);
+    _mm256_store_si256(reinterpret_cast<__m256i*>(rows + s), r);
+    _mm256_store_si256(reinterpret_cast<__m256i*>(rowOffset + s), dy);
+    const __m256i live = _mm256_and_si256(_mm256_cmpgt_epi32(c, izero), _mm256_cmpgt_epi32(r, izero));
+    nonEmpty |= uint64_t(unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(live)))) << s;
+    // Strata of at most four rows of at most four pixels (nearly all of them, for small
+    // micropolygons) fill one or two vectors: rows 0 and 1 in the first one's lanes 0-3 and 4-7,
+    // rows 2 and 3 in the second's; a missing row repeats the one before, masked off. The rows'
+    // starts and the lane masks, eight strata at a time too.
+    const __m256i twoRows = _mm256_cmpgt_epi32(r, ione), threeRows = _mm256_cmpgt_epi32(r, _mm256_set1_epi32(2)),
+                  fourRows = _mm256_cmpgt_epi32(r, _mm256_set1_epi32(3));
+    const __m256i fits = _mm256_andnot_si256(_mm256_or_si256(_mm256_cmpgt_epi32(c, _mm256_set1_epi32(4)), _mm256_cmpgt_epi32(r, _mm256_set1_epi32(4))), live);
+    oneVector |= uint64_t(unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(fits)))) << s;
+    twoVectors |= uint64_t(unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(_mm256_and_si256(threeRows, fits))))) << s;
+    const __m256i two = _mm256_set1_epi32(2);
+    const __m256i halfFits = _mm256_andnot_si256(_mm256_or_si256(_mm256_cmpgt_epi32(c, two), _mm256_cmpgt_epi32(r, two)), live);
+    halfVector |= uint64_t(unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(halfFits)))) << s;
+    const __m256i row2 = _mm256_add_epi32(at, _mm256_and_si256(threeRows, _mm256_add_epi32(stride, stride)));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(second + s), _mm256_add_epi32(at, _mm256_and_si256(twoRows, stride)));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(third + s), row2);
+    _mm256_store_si256(reinterpret_cast<__m256i*>(fourth + s), _mm256_add_epi32(row2, _mm256_and_si256(fourRows, stride)));
+    const __m256i colBits = _mm256_sub_epi32(_mm256_sllv_epi32(ione, _mm256_min_epi32(c, _mm256_set1_epi32(4))), ione);
+    _mm256_store_si256(reinterpret_cast<__m256i*>(laneMask + s),
+                       _mm256_or_si256(colBits, _mm256_and_si256(twoRows, _mm256_slli_epi32(colBits, 4))));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(laneMask2 + s),
+                       _mm256_or_si256(_mm256_and_si256(threeRows, colBits), _mm256_and_si256(fourRows, _mm256_slli_epi32(colBits, 4))));
+  }
+  if (N < 64) nonEmpty &= (uint64_t(1) << N) - 1, halfVector &= (uint64_t(1) << N) - 1;  // the padding lanes past the last stratum
+  if (region.rowGroup) oneVector = 0, halfVector = 0;  // fields: gatherRows() skips the other group's rows
+  // Locals, so that the candidate stores (which may alias anything) do not force reloads.
+  const Candidates list = out;
+  SampleRows rr = region;
+  rr.planes = 1;
+  const uint8_t* rowGroup = region.rowGroup;
+  size_t n = 0;
+  const __m256 zCull = _mm256_set1_ps(region.zCull);
+  // Strata of at most two rows of at most two pixels (most of them when the box moves less than a
+  // pixel per stratum, as over a short shutter) go two to a vector: stratum a's rows in lanes
+  // 0-1 and 4-5, stratum b's in lanes 2-3 and 6-7. The candidates then come in another order
+  // than stratum by stratum; each sample still comes once, and what a hit does depends only on
+  // its own sample.
+  uint64_t halves = halfVector;
+  while (halves & (halves - 1)) {
+    const int a = __builtin_ctzll(halves);
+    halves &= halves - 1;
+    const int b = __builtin_ctzll(halves);
+    halves &= halves - 1;
+    n = appendPlanePair(lanes, rr, zCull, size_t(uint32_t(first[a])), size_t(uint32_t(second[a])), size_t(uint32_t(first[b])), size_t(uint32_t(second[b])),
+                        unsigned(laneMask[a] | laneMask[b] << 2), list, n);
+  }
+  // An unpaired one is left to the loops below.
+  nonEmpty &= ~(halfVector & ~halves);
+  // gatherRows()' row pairs, with each stratum's lanes known in advance: every one-vector
+  // stratum's first vector, then the second vectors of those with three or four rows, then the
+  // wider strata; loops over bit sets rather than branches on each stratum's kind, which the
+  // predictor would lose.
+  auto rowPair = [&](size_t lo, size_t hi, unsigned lanesLive) { n = appendRowPair(lanes, rr, zCull, lo, hi, lanesLive, list, n); };
+  const uint64_t single = nonEmpty & oneVector;
+  for (uint64_t left = single; left; left &= left - 1) {
+    const int s = __builtin_ctzll(left);
+    rowPair(size_t(uint32_t(first[s])), size_t(uint32_t(second[s])), unsigned(laneMask[s]));
+  }
+  for (uint64_t left = single & twoVectors; left; left &= left - 1) {
+    const int s = __builtin_ctzll(left);
+    rowPair(size_t(uint32_t(third[s])), size_t(uint32_t(fourth[s])), unsigned(laneMask2[s]));
+  }
+  for (uint64_t left = nonEmpty & ~oneVector; left; left &= left - 1) {
+    const int s = __builtin_ctzll(left);
+    rr.first = size_t(uint32_t(first[s]));
+    rr.cols = cols[s], rr.rows = rows[s];
+    if (rowGroup) rr.rowGroup = rowGroup + rowOffset[s];
+    n = gatherRows(lanes, rr, list, n);
+  }
+  return n;
+}
+
+// filterCandidates() with eight lanes: the depths gathered by index, the survivors packed with
+// the permutation table.
+size_t filterCandidatesAvx2(const Candidates& in, size_t begin, size_t end, const MovingBox& box, const float* depth, float zCull,
+                                          const Candidates& out, size_t n) {
+  const BoxLanes b = boxLanes(box);
+  const __m256 zc = _mm256_set1_ps(zCull);
+  const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+  for (size_t k = begin; k < end; k += 8) {
+    const __m256i live = _mm256_cmpgt_epi32(_mm256_set1_epi32(int(end - k)), lane);
+    const __m256i idx = _mm256_and_si256(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(in.index + k)), live);  // dead lanes read sample 0
+    const __m256 t = _mm256_loadu_ps(in.t + k), x = _mm256_loadu_ps(in.x + k), y = _mm256_loadu_ps(in.y + k);
+    const __m256 visible = _mm256_cmp_ps(_mm256_i32gather_ps(depth, idx, 4), zc, _CMP_GT_OQ);
+    n = appendLanes(_mm256_and_ps(insideAtOwnTime(b, t, x, y), visible), live, idx, t, x, y, out, n);
+  }
+  return n;
+}
+
+// One edge's value at four samples: E(f) = c0 + f (c3 + f c6) per component, then
+// (x Ex + y Ey) + Ez at raster position (x, y), as edgeAt() and EdgeQuad::at() compute it.
+template <bool kFixed>
+inline __m256d edgeValue(const LinearEdges& E, int e, __m256d f, __m256d rx, __m256d ry) {
+  __m256d c[9];
+  for (int k = 0; k < (kFixed ? 3 : 9); ++k) c[k] = _mm256_set1_pd(E.c[k][e]);
+  if constexpr (kFixed) return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(rx, c[0]), _mm256_mul_pd(ry, c[1])), c[2]);
+  const __m256d ex = _mm256_add_pd(c[0], _mm256_mul_pd(f, _mm256_add_pd(c[3], _mm256_mul_pd(f, c[6]))));
+  const __m256d ey = _mm256_add_pd(c[1], _mm256_mul_pd(f, _mm256_add_pd(c[4], _mm256_mul_pd(f, c[7]))));
+  const __m256d ez = _mm256_add_pd(c[2], _mm256_mul_pd(f, _mm256_add_pd(c[5], _mm256_mul_pd(f, c[8]))));
+  return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(rx, ex), _mm256_mul_pd(ry, ey)), ez);
+}
+
+// Cross products of four corner pairs at once (lane = pair), glm::cross's operations.
+struct Lanes3 {
+  __m256d x, y, z;
+};
+inline Lanes3 crossLanes(const Lanes3& a, const Lanes3& b) {
+  return {_mm256_sub_pd(_mm256_mul_pd(a.y, b.z), _mm256_mul_pd(a.z, b.y)), _mm256_sub_pd(_mm256_mul_pd(a.z, b.x), _mm256_mul_pd(a.x, b.z)),
+          _mm256_sub_pd(_mm256_mul_pd(a.x, b.y), _mm256_mul_pd(a.y, b.x))};
+}
+
+// Edges (a_e, b_e) of four lanes: the three raster coefficient vectors of each power of f,
+// stored to lanes [lane0, lane0 + 4) of out.
+// kFixed: the constant term only (D unused).
+template <bool kFixed = false>
+inline void edgeLanes(const Lanes3& A, const Lanes3& D, const Lanes3& Ab, const Lanes3& Db, const RasterScale& m, LinearEdges& out,
+                                     int lane0) {
+  const __m256d invAx = _mm256_set1_pd(m.invAx), invAy = _mm256_set1_pd(m.invAy), bx = _mm256_set1_pd(m.bx), by = _mm256_set1_pd(m.by);
+  const Lanes3 c0 = crossLanes(A, Ab);
+  Lanes3 c1{}, c2{};
+  if constexpr (!kFixed) {
+    const Lanes3 c1a = crossLanes(A, Db), c1b = crossLanes(D, Ab);
+    c1 = {_mm256_add_pd(c1a.x, c1b.x), _mm256_add_pd(c1a.y, c1b.y), _mm256_add_pd(c1a.z, c1b.z)};
+    c2 = crossLanes(D, Db);
+  }
+  const Lanes3* powers[3] = {&c0, &c1, &c2};
+  for (int p = 0; p < (kFixed ? 1 : 3); ++p) {
+    const __m256d ex = _mm256_mul_pd(powers[p]->x, invAx), ey = _mm256_mul_pd(powers[p]->y, invAy);
+    _mm256_storeu_pd(&out.c[3 * p][lane0], ex);
+    _mm256_storeu_pd(&out.c[3 * p + 1][lane0], ey);
+    _mm256_storeu_pd(&out.c[3 * p + 2][lane0], _mm256_sub_pd(_mm256_sub_pd(powers[p]->z, _mm256_mul_pd(ex, bx)), _mm256_mul_pd(ey, by)));
+  }
+}
+
+// Component k of four corners, lane j = corner j.
+inline __m256d cornerColumn(const float* const p[4], int k) { return _mm256_cvtps_pd(_mm_setr_ps(p[0][k], p[1][k], p[2][k], p[3][k])); }
+// Lanes rotated: lane j takes lane j + 1 (0x39) or j + 2 (0x4E), mod 4.
+template <int kImm>
+inline Lanes3 rotateLanes(const Lanes3& v) {
+  return {_mm256_permute4x64_pd(v.x, kImm), _mm256_permute4x64_pd(v.y, kImm), _mm256_permute4x64_pd(v.z, kImm)};
+}
+
+void linearEdgesAvx2(const float* const at[4], const float* const to[4], const RasterScale& m, LinearEdges& out) {
+  const __m256d one = _mm256_set1_pd(1.0);
+  // Lane j = corner j: A = homogeneous(at), D = homogeneous(to) - A (z motion 0 without perspective).
+  const Lanes3 A{cornerColumn(at, 0), cornerColumn(at, 1), m.perspective ? cornerColumn(at, 2) : one};
+  const Lanes3 D{_mm256_sub_pd(cornerColumn(to, 0), A.x), _mm256_sub_pd(cornerColumn(to, 1), A.y),
+                 m.perspective ? _mm256_sub_pd(cornerColumn(to, 2), A.z) : _mm256_setzero_pd()};
+  // Edges 01 12 23 30: corner j with corner j + 1.
+  edgeLanes(A, D, rotateLanes<0x39>(A), rotateLanes<0x39>(D), m, out, 0);
+  // Edge 02 in lane 4: corner 0 with corner 2 (lanes 5-7 are padding).
+  edgeLanes(A, D, rotateLanes<0x4E>(A), rotateLanes<0x4E>(D), m, out, 4);
+}
+
+void fixedEdgesAvx2(const float* const at[4], const RasterScale& m, LinearEdges& out) {
+  const Lanes3 A{cornerColumn(at, 0), cornerColumn(at, 1), m.perspective ? cornerColumn(at, 2) : _mm256_set1_pd(1.0)};
+  edgeLanes<true>(A, A, rotateLanes<0x39>(A), A, m, out, 0);
+  edgeLanes<true>(A, A, rotateLanes<0x4E>(A), A, m, out, 4);
+}
+
+// Coverage of one triangle from its oriented edge values, as triangleCovers() decides it:
+// `hit` where every edge is strictly on the inner side, `tie` where the triangle counts (non-zero,
+// not culled) and an edge value is exactly zero, so the scalar tie rule must decide. Also the
+// barycentrics a_k / S.
+// Strictly on the inner side of an edge: a > 0, or a < 0 for a clockwise (flipped) triangle.
+inline __m256d innerSide(__m256d a, __m256d flip) {
+  const __m256d zero = _mm256_setzero_pd();
+  return _mm256_blendv_pd(_mm256_cmp_pd(a, zero, _CMP_GT_OQ), _mm256_cmp_pd(a, zero, _CMP_LT_OQ), flip);
+}
+
+struct TriangleMasks {
+  int hit, tie;
+  __m128 b[3];
+};
+inline TriangleMasks triangleMasks(__m256d a0, __m256d a1, __m256d a2, bool cullBack) {
+  const __m256d zero = _mm256_setzero_pd();
+  const __m256d S = _mm256_add_pd(_mm256_add_pd(a0, a1), a2);
+  __m256d counts = _mm256_cmp_pd(S, zero, _CMP_NEQ_UQ);  // S == 0 is degenerate; NaN goes on (and misses)
+  if (cullBack) counts = _mm256_andnot_pd(_mm256_cmp_pd(S, zero, _CMP_GT_OQ), counts);
+  const __m256d flip = _mm256_cmp_pd(S, zero, _CMP_LT_OQ);
+  const __m256d in = _mm256_and_pd(_mm256_and_pd(innerSide(a0, flip), innerSide(a1, flip)), innerSide(a2, flip));
+  const __m256d anyZero = _mm256_or_pd(_mm256_or_pd(_mm256_cmp_pd(a0, zero, _CMP_EQ_OQ), _mm256_cmp_pd(a1, zero, _CMP_EQ_OQ)),
+                                       _mm256_cmp_pd(a2, zero, _CMP_EQ_OQ));
+  TriangleMasks m;
+  m.hit = _mm256_movemask_pd(_mm256_and_pd(counts, in));
+  m.tie = _mm256_movemask_pd(_mm256_and_pd(counts, anyZero));
+  const __m256d inv = _mm256_div_pd(_mm256_set1_pd(1.0), S);
+  m.b[0] = _mm256_cvtpd_ps(_mm256_mul_pd(a0, inv));
+  m.b[1] = _mm256_cvtpd_ps(_mm256_mul_pd(a1, inv));
+  m.b[2] = _mm256_cvtpd_ps(_mm256_mul_pd(a2, inv));
+  return m;
+}
+
+template <bool kFixed>
+size_t testLinearEdgesAvx2(const EdgeTestSetup& s, const LinearEdges& E, size_t n, EdgeHit* hits) {
+  const __m128 fOffset = _mm_set1_ps(s.fOffset), fScale = _mm_set1_ps(s.fScale), zero = _mm_setzero_ps(), one = _mm_set1_ps(1.f);
+  const __m256d sign = _mm256_set1_pd(-0.0);
+  size_t h = 0;
+  for (size_t i = 0; i < n; i += 4) {
+    const size_t live = n - i < 4 ? n - i : 4;  // lanes past n read padding and are masked off
+    // f = clamp((t + fOffset) fScale, 0, 1), operand order as std::clamp; fixed edges need no time.
+    __m128 f = zero;
+    if constexpr (!kFixed) f = _mm_min_ps(one, _mm_max_ps(zero, _mm_mul_ps(_mm_add_ps(_mm_loadu_ps(s.st + i), fOffset), fScale)));
+    const __m256d fd = _mm256_cvtps_pd(f);
+    const __m256d rx = _mm256_cvtps_pd(_mm_loadu_ps(s.sx + i)), ry = _mm256_cvtps_pd(_mm_loadu_ps(s.sy + i));
+    const __m256d e0 = edgeValue<kFixed>(E, 0, fd, rx, ry), e1 = edgeValue<kFixed>(E, 1, fd, rx, ry), e4 = edgeValue<kFixed>(E, 4, fd, rx, ry);
+    const int liveMask = (1 << live) - 1;
+    // Triangle A = (p0 p1 p2) with edges 12, 20 (= -02), 01.
+    const TriangleMasks A = triangleMasks(e1, _mm256_xor_pd(e4, sign), e0, s.cullBackFaces);
+    int hitA = A.hit & liveMask, undecided = A.tie & liveMask, hitB = 0;
+    TriangleMasks B{};
+    const int needB = liveMask & ~hitA & ~undecided;
+    if (!s.triangle && needB) {
+      // Triangle B = (p0 p2 p3) with edges 23, 30, 02.
+      B = triangleMasks(edgeValue<kFixed>(E, 2, fd, rx, ry), edgeValue<kFixed>(E, 3, fd, rx, ry), e4, s.cullBackFaces);
+      hitB = B.hit & needB;
+      undecided |= B.tie & needB;
+      hitB &= ~undecided;
+    }
+    int any = hitA | hitB | undecided;
+    if (!any) continue;
+    // Per triangle (A, B): barycentrics b0 b1 b2 and depth, by lane. Which triangle a sample hit
+    // is a coin toss, so the copy below indexes by it rather than branching on it.
+    alignas(16) float bz[2][4][4];
+    for (int k = 0; k < 3; ++k) _mm_store_ps(bz[0][k], A.b[k]), _mm_store_ps(bz[1][k], B.b[k]);
+    // Depths, as recordKernelHits() and the scalar tests compute them (operand order kept).
+    __m128 zv[4];
+    for (int j = 0; j < 4; ++j) zv[j] = _mm_add_ps(_mm_set1_ps(s.za[j]), _mm_mul_ps(f, _mm_set1_ps(s.zb[j] - s.za[j])));
+    _mm_store_ps(bz[0][3], _mm_add_ps(_mm_add_ps(_mm_mul_ps(A.b[0], zv[0]), _mm_mul_ps(A.b[1], zv[1])), _mm_mul_ps(A.b[2], zv[2])));
+    _mm_store_ps(bz[1][3], _mm_add_ps(_mm_add_ps(_mm_mul_ps(B.b[0], zv[0]), _mm_mul_ps(B.b[1], zv[2])), _mm_mul_ps(B.b[2], zv[3])));
+    h = writeEdgeHits<4>(bz, unsigned(undecided), unsigned(hitB), unsigned(any), i, hits, h);
+  }
+  return h;
+}
+
+bool projectLerpedAvx2(const float* a, const float* b, float f, size_t n, const ProjectionScale& s, float* xo, float* yo, float* zo,
+                                     float box[4]) {
+  const __m128 fv = _mm_set1_ps(f), nearClip = _mm_set1_ps(s.nearClip), inf = _mm_set1_ps(INFINITY), absMask = _mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF));
+  const __m256d ax = _mm256_set1_pd(s.ax), bx = _mm256_set1_pd(s.bx), ay = _mm256_set1_pd(s.ay), by = _mm256_set1_pd(s.by), one = _mm256_set1_pd(1.0);
+  __m128 lo_x = inf, lo_y = inf, hi_x = _mm_set1_ps(-INFINITY), hi_y = hi_x;
+  int bad = 0;
+  for (size_t i = 0; i < n; i += 4) {
+    // Lanes past n repeat the last point (harmless to the box) and are not stored.
+    size_t at[4];
+    for (size_t l = 0; l < 4; ++l) at[l] = 3 * (i + l < n ? i + l : n - 1);
+    auto lane = [&](const float* p, int k) { return _mm_setr_ps(p[at[0] + k], p[at[1] + k], p[at[2] + k], p[at[3] + k]); };
+    __m128 p[3];
+    for (int k = 0; k < 3; ++k) {
+      const __m128 pa = lane(a, k);
+      p[k] = _mm_add_ps(pa, _mm_mul_ps(fv, _mm_sub_ps(lane(b, k), pa)));  // a + f * (b - a), glm's order
+    }
+    const __m256d px = _mm256_cvtps_pd(p[0]), py = _mm256_cvtps_pd(p[1]);
+    __m128 x, y, ok;
+    if (s.perspective) {
+      const __m256d iz = _mm256_div_pd(one, _mm256_cvtps_pd(p[2]));
+      x = _mm256_cvtpd_ps(_mm256_add_pd(_mm256_mul_pd(ax, _mm256_mul_pd(px, iz)), bx));
+      y = _mm256_cvtpd_ps(_mm256_add_pd(_mm256_mul_pd(ay, _mm256_mul_pd(py, iz)), by));
+      ok = _mm_cmp_ps(p[2], nearClip, _CMP_GE_OQ);
+    } else {
+      x = _mm256_cvtpd_ps(_mm256_add_pd(_mm256_mul_pd(ax, px), bx));
+      y = _mm256_cvtpd_ps(_mm256_add_pd(_mm256_mul_pd(ay, py), by));
+      ok = _mm_castsi128_ps(_mm_set1_epi32(-1));
+    }
+    ok = _mm_and_ps(ok, _mm_and_ps(_mm_cmp_ps(_mm_and_ps(x, absMask), inf, _CMP_LT_OQ), _mm_cmp_ps(_mm_and_ps(y, absMask), inf, _CMP_LT_OQ)));
+    x = _mm_blendv_ps(_mm_set1_ps(NAN), x, ok);
+    bad |= _mm_movemask_ps(ok) ^ 0xF;
+    lo_x = _mm_min_ps(lo_x, _mm_blendv_ps(inf, x, ok)), hi_x = _mm_max_ps(hi_x, _mm_blendv_ps(_mm_set1_ps(-INFINITY), x, ok));
+    lo_y = _mm_min_ps(lo_y, _mm_blendv_ps(inf, y, ok)), hi_y = _mm_max_ps(hi_y, _mm_blendv_ps(_mm_set1_ps(-INFINITY), y, ok));
+    if (i + 4 <= n) {
+      _mm_storeu_ps(xo + i, x), _mm_storeu_ps(yo + i, y), _mm_storeu_ps(zo + i, p[2]);
+    } else {
+      alignas(16) float tx[4], ty[4], tz[4];
+      _mm_store_ps(tx, x), _mm_store_ps(ty, y), _mm_store_ps(tz, p[2]);
+      for (size_t l = 0; i + l < n; ++l) xo[i + l] = tx[l], yo[i + l] = ty[l], zo[i + l] = tz[l];
+    }
+  }
+  alignas(16) float r[4][4];
+  _mm_store_ps(r[0], lo_x), _mm_store_ps(r[1], lo_y), _mm_store_ps(r[2], hi_x), _mm_store_ps(r[3], hi_y);
+  box[0] = lowest(r[0], 4), box[1] = lowest(r[1], 4);
+  box[2] = highest(r[2], 4), box[3] = highest(r[3], 4);
+  return bad != 0;
+}
+
+// sortByCell()'s cell of every candidate: MovingBox's u (insideAtOwnTime()'s operations), then
+// the compensated position's cell, clamped to the grid (a NaN clamps to the last cell: max and
+// min return their second operand). Eight and sixteen at a time.
+void cellsOfAvx2(const CellGrid& g, const float* t, const float* x, const float* y, size_t n, uint16_t* cellOf) {
+  const __m256 thetaA = _mm256_set1_ps(g.thetaA), invLen = _mm256_set1_ps(g.invLen), one = _mm256_set1_ps(1.f), zero = _mm256_setzero_ps();
+  const __m256 dx = _mm256_set1_ps(g.dx), dy = _mm256_set1_ps(g.dy), gx = _mm256_set1_ps(g.x0), gy = _mm256_set1_ps(g.y0), inv = _mm256_set1_ps(g.invSize);
+  const __m256 maxCol = _mm256_set1_ps(float(g.cols - 1)), maxRow = _mm256_set1_ps(float(g.rows - 1)), cols = _mm256_set1_ps(float(g.cols));
+  for (size_t i = 0; i < n; i += 8) {
+    const __m256 u = _mm256_min_ps(one, _mm256_max_ps(zero, _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(t + i), thetaA), invLen)));
+    const __m256 cx = _mm256_min_ps(_mm256_max_ps(_mm256_floor_ps(_mm256_mul_ps(_mm256_sub_ps(_mm256_sub_ps(_mm256_loadu_ps(x + i), _mm256_mul_ps(u, dx)), gx), inv)), zero), maxCol);
+    const __m256 cy = _mm256_min_ps(_mm256_max_ps(_mm256_floor_ps(_mm256_mul_ps(_mm256_sub_ps(_mm256_sub_ps(_mm256_loadu_ps(y + i), _mm256_mul_ps(u, dy)), gy), inv)), zero), maxRow);
+    const __m256i cell = _mm256_cvttps_epi32(_mm256_add_ps(_mm256_mul_ps(cy, cols), cx));  // exact: cells < 2^16
+    const __m128i packed = _mm_packus_epi32(_mm256_castsi256_si128(cell), _mm256_extracti128_si256(cell, 1));
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(cellOf + i), packed);
+  }
+}
+
+}  // namespace
+
+const IsaKernels kAvx2Kernels = {gatherInBoxAvx2, gatherStrataAvx2, filterCandidatesAvx2, cellsOfAvx2, projectLerpedAvx2,
+                                 linearEdgesAvx2, fixedEdgesAvx2, testLinearEdgesAvx2<false>, testLinearEdgesAvx2<true>};
+
+}  // namespace reshutter::resample::kernels
