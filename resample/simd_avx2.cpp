@@ -465,7 +465,9 @@ size_t testLinearEdgesAvx2(const EdgeTestSetup& s, const LinearEdges& E, size_t 
   return h;
 }
 
-bool projectLerpedAvx2(const float* a, const float* b, float f, size_t n, const ProjectionScale& s, float* xo, float* yo, float* zo,
+}  // namespace
+
+bool avx2::projectLerped(const float* a, const float* b, float f, size_t n, const ProjectionScale& s, float* xo, float* yo, float* zo,
                                      float box[4]) {
   const __m128 fv = _mm_set1_ps(f), nearClip = _mm_set1_ps(s.nearClip), inf = _mm_set1_ps(INFINITY), absMask = _mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF));
   const __m256d ax = _mm256_set1_pd(s.ax), bx = _mm256_set1_pd(s.bx), ay = _mm256_set1_pd(s.ay), by = _mm256_set1_pd(s.by), one = _mm256_set1_pd(1.0);
@@ -513,6 +515,8 @@ bool projectLerpedAvx2(const float* a, const float* b, float f, size_t n, const 
   return bad != 0;
 }
 
+namespace {
+
 // sortByCell()'s cell of every candidate: MovingBox's u (insideAtOwnTime()'s operations), then
 // the compensated position's cell, clamped to the grid (a NaN clamps to the last cell: max and
 // min return their second operand). Eight and sixteen at a time.
@@ -532,7 +536,7 @@ void cellsOfAvx2(const CellGrid& g, const float* t, const float* x, const float*
 
 }  // namespace
 
-const IsaKernels kAvx2Kernels = {gatherInBoxAvx2, gatherStrataAvx2, filterCandidatesAvx2, cellsOfAvx2, projectLerpedAvx2,
+const IsaKernels kAvx2Kernels = {gatherInBoxAvx2, gatherStrataAvx2, filterCandidatesAvx2, cellsOfAvx2, avx2::projectLerped,
                                  linearEdgesAvx2, fixedEdgesAvx2, testLinearEdgesAvx2<false>, testLinearEdgesAvx2<true>};
 
 }  // namespace reshutter::resample::kernels

@@ -1,6 +1,7 @@
 // The vector kernels for AVX-512 (F, VL, BW, DQ, with BMI2): sample gathering (sixteen lanes, as
-// four row segments of up to four samples), the exact coverage test (eight candidates) and their
-// set-up, the AVX2 kernels' operations lane for lane. This file alone is compiled with the
+// four row segments of up to four samples), the exact coverage test (eight candidates) and the
+// edge set-up, the AVX2 kernels' operations lane for lane. The vertex projection is the AVX2 one
+// (an AVX-512 twin measured within the noise, bench/RESULTS.md). This file alone is compiled with the
 // AVX-512 flags; simd_dispatch.cpp calls it only on CPUs that run it. See simd_isa.h for what it
 // may include.
 #include <cmath>
@@ -172,67 +173,6 @@ size_t gatherInBoxAvx512(const SampleRows& rows, const MovingBox& box, const Can
   const Candidates out = candidates;
   if (box.invLen == 0.f && box.dx0 == 0.f && box.dx1 == 0.f && box.dy0 == 0.f && box.dy1 == 0.f) return gatherRows512<true>(boxLanes512(box), r, out, n);
   return gatherRows512<false>(boxLanes512(box), r, out, n);
-}
-
-// projectLerped() eight points at a time: projectLerpedAvx2()'s operations lane for lane (the
-// lerp in float, the projection in double), the xyz triples de-interleaved with permutes.
-inline void deinterleave8(const float* p, __m256& x, __m256& y, __m256& z) {
-  const __m512 lo = _mm512_loadu_ps(p), hi = _mm512_zextps256_ps512(_mm256_loadu_ps(p + 16));  // floats 0-15, 16-23
-  x = _mm512_castps512_ps256(_mm512_permutex2var_ps(lo, _mm512_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21, 0, 0, 0, 0, 0, 0, 0, 0), hi));
-  y = _mm512_castps512_ps256(_mm512_permutex2var_ps(lo, _mm512_setr_epi32(1, 4, 7, 10, 13, 16, 19, 22, 0, 0, 0, 0, 0, 0, 0, 0), hi));
-  z = _mm512_castps512_ps256(_mm512_permutex2var_ps(lo, _mm512_setr_epi32(2, 5, 8, 11, 14, 17, 20, 23, 0, 0, 0, 0, 0, 0, 0, 0), hi));
-}
-bool projectLerpedAvx512(const float* a, const float* b, float f, size_t n, const ProjectionScale& s, float* xo, float* yo, float* zo,
-                                         float box[4]) {
-  const __m256 fv = _mm256_set1_ps(f), nearClip = _mm256_set1_ps(s.nearClip), inf = _mm256_set1_ps(INFINITY), ninf = _mm256_set1_ps(-INFINITY);
-  const __m256 absMask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
-  const __m512d ax = _mm512_set1_pd(s.ax), bx = _mm512_set1_pd(s.bx), ay = _mm512_set1_pd(s.ay), by = _mm512_set1_pd(s.by), one = _mm512_set1_pd(1.0);
-  __m256 lo_x = inf, lo_y = inf, hi_x = ninf, hi_y = ninf;
-  unsigned bad = 0;
-  alignas(64) float tailA[24], tailB[24];
-  for (size_t i = 0; i < n; i += 8) {
-    const float *pa = a + 3 * i, *pb = b + 3 * i;
-    if (i + 8 > n) {
-      // The last points: lanes past n repeat the last point (harmless to the box), not stored.
-      for (size_t l = 0; l < 8; ++l) {
-        const size_t at = 3 * (i + l < n ? i + l : n - 1);
-        for (int k = 0; k < 3; ++k) tailA[3 * l + k] = a[at + k], tailB[3 * l + k] = b[at + k];
-      }
-      pa = tailA, pb = tailB;
-    }
-    __m256 a3[3], b3[3], p[3];
-    deinterleave8(pa, a3[0], a3[1], a3[2]);
-    deinterleave8(pb, b3[0], b3[1], b3[2]);
-    for (int k = 0; k < 3; ++k) p[k] = _mm256_add_ps(a3[k], _mm256_mul_ps(fv, _mm256_sub_ps(b3[k], a3[k])));  // a + f * (b - a), glm's order
-    const __m512d px = _mm512_cvtps_pd(p[0]), py = _mm512_cvtps_pd(p[1]);
-    __m256 x, y, ok;
-    if (s.perspective) {
-      const __m512d iz = _mm512_div_pd(one, _mm512_cvtps_pd(p[2]));
-      x = _mm512_cvtpd_ps(_mm512_add_pd(_mm512_mul_pd(ax, _mm512_mul_pd(px, iz)), bx));
-      y = _mm512_cvtpd_ps(_mm512_add_pd(_mm512_mul_pd(ay, _mm512_mul_pd(py, iz)), by));
-      ok = _mm256_cmp_ps(p[2], nearClip, _CMP_GE_OQ);
-    } else {
-      x = _mm512_cvtpd_ps(_mm512_add_pd(_mm512_mul_pd(ax, px), bx));
-      y = _mm512_cvtpd_ps(_mm512_add_pd(_mm512_mul_pd(ay, py), by));
-      ok = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
-    }
-    ok = _mm256_and_ps(ok, _mm256_and_ps(_mm256_cmp_ps(_mm256_and_ps(x, absMask), inf, _CMP_LT_OQ), _mm256_cmp_ps(_mm256_and_ps(y, absMask), inf, _CMP_LT_OQ)));
-    x = _mm256_blendv_ps(_mm256_set1_ps(NAN), x, ok);
-    bad |= unsigned(_mm256_movemask_ps(ok)) ^ 0xFFu;
-    lo_x = _mm256_min_ps(lo_x, _mm256_blendv_ps(inf, x, ok)), hi_x = _mm256_max_ps(hi_x, _mm256_blendv_ps(ninf, x, ok));
-    lo_y = _mm256_min_ps(lo_y, _mm256_blendv_ps(inf, y, ok)), hi_y = _mm256_max_ps(hi_y, _mm256_blendv_ps(ninf, y, ok));
-    if (i + 8 <= n) {
-      _mm256_storeu_ps(xo + i, x), _mm256_storeu_ps(yo + i, y), _mm256_storeu_ps(zo + i, p[2]);
-    } else {
-      const __mmask8 keep = __mmask8((1u << (n - i)) - 1);
-      _mm256_mask_storeu_ps(xo + i, keep, x), _mm256_mask_storeu_ps(yo + i, keep, y), _mm256_mask_storeu_ps(zo + i, keep, p[2]);
-    }
-  }
-  alignas(32) float r[4][8];
-  _mm256_store_ps(r[0], lo_x), _mm256_store_ps(r[1], lo_y), _mm256_store_ps(r[2], hi_x), _mm256_store_ps(r[3], hi_y);
-  box[0] = lowest(r[0], 8), box[1] = lowest(r[1], 8);
-  box[2] = highest(r[2], 8), box[3] = highest(r[3], 8);
-  return bad != 0;
 }
 
 // filterCandidates() with sixteen lanes.
@@ -471,7 +411,7 @@ void fixedEdgesAvx512(const float* const at[4], const RasterScale& m, LinearEdge
 
 }  // namespace
 
-const IsaKernels kAvx512Kernels = {gatherInBoxAvx512, gatherStrataAvx512, filterCandidatesAvx512, cellsOfAvx512, projectLerpedAvx512,
+const IsaKernels kAvx512Kernels = {gatherInBoxAvx512, gatherStrataAvx512, filterCandidatesAvx512, cellsOfAvx512, avx2::projectLerped,
                                    edgesAvx512<false>, fixedEdgesAvx512, testLinearEdgesAvx512<false>, testLinearEdgesAvx512<true>};
 
 }  // namespace reshutter::resample::kernels

@@ -34,6 +34,11 @@ struct IsaKernels {
 #if defined(__x86_64__) || defined(__i386__)
 extern const IsaKernels kAvx2Kernels;
 extern const IsaKernels kAvx512Kernels;
+
+// The AVX2 kernels that the AVX-512 table shares.
+namespace avx2 {
+bool projectLerped(const float* a, const float* b, float f, size_t n, const ProjectionScale& scale, float* x, float* y, float* z, float box[4]);
+}  // namespace avx2
 #endif
 
 namespace {
