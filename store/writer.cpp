@@ -399,7 +399,6 @@ struct StoreWriter::Impl {
   }
 
   void addMicropolygon(Builder& b, const GridInput& g, size_t i, uint32_t K, int oi) {
-    const auto& schema = meta.schema;
     const uint32_t* c = &g.corners[i * 4];
     uint32_t localCorners[4];
     for (int j = 0; j < 4; ++j) {
@@ -421,10 +420,16 @@ struct StoreWriter::Impl {
     r[4] = g.objectId, r[5] = g.gridId, r[6] = g.flags;
     if (g.flags & kMatte) b.effects |= kEffectMatte;
     if (g.flags & kTwoSided) b.effects |= kEffectTwoSided;
-    uint32_t* tail = r + RecordLayout::kMpFixedWords;
+    packAttributes(b, g, AttrRate::Micropolygon, i, r + RecordLayout::kMpFixedWords, oi);
+  }
+
+  // Copies element `element`'s attributes of one rate (per micropolygon or per vertex) into a
+  // record's attribute words; an attribute the grid lacks is zero.
+  void packAttributes(Builder& b, const GridInput& g, AttrRate rate, size_t element, uint32_t* tail, int oi) {
+    const auto& schema = meta.schema;
     for (size_t ai = 0; ai < schema.attrs.size(); ++ai) {
       const auto& a = schema.attrs[ai];
-      if (a.rate != AttrRate::Micropolygon) continue;
+      if (a.rate != rate) continue;
       const int nc = componentCount(a.type);
       uint32_t* dst = tail + layout.attrOffset[ai];
       if (ai >= g.attrs.size() || !g.attrs[ai].present()) {
@@ -432,9 +437,9 @@ struct StoreWriter::Impl {
         continue;
       }
       if (a.type == AttrType::UInt) {
-        dst[0] = g.attrs[ai].u[i];
+        dst[0] = g.attrs[ai].u[element];
       } else {
-        const float* src = &g.attrs[ai].f[i * nc];
+        const float* src = &g.attrs[ai].f[element * size_t(nc)];
         std::memcpy(dst, src, size_t(nc) * 4);
         if (int(ai) == oi) noteOpacity(b, src);
       }
@@ -448,7 +453,6 @@ struct StoreWriter::Impl {
   }
 
   void addVertex(Builder& b, const GridInput& g, uint32_t v, uint32_t K, int oi) {
-    const auto& schema = meta.schema;
     const uint32_t nV = g.numVertices;
     uint32_t* r = b.vertices.append(chunks);
     const glm::vec3& p0 = gridPositions[v];
@@ -469,25 +473,7 @@ struct StoreWriter::Impl {
         b.effects |= kEffectNearCrossing;
       }
     }
-    uint32_t* tail = r + 3 * K;
-    for (size_t ai = 0; ai < schema.attrs.size(); ++ai) {
-      const auto& a = schema.attrs[ai];
-      if (a.rate != AttrRate::Vertex) continue;
-      const int nc = componentCount(a.type);
-      uint32_t* dst = tail + layout.attrOffset[ai];
-      if (ai >= g.attrs.size() || !g.attrs[ai].present()) {
-        std::fill(dst, dst + nc, 0u);
-        continue;
-      }
-      if (a.type == AttrType::UInt) {
-        dst[0] = g.attrs[ai].u[v];
-      } else {
-        const float* src = &g.attrs[ai].f[size_t(v) * nc];
-        std::memcpy(dst, src, size_t(nc) * 4);
-        if (int(ai) == oi) noteOpacity(b, src);
-      }
-      b.presence |= uint64_t(1) << ai;
-    }
+    packAttributes(b, g, AttrRate::Vertex, v, r + 3 * K, oi);
   }
 
   void spillLargest() {
