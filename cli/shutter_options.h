@@ -3,7 +3,7 @@
 // command reads `--shutter`, `--shutter-angle`, `--shutter-position`, `--shutter-shape` and
 // `--rolling-shutter` the same way.
 //
-// Time conventions (DESIGN.md): frame N's store covers [N + open, N + close] in absolute source
+// Time conventions (../shared/DESIGN.md): frame N's store covers [N + open, N + close] in absolute source
 // frames and frame N's nominal time is N. A target frame's interval is given relative to its
 // nominal time, in target-frame durations:
 //   --shutter A:B                   [nominal + A·d, nominal + B·d]           (d: target frame duration)
