@@ -12,6 +12,7 @@
 #include "common/frame_range.h"
 #include "common/log.h"
 #include "common/progress.h"
+#include "store/shot.h"
 
 namespace reshutter::cli {
 namespace {
@@ -20,6 +21,12 @@ using resample::RenderResult;
 using resample::RenderSpec;
 using resample::ShutterGroup;
 using resample::ShutterModel;
+
+std::vector<resample::Source> sourcesFor(store::ShotStores& stores, double t0, double t1) {
+  std::vector<resample::Source> sources;
+  for (const store::FrameStore& s : stores.storesFor(t0, t1)) sources.push_back(resample::Source{s.reader, s.frame});
+  return sources;
+}
 
 /// One output frame: its number and the shutter it is rendered with (absolute source frames).
 struct OutputFrame {
@@ -37,7 +44,7 @@ int renderSequence(const std::string& storePattern, const std::string& outPatter
     fail("-o", "'", outPattern, "' has no frame placeholder (####, %04d, @) but ", frames.size(), " frames are rendered");
   if (frames.size() > 1 && !render.deep.empty() && !hasFramePlaceholder(render.deep))
     fail("--deep", "'", render.deep, "' has no frame placeholder (####, %04d, @) but ", frames.size(), " frames are rendered");
-  ShotStores stores(storePattern, size_t(render.cacheMb * 1e6));
+  store::ShotStores stores(storePattern, size_t(render.cacheMb * 1e6));
   // Every store any frame needs, checked before any work.
   {
     std::vector<int64_t> all;
@@ -55,7 +62,7 @@ int renderSequence(const std::string& storePattern, const std::string& outPatter
   for (const auto& f : frames) {
     RenderSpec spec;
     spec.shutter = f.shutter;
-    spec.sources = stores.sourcesFor(f.shutter.earliest(), f.shutter.latest());
+    spec.sources = sourcesFor(stores, f.shutter.earliest(), f.shutter.latest());
     render.applyTo(spec);
     spec.progress = frames.size() == 1;
     RenderResult result = resample::render(spec);
@@ -113,7 +120,7 @@ struct FieldsCommand {
     }
     // The reference semantics: two full progressive renders, rows interlaced afterwards.
     for (int64_t f : list) render.checkOutputs(output.empty() ? "" : expandFramePattern(output, f), f);
-    ShotStores stores(input, size_t(render.cacheMb * 1e6));
+    store::ShotStores stores(input, size_t(render.cacheMb * 1e6));
     Progress progress("fields (two-pass)", list.size());
     for (int64_t f : list) {
       auto [g1, g2] = fieldGroups(f);
@@ -123,7 +130,7 @@ struct FieldsCommand {
         RenderSpec spec;
         spec.shutter = ShutterModel::progressive(g.open, g.close, g.shape);
         shutter.applyRolling(spec.shutter, 1.0);
-        spec.sources = stores.sourcesFor(spec.shutter.earliest(), spec.shutter.latest());
+        spec.sources = sourcesFor(stores, spec.shutter.earliest(), spec.shutter.latest());
         render.applyTo(spec);
         spec.progress = false;
         fields[k++] = resample::render(spec);
@@ -164,7 +171,7 @@ struct RetimeCommand {
     if (!parseRational(toFps, to)) fail("--to-fps", "expected a rate like 25, 30000/1001 or 29.97, got '", toFps, "'");
     if (fromFps.empty()) {
       // The shot's own rate, from its first store.
-      ShotStores probe(input, 0);
+      store::ShotStores probe(input, 0);
       const double near = double(list.front()) * 1.0;  // a guess good enough to find a store
       from = probe.firstMeta(near).fps;
     } else if (!parseRational(fromFps, from)) {
