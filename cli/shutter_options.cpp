@@ -2,8 +2,10 @@
 
 #include <cmath>
 #include <cstdio>
+#include <tuple>
 
 #include "common/error.h"
+#include "resample/retime.h"
 
 namespace reshutter::cli {
 
@@ -48,19 +50,22 @@ void ShutterOptions::interval(double& open, double& close, double defaultOpen, d
   if (!shutter.empty()) {
     parseInterval(shutter, "--shutter", open, close);
   } else if (angle >= 0) {
-    const double len = angle / 360.0;
-    if (position == "start") open = 0, close = len;
-    else if (position == "center") open = -len / 2, close = len / 2;
-    else open = -len, close = 0;
+    std::tie(open, close) = resample::angleInterval(angle, resample::parseShutterPosition(position, "--shutter-position"));
   }
 }
 
 resample::ShutterShape ShutterOptions::parsedShape() const { return resample::ShutterShape::parse(shape, "--shutter-shape"); }
 
-void ShutterOptions::applyRolling(resample::ShutterModel& model, double frameDuration) const {
+resample::RollingShutter ShutterOptions::rollingShutter() const {
   resample::RollingShutter r;
-  r.duration = rolling * frameDuration;
+  r.duration = rolling;
   r.upward = direction == "up";
+  return r;
+}
+
+void ShutterOptions::applyRolling(resample::ShutterModel& model, double frameDuration) const {
+  resample::RollingShutter r = rollingShutter();
+  r.duration = rolling * frameDuration;
   model.setRolling(r);
 }
 

@@ -1,7 +1,7 @@
-// How the commands that render (resample, fields, retime) turn shutter options into the
-// re-sampler's shutter model. One definition, so every command reads `--shutter`,
-// `--shutter-angle`, `--shutter-position`, `--shutter-shape` and `--rolling-shutter` the same
-// way. A shot's stores are store/shot.h's.
+// How the commands that render (resample, fields, retime) read shutter options. One definition, so
+// every command reads `--shutter`, `--shutter-angle`, `--shutter-position`, `--shutter-shape` and
+// `--rolling-shutter` the same way; what the values mean for a sequence (fields, rate conversion)
+// is the library's (resample/retime.h), and a shot's stores are store/shot.h's.
 //
 // Time conventions (docs/resample.md): frame N's store covers [N + open, N + close] in absolute source
 // frames and frame N's nominal time is N. A target frame's interval is given relative to its
@@ -38,6 +38,8 @@ struct ShutterOptions {
   /// [defaultOpen, defaultClose] when neither --shutter nor an angle is given.
   void interval(double& open, double& close, double defaultOpen, double defaultClose) const;
   resample::ShutterShape parsedShape() const;
+  /// The rolling read-out, its duration in target frames.
+  resample::RollingShutter rollingShutter() const;
   /// Applies the rolling read-out (duration in target frames × `frameDuration` source frames).
   void applyRolling(resample::ShutterModel& model, double frameDuration) const;
 };
