@@ -77,6 +77,29 @@ void interlaceFields(RenderResult& first, const RenderResult& second, int firstF
       if (!dst.u.empty()) std::copy(from.u.begin() + long(row), from.u.begin() + long(row + W), dst.u.begin() + long(row));
     }
   }
+  // The deep image is rebuilt rather than patched: a pixel's samples are a run in one block, and
+  // field 2's runs live in the other render's blocks. Block 0 holds field 1's rows, block 1 field 2's.
+  const DeepImage& d1 = first.deep;
+  const DeepImage& d2 = second.deep;
+  CHECK((d1.width == 0) == (d2.width == 0), "one field has a deep image, the other not");
+  if (d1.width != 0) {
+    CHECK(d1.x0 == d2.x0 && d1.y0 == d2.y0 && d1.width == d2.width && d1.height == d2.height, "the fields' deep data windows differ");
+    CHECK(d1.layout.nf() == d2.layout.nf() && d1.layout.nu() == d2.layout.nu(), "the fields' deep layouts differ");
+    DeepImage woven;
+    woven.reset(d1.x0, d1.y0, d1.width, d1.height, d1.fullWidth, d1.fullHeight, d1.layout, 2);
+    woven.tidy = d1.tidy && d2.tidy;
+    woven.objectNames = d1.objectNames;
+    DeepPixel px;
+    for (int y = d1.y0; y < d1.y0 + d1.height; ++y) {
+      const bool inSecond = secondFieldRow(y, firstFieldParity);
+      const DeepImage& from = inSecond ? d2 : d1;
+      for (int x = d1.x0; x < d1.x0 + d1.width; ++x) {
+        from.getPixel(x, y, px);
+        woven.setPixel(inSecond ? 1 : 0, x, y, px);
+      }
+    }
+    first.deep = std::move(woven);
+  }
   first.provenance.shutter = "two-pass fields: " + first.provenance.shutter + " / " + second.provenance.shutter;
   first.provenance.shutterClose = second.provenance.shutterClose;
 }

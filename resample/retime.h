@@ -3,7 +3,7 @@
 // with a dominance and a field shutter; a rate conversion with a shutter angle, position, shape
 // and rolling read-out) into one ShutterModel per output frame (resample/shutter.h), finding the
 // stores each frame's shutter reaches (store/shot.h), and interlacing two full-frame field
-// renders row by row. It renders nothing itself: every frame
+// renders row by row, flat channels and deep pixels alike. It renders nothing itself: every frame
 // goes through the one re-sampler (resample/resampler.h).
 //
 // Time conventions (docs/resample.md): times are absolute source frames; a store for frame N
@@ -66,9 +66,9 @@ std::pair<ShutterModel, ShutterModel> fieldPassShutters(int64_t frame, const Fie
 inline bool secondFieldRow(int y, int firstFieldParity) { return ((y - firstFieldParity) % 2 + 2) % 2 != 0; }
 
 /// Interlaces two full-frame renders of one frame's fields: `first` keeps its field-1 rows and
-/// takes `second`'s field-2 rows in every flat channel; the provenance names both shutters. The
-/// two must come from one spec but for the shutter (same data window and channels); anything else
-/// is a CHECK failure.
+/// takes `second`'s field-2 rows, in every flat channel and, when both carry one, in the deep
+/// image; the provenance names both shutters. The two must come from one spec but for the
+/// shutter (same data window, channels and deep layout); anything else is a CHECK failure.
 void interlaceFields(RenderResult& first, const RenderResult& second, int firstFieldParity);
 
 // ---------------------------------------------------------------------------------------------

@@ -8,6 +8,8 @@
 #include <gtest/gtest.h>
 
 #include "common/error.h"
+#include "resample/retime.h"
+#include "tests/exr_test_util.h"
 #include "tests/resample_test_util.h"
 #include "tests/test_util.h"
 
@@ -58,6 +60,19 @@ RenderSpec baseSpec(std::vector<Source> sources, ShutterModel shutter, int n = 8
   spec.filter = FilterSpec::parse("box:1", "t");
   spec.progress = false;
   return spec;
+}
+
+// Largest |flattened deep − flat| over R G B A on row y (absolute) of a render.
+double rowFlattenError(const DeepImage& deep, const FlatImage& flat, int y) {
+  double worst = 0;
+  DeepPixel px;
+  for (int x = flat.x0; x < flat.x0 + flat.width; ++x) {
+    deep.getPixel(x, y, px);
+    const FlatDeepPixel f = flattenDeepPixel(px, deep.layout, false);
+    const size_t o = size_t(y - flat.y0) * flat.width + size_t(x - flat.x0);
+    for (auto [v, name] : {std::pair{f.r, "R"}, {f.g, "G"}, {f.b, "B"}, {f.a, "A"}}) worst = std::max(worst, std::abs(v - double(flat.find(name)->f[o])));
+  }
+  return worst;
 }
 
 bool sameBits(const RenderResult& a, const RenderResult& b) {
@@ -125,6 +140,53 @@ TEST(RetimeFields, TallerFiltersBlendNeighbouringFieldsOnlyNearMotion) {
       }
     }
   EXPECT_GT(differing, 0);
+}
+
+// The two-pass reference interlaces the deep image as it does the flat one: every row's deep
+// pixels are its own field's (field 2's rows once wrote field 1's samples), so the deep image
+// flattens to the interlaced flat image on every row. A crop starting on an odd row checks that
+// the field of a row is the raster row's, not the data window's.
+TEST(RetimeFields, TwoPassInterlacesTheDeepImageRowByRow) {
+  ScratchDir dir;
+  Motion m;
+  auto s = frameStore(m, 3, dir.path("f3.mps"));
+  for (int parity : {0, 1})
+    for (int cropY0 : {0, 5}) {
+      FieldShutter fs;
+      fs.firstFieldParity = parity;
+      const auto passes = fieldPassShutters(3, fs);
+      RenderResult field[2];
+      for (int k = 0; k < 2; ++k) {
+        RenderSpec spec = baseSpec({Source{s, 3}}, k == 0 ? passes.first : passes.second, 4);
+        spec.filter = FilterSpec::parse("gaussian:2", "t");  // taller than a row: neighbouring rows mix within each pass
+        spec.deep = true;
+        spec.cropX0 = 0, spec.cropX1 = 48, spec.cropY0 = cropY0, spec.cropY1 = 36;
+        field[k] = render(spec);
+      }
+      RenderResult woven = field[0];
+      interlaceFields(woven, field[1], parity);
+      int secondFieldRows = 0, rowsThatShowTheBug = 0;
+      DeepPixel a, b, other;
+      for (int y = woven.image.y0; y < woven.image.y0 + woven.image.height; ++y) {
+        const int k = (y % 2 == parity) ? 0 : 1;  // upper dominance (parity 0): raster row 0 is field 1's
+        secondFieldRows += k;
+        bool differsFromOtherField = false;
+        for (int x = woven.image.x0; x < woven.image.x0 + woven.image.width; ++x) {
+          woven.deep.getPixel(x, y, a);
+          field[k].deep.getPixel(x, y, b);
+          field[1 - k].deep.getPixel(x, y, other);
+          ASSERT_TRUE(a.f == b.f && a.u == b.u) << "pixel " << x << "," << y << " holds field " << 2 - k << "'s deep samples, not field " << k + 1 << "'s";
+          differsFromOtherField |= a.f != other.f;
+        }
+        if (k == 1 && differsFromOtherField) ++rowsThatShowTheBug;
+        EXPECT_LT(rowFlattenError(woven.deep, woven.image, y), 1e-5) << "row " << y << " (field " << k + 1 << "), parity " << parity;
+      }
+      EXPECT_GT(secondFieldRows, 0);
+      EXPECT_GT(rowsThatShowTheBug, 3) << "the square must move between the fields, or field 1's samples on field 2's rows would pass";
+      EXPECT_TRUE(woven.deep.tidy);
+      EXPECT_GT(woven.deep.totalSamples(), 0u);
+      EXPECT_NE(woven.provenance.shutter.find("two-pass fields"), std::string::npos) << woven.provenance.shutter;
+    }
 }
 
 TEST(RetimeRate, IntervalsAcrossFrameBoundariesMatchAnalyticCoverage) {
@@ -249,6 +311,56 @@ TEST(RetimeCli, FieldsAndRetimeWriteSequencesThatOpenElsewhere) {
   CommandResult info = runImageTool("iinfo -v " + dir.path("r.0004.exr"));
   EXPECT_EQ(info.exitCode, 0) << info.err;
   EXPECT_NE(info.out.find("48 x"), std::string::npos) << info.out;
+}
+
+// `fields --two-pass --deep`, read back with OpenEXR: on every row the deep file flattens to the
+// flat file, and both are that row's field rendered alone (`resample` of the field's interval of
+// the frame's store). Field 2's rows of the deep file once held field 1's samples.
+TEST(RetimeCli, TwoPassDeepFlattensToTheTwoPassFlatImageOnEveryRow) {
+  ScratchDir dir;
+  Motion m;
+  for (int64_t f = 1; f <= 3; ++f) frameStore(m, f, dir.path("shot.000" + std::to_string(f) + ".mps"));
+  const std::string common = " --spp 4 --filter gaussian:2";
+  // Frame 2's fields as full frames: [2, 2.25] and [2.5, 2.75], store 2's [0, 0.25] and [0.5, 0.75].
+  FlatImage fieldFlat[2];
+  DeepExr fieldDeep[2];
+  for (int k = 0; k < 2; ++k) {
+    const std::string flat = dir.path("field" + std::to_string(k) + ".exr"), deep = dir.path("field" + std::to_string(k) + "d.exr");
+    CommandResult r = runReshutter("resample " + dir.path("shot.0002.mps") + " --shutter " + (k == 0 ? "0:0.25" : "0.5:0.75") + common + " -o " + flat +
+                                   " --deep " + deep);
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    fieldFlat[k] = readFlatExr(flat);
+    fieldDeep[k] = readDeepExr(deep);
+  }
+  for (const char* dominance : {"upper", "lower"}) {
+    const int parity = std::string(dominance) == "upper" ? 0 : 1;
+    CommandResult r = runReshutter("fields " + dir.path("shot.####.mps") + " --frames 2 --two-pass --dominance " + dominance + common + " -o " +
+                                   dir.path("t.####.exr") + " --deep " + dir.path("d.####.exr"));
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    const FlatImage flat = readFlatExr(dir.path("t.0002.exr"));
+    const DeepExr deep = readDeepExr(dir.path("d.0002.exr"));
+    EXPECT_NE(readExrShutter(dir.path("d.0002.exr")).description.find("two-pass fields"), std::string::npos) << "not the two-pass path";
+    EXPECT_TRUE(deep.tidyState);
+    ASSERT_EQ(flat.height, 36);
+    int rowsThatShowTheBug = 0;
+    DeepPixel a, b, other;
+    for (int y = 0; y < flat.height; ++y) {
+      const int k = (y % 2 == parity) ? 0 : 1;
+      EXPECT_LT(rowFlattenError(deep.image, flat, y), 1e-5) << dominance << " dominance, row " << y << " (field " << k + 1 << ")";
+      bool sameAsField = true, sameAsOther = true;
+      for (int x = 0; x < flat.width; ++x) {
+        for (const char* c : {"R", "G", "B", "A"}) sameAsField &= flat.find(c)->f[size_t(y) * flat.width + x] == fieldFlat[k].find(c)->f[size_t(y) * flat.width + x];
+        deep.image.getPixel(x, y, a);
+        fieldDeep[k].image.getPixel(x, y, b);
+        fieldDeep[1 - k].image.getPixel(x, y, other);
+        sameAsField &= a.f == b.f && a.u == b.u;
+        sameAsOther &= a.f == other.f;
+      }
+      EXPECT_TRUE(sameAsField) << dominance << " dominance, row " << y << " is not field " << k + 1 << "'s";
+      if (k == 1 && !sameAsOther) ++rowsThatShowTheBug;
+    }
+    EXPECT_GT(rowsThatShowTheBug, 3) << "the fields must differ on field 2's rows, or the bug would not show";
+  }
 }
 
 TEST(RetimeCli, MissingStoresAreReportedAllAtOnceBeforeAnyWork) {
