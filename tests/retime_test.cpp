@@ -3,6 +3,7 @@
 // rolling shutter slant, coverage gaps, and the `fields` / `retime` commands on sequences.
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <filesystem>
 #include <tuple>
 
@@ -43,16 +44,37 @@ std::shared_ptr<const store::StoreReader> frameStore(const Motion& m, int64_t fr
   return writeScene(s, path);
 }
 
-double coverageError(const RenderResult& r, const Motion& m, double a, double b, const std::vector<double>& shapeT = {},
+double coverageError(const FlatImage& img, const Motion& m, double a, double b, const std::vector<double>& shapeT = {},
                      const std::vector<double>& shapeW = {}) {
-  const auto& A = channel(r, "A").f;
+  const auto& A = img.find("A")->f;
   double sum = 0;
-  for (int py = 0; py < r.image.height; ++py)
-    for (int px = 0; px < r.image.width; ++px) {
-      const double d = A[size_t(py) * r.image.width + px] - analyticCoverage(px, py, m.x0, m.y0, m.w, m.h, m.vx, m.vy, a, b, shapeT, shapeW);
+  for (int py = 0; py < img.height; ++py)
+    for (int px = 0; px < img.width; ++px) {
+      const double d = A[size_t(py) * img.width + px] - analyticCoverage(px, py, m.x0, m.y0, m.w, m.h, m.vx, m.vy, a, b, shapeT, shapeW);
       sum += d * d;
     }
   return std::sqrt(sum / double(A.size()));
+}
+double coverageError(const RenderResult& r, const Motion& m, double a, double b, const std::vector<double>& shapeT = {},
+                     const std::vector<double>& shapeW = {}) {
+  return coverageError(r.image, m, a, b, shapeT, shapeW);
+}
+
+// Pixels where any channel of two images read back differs in its bits (or the images' windows
+// or channel lists differ: every pixel).
+size_t differingPixels(const FlatImage& a, const FlatImage& b) {
+  if (a.x0 != b.x0 || a.y0 != b.y0 || a.width != b.width || a.height != b.height || a.channels.size() != b.channels.size())
+    return size_t(a.width) * size_t(a.height);
+  size_t n = 0;
+  for (size_t i = 0; i < size_t(a.width) * size_t(a.height); ++i) {
+    bool same = true;
+    for (size_t c = 0; c < a.channels.size(); ++c) {
+      const ImageChannel &x = a.channels[c], &y = b.channels[c];
+      same &= x.name == y.name && (x.isUInt ? x.u[i] == y.u[i] : std::memcmp(&x.f[i], &y.f[i], sizeof(float)) == 0);
+    }
+    n += !same;
+  }
+  return n;
 }
 
 RenderSpec baseSpec(std::vector<Source> sources, ShutterModel shutter, int n = 8) {
@@ -528,25 +550,98 @@ TEST(RetimeCli, FieldsAndRetimeWriteSequencesThatOpenElsewhere) {
   Motion m;
   for (int64_t f = 1; f <= 4; ++f) frameStore(m, f, dir.path("shot." + std::string(4 - std::to_string(f).size(), '0') + std::to_string(f) + ".mps"));
   const std::string shot = dir.path("shot.####.mps");
-  CommandResult fields = runReshutter("fields " + shot + " --frames 1-3 --spp 4 --filter box:1 -o " + dir.path("f.####.exr"));
+  CommandResult fields =
+      runReshutter("fields " + shot + " --frames 1-3 --spp 4 --filter box:1 -o " + dir.path("f.####.exr") + " --deep " + dir.path("fd.####.exr"));
   ASSERT_EQ(fields.exitCode, 0) << fields.err;
-  CommandResult twoPass = runReshutter("fields " + shot + " --frames 1-3 --spp 4 --filter box:1 --two-pass -o " + dir.path("t.%04d.exr"));
+  CommandResult twoPass = runReshutter("fields " + shot + " --frames 1-3 --spp 4 --filter box:1 --two-pass -o " + dir.path("t.%04d.exr") + " --deep " +
+                                       dir.path("td.%04d.exr"));
   ASSERT_EQ(twoPass.exitCode, 0) << twoPass.err;
   for (int f = 1; f <= 3; ++f) {
-    const std::string a = dir.path("f.000" + std::to_string(f) + ".exr"), b = dir.path("t.000" + std::to_string(f) + ".exr");
-    ASSERT_TRUE(std::filesystem::exists(a)) << a;
-    // OpenImageIO, an independent reader, finds the single pass identical to the two-pass one.
-    CommandResult diff = runImageTool("idiff -q -fail 0 -failpercent 0 -warn 0 " + a + " " + b);
-    EXPECT_EQ(diff.exitCode, 0) << diff.out << diff.err;
+    const std::string n = std::to_string(f);
+    // OpenImageIO, an independent reader, finds the single pass identical to the two-pass one, flat
+    // and deep (with a one-row filter no row sees the other field's samples).
+    for (auto [a, b] : {std::pair{dir.path("f.000" + n + ".exr"), dir.path("t.000" + n + ".exr")}, {dir.path("fd.000" + n + ".exr"), dir.path("td.000" + n + ".exr")}}) {
+      ASSERT_TRUE(std::filesystem::exists(a)) << a;
+      CommandResult diff = runImageTool("idiff -q -fail 0 -failpercent 0 -warn 0 " + a + " " + b);
+      EXPECT_EQ(diff.exitCode, 0) << a << " " << b << "\n" << diff.out << diff.err;
+    }
+    // Field 1 of frame f is [f, f + 1/4], field 2 [f + 1/2, f + 3/4]: each field's rows are the
+    // square's coverage over its own interval, clearly closer than over the other field's.
+    const FlatImage img = readFlatExr(dir.path("f.000" + n + ".exr"));
+    for (int field : {0, 1}) {
+      double own = 0, other = 0;
+      for (int y = field; y < img.height; y += 2)
+        for (int x = 0; x < img.width; ++x) {
+          const double a = img.find("A")->f[size_t(y) * img.width + x];
+          own += std::pow(a - analyticCoverage(x, y, m.x0, m.y0, m.w, m.h, m.vx, m.vy, f + 0.5 * field, f + 0.5 * field + 0.25), 2);
+          other += std::pow(a - analyticCoverage(x, y, m.x0, m.y0, m.w, m.h, m.vx, m.vy, f + 0.5 * (1 - field), f + 0.5 * (1 - field) + 0.25), 2);
+        }
+      EXPECT_LT(3 * own, other) << "frame " << f << ", field " << field + 1 << ": rows of the wrong field";
+    }
   }
-  CommandResult retime = runReshutter("retime " + shot + " --from-fps 24 --to-fps 30 --frames 2-4x2 --spp 4 -o " + dir.path("r.####.exr"));
+  // 24 → 30 fps, 180°: output frame k exposes [0.8k, 0.8k + 0.4], frame 2 within store 1, frame 4
+  // [3.2, 3.6] within store 3; the square's coverage over that interval is known exactly.
+  CommandResult retime =
+      runReshutter("retime " + shot + " --from-fps 24 --to-fps 30 --frames 2-4x2 --spp 64 --filter box:1 -o " + dir.path("r.####.exr"));
   ASSERT_EQ(retime.exitCode, 0) << retime.err;
-  EXPECT_TRUE(std::filesystem::exists(dir.path("r.0002.exr")));
-  EXPECT_TRUE(std::filesystem::exists(dir.path("r.0004.exr")));
   EXPECT_FALSE(std::filesystem::exists(dir.path("r.0003.exr")));
+  for (int k : {2, 4}) {
+    const std::string path = dir.path("r.000" + std::to_string(k) + ".exr");
+    ASSERT_TRUE(std::filesystem::exists(path)) << path;
+    const ExrShutter shutter = readExrShutter(path);
+    EXPECT_NEAR(shutter.open, 0.8 * k, 1e-12);
+    EXPECT_NEAR(shutter.close, 0.8 * k + 0.4, 1e-12);
+    EXPECT_LT(coverageError(readFlatExr(path), m, 0.8 * k, 0.8 * k + 0.4), 0.02) << "output frame " << k;
+  }
   CommandResult info = runImageTool("iinfo -v " + dir.path("r.0004.exr"));
   EXPECT_EQ(info.exitCode, 0) << info.err;
   EXPECT_NE(info.out.find("48 x"), std::string::npos) << info.out;
+}
+
+// A retime frame whose shutter lies within one store is that store re-sampled over the same
+// interval, bit for bit: the instant of a 0° shutter, a 360° frame at the shot's own rate (the
+// store's whole shutter), a 180° frame at half the rate (one whole source frame), and the same
+// with the rate read from the stores.
+TEST(RetimeCli, RetimeFramesEqualResampleOfTheSameInterval) {
+  ScratchDir dir;
+  Motion m;
+  for (int64_t f = 1; f <= 4; ++f) frameStore(m, f, dir.path("shot.000" + std::to_string(f) + ".mps"));
+  const std::string shot = dir.path("shot.####.mps"), common = " --spp 64 --filter box:1 --aov id --aov z";
+  struct Case {
+    std::string retime;    // arguments after the stores
+    int frame;             // the output frame compared
+    std::string resample;  // the equivalent `resample` of one store
+    double open, close;    // the interval both render (absolute frames)
+  };
+  // 24 → 32: frame 3 is nominally at 2.25 (exact in binary, as store 2's 0.25 is).
+  const Case cases[] = {
+      {"--from-fps 24 --to-fps 32 --frames 3 --shutter-angle 0", 3, "shot.0002.mps --shutter 0.25:0.25", 2.25, 2.25},
+      {"--from-fps 24 --to-fps 32 --frames 3 --shutter-angle 0 --shutter-position end", 3, "shot.0002.mps --shutter 0.25:0.25", 2.25, 2.25},
+      {"--from-fps 24 --to-fps 24 --frames 2-3 --shutter-angle 360", 3, "shot.0003.mps", 3, 4},
+      {"--from-fps 24 --to-fps 12 --frames 1 --shutter-angle 180", 1, "shot.0002.mps", 2, 3},
+      {"--to-fps 12 --frames 1", 1, "shot.0002.mps --shutter 0:1", 2, 3},
+  };
+  for (const Case& c : cases) {
+    const std::string out = dir.path("r.####.exr"), ref = dir.path("ref.exr");
+    CommandResult r = runReshutter("retime " + shot + " " + c.retime + common + " -o " + out);
+    ASSERT_EQ(r.exitCode, 0) << c.retime << ": " << r.err;
+    r = runReshutter("resample " + dir.path(c.resample) + common + " -o " + ref);
+    ASSERT_EQ(r.exitCode, 0) << c.resample << ": " << r.err;
+    const std::string frame = dir.path("r.000" + std::to_string(c.frame) + ".exr");
+    const ExrShutter a = readExrShutter(frame), b = readExrShutter(ref);
+    EXPECT_EQ(a.open, c.open) << c.retime;
+    EXPECT_EQ(a.close, c.close) << c.retime;
+    EXPECT_EQ(b.open, c.open) << c.resample;
+    EXPECT_EQ(b.close, c.close) << c.resample;
+    const FlatImage x = readFlatExr(frame), y = readFlatExr(ref);
+    EXPECT_EQ(differingPixels(x, y), 0u) << c.retime << " against resample " << c.resample;
+    EXPECT_GT(x.channels.size(), 5u) << "R G B A Z, id and z";
+    // And the frame is not just any image: the square's coverage over that interval, not over one
+    // a tenth of a frame later.
+    const double error = coverageError(x, m, c.open, c.close), shifted = coverageError(x, m, c.open + 0.1, c.close + 0.1);
+    EXPECT_LT(error, 0.02) << c.retime;
+    EXPECT_GT(shifted, 3 * error) << c.retime;
+  }
 }
 
 // `fields --two-pass --deep`, read back with OpenEXR: on every row the deep file flattens to the
