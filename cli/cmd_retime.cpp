@@ -1,9 +1,9 @@
-// `reshutter fields` and `reshutter retime`: sequences re-timed from a shot's stores. Both build
-// a shutter model per output frame (resample/shutter.h) and hand it, with the stores whose
-// coverage it reaches, to the one re-sampler; neither is a renderer of its own.
-#include <cmath>
+// `reshutter fields` and `reshutter retime`: sequences re-timed from a shot's stores. The commands
+// only read options and write files; the shutter of each output frame, the stores it reaches and
+// the two-pass interlace are the library's (resample/retime.h, store/shot.h), and every frame is
+// rendered by the one re-sampler.
 #include <cstdio>
-#include <numeric>
+#include <tuple>
 
 #include "cli/commands.h"
 #include "cli/render_options.h"
@@ -12,20 +12,15 @@
 #include "common/frame_range.h"
 #include "common/log.h"
 #include "common/progress.h"
+#include "resample/retime.h"
+#include "store/shot.h"
 
 namespace reshutter::cli {
 namespace {
 
+using resample::OutputFrame;
 using resample::RenderResult;
 using resample::RenderSpec;
-using resample::ShutterGroup;
-using resample::ShutterModel;
-
-/// One output frame: its number and the shutter it is rendered with (absolute source frames).
-struct OutputFrame {
-  int64_t frame;
-  ShutterModel shutter;
-};
 
 /// Renders a sequence: checks every store and output name first, then renders frame by frame
 /// with a progress bar over frames.
@@ -37,25 +32,13 @@ int renderSequence(const std::string& storePattern, const std::string& outPatter
     fail("-o", "'", outPattern, "' has no frame placeholder (####, %04d, @) but ", frames.size(), " frames are rendered");
   if (frames.size() > 1 && !render.deep.empty() && !hasFramePlaceholder(render.deep))
     fail("--deep", "'", render.deep, "' has no frame placeholder (####, %04d, @) but ", frames.size(), " frames are rendered");
-  ShotStores stores(storePattern, size_t(render.cacheMb * 1e6));
-  // Every store any frame needs, checked before any work.
-  {
-    std::vector<int64_t> all;
-    for (const auto& f : frames) {
-      auto need = stores.framesFor(f.shutter.earliest(), f.shutter.latest());
-      all.insert(all.end(), need.begin(), need.end());
-    }
-    std::sort(all.begin(), all.end());
-    all.erase(std::unique(all.begin(), all.end()), all.end());
-    stores.requireAll(all);
-  }
+  store::ShotStores stores(storePattern, size_t(render.cacheMb * 1e6));
+  resample::requireStores(stores, frames);  // every store any frame needs, before any work
   for (const auto& f : frames) render.checkOutputs(outPattern.empty() ? "" : expandFramePattern(outPattern, f.frame), f.frame);
   Progress progress(what, frames.size());
   double seconds = 0;
   for (const auto& f : frames) {
-    RenderSpec spec;
-    spec.shutter = f.shutter;
-    spec.sources = stores.sourcesFor(f.shutter.earliest(), f.shutter.latest());
+    RenderSpec spec = resample::frameSpec(stores, f.shutter);
     render.applyTo(spec);
     spec.progress = frames.size() == 1;
     RenderResult result = resample::render(spec);
@@ -81,71 +64,42 @@ struct FieldsCommand {
   ShutterOptions shutter;
   RenderOptions render;
 
-  // Field intervals of frame N (absolute source frames): field 1's nominal time is N, field 2's
-  // N + 1/2; each is open for the field shutter (in field durations, 1/2 frame).
-  std::pair<ShutterGroup, ShutterGroup> fieldGroups(int64_t frame) const {
-    double a = 0, b = fieldAngle / 360.0;
-    if (!fieldShutter.empty()) {
-      parseInterval(fieldShutter, "--field-shutter", a, b);
-    } else if (position == "center") {
-      a = -b / 2, b = b / 2;
-    } else if (position == "end") {
-      a = -b, b = 0;
-    }
-    const double F = double(frame), d = 0.5;
-    auto shape = shutter.parsedShape();
-    return {ShutterGroup{F + a * d, F + b * d, shape}, ShutterGroup{F + d + a * d, F + d + b * d, shape}};
+  resample::FieldShutter fields() const {
+    resample::FieldShutter fs;
+    fs.firstFieldParity = resample::parseDominance(dominance, "--dominance");
+    if (!fieldShutter.empty()) parseInterval(fieldShutter, "--field-shutter", fs.open, fs.close);
+    else std::tie(fs.open, fs.close) = resample::angleInterval(fieldAngle, resample::parseShutterPosition(position, "--shutter-position"));
+    fs.shape = shutter.parsedShape();
+    fs.rolling = shutter.rollingShutter();  // one frame's read-out: target frames are source frames
+    return fs;
   }
 
   int run() const {
     std::vector<int64_t> list = parseFrameRange(frames, "--frames");
     if (output.empty() && render.deep.empty()) fail("fields", "nothing to write: give -o OUT.####.exr, --deep DEEP.####.exr or both");
-    const int parity = dominance == "upper" ? 0 : 1;
-    if (!twoPass) {
-      std::vector<OutputFrame> out;
-      for (int64_t f : list) {
-        auto [g1, g2] = fieldGroups(f);
-        ShutterModel m = ShutterModel::fields(g1, g2, parity);
-        shutter.applyRolling(m, 1.0);
-        out.push_back({f, m});
-      }
-      return renderSequence(input, output, out, render, "fields");
-    }
+    if (!twoPass) return renderSequence(input, output, resample::fieldFrames(list, fields()), render, "fields");
     // The reference semantics: two full progressive renders, rows interlaced afterwards.
     for (int64_t f : list) render.checkOutputs(output.empty() ? "" : expandFramePattern(output, f), f);
-    ShotStores stores(input, size_t(render.cacheMb * 1e6));
+    store::ShotStores stores(input, size_t(render.cacheMb * 1e6));
     Progress progress("fields (two-pass)", list.size());
+    const resample::FieldShutter fs = fields();
     for (int64_t f : list) {
-      auto [g1, g2] = fieldGroups(f);
-      RenderResult fields[2];
+      const auto passes = resample::fieldPassShutters(f, fs);
+      RenderResult field[2];
       int k = 0;
-      for (const ShutterGroup& g : {g1, g2}) {
-        RenderSpec spec;
-        spec.shutter = ShutterModel::progressive(g.open, g.close, g.shape);
-        shutter.applyRolling(spec.shutter, 1.0);
-        spec.sources = stores.sourcesFor(spec.shutter.earliest(), spec.shutter.latest());
+      for (const resample::ShutterModel* pass : {&passes.first, &passes.second}) {
+        RenderSpec spec = resample::frameSpec(stores, *pass);
         render.applyTo(spec);
         spec.progress = false;
-        fields[k++] = resample::render(spec);
+        field[k++] = resample::render(spec);
       }
-      RenderResult& out = fields[0];
-      for (size_t c = 0; c < out.image.channels.size(); ++c) {
-        auto& dst = out.image.channels[c];
-        const auto& src = fields[1].image.channels[c];
-        for (int y = 0; y < out.image.height; ++y) {
-          if (((out.image.y0 + y - parity) % 2 + 2) % 2 == 0) continue;  // a first-field row
-          const size_t row = size_t(y) * out.image.width;
-          if (!dst.f.empty()) std::copy(src.f.begin() + long(row), src.f.begin() + long(row + out.image.width), dst.f.begin() + long(row));
-          if (!dst.u.empty()) std::copy(src.u.begin() + long(row), src.u.begin() + long(row + out.image.width), dst.u.begin() + long(row));
-        }
-      }
+      RenderResult& out = field[0];
+      resample::interlaceFields(out, field[1], fs.firstFieldParity);
       out.provenance.frame = f;
-      out.provenance.shutter = "two-pass fields: " + out.provenance.shutter + " / " + fields[1].provenance.shutter;
-      out.provenance.shutterClose = fields[1].provenance.shutterClose;
       render.writeOutputs(out, output.empty() ? "" : expandFramePattern(output, f), f);
       if (render.stats)
-        std::printf("frame %lld, field 1\n%sframe %lld, field 2\n%s", static_cast<long long>(f), fields[0].stats.report().c_str(),
-                    static_cast<long long>(f), fields[1].stats.report().c_str());
+        std::printf("frame %lld, field 1\n%sframe %lld, field 2\n%s", static_cast<long long>(f), field[0].stats.report().c_str(),
+                    static_cast<long long>(f), field[1].stats.report().c_str());
       progress.advance();
     }
     return 0;
@@ -160,29 +114,20 @@ struct RetimeCommand {
 
   int run() const {
     std::vector<int64_t> list = parseFrameRange(frames, "--frames");
-    store::Rational from{0, 1}, to{0, 1};
-    if (!parseRational(toFps, to)) fail("--to-fps", "expected a rate like 25, 30000/1001 or 29.97, got '", toFps, "'");
+    resample::RateConversion rc;
+    if (!store::parseRational(toFps, rc.to)) fail("--to-fps", "expected a rate like 25, 30000/1001 or 29.97, got '", toFps, "'");
     if (fromFps.empty()) {
       // The shot's own rate, from its first store.
-      ShotStores probe(input, 0);
+      store::ShotStores probe(input, 0);
       const double near = double(list.front()) * 1.0;  // a guess good enough to find a store
-      from = probe.firstMeta(near).fps;
-    } else if (!parseRational(fromFps, from)) {
+      rc.from = probe.firstMeta(near).fps;
+    } else if (!store::parseRational(fromFps, rc.from)) {
       fail("--from-fps", "expected a rate like 24, 24000/1001 or 23.976, got '", fromFps, "'");
     }
-    // One target frame lasts from/to source frames; output frame k's nominal time is k·from/to.
-    const long double ratio = (static_cast<long double>(from.num) * to.den) / (static_cast<long double>(from.den) * to.num);
-    const double d = double(ratio);
-    double a, b;
-    shutter.interval(a, b, 0.0, 0.5);  // default: a 180° shutter opening on the nominal time
-    std::vector<OutputFrame> out;
-    for (int64_t k : list) {
-      const double nominal = double(static_cast<long double>(k) * ratio);
-      ShutterModel m = ShutterModel::progressive(nominal + a * d, nominal + b * d, shutter.parsedShape());
-      shutter.applyRolling(m, d);
-      out.push_back({k, m});
-    }
-    return renderSequence(input, output, out, render, "retime");
+    shutter.interval(rc.open, rc.close, 0.0, 0.5);  // default: a 180° shutter opening on the nominal time
+    rc.shape = shutter.parsedShape();
+    rc.rolling = shutter.rollingShutter();
+    return renderSequence(input, output, resample::retimeFrames(list, rc), render, "retime");
   }
 };
 

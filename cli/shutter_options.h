@@ -1,9 +1,9 @@
-// How the commands that render (resample, fields, retime) turn shutter options into the
-// re-sampler's shutter model, and how they find the stores of a shot. One definition, so every
-// command reads `--shutter`, `--shutter-angle`, `--shutter-position`, `--shutter-shape` and
-// `--rolling-shutter` the same way.
+// How the commands that render (resample, fields, retime) read shutter options. One definition, so
+// every command reads `--shutter`, `--shutter-angle`, `--shutter-position`, `--shutter-shape` and
+// `--rolling-shutter` the same way; what the values mean for a sequence (fields, rate conversion)
+// is the library's (resample/retime.h), and a shot's stores are store/shot.h's.
 //
-// Time conventions (../shared/DESIGN.md): frame N's store covers [N + open, N + close] in absolute source
+// Time conventions (docs/resample.md): frame N's store covers [N + open, N + close] in absolute source
 // frames and frame N's nominal time is N. A target frame's interval is given relative to its
 // nominal time, in target-frame durations:
 //   --shutter A:B                   [nominal + A·d, nominal + B·d]           (d: target frame duration)
@@ -13,15 +13,11 @@
 // first half of the store's frame, as RenderMan's Shutter).
 #pragma once
 
-#include <map>
-#include <memory>
 #include <string>
-#include <vector>
 
 #include <CLI/CLI.hpp>
 
 #include "resample/resampler.h"
-#include "store/reader.h"
 
 namespace reshutter::cli {
 
@@ -42,34 +38,10 @@ struct ShutterOptions {
   /// [defaultOpen, defaultClose] when neither --shutter nor an angle is given.
   void interval(double& open, double& close, double defaultOpen, double defaultClose) const;
   resample::ShutterShape parsedShape() const;
+  /// The rolling read-out, its duration in target frames.
+  resample::RollingShutter rollingShutter() const;
   /// Applies the rolling read-out (duration in target frames × `frameDuration` source frames).
   void applyRolling(resample::ShutterModel& model, double frameDuration) const;
-};
-
-/// The stores of a shot named by a frame pattern (`shot.####.mps`), opened on demand and kept
-/// while they are needed. Every store must share the first one's shutter and schema.
-class ShotStores {
- public:
-  ShotStores(std::string pattern, size_t cacheBytes);
-  /// Source frames whose stores an interval [t0, t1] (absolute source frames) needs.
-  std::vector<int64_t> framesFor(double t0, double t1);
-  /// Throws one Error listing every missing store among `frames`, before any work starts.
-  void requireAll(const std::vector<int64_t>& frames) const;
-  /// The sources covering [t0, t1]; drops stores no longer needed (frames before t0's first).
-  std::vector<resample::Source> sourcesFor(double t0, double t1);
-  /// Metadata of the shot's first store opened (the one nearest `near` for a pattern).
-  const store::StoreMeta& firstMeta(double near);
-  std::string pathOf(int64_t frame) const;
-
- private:
-  std::shared_ptr<const store::StoreReader> open(int64_t frame);
-  void probe(double near);
-  std::string pattern_;
-  size_t cacheBytes_;
-  bool probed_ = false;
-  double open_ = 0, close_ = 1;
-  std::map<int64_t, std::shared_ptr<const store::StoreReader>> openStores_;
-  std::shared_ptr<const store::StoreReader> first_;
 };
 
 }  // namespace reshutter::cli

@@ -9,9 +9,6 @@
 #include <gtest/gtest.h>
 
 #include <OpenEXR/ImfCheckFile.h>
-#include <OpenEXR/ImfDeepFrameBuffer.h>
-#include <OpenEXR/ImfDeepImageStateAttribute.h>
-#include <OpenEXR/ImfDeepScanLineInputFile.h>
 #include <OpenEXR/ImfHeader.h>
 #include <OpenEXR/ImfInputFile.h>
 #include <OpenEXR/ImfChannelList.h>
@@ -24,6 +21,7 @@
 #include "store/reader.h"
 #include "store/writer.h"
 #include "test_util.h"
+#include "tests/exr_test_util.h"
 
 namespace reshutter {
 namespace {
@@ -519,42 +517,6 @@ TEST(DeepForm, ObjectNamesFromProvenance) {
 // ---------------------------------------------------------------------------------------------
 // The file: OpenEXR's checker, read back, header, compressions, an independent reader.
 
-struct ReadBack {
-  std::vector<unsigned> counts;
-  std::vector<std::string> channels;
-  bool tidyState = false;
-  bool manifest = false;
-  uint64_t total = 0;
-  std::vector<std::vector<float>> r;  // per pixel
-};
-
-ReadBack readDeep(const std::string& path) {
-  ReadBack rb;
-  Imf::DeepScanLineInputFile in(path.c_str());
-  const Imf::Header& h = in.header();
-  for (auto it = h.channels().begin(); it != h.channels().end(); ++it) rb.channels.push_back(it.name());
-  if (auto* a = h.findTypedAttribute<Imf::DeepImageStateAttribute>("deepImageState")) rb.tidyState = a->value() == Imf::DIS_TIDY;
-  rb.manifest = h.find("idManifest") != h.end();
-  const Imath::Box2i dw = h.dataWindow();
-  const int W = dw.max.x - dw.min.x + 1, H = dw.max.y - dw.min.y + 1;
-  rb.counts.resize(size_t(W) * H);
-  Imf::DeepFrameBuffer fb;
-  fb.insertSampleCountSlice(Imf::Slice(Imf::UINT, reinterpret_cast<char*>(rb.counts.data() - dw.min.x - ptrdiff_t(dw.min.y) * W), 4, 4 * size_t(W)));
-  std::vector<float*> ptrs(size_t(W) * H);
-  fb.insert("R", Imf::DeepSlice(Imf::FLOAT, reinterpret_cast<char*>(ptrs.data() - dw.min.x - ptrdiff_t(dw.min.y) * W), sizeof(float*),
-                                sizeof(float*) * size_t(W), sizeof(float)));
-  in.setFrameBuffer(fb);
-  in.readPixelSampleCounts(dw.min.y, dw.max.y);
-  rb.r.resize(ptrs.size());
-  for (size_t i = 0; i < ptrs.size(); ++i) {
-    rb.r[i].resize(rb.counts[i]);
-    ptrs[i] = rb.r[i].data();
-    rb.total += rb.counts[i];
-  }
-  in.readPixels(dw.min.y, dw.max.y);
-  return rb;
-}
-
 TEST(DeepFile, WritesCheckedTidyScanlineDeep) {
   ScratchDir dir;
   std::vector<Rect> rs = translucentScene();
@@ -568,19 +530,22 @@ TEST(DeepFile, WritesCheckedTidyScanlineDeep) {
     o.compression = comp;
     writeDeepExr(path, res.deep, res.provenance, o);
     EXPECT_FALSE(Imf::checkOpenEXRFile(path.c_str(), false, false, true)) << "checkOpenEXRFile reports a problem";
-    const ReadBack rb = readDeep(path);
+    const test::DeepExr rb = test::readDeepExr(path);
     EXPECT_TRUE(rb.tidyState);
     EXPECT_TRUE(rb.manifest);
-    EXPECT_EQ(rb.total, res.deep.totalSamples());
+    EXPECT_EQ(rb.image.totalSamples(), res.deep.totalSamples());
     for (const char* c : {"R", "G", "B", "A", "Z", "ZBack", "AR", "AG", "AB", "Oi.R", "objectid"})
       EXPECT_NE(std::find(rb.channels.begin(), rb.channels.end(), c), rb.channels.end()) << c;
-    DeepPixel px;
+    DeepPixel px, back;
     for (int y = 0; y < 48; ++y)
       for (int x = 0; x < 64; ++x) {
         res.deep.getPixel(x, y, px);
-        const auto& r = rb.r[size_t(y) * 64 + x];
-        ASSERT_EQ(r.size(), px.size());
-        for (size_t i = 0; i < r.size(); ++i) EXPECT_EQ(r[i], px.at(i)[kDeepR]);
+        rb.image.getPixel(x, y, back);
+        ASSERT_EQ(back.size(), px.size());
+        for (size_t i = 0; i < px.size(); ++i) {
+          for (int f : {kDeepZ, kDeepZBack, kDeepR, kDeepG, kDeepB, kDeepA, kDeepAR, kDeepAG, kDeepAB}) EXPECT_EQ(back.at(i)[f], px.at(i)[f]) << f;
+          EXPECT_EQ(back.uat(i)[kDeepObjectId], px.uat(i)[kDeepObjectId]);
+        }
       }
   }
 }
