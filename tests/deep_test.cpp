@@ -385,24 +385,65 @@ TEST(DeepRender, FlattenMatchesFlatWideFilters) {
 }
 
 // Negative lobes are clamped for deep (alpha must stay in [0, 1]); the flattened deep image is the
-// image filtered with the positive part: close to, not equal to, the flat image.
+// image filtered with the positive part: close to, not equal to, the flat image. Exactly: with
+// sample values v_q and filter weights w_q over a pixel's support, flat = Σ w v / Σ w and
+// flattened deep = Σ max(w, 0) v / Σ max(w, 0). At one sample per pixel a box:1 render gives every
+// sample's value (R G B A), so both sums can be formed here from the filter's definition and held
+// to float rounding, in every pixel whose support lies inside the image.
 TEST(DeepRender, NegativeLobeFiltersFlattenToTheirPositivePart) {
   ScratchDir dir;
-  auto store = writeScene(dir.path("s.mps"), 64, 48, translucentScene());
-  const RenderResult res = renderDeep(store, "catmull-rom", 16);
-  const FlattenError e = compareFlatten(res);
-  std::printf("catmull-rom: max %.3g mean %.3g p99 %.3g\n", e.max, e.mean, e.p99);
-  EXPECT_LT(e.max, 0.15);
-  EXPECT_LT(e.mean, 0.01);
+  const int W = 64, H = 48;
+  auto store = writeScene(dir.path("s.mps"), W, H, translucentScene());
+  const RenderResult res = renderDeep(store, "catmull-rom", 1);
+  const RenderResult samples = renderDeep(store, "box:1", 1);  // one sample per pixel: its value
+  const FilterSpec filter = FilterSpec::parse("catmull-rom", "test");
+  const SamplePattern pattern(1, 1, 0);
+  const int M = 2;  // catmull-rom:4 reaches 2 px from the pixel centre
+  const FlatImage& flat = res.image;
+  double worstDeep = 0, worstFlat = 0, lobeEffect = 0;
+  int negativeWeights = 0;
   DeepPixel px;
-  for (int y = 0; y < 48; ++y)
-    for (int x = 0; x < 64; ++x) {
+  for (int y = M; y < H - M; ++y)
+    for (int x = M; x < W - M; ++x) {
+      double sum[4] = {0, 0, 0, 0}, sumPos[4] = {0, 0, 0, 0}, w = 0, wPos = 0;
+      for (int qy = y - M; qy <= y + M; ++qy)
+        for (int qx = x - M; qx <= x + M; ++qx) {
+          const glm::vec2 o = pattern.offset(pattern.patternOf(qx, qy), 0);
+          const double wq = double(filter1D(filter.kind, float(qx) + o.x - float(x) - 0.5f, filter.width)) *
+                            double(filter1D(filter.kind, float(qy) + o.y - float(y) - 0.5f, filter.height));
+          const size_t q = size_t(qy) * W + size_t(qx);
+          w += wq, wPos += std::max(wq, 0.0), negativeWeights += wq < 0;
+          for (int c = 0; c < 4; ++c) {
+            const double v = samples.image.channels[size_t(c)].f[q];
+            sum[c] += wq * v, sumPos[c] += std::max(wq, 0.0) * v;
+          }
+        }
       res.deep.getPixel(x, y, px);
-      for (size_t i = 0; i < px.size(); ++i) {
-        EXPECT_GE(px.at(i)[kDeepA], 0.f);
-        EXPECT_LE(px.at(i)[kDeepA], 1.f);
+      const FlatDeepPixel d = flattenDeepPixel(px, res.deep.layout, true);
+      const double deep[4] = {d.r, d.g, d.b, d.a};
+      for (int c = 0; c < 4; ++c) {
+        const double f = flat.channels[size_t(c)].f[size_t(y) * W + size_t(x)];
+        worstDeep = std::max(worstDeep, std::abs(deep[c] - sumPos[c] / wPos));
+        worstFlat = std::max(worstFlat, std::abs(f - sum[c] / w));
+        lobeEffect = std::max(lobeEffect, std::abs(deep[c] - f));
       }
     }
+  std::printf("catmull-rom, 1 spp: flattened deep vs positive part %.3g, flat vs signed filter %.3g, deep vs flat %.3g; %d negative weights\n",
+              worstDeep, worstFlat, lobeEffect, negativeWeights);
+  EXPECT_GT(negativeWeights, 1000);
+  EXPECT_LT(worstFlat, 1e-5) << "the sample values or the weights are not the renderer's";
+  EXPECT_LT(worstDeep, 1e-5) << "the flattened deep image is not the image filtered with the filter's positive part";
+  EXPECT_GT(lobeEffect, 1e-3) << "the negative lobes must matter somewhere in this scene";
+  for (const auto* r : {&res, &samples})
+    for (int y = 0; y < H; ++y)
+      for (int x = 0; x < W; ++x) {
+        r->deep.getPixel(x, y, px);
+        EXPECT_TRUE(isTidy(px)) << "pixel " << x << "," << y;
+        for (size_t i = 0; i < px.size(); ++i) {
+          EXPECT_GE(px.at(i)[kDeepA], 0.f);
+          EXPECT_LE(px.at(i)[kDeepA], 1.f);
+        }
+      }
 }
 
 // Two translucent cards passing through each other inside pixels: the front sample's depth range is
