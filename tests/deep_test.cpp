@@ -200,13 +200,26 @@ TEST(DeepAlpha, SplitPiecesCompositeToTheWhole) {
   EXPECT_EQ(deepSplitScale(1.0, 0.3), 1.0);
 }
 
+// The documented merge of coincident samples (deep.h): α = 1 − Π(1 − αᵢ) and, for colour,
+// c = α/U · Σ cᵢ·uᵢ/αᵢ with uᵢ = −log(1 − αᵢ), U = Σ uᵢ - written out here in long double.
+double logWeightedColour(const std::vector<double>& alphas, const std::vector<double>& colours) {
+  long double U = 0, sum = 0, T = 1;
+  for (size_t i = 0; i < alphas.size(); ++i) {
+    const long double u = -std::log1p(-(long double)alphas[i]);
+    U += u, sum += colours[i] * u / alphas[i], T *= 1 - (long double)alphas[i];
+  }
+  return double((1 - T) / U * sum);
+}
+
 TEST(DeepAlpha, MergeIsOverForAlphaAndKeepsOpaqueColour) {
-  const double alphas[2] = {0.5, 0.25}, colours[2] = {0.4, 0.2};
+  // Straight colours 0.8 and 0.2 (with equal straight colours every rule gives the same).
+  const double alphas[2] = {0.5, 0.25}, colours[2] = {0.4, 0.05};
   double a = 0, c = 0;
   deepMergeAlphas(alphas, colours, 2, 1, a, &c);
   EXPECT_NEAR(a, 1 - 0.5 * 0.75, 1e-12);
-  EXPECT_GT(c, 0.0);
-  EXPECT_LT(c, 0.6);
+  // The log-weighted rule (0.3900...), not `over` in either order (0.425, 0.35) nor the sum (0.45).
+  EXPECT_NEAR(c, logWeightedColour({0.5, 0.25}, {0.4, 0.05}), 1e-12);
+  for (double other : {0.425, 0.35, 0.45}) EXPECT_GT(std::abs(c - other), 0.02) << other;
   const double alphas2[2] = {1.0, 0.5}, colours2[2] = {0.7, 0.1};
   deepMergeAlphas(alphas2, colours2, 2, 1, a, &c);
   EXPECT_EQ(a, 1.0);
@@ -700,7 +713,10 @@ TEST(DeepHard, AlphaNearOne) {
   EXPECT_TRUE(std::isfinite(c));
   EXPECT_LE(m, 1.0);
   EXPECT_NEAR(m, 1 - 1e-14 * 0.5, 1e-15);
-  EXPECT_NEAR(c, 0.45, 0.05);  // the two near-opaque ones dominate equally
+  // The two near-opaque ones dominate equally, the third still shows: 0.4447..., not the two's
+  // plain average 0.45.
+  EXPECT_NEAR(c, logWeightedColour({a, a, 0.5}, {0.3, 0.6, 0.1}), 1e-12);
+  EXPECT_GT(std::abs(c - 0.45), 1e-3);
   // Float pixel: a sample with alpha 1 - 1e-7 split by a point inside it.
   DeepPixel px;
   addSample(px, 1, 2, float(a), 0.5f, 1);
