@@ -814,7 +814,13 @@ TEST(DeepHard, CoincidentDepthsOfDifferentSurfaces) {
   ASSERT_EQ(px.size(), 1u);  // three point samples at one depth merge
   EXPECT_TRUE(isTidy(px));
   EXPECT_EQ(px.at(0)[kDeepA], 1.f);
-  EXPECT_TRUE(std::isfinite(px.at(0)[kDeepR]));
+  // ... in the order the sample saw them: the flat composite 0.5 + 0.5·0 + 0.25·0.5, not the
+  // opaque one's colour alone (0.5).
+  const FlatDeepPixel f = flattenDeepPixel(px, plainLayout(), true), ref = flatReference(ws);
+  EXPECT_NEAR(ref.r, 0.625, 1e-12);
+  EXPECT_NEAR(f.r, ref.r, 1e-6);
+  EXPECT_NEAR(f.g, ref.g, 1e-6);
+  EXPECT_NEAR(f.a, ref.a, 1e-6);
 }
 
 TEST(DeepHard, PointAtAVolumesFrontAndBack) {
