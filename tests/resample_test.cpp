@@ -94,6 +94,10 @@ TEST(ResampleAnalytic, ColourFollowsCoverage) {
     EXPECT_FLOAT_EQ(G[i], 0.5f * A[i]);
     EXPECT_FLOAT_EQ(B[i], 0.75f * A[i]);
   }
+  // An empty image would meet that too: the square stays in the frame over [0.1, 0.7], so the
+  // alphas sum to its area, up to the sampling error of its edges.
+  const double alpha = std::accumulate(A.begin(), A.end(), 0.0);
+  EXPECT_NEAR(alpha, sq.w * sq.h, 0.01 * sq.w * sq.h);
 }
 
 TEST(ResampleAnalytic, ZeroLengthIntervalIsTheExactInstant) {
