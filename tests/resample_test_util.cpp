@@ -115,19 +115,20 @@ double hitTriangle(const glm::dvec3& d, const glm::dvec3& a, const glm::dvec3& b
 
 }  // namespace
 
-Reference rayCast(const TestScene& scene, const RenderSpec& spec, int W, int H) {
+SampleReference rayCastSamples(const TestScene& scene, const RenderSpec& spec, int imageHeight, int x0, int y0, int W, int H) {
   const Camera& camera = scene.meta.cameras[0];
   Projector proj(camera);
   SamplePattern pattern(spec.samplesX, spec.samplesY, spec.seed);
   const int N = pattern.spp();
   ShutterModel shutter = spec.shutter;
   RollingShutter rolling = shutter.rolling();
-  rolling.height = H;
+  rolling.height = imageHeight;
   shutter.setRolling(rolling);
   const double tBase = std::floor(shutter.earliest());
   const double F = double(scene.meta.frame);
-  Reference ref;
-  ref.r.assign(size_t(W) * H, 0), ref.g = ref.r, ref.b = ref.r, ref.a = ref.r;
+  SampleReference ref;
+  ref.x0 = x0, ref.y0 = y0, ref.width = W, ref.height = H, ref.spp = N;
+  ref.r.assign(size_t(W) * H * N, 0), ref.g = ref.r, ref.b = ref.r, ref.a = ref.r;
   std::vector<uint16_t> stratumOf(static_cast<size_t>(N));
   std::vector<float> u(static_cast<size_t>(N));
   struct Hit {
@@ -135,12 +136,11 @@ Reference rayCast(const TestScene& scene, const RenderSpec& spec, int W, int H) 
     size_t mp;
   };
   std::vector<Hit> hits;
-  for (int py = 0; py < H; ++py)
-    for (int px = 0; px < W; ++px) {
+  for (int py = y0; py < y0 + H; ++py)
+    for (int px = x0; px < x0 + W; ++px) {
       const int pat = pattern.patternOf(px, py);
       pattern.times(px, py, stratumOf.data(), u.data());
       const int g = shutter.groupOfRow(py);
-      double acc[4] = {0, 0, 0, 0};
       for (int i = 0; i < N; ++i) {
         const glm::vec2 o = pattern.offset(pat, i);
         const float x = float(px) + o.x, y = float(py) + o.y;
@@ -167,7 +167,24 @@ Reference rayCast(const TestScene& scene, const RenderSpec& spec, int W, int H) 
           }
           if (T[0] <= 1 - spec.raster.opacityThreshold && T[1] <= 1 - spec.raster.opacityThreshold && T[2] <= 1 - spec.raster.opacityThreshold) break;
         }
-        acc[0] += C[0], acc[1] += C[1], acc[2] += C[2], acc[3] += (A[0] + A[1] + A[2]) / 3;
+        const size_t s = ref.at(px, py, i);
+        ref.r[s] = C[0], ref.g[s] = C[1], ref.b[s] = C[2], ref.a[s] = (A[0] + A[1] + A[2]) / 3;
+      }
+    }
+  return ref;
+}
+
+Reference rayCast(const TestScene& scene, const RenderSpec& spec, int W, int H) {
+  const SampleReference s = rayCastSamples(scene, spec, H, 0, 0, W, H);
+  const int N = s.spp;
+  Reference ref;
+  ref.r.assign(size_t(W) * H, 0), ref.g = ref.r, ref.b = ref.r, ref.a = ref.r;
+  for (int py = 0; py < H; ++py)
+    for (int px = 0; px < W; ++px) {
+      double acc[4] = {0, 0, 0, 0};
+      for (int i = 0; i < N; ++i) {
+        const size_t k = s.at(px, py, i);
+        acc[0] += s.r[k], acc[1] += s.g[k], acc[2] += s.b[k], acc[3] += s.a[k];
       }
       const size_t p = size_t(py) * W + size_t(px);
       ref.r[p] = acc[0] / N, ref.g[p] = acc[1] / N, ref.b[p] = acc[2] / N, ref.a[p] = acc[3] / N;

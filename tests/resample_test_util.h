@@ -54,6 +54,17 @@ struct Reference {
 };
 Reference rayCast(const TestScene& scene, const resample::RenderSpec& spec, int width, int height);
 
+/// The same ray caster per sample, over any pixel region - beyond the image too, where the
+/// filter's margin reaches: the composite R G B A of sample i of pixel (px, py) at
+/// [((py - y0) * width + (px - x0)) * spp + i]. `imageHeight` is the image's (the rolling
+/// shutter's rows).
+struct SampleReference {
+  int x0 = 0, y0 = 0, width = 0, height = 0, spp = 1;
+  std::vector<double> r, g, b, a;
+  size_t at(int px, int py, int i) const { return (size_t(py - y0) * size_t(width) + size_t(px - x0)) * size_t(spp) + size_t(i); }
+};
+SampleReference rayCastSamples(const TestScene& scene, const resample::RenderSpec& spec, int imageHeight, int x0, int y0, int width, int height);
+
 /// Exact time-averaged coverage of pixel (px, py) by the raster rectangle
 /// [x0 + vx·t, x0 + w + vx·t] × [y0 + vy·t, y0 + h + vy·t] over t ∈ [a, b], weighted by a shutter
 /// opening that is linear between `shapeTimes` (absolute, with weights `shapeWeights`; empty: box).
