@@ -134,41 +134,6 @@ void BucketRasterizer::Impl::rasterizeChunk(const Source& src, const TileEntry& 
   }
 }
 
-// Appends to `candidates` (from position n) the samples of strata [s0, s1) and group g (< 0:
-// any) in pixels [px0, px1] × [py0, py1] that lie in `box` at their own time and inside the
-// source's coverage; returns the new count. The scalar loop is branch-free: the in/out pattern is random, so
-// branches would mispredict.
-size_t BucketRasterizer::Impl::gatherCandidates(int s0, int s1, int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover,
-                                                float zCull, size_t n) {
-  if (vectorKernels && !cover.check) {
-    const kernels::SampleRows rows{st.data(), sx.data(), sy.data(), size_t(s0) * PS + size_t(py0 - y0) * w + size_t(px0 - x0), size_t(w),
-                                   px1 - px0 + 1, py1 - py0 + 1, multiGroup && g >= 0 ? &rowGroup[size_t(py0 - y0)] : nullptr, uint8_t(g),
-                                   s1 - s0, PS, zbuf.data(), zCull};
-    return kernels::gatherInBox(isa, rows, box, candidateList(), n);
-  }
-  uint32_t* __restrict cand = candidates.data();
-  float* __restrict ct = candT.data();
-  float* __restrict cx = candX.data();
-  float* __restrict cy = candY.data();
-  for (int s = s0; s < s1; ++s)
-  for (int py = py0; py <= py1; ++py) {
-    if (multiGroup && g >= 0 && rowGroup[size_t(py - y0)] != g) continue;
-    const uint32_t rowBase = uint32_t(size_t(s) * PS + size_t(py - y0) * w - size_t(x0));
-    for (int px = px0; px <= px1; ++px) {
-      const uint32_t idx = rowBase + uint32_t(px);
-      const float t = st[idx];
-      const float u = std::min(std::max((t - box.thetaA) * box.invLen, 0.f), 1.f);  // minss/maxss, no branches
-      const float x = sx[idx], y = sy[idx];
-      bool in = (x >= box.x0 + u * box.dx0) & (x <= box.x1 + u * box.dx1) & (y >= box.y0 + u * box.dy0) & (y <= box.y1 + u * box.dy1);
-      if (cover.check) in &= (double(t) >= cover.lo) & (double(t) <= cover.hi);
-      in &= zbuf[idx] > zCull;  // the early depth test
-      cand[n] = idx, ct[n] = t, cx[n] = x, cy[n] = y;
-      n += in;
-    }
-  }
-  return n;
-}
-
 BucketRasterizer::BucketRasterizer(const SamplePattern& pattern, const ShutterModel& shutter, const View& view,
                                    const std::vector<AovChannel>& aovs, const RasterOptions& options)
     : impl_(std::make_unique<Impl>(pattern, shutter, view, aovs, options)) {

@@ -10,6 +10,7 @@
 // Only those files include this one.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <memory>
@@ -260,5 +261,128 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   std::vector<uint32_t> cellStart;
   std::vector<uint16_t> cellScratch;
 };
+
+
+// ------------------------------------------------------------------------------------------
+// Gathering a micropolygon's candidates, for the static and moving paths (inline: per micropolygon).
+
+// Appends to `candidates` (from position n) the samples of strata [s0, s1) and group g (< 0:
+// any) in pixels [px0, px1] × [py0, py1] that lie in `box` at their own time and inside the
+// source's coverage; returns the new count. The scalar loop is branch-free: the in/out pattern is random, so
+// branches would mispredict.
+inline size_t BucketRasterizer::Impl::gatherCandidates(int s0, int s1, int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover,
+                                                float zCull, size_t n) {
+  if (vectorKernels && !cover.check) {
+    const kernels::SampleRows rows{st.data(), sx.data(), sy.data(), size_t(s0) * PS + size_t(py0 - y0) * w + size_t(px0 - x0), size_t(w),
+                                   px1 - px0 + 1, py1 - py0 + 1, multiGroup && g >= 0 ? &rowGroup[size_t(py0 - y0)] : nullptr, uint8_t(g),
+                                   s1 - s0, PS, zbuf.data(), zCull};
+    return kernels::gatherInBox(isa, rows, box, candidateList(), n);
+  }
+  uint32_t* __restrict cand = candidates.data();
+  float* __restrict ct = candT.data();
+  float* __restrict cx = candX.data();
+  float* __restrict cy = candY.data();
+  for (int s = s0; s < s1; ++s)
+  for (int py = py0; py <= py1; ++py) {
+    if (multiGroup && g >= 0 && rowGroup[size_t(py - y0)] != g) continue;
+    const uint32_t rowBase = uint32_t(size_t(s) * PS + size_t(py - y0) * w - size_t(x0));
+    for (int px = px0; px <= px1; ++px) {
+      const uint32_t idx = rowBase + uint32_t(px);
+      const float t = st[idx];
+      const float u = std::min(std::max((t - box.thetaA) * box.invLen, 0.f), 1.f);  // minss/maxss, no branches
+      const float x = sx[idx], y = sy[idx];
+      bool in = (x >= box.x0 + u * box.dx0) & (x <= box.x1 + u * box.dx1) & (y >= box.y0 + u * box.dy0) & (y <= box.y1 + u * box.dy1);
+      if (cover.check) in &= (double(t) >= cover.lo) & (double(t) <= cover.hi);
+      in &= zbuf[idx] > zCull;  // the early depth test
+      cand[n] = idx, ct[n] = t, cx[n] = x, cy[n] = y;
+      n += in;
+    }
+  }
+  return n;
+}
+
+// ------------------------------------------------------------------------------------------
+// The exact test of a moving micropolygon's candidates, shared by the moving and linear paths;
+// inline, as it runs per micropolygon (and, in the scalar loops, per candidate).
+
+// Knot segment and parameter for a local time (general schedules; two-knot schedules take a
+// precomputed linear map instead).
+inline void segmentAt(const store::Schedule& knots, double tau, uint32_t& k, float& f) {
+  const uint32_t K = uint32_t(knots.size());
+  k = 0;
+  if (tau <= knots[0]) {
+    f = 0.f;
+    return;
+  }
+  if (tau >= knots[K - 1]) {
+    k = K - 2, f = 1.f;
+    return;
+  }
+  while (k + 2 < K && knots[k + 1] <= tau) ++k;
+  f = float((tau - knots[k]) / (knots[k + 1] - knots[k]));
+}
+
+// Exact coverage test of micropolygon mi against the first n sample indices in `candidates`.
+inline void BucketRasterizer::Impl::testCandidates(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, uint8_t flags, size_t n) {
+  stats.sampleTests += n;
+  if (vectorKernels && mp.times.seg.twoKnots) {
+    testCandidatesVector(mp, mi, c, tri, flags, n);
+    return;
+  }
+  const uint32_t* cand = candidates.data();
+  for (size_t ci = 0; ci < n; ++ci) testCandidate(mp, mi, c, tri, flags, cand[ci]);
+}
+
+// Two-knot schedules through the vector kernel; the rare exact ties go to testCandidate().
+inline void BucketRasterizer::Impl::testCandidatesVector(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, uint8_t flags, size_t n) {
+  const store::TilePart& part = mp.part;
+  // The scalar linearEdges()' values, four edges at a time (the scalar tie test still makes its own).
+  const float* at[4];
+  const float* to[4];
+  for (int j = 0; j < 4; ++j) {
+    const uint32_t v = c[tri && j == 3 ? 2 : j];
+    at[j] = &part.position(0, v).x, to[j] = &part.position(1, v).x;
+  }
+  kernels::LinearEdges edges;
+  kernels::linearEdges(isa, at, to, rasterScale, edges);
+  kernels::EdgeTestSetup setup{candT.data(), candX.data(), candY.data(), mp.times.seg.fOffset, mp.times.seg.fScale, tri,
+                               opt.backfaceCull && !(flags & store::kTwoSided)};
+  for (int j = 0; j < (tri ? 3 : 4); ++j) setup.za[j] = part.position(0, c[j]).z, setup.zb[j] = part.position(1, c[j]).z;
+  recordKernelHits(mp.hc, mi, c, setup, edges, n, [&](uint32_t idx) { testCandidate(mp, mi, c, tri, flags, idx); });
+}
+
+// Exact coverage test of micropolygon mi against one sample, in scalar double precision.
+inline void BucketRasterizer::Impl::testCandidate(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, uint8_t flags, uint32_t idx) {
+  const store::TilePart& part = mp.part;
+  const SegmentMap& seg = mp.times.seg;
+  const float t = st[idx];
+  uint32_t k = 0;
+  float f;
+  if (seg.twoKnots) f = std::clamp((t + seg.fOffset) * seg.fScale, 0.f, 1.f);
+  else segmentAt(mp.knots, double(t) + seg.toLocal, k, f);
+  EdgeQuad* q = &segEdges[size_t(k) * 5];
+  if (!segReady[k]) {
+    const glm::vec3* at[4];
+    const glm::vec3* to[4];
+    for (int j = 0; j < 4; ++j) {
+      const uint32_t v = c[tri && j == 3 ? 2 : j];
+      at[j] = &part.position(k, v), to[j] = &part.position(k + 1, v);
+    }
+    linearEdges(at, to, tri, rasterScale, q);
+    segReady[k] = 1;
+  }
+  int tr;
+  float b[3];
+  if (!coversMoving(q, tri, opt.backfaceCull && !(flags & store::kTwoSided), sx[idx], sy[idx], f, tr, b)) return;
+  float zv[3];
+  const uint32_t tv[3] = {c[0], c[tr == 0 ? 1 : 2], c[tr == 0 ? 2 : 3]};
+  for (int j = 0; j < 3; ++j) {
+    const float za = part.position(k, tv[j]).z, zb = part.position(k + 1, tv[j]).z;
+    zv[j] = za + f * (zb - za);
+  }
+  const float z = b[0] * zv[0] + b[1] * zv[1] + b[2] * zv[2];
+  if (!(z >= view.nearClip && z <= view.farClip)) return;
+  recordHit(mp.hc, idx, mi, tv, b, z);
+}
 
 }  // namespace reshutter::resample

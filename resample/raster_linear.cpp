@@ -15,6 +15,9 @@ namespace reshutter::resample {
 
 using store::kNoCorner;
 
+// The functions below run per micropolygon and are called from this file only: inline, so they
+// fold into the chunk loop (drawLinearChunk) as they did when they were one class body.
+
 // A chunk's micropolygons on the linear path, those it cannot bound (a corner before the near
 // plane at an interval end) on the general path (drawMoving()).
 void BucketRasterizer::Impl::drawLinearChunk(const MovingPart& mp, const Chunk& ch) {
@@ -27,7 +30,7 @@ void BucketRasterizer::Impl::drawLinearChunk(const MovingPart& mp, const Chunk& 
 }
 
 // The per-vertex terms of linearBox() for the chunk's nV vertices (cull rows 0 and 1).
-void BucketRasterizer::Impl::prepareLinearVertices(uint32_t nV) {
+inline void BucketRasterizer::Impl::prepareLinearVertices(uint32_t nV) {
   linearVertex.resize(nV), linearDepth.resize(nV), linearUnbounded.resize(nV);
   for (uint32_t v = 0; v < nV; ++v) {
     const float xa = cullX[v], ya = cullY[v], xb = cullX[nV + v], yb = cullY[nV + v], za = cullZ[v], zb = cullZ[nV + v];
@@ -51,7 +54,7 @@ void BucketRasterizer::Impl::prepareLinearVertices(uint32_t nV) {
 // ranges), Unbounded when a corner lies before the near plane at either end (the general path
 // handles it); drawLinear() gathers and tests the micropolygon's samples on its own, and
 // rasterizeLinearInChunk() through its run's chunk gather.
-BucketRasterizer::Impl::LinearState BucketRasterizer::Impl::linearBox(const MovingPart& mp, const uint32_t* c, int nc, LinearBox& out) const {
+inline BucketRasterizer::Impl::LinearState BucketRasterizer::Impl::linearBox(const MovingPart& mp, const uint32_t* c, int nc, LinearBox& out) const {
   const LinearInterval& li = mp.times.li;
   // Min and max of the corners' end positions and max of their reach, four lanes each.
   alignas(16) float lo[4], hi[4], reach[4];
@@ -112,7 +115,7 @@ BucketRasterizer::Impl::LinearState BucketRasterizer::Impl::linearBox(const Movi
   return LinearState::Draw;
 }
 
-void BucketRasterizer::Impl::drawLinear(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, const LinearBox& lb) {
+inline void BucketRasterizer::Impl::drawLinear(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, const LinearBox& lb) {
   ++stats.linearMicropolygons;
   const float zCull = lb.zCull;
   const MovingBox& box = lb.box;
@@ -169,7 +172,7 @@ void BucketRasterizer::Impl::drawLinear(const MovingPart& mp, uint32_t mi, const
 // depth tests (filterCandidates()) - exactly the samples its own gather would have found, so
 // the hits, the counts and the image are the same. (Depths only fall, so gathering the run
 // before its micropolygons draw keeps every sample any of them would keep.)
-void BucketRasterizer::Impl::prepareLinearChunk(const MovingPart& mp, const Chunk& ch) {
+inline void BucketRasterizer::Impl::prepareLinearChunk(const MovingPart& mp, const Chunk& ch) {
   const uint32_t count = ch.m1 - ch.m0;
   chunkMps.resize(count);
   chunkRuns.clear();
@@ -186,7 +189,7 @@ void BucketRasterizer::Impl::prepareLinearChunk(const MovingPart& mp, const Chun
 }
 
 // Gathers run r's candidates, when its micropolygons move together enough to pay.
-void BucketRasterizer::Impl::gatherRun(const MovingPart& mp, uint32_t r) {
+inline void BucketRasterizer::Impl::gatherRun(const MovingPart& mp, uint32_t r) {
   ChunkRun& run = chunkRuns[r];
   gatheredRun = r;
   run.gathered = false;
@@ -258,7 +261,7 @@ void BucketRasterizer::Impl::gatherRun(const MovingPart& mp, uint32_t r) {
 // Micropolygon mi of the chunk prepareLinearChunk() prepared, on the linear path: through its
 // run's chunk gather, or on its own (drawLinear()). False (nothing done) when it is unbounded:
 // the general path handles it.
-bool BucketRasterizer::Impl::rasterizeLinearInChunk(const MovingPart& mp, uint32_t mi, const Chunk& ch, const uint32_t* c, bool tri) {
+inline bool BucketRasterizer::Impl::rasterizeLinearInChunk(const MovingPart& mp, uint32_t mi, const Chunk& ch, const uint32_t* c, bool tri) {
   const ChunkMicropolygon& cm = chunkMps[mi - ch.m0];
   if (cm.state == LinearState::Unbounded) return false;
   if (cm.state == LinearState::Misses) return true;

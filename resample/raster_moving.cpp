@@ -16,26 +16,6 @@ namespace reshutter::resample {
 using store::kNoCorner;
 using store::TilePart;
 
-namespace {
-
-// Knot segment and parameter for a local time (general schedules; two-knot schedules take a
-// precomputed linear map instead).
-void segmentAt(const store::Schedule& knots, double tau, uint32_t& k, float& f) {
-  const uint32_t K = uint32_t(knots.size());
-  k = 0;
-  if (tau <= knots[0]) {
-    f = 0.f;
-    return;
-  }
-  if (tau >= knots[K - 1]) {
-    k = K - 2, f = 1.f;
-    return;
-  }
-  while (k + 2 < K && knots[k + 1] <= tau) ++k;
-  f = float((tau - knots[k]) / (knots[k + 1] - knots[k]));
-}
-
-}  // namespace
 
 const BucketRasterizer::Impl::MovingTimes& BucketRasterizer::Impl::timesFor(const Source& src, uint32_t schedule, const store::Schedule& knots, int g) {
   for (const auto& t : movingTimes)
@@ -322,67 +302,7 @@ void BucketRasterizer::Impl::projectVertexPath(const MovingTimes& mt, const Tile
   rho[T - 1] = 0.f;
 }
 
-// Exact coverage test of micropolygon mi against the first n sample indices in `candidates`.
-void BucketRasterizer::Impl::testCandidates(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, uint8_t flags, size_t n) {
-  stats.sampleTests += n;
-  if (vectorKernels && mp.times.seg.twoKnots) {
-    testCandidatesVector(mp, mi, c, tri, flags, n);
-    return;
-  }
-  const uint32_t* cand = candidates.data();
-  for (size_t ci = 0; ci < n; ++ci) testCandidate(mp, mi, c, tri, flags, cand[ci]);
-}
 
-// Two-knot schedules through the vector kernel; the rare exact ties go to testCandidate().
-void BucketRasterizer::Impl::testCandidatesVector(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, uint8_t flags, size_t n) {
-  const TilePart& part = mp.part;
-  // The scalar linearEdges()' values, four edges at a time (the scalar tie test still makes its own).
-  const float* at[4];
-  const float* to[4];
-  for (int j = 0; j < 4; ++j) {
-    const uint32_t v = c[tri && j == 3 ? 2 : j];
-    at[j] = &part.position(0, v).x, to[j] = &part.position(1, v).x;
-  }
-  kernels::LinearEdges edges;
-  kernels::linearEdges(isa, at, to, rasterScale, edges);
-  kernels::EdgeTestSetup setup{candT.data(), candX.data(), candY.data(), mp.times.seg.fOffset, mp.times.seg.fScale, tri,
-                               opt.backfaceCull && !(flags & store::kTwoSided)};
-  for (int j = 0; j < (tri ? 3 : 4); ++j) setup.za[j] = part.position(0, c[j]).z, setup.zb[j] = part.position(1, c[j]).z;
-  recordKernelHits(mp.hc, mi, c, setup, edges, n, [&](uint32_t idx) { testCandidate(mp, mi, c, tri, flags, idx); });
-}
 
-// Exact coverage test of micropolygon mi against one sample, in scalar double precision.
-void BucketRasterizer::Impl::testCandidate(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, uint8_t flags, uint32_t idx) {
-  const TilePart& part = mp.part;
-  const SegmentMap& seg = mp.times.seg;
-  const float t = st[idx];
-  uint32_t k = 0;
-  float f;
-  if (seg.twoKnots) f = std::clamp((t + seg.fOffset) * seg.fScale, 0.f, 1.f);
-  else segmentAt(mp.knots, double(t) + seg.toLocal, k, f);
-  EdgeQuad* q = &segEdges[size_t(k) * 5];
-  if (!segReady[k]) {
-    const glm::vec3* at[4];
-    const glm::vec3* to[4];
-    for (int j = 0; j < 4; ++j) {
-      const uint32_t v = c[tri && j == 3 ? 2 : j];
-      at[j] = &part.position(k, v), to[j] = &part.position(k + 1, v);
-    }
-    linearEdges(at, to, tri, rasterScale, q);
-    segReady[k] = 1;
-  }
-  int tr;
-  float b[3];
-  if (!coversMoving(q, tri, opt.backfaceCull && !(flags & store::kTwoSided), sx[idx], sy[idx], f, tr, b)) return;
-  float zv[3];
-  const uint32_t tv[3] = {c[0], c[tr == 0 ? 1 : 2], c[tr == 0 ? 2 : 3]};
-  for (int j = 0; j < 3; ++j) {
-    const float za = part.position(k, tv[j]).z, zb = part.position(k + 1, tv[j]).z;
-    zv[j] = za + f * (zb - za);
-  }
-  const float z = b[0] * zv[0] + b[1] * zv[1] + b[2] * zv[2];
-  if (!(z >= view.nearClip && z <= view.farClip)) return;
-  recordHit(mp.hc, idx, mi, tv, b, z);
-}
 
 }  // namespace reshutter::resample
