@@ -17,7 +17,7 @@
 #include <tbb/parallel_for.h>
 
 #include "bench/bench_util.h"
-#include "bench/dump_rib.h"
+#include "shade/dump_writer.h"
 #include "store/reader.h"
 #include "store/synthetic.h"
 #include "store/writer.h"
@@ -136,7 +136,7 @@ int main(int argc, char** argv) {
   if (rib) {
     const std::string ribPath = dir + "/bench_" + std::to_string(opt.micropolygons) + ".rib.gz";
     sw.reset();
-    bench::DumpRibWriter dump(ribPath, syntheticMeta(opt), true, 6);
+    shade::DumpRibWriter dump(ribPath, syntheticMeta(opt), true, 6);
     generateSynthetic(opt, dump);
     dump.close();
     double ribWrite = sw.seconds() - genSeconds;
