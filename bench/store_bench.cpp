@@ -2,7 +2,7 @@
 // ~1 px quads in 16x16 grids, motion up to 50 px, 2 knots, Ci + Oi) it reports:
 //   bytes per micropolygon, write and decode throughput per core, streaming peak memory and time
 //   to first tile (in a child process, visiting tiles in bucket order), and the same
-//   micropolygons as a gzipped ASCII RIB dump (size; parse time once the RIB reader exists).
+//   micropolygons as a gzipped ASCII RIB dump (size and write time; bench/rib_bench.cpp measures parsing it).
 // Usage: store_bench [--mp N] [--texture T] [--dir DIR] [--rib]    (one line of results per run)
 //        store_bench stream FILE                                   (child: streaming pass)
 #include <cinttypes>
