@@ -214,6 +214,8 @@ class DumpHandler final : public rib::RequestHandler {
   void readVariables(const rib::Request& r, const rib::Args& a, const std::vector<rib::Param>& params, Prim& p);
   void split(const rib::Args& a, Prim& p);
   void registerVars(const rib::Args& a, Prim& p);
+  bool collectSchema(const rib::Args& a, const Prim& p);
+  bool needsVertexPerCorner(const Prim& p) const;
 
   // ingest_grids.cpp
   void emitPrim(const Prim& p);

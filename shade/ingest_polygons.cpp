@@ -380,32 +380,7 @@ void DumpHandler::split(const Args& a, Prim& p) {
 /// at the first primitive of an optimistic pass, or gives up on it if the schema grew; decides
 /// whether the grid needs a vertex per face corner.
 void DumpHandler::registerVars(const Args& a, Prim& p) {
-  bool grew = false;
-  if (collect_) {
-    for (const auto& v : p.vars) {
-      for (const auto& o : outputsFor(v.decl)) {
-        const bool perVertex = perVertexClass(v.decl.storage);
-        auto it = schema_.find(o.name);
-        if (it == schema_.end()) {
-          schema_.emplace(o.name, SchemaEntry{o.type, perVertex});
-          schemaOrder_.push_back(o.name);
-          grew = true;
-        } else {
-          if (it->second.type != o.type)
-            a.fail(cat("\"", v.decl.name, "\" is a ", toString(o.type), " here and a ", toString(it->second.type), " elsewhere"));
-          grew |= perVertex && !it->second.perVertex;
-          it->second.perVertex |= perVertex;
-        }
-      }
-    }
-    // Ci/Oi from Color/Opacity are constant: per micropolygon unless a primitive gives them per vertex.
-    for (const char* n : {"Ci", "Oi"})
-      if (!schema_.count(n)) {
-        schema_.emplace(n, SchemaEntry{AttrType::Color, false});
-        schemaOrder_.push_back(n);
-        grew = true;
-      }
-  }
+  const bool grew = collect_ && collectSchema(a, p);
   if (!emit_) return;
   if (optimistic_) {
     if (!sink_) {
@@ -416,16 +391,51 @@ void DumpHandler::registerVars(const Args& a, Prim& p) {
       throw SchemaGrew{};
     }
   }
-  // Per-vertex storage of per-face values needs a vertex per face corner.
-  p.unshare = false;
+  p.unshare = needsVertexPerCorner(p);
+}
+
+/// Adds the primitive's variables (and Ci, Oi) to the schema; true when that added an attribute
+/// or made one per vertex.
+bool DumpHandler::collectSchema(const Args& a, const Prim& p) {
+  bool grew = false;
   for (const auto& v : p.vars) {
-    if (faceVaryingClass(v.decl.storage)) p.unshare = true;
+    for (const auto& o : outputsFor(v.decl)) {
+      const bool perVertex = perVertexClass(v.decl.storage);
+      auto it = schema_.find(o.name);
+      if (it == schema_.end()) {
+        schema_.emplace(o.name, SchemaEntry{o.type, perVertex});
+        schemaOrder_.push_back(o.name);
+        grew = true;
+      } else {
+        if (it->second.type != o.type)
+          a.fail(cat("\"", v.decl.name, "\" is a ", toString(o.type), " here and a ", toString(it->second.type), " elsewhere"));
+        grew |= perVertex && !it->second.perVertex;
+        it->second.perVertex |= perVertex;
+      }
+    }
+  }
+  // Ci/Oi from Color/Opacity are constant: per micropolygon unless a primitive gives them per vertex.
+  for (const char* n : {"Ci", "Oi"})
+    if (!schema_.count(n)) {
+      schema_.emplace(n, SchemaEntry{AttrType::Color, false});
+      schemaOrder_.push_back(n);
+      grew = true;
+    }
+  return grew;
+}
+
+/// Per-vertex storage of per-face values needs a vertex per face corner.
+bool DumpHandler::needsVertexPerCorner(const Prim& p) const {
+  bool unshare = false;
+  for (const auto& v : p.vars) {
+    if (faceVaryingClass(v.decl.storage)) unshare = true;
     if (v.decl.storage == StorageClass::Uniform)
       for (const auto& o : outputsFor(v.decl)) {
         int i = meta_->schema.find(o.name);
-        p.unshare = p.unshare || (i >= 0 && meta_->schema.attrs[size_t(i)].rate == AttrRate::Vertex);
+        unshare = unshare || (i >= 0 && meta_->schema.attrs[size_t(i)].rate == AttrRate::Vertex);
       }
   }
+  return unshare;
 }
 
 }  // namespace reshutter::shade::ingest
