@@ -1,6 +1,6 @@
 // RIB reader and ingest benchmark (issue 3). Writes N synthetic micropolygons (store/synthetic.h:
 // ~1 px quads in 16x16 grids, 2 knots, per-vertex Ci/Oi) as the reference workflow's dump
-// (bench/dump_rib.h: PointsPolygons + Cs + Os + blurP under CoordSysTransform "camera"), plain
+// (shade/dump_writer.h: PointsPolygons + Cs + Os + blurP under CoordSysTransform "camera"), plain
 // and gzipped, then reports:
 //   ASCII parse MB/s on one core (from memory, from the plain file, from the gzipped file), with a
 //   handler that takes every request and resolves its parameter list;
@@ -19,8 +19,8 @@
 #include <tbb/global_control.h>
 
 #include "bench/bench_util.h"
-#include "bench/dump_rib.h"
 #include "rib/rib.h"
+#include "shade/dump_writer.h"
 #include "shade/ingest.h"
 #include "store/synthetic.h"
 
@@ -86,10 +86,10 @@ int main(int argc, char** argv) {
   so.micropolygons = mp;
   const store::StoreMeta meta = store::syntheticMeta(so);
   {
-    bench::DumpRibWriter a(plain, meta, false);
+    shade::DumpRibWriter a(plain, meta, false);
     store::generateSynthetic(so, a);
     a.close();
-    bench::DumpRibWriter b(gz, meta, true);
+    shade::DumpRibWriter b(gz, meta, true);
     store::generateSynthetic(so, b);
     b.close();
   }

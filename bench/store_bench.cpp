@@ -2,7 +2,7 @@
 // ~1 px quads in 16x16 grids, motion up to 50 px, 2 knots, Ci + Oi) it reports:
 //   bytes per micropolygon, write and decode throughput per core, streaming peak memory and time
 //   to first tile (in a child process, visiting tiles in bucket order), and the same
-//   micropolygons as a gzipped ASCII RIB dump (size; parse time once the RIB reader exists).
+//   micropolygons as a gzipped ASCII RIB dump (size and write time; bench/rib_bench.cpp measures parsing it).
 // Usage: store_bench [--mp N] [--texture T] [--dir DIR] [--rib]    (one line of results per run)
 //        store_bench stream FILE                                   (child: streaming pass)
 #include <cinttypes>
@@ -17,7 +17,7 @@
 #include <tbb/parallel_for.h>
 
 #include "bench/bench_util.h"
-#include "bench/dump_rib.h"
+#include "shade/dump_writer.h"
 #include "store/reader.h"
 #include "store/synthetic.h"
 #include "store/writer.h"
@@ -136,7 +136,7 @@ int main(int argc, char** argv) {
   if (rib) {
     const std::string ribPath = dir + "/bench_" + std::to_string(opt.micropolygons) + ".rib.gz";
     sw.reset();
-    bench::DumpRibWriter dump(ribPath, syntheticMeta(opt), true, 6);
+    shade::DumpRibWriter dump(ribPath, syntheticMeta(opt), true, 6);
     generateSynthetic(opt, dump);
     dump.close();
     double ribWrite = sw.seconds() - genSeconds;

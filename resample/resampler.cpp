@@ -1,3 +1,7 @@
+// The re-sampler's render(): validate the spec, plan what every bucket shares (window, shutter,
+// view, samples, output variables, filters, buckets), render the buckets in parallel (gather the
+// parts that touch each, rasterize, resolve, filter into pixels, form deep pixels), then sum the
+// figures and record the image's provenance. resample/resampler.h says what it promises.
 #include "resample/resampler.h"
 
 #include <algorithm>
@@ -183,6 +187,155 @@ uint32_t specialFilterU(FilterKind k, const uint32_t* v, const float* z, int n) 
   return best;
 }
 
+// ---------------------------------------------------------------------------------------------
+// Validate and plan: what every bucket shares, fixed before the first one starts.
+
+/// Output resolution and data window: [x0, x1) × [y0, y1) of a W × H image.
+struct Window {
+  int W = 0, H = 0, x0 = 0, x1 = 0, y0 = 0, y1 = 0;
+};
+
+/// The checks on the spec itself, before anything is built: shared schema, resolution, crop,
+/// samples, bucket size.
+Window validateSpec(const RenderSpec& spec) {
+  if (spec.sources.empty()) fail("resample", "no store to re-sample");
+  const store::StoreMeta& meta0 = spec.sources[0].store->meta();
+  const store::Camera& cam = meta0.cameras[0];
+  for (const auto& s : spec.sources)
+    if (!(s.store->meta().schema == meta0.schema))
+      fail(s.store->path(), "its output variables differ from ", spec.sources[0].store->path(), "'s; stores of one render must share a schema");
+  Window w;
+  w.W = spec.width > 0 ? spec.width : cam.width, w.H = spec.height > 0 ? spec.height : cam.height;
+  if (w.W <= 0 || w.H <= 0 || w.W > 65536 || w.H > 65536) fail("--res", "resolution ", w.W, "x", w.H, " out of range");
+  w.x0 = 0, w.x1 = w.W, w.y0 = 0, w.y1 = w.H;
+  if (spec.cropX1 > spec.cropX0 || spec.cropY1 > spec.cropY0) {
+    w.x0 = std::max(0, spec.cropX0), w.x1 = std::min(w.W, spec.cropX1), w.y0 = std::max(0, spec.cropY0), w.y1 = std::min(w.H, spec.cropY1);
+    if (w.x0 >= w.x1 || w.y0 >= w.y1)
+      fail("--crop", "the crop window ", spec.cropX0, " ", spec.cropX1, " ", spec.cropY0, " ", spec.cropY1, " lies outside the ", w.W, "x", w.H, " image");
+  }
+  if (spec.samplesX < 1 || spec.samplesY < 1 || spec.samplesX * spec.samplesY > 4096) fail("--spp", "samples per pixel must be 1 to 4096");
+  if (spec.bucketSize < 4 || spec.bucketSize > 1024) fail("--bucket", "bucket size must be 4 to 1024");
+  return w;
+}
+
+/// The spec's shutter with its rolling read-out spread over the output's rows.
+ShutterModel shutterOverRows(const ShutterModel& given, int height) {
+  ShutterModel shutter = given;
+  RollingShutter rolling = shutter.rolling();
+  rolling.height = height;
+  shutter.setRolling(rolling);
+  return shutter;
+}
+
+struct Bucket {
+  int x0, y0, x1, y1;
+};
+
+/// Buckets over the data window, row-major.
+std::vector<Bucket> planBuckets(const Window& w, int size) {
+  std::vector<Bucket> buckets;
+  for (int y = w.y0; y < w.y1; y += size)
+    for (int x = w.x0; x < w.x1; x += size) buckets.push_back({x, y, std::min(w.x1, x + size), std::min(w.y1, y + size)});
+  return buckets;
+}
+
+std::vector<std::unique_ptr<FilterTable>> aovFilterTables(const std::vector<AovChannel>& aovs, const SamplePattern& pattern) {
+  std::vector<std::unique_ptr<FilterTable>> tables;
+  for (const auto& a : aovs) tables.push_back(std::make_unique<FilterTable>(a.filter, pattern));
+  return tables;
+}
+
+/// Everything the buckets read and none writes: the validated window and shutter, the camera's
+/// view, the sample pattern, the output variables and their filters, the buckets.
+struct Plan {
+  Plan(const RenderSpec& spec, const Window& window, const ShutterModel& shutter)
+      : spec(spec), meta0(spec.sources[0].store->meta()), cam(meta0.cameras[0]), win(window), shutter(shutter), view(makeView(cam, win.W, win.H)),
+        pattern(spec.samplesX, spec.samplesY, spec.seed), N(pattern.spp()), aovs(resolveAovs(spec.aovs, meta0.schema, spec.filter)),
+        mainTable(spec.filter, pattern), aovTables(aovFilterTables(aovs, pattern)), buckets(planBuckets(win, spec.bucketSize)) {
+    // Samples beyond the bucket: as many pixels as the widest filter reaches.
+    margin = mainTable.margin();
+    for (const auto& t : aovTables) margin = std::max(margin, t->margin());
+    // Where each output variable's values start among the resolved samples' arrays.
+    int floatBase = 0, uintBase = 0;
+    for (const auto& a : aovs) {
+      aovFloatBase.push_back(floatBase), aovUIntBase.push_back(uintBase);
+      if (a.isUInt) ++uintBase;
+      else floatBase += a.components;
+    }
+    rasterOptions = spec.raster;
+    rasterOptions.surfaceIds = spec.deep;  // only deep output reads them back
+  }
+
+  const RenderSpec& spec;
+  const store::StoreMeta& meta0;
+  const store::Camera& cam;
+  const Window win;
+  const ShutterModel shutter;
+  const View view;
+  const SamplePattern pattern;
+  const int N;  // samples per pixel
+  const std::vector<AovChannel> aovs;
+  const FilterTable mainTable;                               // R G B A
+  const std::vector<std::unique_ptr<FilterTable>> aovTables;  // per output variable
+  const std::vector<Bucket> buckets;
+  int margin = 0;
+  std::vector<int> aovFloatBase, aovUIntBase;  // per output variable: its first ResolvedSamples::aov / aovU array
+  RasterOptions rasterOptions;
+};
+
+/// The flat image over the data window: R G B A Z, then each output variable's channels.
+/// Returns, per output variable, the indices of its channels.
+std::vector<std::vector<int>> setUpImage(const Plan& plan, FlatImage& img) {
+  const Window& w = plan.win;
+  img.x0 = w.x0, img.y0 = w.y0, img.width = w.x1 - w.x0, img.height = w.y1 - w.y0, img.fullWidth = w.W, img.fullHeight = w.H;
+  for (const char* n : {"R", "G", "B", "A"}) img.add(n).half = plan.spec.halfColor;
+  img.add("Z");
+  std::vector<std::vector<int>> aovImageChannel(plan.aovs.size());
+  for (size_t a = 0; a < plan.aovs.size(); ++a)
+    for (const auto& n : channelNames(plan.aovs[a], plan.meta0.schema)) {
+      if (img.find(n)) fail("--aov " + plan.aovs[a].name, "channel '", n, "' requested twice");
+      aovImageChannel[a].push_back(int(img.channels.size()));
+      img.add(n, plan.aovs[a].isUInt);
+    }
+  return aovImageChannel;
+}
+
+/// Deep output: the same output variables as the flat image; the object id is always there.
+DeepLayout deepLayoutOf(const std::vector<AovChannel>& aovs, const store::Schema& schema) {
+  DeepLayout layout;
+  for (const auto& aov : aovs) {
+    const auto names = channelNames(aov, schema);
+    if (aov.isUInt) {
+      if (aov.builtin != AovChannel::Builtin::ObjectId) layout.uints.push_back({names[0], layout.sourceUInts, false});
+      ++layout.sourceUInts;
+      continue;
+    }
+    for (int c = 0; c < aov.components; ++c) layout.floats.push_back({names[size_t(c)], layout.sourceFloats + c, aov.composited()});
+    layout.sourceFloats += aov.components;
+  }
+  return layout;
+}
+
+/// The deep image (one block per bucket) and what forms its pixels.
+std::unique_ptr<DeepFormer> setUpDeep(const Plan& plan, DeepImage& deep) {
+  const Window& w = plan.win;
+  deep.reset(w.x0, w.y0, w.x1 - w.x0, w.y1 - w.y0, w.W, w.H, deepLayoutOf(plan.aovs, plan.meta0.schema), plan.buckets.size());
+  deep.objectNames = plan.spec.objectNames.empty() ? objectNamesFromProvenance(plan.meta0.provenance) : plan.spec.objectNames;
+  return std::make_unique<DeepFormer>(deep, plan.mainTable, plan.pattern, plan.spec.deepOptions);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Per bucket: gather the parts, rasterize them, resolve the samples, filter them into pixels.
+
+using Clock = std::chrono::steady_clock;
+
+double secondsBetween(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
+
+/// The pixels a bucket rasterizes: the bucket and the filter margin around it.
+struct Region {
+  int x0, y0, w, h;
+};
+
 struct ThreadState {
   std::unique_ptr<BucketRasterizer> raster;
   RenderStats stats;
@@ -191,278 +344,233 @@ struct ThreadState {
   std::vector<std::shared_ptr<const store::TilePart>> held;  // the bucket's decoded parts
   std::vector<const float*> tapWeights;  // one pixel's filter neighbourhood (accumulateTaps)
   std::vector<size_t> tapOffsets;
+
+  BucketRasterizer& rasterizer(const Plan& plan) {
+    if (!raster) raster = std::make_unique<BucketRasterizer>(plan.pattern, plan.shutter, plan.view, plan.aovs, plan.rasterOptions);
+    return *raster;
+  }
 };
 
-}  // namespace
-
-RenderResult render(const RenderSpec& spec) {
-  using clock = std::chrono::steady_clock;
-  const auto wallStart = clock::now();
-  if (spec.sources.empty()) fail("resample", "no store to re-sample");
-  const store::StoreMeta& meta0 = spec.sources[0].store->meta();
-  const store::Camera& cam = meta0.cameras[0];
-  for (const auto& s : spec.sources)
-    if (!(s.store->meta().schema == meta0.schema))
-      fail(s.store->path(), "its output variables differ from ", spec.sources[0].store->path(), "'s; stores of one render must share a schema");
-  const int W = spec.width > 0 ? spec.width : cam.width, H = spec.height > 0 ? spec.height : cam.height;
-  if (W <= 0 || H <= 0 || W > 65536 || H > 65536) fail("--res", "resolution ", W, "x", H, " out of range");
-  int cx0 = 0, cx1 = W, cy0 = 0, cy1 = H;
-  if (spec.cropX1 > spec.cropX0 || spec.cropY1 > spec.cropY0) {
-    cx0 = std::max(0, spec.cropX0), cx1 = std::min(W, spec.cropX1), cy0 = std::max(0, spec.cropY0), cy1 = std::min(H, spec.cropY1);
-    if (cx0 >= cx1 || cy0 >= cy1) fail("--crop", "the crop window ", spec.cropX0, " ", spec.cropX1, " ", spec.cropY0, " ", spec.cropY1, " lies outside the ", W, "x", H, " image");
+/// Lists, into `parts`, every part whose bound over the region's time range touches the region.
+void gatherParts(const Plan& plan, const BucketRasterizer& r, const Region& rg, std::vector<std::pair<size_t, size_t>>& parts) {
+  parts.clear();
+  for (size_t si = 0; si < plan.spec.sources.size(); ++si) {
+    const Source& src = plan.spec.sources[si];
+    const auto& m = src.store->meta();
+    const double lo = std::max(r.earliestTime() - double(src.frame), m.shutterOpen);
+    const double hi = std::min(r.latestTime() - double(src.frame), m.shutterClose);
+    if (lo > hi) continue;
+    const auto& sc = m.cameras[0];
+    const float fx = float(sc.width) / float(plan.win.W), fy = float(sc.height) / float(plan.win.H);
+    store::RasterRect rect{float(rg.x0) * fx, float(rg.y0) * fy, float(rg.x0 + rg.w) * fx, float(rg.y0 + rg.h) * fy, false};
+    src.store->visit(rect, lo, hi, [&](size_t e) { parts.push_back({si, e}); });
   }
-  if (spec.samplesX < 1 || spec.samplesY < 1 || spec.samplesX * spec.samplesY > 4096) fail("--spp", "samples per pixel must be 1 to 4096");
-  if (spec.bucketSize < 4 || spec.bucketSize > 1024) fail("--bucket", "bucket size must be 4 to 1024");
+}
 
-  ShutterModel shutter = spec.shutter;
-  RollingShutter rolling = shutter.rolling();
-  rolling.height = H;
-  shutter.setRolling(rolling);
-  checkCoverage(spec.sources, shutter);
-
-  const View view = makeView(cam, W, H);
-  const SamplePattern pattern(spec.samplesX, spec.samplesY, spec.seed);
-  const int N = pattern.spp();
-  const std::vector<AovChannel> aovs = resolveAovs(spec.aovs, meta0.schema, spec.filter);
-  const FilterTable mainTable(spec.filter, pattern);
-  std::vector<std::unique_ptr<FilterTable>> aovTables;
-  int margin = mainTable.margin();
-  for (const auto& a : aovs) {
-    aovTables.push_back(std::make_unique<FilterTable>(a.filter, pattern));
-    margin = std::max(margin, aovTables.back()->margin());
+/// Fetches (decodes) the gathered parts and rasterizes them; returns the seconds spent fetching.
+double rasterizeParts(const Plan& plan, BucketRasterizer& r, ThreadState& ts) {
+  double fetch = 0;
+  // Every part is decoded before any is drawn, so that the rasterizer can draw them nearest
+  // first - up to a memory budget: past it, what is queued is drawn and released (the image is
+  // the same; only exact depth ties could then resolve differently for another bucket size).
+  constexpr uint64_t kQueuedBytes = 128ull << 20;
+  uint64_t queuedBytes = 0;
+  for (auto [si, e] : ts.parts) {
+    const Source& src = plan.spec.sources[si];
+    const store::TileEntry& entry = src.store->entries()[e];
+    if (queuedBytes > 0 && queuedBytes + entry.rawSize > kQueuedBytes) {
+      r.rasterizeQueued();
+      ts.held.clear(), queuedBytes = 0;
+    }
+    auto ta = Clock::now();
+    ts.held.push_back(src.store->part(e));
+    fetch += secondsBetween(ta, Clock::now());
+    r.add(src, entry, *ts.held.back());
+    queuedBytes += entry.rawSize;
   }
+  r.rasterizeQueued();
+  ts.held.clear();  // the cache may drop them now
+  return fetch;
+}
 
-  RenderResult result;
-  FlatImage& img = result.image;
-  img.x0 = cx0, img.y0 = cy0, img.width = cx1 - cx0, img.height = cy1 - cy0, img.fullWidth = W, img.fullHeight = H;
-  for (const char* n : {"R", "G", "B", "A"}) img.add(n).half = spec.halfColor;
-  img.add("Z");
-  std::vector<std::vector<int>> aovImageChannel(aovs.size());
-  for (size_t a = 0; a < aovs.size(); ++a)
-    for (const auto& n : channelNames(aovs[a], meta0.schema)) {
-      if (img.find(n)) fail("--aov " + aovs[a].name, "channel '", n, "' requested twice");
-      aovImageChannel[a].push_back(int(img.channels.size()));
-      img.add(n, aovs[a].isUInt);
-    }
-
-  // Deep output: the same output variables as the flat image; the object id is always there.
-  std::unique_ptr<DeepFormer> deepFormer;
-  DeepLayout deepLayout;
-  if (spec.deep) {
-    for (size_t a = 0; a < aovs.size(); ++a) {
-      const auto names = channelNames(aovs[a], meta0.schema);
-      if (aovs[a].isUInt) {
-        if (aovs[a].builtin != AovChannel::Builtin::ObjectId) deepLayout.uints.push_back({names[0], deepLayout.sourceUInts, false});
-        ++deepLayout.sourceUInts;
-        continue;
-      }
-      for (int c = 0; c < aovs[a].components; ++c)
-        deepLayout.floats.push_back({names[size_t(c)], deepLayout.sourceFloats + c, aovs[a].composited()});
-      deepLayout.sourceFloats += aovs[a].components;
-    }
-  }
-
-  // Buckets over the data window, row-major.
-  struct Bucket {
-    int x0, y0, x1, y1;
-  };
-  std::vector<Bucket> buckets;
-  for (int y = cy0; y < cy1; y += spec.bucketSize)
-    for (int x = cx0; x < cx1; x += spec.bucketSize)
-      buckets.push_back({x, y, std::min(cx1, x + spec.bucketSize), std::min(cy1, y + spec.bucketSize)});
-  if (spec.deep) {
-    result.deep.reset(cx0, cy0, cx1 - cx0, cy1 - cy0, W, H, deepLayout, buckets.size());  // one block per bucket
-    result.deep.objectNames = spec.objectNames.empty() ? objectNamesFromProvenance(meta0.provenance) : spec.objectNames;
-    deepFormer = std::make_unique<DeepFormer>(result.deep, mainTable, pattern, spec.deepOptions);
-  }
-
-  RasterOptions rasterOptions = spec.raster;
-  rasterOptions.surfaceIds = spec.deep;  // only deep output reads them back
-  tbb::enumerable_thread_specific<ThreadState> threads;
-  Progress progress("resample", buckets.size());
-  const bool showProgress = spec.progress;
-
-  auto processBucket = [&](const Bucket& bk) {
-    ThreadState& ts = threads.local();
-    if (!ts.raster) ts.raster = std::make_unique<BucketRasterizer>(pattern, shutter, view, aovs, rasterOptions);
-    BucketRasterizer& r = *ts.raster;
-    const int rx0 = bk.x0 - margin, ry0 = bk.y0 - margin, rw = bk.x1 - bk.x0 + 2 * margin, rh = bk.y1 - bk.y0 + 2 * margin;
-    auto t0 = clock::now();
-    r.begin(rx0, ry0, rw, rh);
-    // Gather: every part whose bound over the region's time range touches the region.
-    ts.parts.clear();
-    for (size_t si = 0; si < spec.sources.size(); ++si) {
-      const Source& src = spec.sources[si];
-      const auto& m = src.store->meta();
-      const double lo = std::max(r.earliestTime() - double(src.frame), m.shutterOpen);
-      const double hi = std::min(r.latestTime() - double(src.frame), m.shutterClose);
-      if (lo > hi) continue;
-      const auto& sc = m.cameras[0];
-      const float fx = float(sc.width) / float(W), fy = float(sc.height) / float(H);
-      store::RasterRect rect{float(rx0) * fx, float(ry0) * fy, float(rx0 + rw) * fx, float(ry0 + rh) * fy, false};
-      src.store->visit(rect, lo, hi, [&](size_t e) { ts.parts.push_back({si, e}); });
-    }
-    double gather = 0;
-    auto t1 = clock::now();
-    // Every part is decoded before any is drawn, so that the rasterizer can draw them nearest
-    // first - up to a memory budget: past it, what is queued is drawn and released (the image is
-    // the same; only exact depth ties could then resolve differently for another bucket size).
-    constexpr uint64_t kQueuedBytes = 128ull << 20;
-    uint64_t queuedBytes = 0;
-    for (auto [si, e] : ts.parts) {
-      const Source& src = spec.sources[si];
-      const store::TileEntry& entry = src.store->entries()[e];
-      if (queuedBytes > 0 && queuedBytes + entry.rawSize > kQueuedBytes) {
-        r.rasterizeQueued();
-        ts.held.clear(), queuedBytes = 0;
-      }
-      auto ta = clock::now();
-      ts.held.push_back(src.store->part(e));
-      gather += std::chrono::duration<double>(clock::now() - ta).count();
-      r.add(src, entry, *ts.held.back());
-      queuedBytes += entry.rawSize;
-    }
-    r.rasterizeQueued();
-    ts.held.clear();  // the cache may drop them now
-    auto t2 = clock::now();
-    const double raster = std::chrono::duration<double>(t2 - t1).count() - gather;
-    const ResolvedSamples& rs = r.resolve();
-    auto t3 = clock::now();
-
-    // Filter the samples into the bucket's pixels.
-    ts.patterns.resize(size_t(rw) * rh);
-    for (int y = 0; y < rh; ++y)
-      for (int x = 0; x < rw; ++x) ts.patterns[size_t(y) * rw + x] = pattern.patternOf(rx0 + x, ry0 + y);
-    auto filterInto = [&](const FilterTable& table, const std::vector<const std::vector<float>*>& in, const std::vector<float*>& outPx, int px,
-                          int py) {
-      const int m = table.margin();
-      // Eight partial sums per channel over every neighbour (accumulateTaps), added up once at the end.
-      float lanes[8][8] = {};
-      float tail[8] = {};
-      float wsum = 0;
-      const size_t nc = in.size();
-      const int taps = table.span() * table.span();
-      ts.tapWeights.resize(size_t(taps)), ts.tapOffsets.resize(size_t(taps));
-      const float** tapWeight = ts.tapWeights.data();
-      size_t* tapOffset = ts.tapOffsets.data();
-      for (int dy = -m; dy <= m; ++dy)
-        for (int dx = -m; dx <= m; ++dx) {
-          const size_t q = size_t(py - ry0 + dy) * rw + size_t(px - rx0 + dx);
-          const int pat = ts.patterns[q];
-          *tapWeight++ = table.weights(pat, dx, dy);
-          *tapOffset++ = q * N;
-          wsum += table.weightSum(pat, dx, dy);
-        }
-      const float* channels[8];
-      for (size_t c = 0; c < nc; ++c) channels[c] = in[c]->data();
-      accumulateTaps(N, int(nc), channels, ts.tapWeights.data(), ts.tapOffsets.data(), taps, lanes, tail);
-      float acc[8];
-      for (size_t c = 0; c < nc; ++c) {
-        const float* l = lanes[c];
-        acc[c] = (((l[0] + l[4]) + (l[1] + l[5])) + ((l[2] + l[6]) + (l[3] + l[7]))) + tail[c];
-      }
-      const size_t o = size_t(py - cy0) * img.width + size_t(px - cx0);
-      if (std::abs(wsum) < 1e-6f * float(N)) {
-        // Negative lobes cancelled out: fall back to the pixel's own samples, unweighted.
-        const size_t q = size_t(py - ry0) * rw + size_t(px - rx0);
-        for (size_t c = 0; c < nc; ++c) {
-          double s = 0;
-          for (int i = 0; i < N; ++i) s += (*in[c])[q * N + i];
-          outPx[c][o] = float(s / N);
-        }
-        return;
-      }
-      const float inv = 1.0f / wsum;
-      for (size_t c = 0; c < nc; ++c) outPx[c][o] = acc[c] * inv;
-    };
-    const std::vector<const std::vector<float>*> rgbaIn{&rs.r, &rs.g, &rs.b, &rs.a};
-    const std::vector<float*> rgbaOut{img.channels[0].f.data(), img.channels[1].f.data(), img.channels[2].f.data(), img.channels[3].f.data()};
-    float* zOut = img.channels[4].f.data();
-    int floatBase = 0, uintBase = 0;
-    std::vector<int> aovFloatBase(aovs.size()), aovUIntBase(aovs.size());
-    for (size_t a = 0; a < aovs.size(); ++a) {
-      aovFloatBase[a] = floatBase, aovUIntBase[a] = uintBase;
-      if (aovs[a].isUInt) ++uintBase;
-      else floatBase += aovs[a].components;
-    }
-    // Per filtered output variable, its sample arrays and image channels: set up once per bucket,
-    // not per pixel.
-    std::vector<std::vector<const std::vector<float>*>> aovIn(aovs.size());
-    std::vector<std::vector<float*>> aovOut(aovs.size());
+/// Filters one bucket's resolved samples into its pixels of the flat image.
+class BucketFilter {
+ public:
+  BucketFilter(const Plan& plan, const std::vector<std::vector<int>>& aovImageChannel, const Region& rg, const ResolvedSamples& rs, ThreadState& ts,
+               FlatImage& img)
+      : plan_(plan), aovImageChannel_(aovImageChannel), rg_(rg), rs_(rs), ts_(ts), img_(img), N_(plan.N) {
+    ts.patterns.resize(size_t(rg.w) * rg.h);
+    for (int y = 0; y < rg.h; ++y)
+      for (int x = 0; x < rg.w; ++x) ts.patterns[size_t(y) * rg.w + x] = plan.pattern.patternOf(rg.x0 + x, rg.y0 + y);
+    // Per filtered output variable, its sample arrays and image channels: set up once per
+    // bucket, not per pixel.
+    const auto& aovs = plan.aovs;
+    aovIn_.resize(aovs.size()), aovOut_.resize(aovs.size());
     for (size_t a = 0; a < aovs.size(); ++a)
       if (!aovs[a].isUInt && !aovs[a].filter.special())
         for (int c = 0; c < aovs[a].components; ++c) {
-          aovIn[a].push_back(&rs.aov[size_t(aovFloatBase[a] + c)]);
-          aovOut[a].push_back(img.channels[size_t(aovImageChannel[a][size_t(c)])].f.data());
+          aovIn_[a].push_back(&rs.aov[size_t(plan.aovFloatBase[a] + c)]);
+          aovOut_[a].push_back(img.channels[size_t(aovImageChannel[a][size_t(c)])].f.data());
         }
+  }
+
+  void run(const Bucket& bk) {
+    const std::vector<const std::vector<float>*> rgbaIn{&rs_.r, &rs_.g, &rs_.b, &rs_.a};
+    const std::vector<float*> rgbaOut{img_.channels[0].f.data(), img_.channels[1].f.data(), img_.channels[2].f.data(), img_.channels[3].f.data()};
+    float* zOut = img_.channels[4].f.data();
+    const auto& aovs = plan_.aovs;
+    const int N = N_;
     for (int py = bk.y0; py < bk.y1; ++py)
       for (int px = bk.x0; px < bk.x1; ++px) {
-        filterInto(mainTable, rgbaIn, rgbaOut, px, py);
-        const size_t q = size_t(py - ry0) * rw + size_t(px - rx0);
-        const size_t o = size_t(py - cy0) * img.width + size_t(px - cx0);
+        filterPixel(plan_.mainTable, rgbaIn, rgbaOut, px, py);
+        const size_t q = sampleSlot(px, py);
+        const size_t o = imageOffset(px, py);
         // Z: the nearest surface any of the pixel's samples saw (zmin).
-        float z = view.farClip;
-        for (int i = 0; i < N; ++i) z = std::min(z, rs.z[q * N + i]);
+        float z = plan_.view.farClip;
+        for (int i = 0; i < N; ++i) z = std::min(z, rs_.z[q * N + i]);
         zOut[o] = z;
         for (size_t a = 0; a < aovs.size(); ++a) {
           const AovChannel& ch = aovs[a];
           if (ch.isUInt) {
-            img.channels[size_t(aovImageChannel[a][0])].u[o] =
-                specialFilterU(ch.filter.kind, rs.aovU[size_t(aovUIntBase[a])].data() + q * N, rs.aovZ.data() + q * N, N);
+            img_.channels[size_t(aovImageChannel_[a][0])].u[o] =
+                specialFilterU(ch.filter.kind, rs_.aovU[size_t(plan_.aovUIntBase[a])].data() + q * N, rs_.aovZ.data() + q * N, N);
           } else if (ch.filter.special()) {
             for (int c = 0; c < ch.components; ++c)
-              img.channels[size_t(aovImageChannel[a][size_t(c)])].f[o] =
-                  specialFilter(ch.filter.kind, rs.aov[size_t(aovFloatBase[a] + c)].data() + q * N, rs.aovZ.data() + q * N, N, 0.f);
+              img_.channels[size_t(aovImageChannel_[a][size_t(c)])].f[o] =
+                  specialFilter(ch.filter.kind, rs_.aov[size_t(plan_.aovFloatBase[a] + c)].data() + q * N, rs_.aovZ.data() + q * N, N, 0.f);
           } else {
-            filterInto(*aovTables[a], aovIn[a], aovOut[a], px, py);
+            filterPixel(*plan_.aovTables[a], aovIn_[a], aovOut_[a], px, py);
           }
         }
       }
-    // DEEP HOOK: deep output forms its samples here from r.visitFragments() (resample/deep.h).
-    if (deepFormer) deepFormer->formBucket(r, size_t(&bk - buckets.data()), bk.x0, bk.y0, bk.x1, bk.y1, rx0, ry0, rw, rh);
-    auto t4 = clock::now();
-    ts.stats.setupSeconds += std::chrono::duration<double>(t1 - t0).count();
-    ts.stats.partsSeconds += gather;
-    ts.stats.partsFetched += ts.parts.size();
-    ts.stats.rasterSeconds += raster;
-    ts.stats.resolveSeconds += std::chrono::duration<double>(t3 - t2).count();
-    ts.stats.filterSeconds += std::chrono::duration<double>(t4 - t3).count();
-    ts.stats.raster.add(r.stats());
-    ts.stats.samples += uint64_t(bk.x1 - bk.x0) * uint64_t(bk.y1 - bk.y0) * uint64_t(N);
-    ++ts.stats.buckets;
-    if (showProgress) progress.advance();
-  };
-  std::map<const store::StoreReader*, store::CacheStats> cacheBefore;
-  for (const Source& src : spec.sources) cacheBefore.emplace(src.store.get(), src.store->cacheStats());
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, buckets.size(), 1), [&](const tbb::blocked_range<size_t>& range) {
-    for (size_t b = range.begin(); b != range.end(); ++b) processBucket(buckets[b]);
-  });
-  progress.finish();
-
-  for (auto& ts : threads) {
-    result.stats.raster.add(ts.stats.raster);
-    result.stats.buckets += ts.stats.buckets;
-    result.stats.samples += ts.stats.samples;
-    result.stats.setupSeconds += ts.stats.setupSeconds;
-    result.stats.partsSeconds += ts.stats.partsSeconds;
-    result.stats.partsFetched += ts.stats.partsFetched;
-    result.stats.rasterSeconds += ts.stats.rasterSeconds;
-    result.stats.resolveSeconds += ts.stats.resolveSeconds;
-    result.stats.filterSeconds += ts.stats.filterSeconds;
   }
-  result.stats.wallSeconds = std::chrono::duration<double>(clock::now() - wallStart).count();
-  for (const auto& [store, before] : cacheBefore) {
+
+ private:
+  const Plan& plan_;
+  const std::vector<std::vector<int>>& aovImageChannel_;
+  const Region rg_;
+  const ResolvedSamples& rs_;
+  ThreadState& ts_;
+  FlatImage& img_;
+  const int N_;
+  std::vector<std::vector<const std::vector<float>*>> aovIn_;
+  std::vector<std::vector<float*>> aovOut_;
+
+  /// The pixel's first sample in the region's sample arrays (times N).
+  size_t sampleSlot(int px, int py) const { return size_t(py - rg_.y0) * rg_.w + size_t(px - rg_.x0); }
+  size_t imageOffset(int px, int py) const { return size_t(py - plan_.win.y0) * img_.width + size_t(px - plan_.win.x0); }
+
+  /// One pixel of the channels `in` through `table` into `outPx`.
+  void filterPixel(const FilterTable& table, const std::vector<const std::vector<float>*>& in, const std::vector<float*>& outPx, int px, int py) {
+    const int N = N_;
+    const int m = table.margin();
+    // Eight partial sums per channel over every neighbour (accumulateTaps), added up once at the end.
+    float lanes[8][8] = {};
+    float tail[8] = {};
+    float wsum = 0;
+    const size_t nc = in.size();
+    const int taps = table.span() * table.span();
+    ts_.tapWeights.resize(size_t(taps)), ts_.tapOffsets.resize(size_t(taps));
+    const float** tapWeight = ts_.tapWeights.data();
+    size_t* tapOffset = ts_.tapOffsets.data();
+    for (int dy = -m; dy <= m; ++dy)
+      for (int dx = -m; dx <= m; ++dx) {
+        const size_t q = size_t(py - rg_.y0 + dy) * rg_.w + size_t(px - rg_.x0 + dx);
+        const int pat = ts_.patterns[q];
+        *tapWeight++ = table.weights(pat, dx, dy);
+        *tapOffset++ = q * N;
+        wsum += table.weightSum(pat, dx, dy);
+      }
+    const float* channels[8];
+    for (size_t c = 0; c < nc; ++c) channels[c] = in[c]->data();
+    accumulateTaps(N, int(nc), channels, ts_.tapWeights.data(), ts_.tapOffsets.data(), taps, lanes, tail);
+    float acc[8];
+    for (size_t c = 0; c < nc; ++c) {
+      const float* l = lanes[c];
+      acc[c] = (((l[0] + l[4]) + (l[1] + l[5])) + ((l[2] + l[6]) + (l[3] + l[7]))) + tail[c];
+    }
+    const size_t o = imageOffset(px, py);
+    if (std::abs(wsum) < 1e-6f * float(N)) {
+      // Negative lobes cancelled out: fall back to the pixel's own samples, unweighted.
+      const size_t q = sampleSlot(px, py);
+      for (size_t c = 0; c < nc; ++c) {
+        double s = 0;
+        for (int i = 0; i < N; ++i) s += (*in[c])[q * N + i];
+        outPx[c][o] = float(s / N);
+      }
+      return;
+    }
+    const float inv = 1.0f / wsum;
+    for (size_t c = 0; c < nc; ++c) outPx[c][o] = acc[c] * inv;
+  }
+};
+
+/// One bucket, start to end: its pixels of the flat (and deep) image, its figures in ts.stats.
+void renderBucket(const Plan& plan, const std::vector<std::vector<int>>& aovImageChannel, size_t b, ThreadState& ts, FlatImage& img,
+                  DeepFormer* deepFormer) {
+  const Bucket& bk = plan.buckets[b];
+  BucketRasterizer& r = ts.rasterizer(plan);
+  const Region rg{bk.x0 - plan.margin, bk.y0 - plan.margin, bk.x1 - bk.x0 + 2 * plan.margin, bk.y1 - bk.y0 + 2 * plan.margin};
+  const auto t0 = Clock::now();
+  r.begin(rg.x0, rg.y0, rg.w, rg.h);
+  gatherParts(plan, r, rg, ts.parts);
+  const auto t1 = Clock::now();
+  const double fetch = rasterizeParts(plan, r, ts);
+  const auto t2 = Clock::now();
+  const ResolvedSamples& rs = r.resolve();
+  const auto t3 = Clock::now();
+  BucketFilter(plan, aovImageChannel, rg, rs, ts, img).run(bk);
+  // Deep output forms its samples from r.visitFragments() (resample/deep.h).
+  if (deepFormer) deepFormer->formBucket(r, b, bk.x0, bk.y0, bk.x1, bk.y1, rg.x0, rg.y0, rg.w, rg.h);
+  const auto t4 = Clock::now();
+
+  RenderStats& s = ts.stats;
+  s.setupSeconds += secondsBetween(t0, t1);
+  s.partsSeconds += fetch;
+  s.partsFetched += ts.parts.size();
+  s.rasterSeconds += secondsBetween(t1, t2) - fetch;
+  s.resolveSeconds += secondsBetween(t2, t3);
+  s.filterSeconds += secondsBetween(t3, t4);
+  s.raster.add(r.stats());
+  s.samples += uint64_t(bk.x1 - bk.x0) * uint64_t(bk.y1 - bk.y0) * uint64_t(plan.N);
+  ++s.buckets;
+}
+
+// ---------------------------------------------------------------------------------------------
+// Output: the figures and the image's record of how it was made.
+
+void addThreadStats(const tbb::enumerable_thread_specific<ThreadState>& threads, RenderStats& total) {
+  for (const auto& ts : threads) {
+    total.raster.add(ts.stats.raster);
+    total.buckets += ts.stats.buckets;
+    total.samples += ts.stats.samples;
+    total.setupSeconds += ts.stats.setupSeconds;
+    total.partsSeconds += ts.stats.partsSeconds;
+    total.partsFetched += ts.stats.partsFetched;
+    total.rasterSeconds += ts.stats.rasterSeconds;
+    total.resolveSeconds += ts.stats.resolveSeconds;
+    total.filterSeconds += ts.stats.filterSeconds;
+  }
+}
+
+using CacheCounts = std::map<const store::StoreReader*, store::CacheStats>;
+
+CacheCounts cacheCounts(const std::vector<Source>& sources) {
+  CacheCounts counts;
+  for (const Source& src : sources) counts.emplace(src.store.get(), src.store->cacheStats());
+  return counts;
+}
+
+/// Parts decoded and waited for since `before`: the store caches' misses and waits.
+void addCacheStats(const CacheCounts& before, RenderStats& stats) {
+  for (const auto& [store, was] : before) {
     const store::CacheStats now = store->cacheStats();
-    result.stats.partsDecoded += now.misses - before.misses;
-    result.stats.partsWaited += now.waits - before.waits;
+    stats.partsDecoded += now.misses - was.misses;
+    stats.partsWaited += now.waits - was.waits;
   }
+}
 
-  ImageProvenance& pv = result.provenance;
-  pv.worldToCamera = cam.worldToCamera;
-  pv.worldToNdc = cameraToNdc(view, W, H) * cam.worldToCamera;
-  pv.frame = spec.sources[0].frame;
-  pv.fpsNum = meta0.fps.num, pv.fpsDen = meta0.fps.den;
-  pv.shutterOpen = shutter.earliest(), pv.shutterClose = shutter.latest();
+std::string describeShutter(const ShutterModel& shutter) {
   std::ostringstream sh;
   sh.precision(9);
   for (size_t g = 0; g < shutter.groups().size(); ++g) {
@@ -472,7 +580,48 @@ RenderResult render(const RenderSpec& spec) {
   }
   if (shutter.rolling().duration != 0)
     sh << "; rolling " << shutter.rolling().duration << " frames " << (shutter.rolling().upward ? "upward" : "downward");
-  pv.shutter = sh.str();
+  return sh.str();
+}
+
+ImageProvenance provenanceOf(const Plan& plan) {
+  ImageProvenance pv;
+  pv.worldToCamera = plan.cam.worldToCamera;
+  pv.worldToNdc = cameraToNdc(plan.view, plan.win.W, plan.win.H) * plan.cam.worldToCamera;
+  pv.frame = plan.spec.sources[0].frame;
+  pv.fpsNum = plan.meta0.fps.num, pv.fpsDen = plan.meta0.fps.den;
+  pv.shutterOpen = plan.shutter.earliest(), pv.shutterClose = plan.shutter.latest();
+  pv.shutter = describeShutter(plan.shutter);
+  return pv;
+}
+
+}  // namespace
+
+RenderResult render(const RenderSpec& spec) {
+  const auto wallStart = Clock::now();
+  const Window window = validateSpec(spec);
+  const ShutterModel shutter = shutterOverRows(spec.shutter, window.H);
+  checkCoverage(spec.sources, shutter);
+  const Plan plan(spec, window, shutter);
+
+  RenderResult result;
+  const std::vector<std::vector<int>> aovImageChannel = setUpImage(plan, result.image);
+  const std::unique_ptr<DeepFormer> deepFormer = spec.deep ? setUpDeep(plan, result.deep) : nullptr;
+
+  tbb::enumerable_thread_specific<ThreadState> threads;
+  Progress progress("resample", plan.buckets.size());
+  const CacheCounts cacheBefore = cacheCounts(spec.sources);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, plan.buckets.size(), 1), [&](const tbb::blocked_range<size_t>& range) {
+    for (size_t b = range.begin(); b != range.end(); ++b) {
+      renderBucket(plan, aovImageChannel, b, threads.local(), result.image, deepFormer.get());
+      if (spec.progress) progress.advance();
+    }
+  });
+  progress.finish();
+
+  addThreadStats(threads, result.stats);
+  result.stats.wallSeconds = secondsBetween(wallStart, Clock::now());
+  addCacheStats(cacheBefore, result.stats);
+  result.provenance = provenanceOf(plan);
   return result;
 }
 

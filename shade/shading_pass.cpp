@@ -1,10 +1,14 @@
-// The single shading pass: split → dice → shade → stream, in parallel, in scene order.
+// The single shading pass: split every primitive into leaves (splitScene), dice and shade
+// batches of leaves in parallel (shadeBatch), and hand the grids to the sink in scene order
+// (GridSender, the pipeline's last stage). shade/shading_pass.h says what it promises.
 #include "shade/shading_pass.h"
 
 #include <algorithm>
+#include <array>
 #include <chrono>
 #include <cmath>
 #include <memory>
+#include <span>
 
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_pipeline.h>
@@ -105,155 +109,223 @@ store::StoreMeta storeMeta(const FrameScene& scene, const ShadeOptions& o) {
   return m;
 }
 
+namespace {
+
+// ---------------------------------------------------------------------------------------------
+// 1. Split: knots and leaves per primitive, then every leaf in scene order.
+
+struct SplitScene {
+  std::vector<std::vector<double>> knots;  // per primitive: its knots inside the interval
+  std::vector<std::vector<Leaf>> leaves;   // per primitive, in dicing order
+  std::vector<std::pair<uint32_t, const Leaf*>> flat;  // (primitive, leaf): primitive order, then dicing order
+};
+
+/// Splits every primitive (in parallel; each primitive's list in dicing order) and counts culled
+/// pieces and eye splits into `stats`.
+SplitScene splitScene(const FrameScene& scene, const Interval& iv, const store::Camera& cam, const DiceOptions& dice, ShadeStats& stats) {
+  const size_t nPrims = scene.prims.size();
+  SplitScene split;
+  split.knots.resize(nPrims), split.leaves.resize(nPrims);
+  std::vector<DiceStats> diceStats(nPrims);
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, nPrims, 1), [&](const tbb::blocked_range<size_t>& r) {
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      split.knots[i] = clipKnots(scene.prims[i], iv.open, iv.close);
+      splitPrimitive(scene.prims[i], split.knots[i], cam, dice, split.leaves[i], diceStats[i]);
+    }
+  });
+  for (size_t i = 0; i < nPrims; ++i) {
+    stats.culledPieces += diceStats[i].culledPieces;
+    stats.eyeSplits += diceStats[i].eyeSplits;
+    for (const Leaf& l : split.leaves[i]) split.flat.emplace_back(uint32_t(i), &l);
+  }
+  return split;
+}
+
+// ---------------------------------------------------------------------------------------------
+// 2. Dice and shade, a batch of leaves at a time (in parallel).
+
+/// What shading any leaf needs, fixed for the frame.
+struct ShadeContext {
+  const FrameScene& scene;
+  const SplitScene& split;
+  const store::Schema& schema;
+  std::vector<Var> vars;       // what each schema attribute holds
+  std::vector<LitLight> lit;   // every light, resolved once at the shading time
+  double shadeAt;
+  double nearClip;
+  bool perspective;
+};
+
+/// Vertex i's output variables into `attrs` (parallel to the schema).
+void storeOutputs(const std::vector<Var>& vars, const DicedGrid& g, size_t i, const SurfaceInput& in, const SurfaceOutput& so,
+                  std::vector<std::vector<float>>& attrs) {
+  for (size_t ai = 0; ai < vars.size(); ++ai) {
+    auto& dst = attrs[ai];
+    switch (vars[ai]) {
+      case Var::Ci: put3(dst, i, finite(so.Ci)); break;
+      case Var::Oi: put3(dst, i, finite(so.Oi)); break;
+      case Var::P: put3(dst, i, g.P[i]); break;
+      case Var::N: put3(dst, i, g.N[i]); break;
+      case Var::Ng: put3(dst, i, g.Ng[i]); break;
+      case Var::s: dst[i] = float(g.s[i]); break;
+      case Var::t: dst[i] = float(g.t[i]); break;
+      case Var::u: dst[i] = float(g.u[i]); break;
+      case Var::v: dst[i] = float(g.v[i]); break;
+      case Var::Cs: put3(dst, i, in.Cs); break;
+      case Var::Os: put3(dst, i, in.Os); break;
+      case Var::depth: dst[i] = float(g.P[i].z); break;
+      case Var::specular: put3(dst, i, finite(so.viewDependent)); break;
+    }
+  }
+}
+
+/// Shades every vertex of the diced grid `g` of primitive `p` into `out.attrs`.
+void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g, std::span<const LitLight> lights, GridOut& out) {
+  const Attributes& a = *p.attrs;
+  const SurfaceShader shader = a.surface.at(c.shadeAt);
+  const glm::dvec3 Cs0 = a.color.at(c.shadeAt), Os0 = a.opacity.at(c.shadeAt);
+  std::array<glm::dvec3, 4> cornerCs, cornerOs;
+  const bool hasCs = p.mesh && p.corners(p.mesh->Cs, cornerCs);
+  const bool hasOs = p.mesh && p.corners(p.mesh->Os, cornerOs);
+  const size_t nV = g.numVertices;
+  out.attrs.resize(c.vars.size());
+  for (size_t ai = 0; ai < c.vars.size(); ++ai) out.attrs[ai].resize(nV * size_t(store::componentCount(c.schema.attrs[ai].type)));
+  for (size_t i = 0; i < nV; ++i) {
+    SurfaceInput in;
+    in.P = g.P[i], in.N = g.N[i], in.Ng = g.Ng[i];
+    in.I = c.perspective ? g.P[i] : glm::dvec3(0, 0, 1);
+    // Per-vertex colours are given over the primitive's own (u, v) square.
+    in.Cs = hasCs ? bilinear(cornerCs, g.u[i], g.v[i]) : Cs0;
+    in.Os = hasOs ? bilinear(cornerOs, g.u[i], g.v[i]) : Os0;
+    const SurfaceOutput so = shadeSurface(shader, in, lights);
+    storeOutputs(c.vars, g, i, in, so, out.attrs);
+  }
+}
+
+/// Dices and shades the batch's leaves into b.grids.
+void shadeBatch(const ShadeContext& c, Batch& b) {
+  DicedGrid g;
+  std::vector<LitLight> lights;
+  b.grids.resize(b.count);
+  for (size_t n = 0; n < b.count; ++n) {
+    const auto [pi, leaf] = c.split.flat[b.first + n];
+    const Primitive& p = c.scene.prims[pi];
+    diceLeaf(p, *leaf, c.split.knots[pi], c.shadeAt, c.nearClip, c.perspective, g);
+    b.dropped += g.droppedMicropolygons;
+    lights.clear();
+    for (uint32_t li : p.attrs->lights)
+      if (li < c.lit.size()) lights.push_back(c.lit[li]);
+    GridOut& out = b.grids[n];
+    out.prim = pi;
+    out.numVertices = g.numVertices;
+    out.positions = std::move(g.positions);
+    out.corners = std::move(g.corners);
+    shadeVertices(c, p, g, lights, out);
+    g = DicedGrid{};
+  }
+}
+
+// ---------------------------------------------------------------------------------------------
+// 3. Send: the grids to the sink, in scene order (the pipeline's last, serial stage).
+
+class GridSender {
+ public:
+  GridSender(const FrameScene& scene, const SplitScene& split, size_t numVars, store::GridSink& sink, ShadeStats& stats)
+      : scene_(scene), split_(split), sink_(sink), stats_(stats), values_(numVars) {}
+
+  void send(Batch& b) {
+    stats_.droppedMicropolygons += b.dropped;
+    for (GridOut& go : b.grids)
+      if (!go.corners.empty()) sendGrid(go);
+  }
+
+ private:
+  const FrameScene& scene_;
+  const SplitScene& split_;
+  store::GridSink& sink_;
+  ShadeStats& stats_;
+  uint32_t lastPrim_ = UINT32_MAX, schedule_ = 0;
+  uint32_t gridId_ = 0;
+  std::vector<store::AttrValues> values_;
+
+  void sendGrid(const GridOut& go) {
+    // A primitive's knots are registered once, at its first grid.
+    if (go.prim != lastPrim_) {
+      lastPrim_ = go.prim;
+      schedule_ = split_.knots[go.prim].size() > 1 ? sink_.addSchedule(split_.knots[go.prim]) : 0;
+    }
+    const Primitive& p = scene_.prims[go.prim];
+    store::GridInput in;
+    in.schedule = schedule_;
+    in.numVertices = go.numVertices;
+    in.positions = go.positions;
+    in.corners = go.corners;
+    in.objectId = p.attrs->objectId;
+    in.gridId = gridId_++;
+    in.flags = uint8_t((p.attrs->matte ? store::kMatte : 0) | (p.attrs->twoSided ? store::kTwoSided : 0));
+    for (size_t ai = 0; ai < values_.size(); ++ai) values_[ai] = store::AttrValues{go.attrs[ai], {}};
+    in.attrs = values_;
+    sink_.addGrid(in);
+    stats_.grids += 1;
+    stats_.micropolygons += in.numMicropolygons();
+    stats_.vertices += go.numVertices;
+    const bool moves = schedule_ != 0 && !in.standsStill();  // the writer stores a still grid static
+    stats_.movingGrids += moves;
+    stats_.movingMicropolygons += moves ? in.numMicropolygons() : 0;
+  }
+};
+
+/// Batches of leaves go through dice-and-shade in parallel and reach `sender` in order; the
+/// pipeline's token count bounds the grids in flight.
+void shadeAndSend(const ShadeContext& c, GridSender& sender, Progress& progress) {
+  constexpr size_t kBatch = 8;
+  const size_t numLeaves = c.split.flat.size();
+  size_t next = 0;
+  auto nextBatch = [&](tbb::flow_control& fc) -> BatchPtr {
+    if (next >= numLeaves) {
+      fc.stop();
+      return nullptr;
+    }
+    auto b = std::make_shared<Batch>();
+    b->first = next;
+    b->count = std::min(kBatch, numLeaves - next);
+    next += b->count;
+    return b;
+  };
+  auto shade = [&](BatchPtr b) {
+    shadeBatch(c, *b);
+    return b;
+  };
+  auto sendInOrder = [&](BatchPtr b) {
+    progress.advance(b->count);
+    sender.send(*b);
+  };
+  const size_t tokens = size_t(2 * tbb::this_task_arena::max_concurrency() + 2);
+  tbb::parallel_pipeline(tokens, tbb::make_filter<void, BatchPtr>(tbb::filter_mode::serial_in_order, nextBatch) &
+                                     tbb::make_filter<BatchPtr, BatchPtr>(tbb::filter_mode::parallel, shade) &
+                                     tbb::make_filter<BatchPtr, void>(tbb::filter_mode::serial_in_order, sendInOrder));
+}
+
+}  // namespace
+
 ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::GridSink& sink) {
   const auto start = std::chrono::steady_clock::now();
   const Interval iv = intervalOf(scene, o);
   const store::StoreMeta meta = storeMeta(scene, o);
   const store::Camera& cam = meta.cameras[0];
-  const bool perspective = cam.projection == store::Projection::Perspective;
-  const size_t nPrims = scene.prims.size();
   ShadeStats stats;
-  stats.primitives = nPrims;
+  stats.primitives = scene.prims.size();
   stats.shadeAt = iv.shadeAt;
 
-  // 1. Knots and leaves per primitive (parallel; each primitive's list in dicing order).
-  std::vector<std::vector<double>> knots(nPrims);
-  std::vector<std::vector<Leaf>> leaves(nPrims);
-  std::vector<DiceStats> diceStats(nPrims);
-  tbb::parallel_for(tbb::blocked_range<size_t>(0, nPrims, 1), [&](const tbb::blocked_range<size_t>& r) {
-    for (size_t i = r.begin(); i != r.end(); ++i) {
-      knots[i] = clipKnots(scene.prims[i], iv.open, iv.close);
-      splitPrimitive(scene.prims[i], knots[i], cam, o.dice, leaves[i], diceStats[i]);
-    }
-  });
-  std::vector<std::pair<uint32_t, const Leaf*>> flat;
-  for (size_t i = 0; i < nPrims; ++i) {
-    stats.culledPieces += diceStats[i].culledPieces;
-    stats.eyeSplits += diceStats[i].eyeSplits;
-    for (const Leaf& l : leaves[i]) flat.emplace_back(uint32_t(i), &l);
-  }
+  const SplitScene split = splitScene(scene, iv, cam, o.dice, stats);
+  ShadeContext context{scene, split, meta.schema, {}, {}, iv.shadeAt, cam.nearClip, cam.projection == store::Projection::Perspective};
+  context.lit.reserve(scene.lights.size());
+  for (const auto& l : scene.lights) context.lit.push_back(resolveLight(l, iv.shadeAt));
+  for (const auto& a : meta.schema.attrs) context.vars.push_back(varOf(a.name));
 
-  // Lights resolved once, at the shading time.
-  std::vector<LitLight> lit;
-  lit.reserve(scene.lights.size());
-  for (const auto& l : scene.lights) lit.push_back(resolveLight(l, iv.shadeAt));
-
-  std::vector<Var> vars;
-  for (const auto& a : meta.schema.attrs) vars.push_back(varOf(a.name));
-
-  auto shadeBatch = [&](Batch& b) {
-    DicedGrid g;
-    std::vector<LitLight> lights;
-    b.grids.resize(b.count);
-    for (size_t n = 0; n < b.count; ++n) {
-      const auto [pi, leaf] = flat[b.first + n];
-      const Primitive& p = scene.prims[pi];
-      const Attributes& a = *p.attrs;
-      diceLeaf(p, *leaf, knots[pi], iv.shadeAt, cam.nearClip, perspective, g);
-      b.dropped += g.droppedMicropolygons;
-      lights.clear();
-      for (uint32_t li : a.lights)
-        if (li < lit.size()) lights.push_back(lit[li]);
-      const SurfaceShader shader = a.surface.at(iv.shadeAt);
-      const glm::dvec3 Cs0 = a.color.at(iv.shadeAt), Os0 = a.opacity.at(iv.shadeAt);
-      std::array<glm::dvec3, 4> cornerCs, cornerOs;
-      const bool hasCs = p.mesh && p.corners(p.mesh->Cs, cornerCs);
-      const bool hasOs = p.mesh && p.corners(p.mesh->Os, cornerOs);
-      const size_t nV = g.numVertices;
-      GridOut& out = b.grids[n];
-      out.prim = pi;
-      out.numVertices = g.numVertices;
-      out.positions = std::move(g.positions);
-      out.corners = std::move(g.corners);
-      out.attrs.resize(vars.size());
-      for (size_t ai = 0; ai < vars.size(); ++ai) out.attrs[ai].resize(nV * size_t(store::componentCount(meta.schema.attrs[ai].type)));
-      for (size_t i = 0; i < nV; ++i) {
-        SurfaceInput in;
-        in.P = g.P[i], in.N = g.N[i], in.Ng = g.Ng[i];
-        in.I = perspective ? g.P[i] : glm::dvec3(0, 0, 1);
-        // Per-vertex colours are given over the primitive's own (u, v) square.
-        in.Cs = hasCs ? bilinear(cornerCs, g.u[i], g.v[i]) : Cs0;
-        in.Os = hasOs ? bilinear(cornerOs, g.u[i], g.v[i]) : Os0;
-        const SurfaceOutput so = shadeSurface(shader, in, lights);
-        for (size_t ai = 0; ai < vars.size(); ++ai) {
-          auto& dst = out.attrs[ai];
-          switch (vars[ai]) {
-            case Var::Ci: put3(dst, i, finite(so.Ci)); break;
-            case Var::Oi: put3(dst, i, finite(so.Oi)); break;
-            case Var::P: put3(dst, i, g.P[i]); break;
-            case Var::N: put3(dst, i, g.N[i]); break;
-            case Var::Ng: put3(dst, i, g.Ng[i]); break;
-            case Var::s: dst[i] = float(g.s[i]); break;
-            case Var::t: dst[i] = float(g.t[i]); break;
-            case Var::u: dst[i] = float(g.u[i]); break;
-            case Var::v: dst[i] = float(g.v[i]); break;
-            case Var::Cs: put3(dst, i, in.Cs); break;
-            case Var::Os: put3(dst, i, in.Os); break;
-            case Var::depth: dst[i] = float(g.P[i].z); break;
-            case Var::specular: put3(dst, i, finite(so.viewDependent)); break;
-          }
-        }
-      }
-      g = DicedGrid{};
-    }
-  };
-
-  // 2. Dice and shade in parallel; hand grids to the sink in order.
-  constexpr size_t kBatch = 8;
-  size_t next = 0;
-  uint32_t lastPrim = UINT32_MAX, schedule = 0;
-  uint32_t gridId = 0;
-  std::vector<store::AttrValues> values(vars.size());
-  const size_t tokens = size_t(2 * tbb::this_task_arena::max_concurrency() + 2);
-  Progress progress(cat("shading ", scene.source.empty() ? "frame" : scene.source), flat.size());
-  tbb::parallel_pipeline(
-      tokens,
-      tbb::make_filter<void, BatchPtr>(tbb::filter_mode::serial_in_order,
-                                     [&](tbb::flow_control& fc) -> BatchPtr {
-                                       if (next >= flat.size()) {
-                                         fc.stop();
-                                         return nullptr;
-                                       }
-                                       auto b = std::make_shared<Batch>();
-                                       b->first = next;
-                                       b->count = std::min(kBatch, flat.size() - next);
-                                       next += b->count;
-                                       return b;
-                                     }) &
-          tbb::make_filter<BatchPtr, BatchPtr>(tbb::filter_mode::parallel,
-                                           [&](BatchPtr b) {
-                                             shadeBatch(*b);
-                                             return b;
-                                           }) &
-          tbb::make_filter<BatchPtr, void>(tbb::filter_mode::serial_in_order, [&](BatchPtr b) {
-            stats.droppedMicropolygons += b->dropped;
-            progress.advance(b->count);
-            for (GridOut& go : b->grids) {
-              if (go.corners.empty()) continue;
-              if (go.prim != lastPrim) {
-                lastPrim = go.prim;
-                schedule = knots[go.prim].size() > 1 ? sink.addSchedule(knots[go.prim]) : 0;
-              }
-              const Primitive& p = scene.prims[go.prim];
-              store::GridInput in;
-              in.schedule = schedule;
-              in.numVertices = go.numVertices;
-              in.positions = go.positions;
-              in.corners = go.corners;
-              in.objectId = p.attrs->objectId;
-              in.gridId = gridId++;
-              in.flags = uint8_t((p.attrs->matte ? store::kMatte : 0) | (p.attrs->twoSided ? store::kTwoSided : 0));
-              for (size_t ai = 0; ai < vars.size(); ++ai) values[ai] = store::AttrValues{go.attrs[ai], {}};
-              in.attrs = values;
-              sink.addGrid(in);
-              stats.grids += 1;
-              stats.micropolygons += in.numMicropolygons();
-              stats.vertices += go.numVertices;
-              const bool moves = schedule != 0 && !in.standsStill();  // the writer stores a still grid static
-              stats.movingGrids += moves;
-              stats.movingMicropolygons += moves ? in.numMicropolygons() : 0;
-            }
-          }));
+  GridSender sender(scene, split, context.vars.size(), sink, stats);
+  Progress progress(cat("shading ", scene.source.empty() ? "frame" : scene.source), split.flat.size());
+  shadeAndSend(context, sender, progress);
   progress.finish();
   stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return stats;

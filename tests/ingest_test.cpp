@@ -10,9 +10,9 @@
 
 #include <gtest/gtest.h>
 
-#include "bench/dump_rib.h"
 #include "common/error.h"
 #include "common/log.h"
+#include "shade/dump_writer.h"
 #include "shade/ingest.h"
 #include "store/reader.h"
 #include "store/synthetic.h"
@@ -100,11 +100,11 @@ std::string ingestError(const std::string& rib) {
   return {};
 }
 
-// A synthetic scene written as a reference-form dump (bench::DumpRibWriter, gzipped) at path;
+// A synthetic scene written as a reference-form dump (shade::DumpRibWriter, gzipped) at path;
 // returns the grids as generated, the truth to compare an ingest with.
 Capture dumpSynthetic(const SyntheticOptions& so, const std::string& path) {
   Capture truth;
-  bench::DumpRibWriter dump(path, syntheticMeta(so), true);
+  shade::DumpRibWriter dump(path, syntheticMeta(so), true);
   truth.next = &dump;
   generateSynthetic(so, truth);
   dump.close();
@@ -128,7 +128,7 @@ double area2d(const std::vector<glm::vec3>& p, const std::vector<uint32_t>& ring
 }  // namespace
 
 TEST(IngestTest, ReferenceWorkflowDumpRoundTripsExactly) {
-  // Grids written by bench::DumpRibWriter in the reference form (PointsPolygons, "Cs", "Os",
+  // Grids written by shade::DumpRibWriter in the reference form (PointsPolygons, "Cs", "Os",
   // "blurP", CoordSysTransform "camera", gzipped), ingested, and read back from the store.
   test::ScratchDir dir;
   SyntheticOptions so;
