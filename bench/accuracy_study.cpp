@@ -106,8 +106,8 @@ struct Point {
 std::vector<Point> gPoints;
 
 /// Renders `specFor(seed)` for `seeds` seeds; time = best render; errors against `ref`.
-Point measure(const std::string& study, const std::string& curve, double knob, const std::function<RenderSpec(uint64_t)>& specFor,
-              const Img& ref, int seeds, double extraSeconds = 0) {
+Point measure(const std::string& study, const std::string& curve, double knob, const std::function<RenderSpec(uint64_t)>& specFor, const Img& ref, int seeds,
+              double extraSeconds = 0) {
   Point p;
   p.study = study, p.curve = curve, p.knob = knob;
   std::vector<Img> imgs;
@@ -146,8 +146,8 @@ Point measure(const std::string& study, const std::string& curve, double knob, c
     p.noise = std::sqrt(var);
     p.bias = std::sqrt(std::max(0.0, meanErr * meanErr - var / seeds));
   }
-  std::fprintf(stderr, "  %-14s %-34s knob %-8g spp %-4d %8.4f s  rmse %.3e  max %.3e  bias %.2e  noise %.2e\n", study.c_str(),
-               curve.c_str(), knob, p.spp, p.seconds, p.rmse, p.max, p.bias, p.noise);
+  std::fprintf(stderr, "  %-14s %-34s knob %-8g spp %-4d %8.4f s  rmse %.3e  max %.3e  bias %.2e  noise %.2e\n", study.c_str(), curve.c_str(), knob, p.spp,
+               p.seconds, p.rmse, p.max, p.bias, p.noise);
   gPoints.push_back(p);
   return p;
 }
@@ -203,18 +203,17 @@ void plot(const std::string& outDir, const std::string& study, const std::string
      << "set ylabel '" << yLabel << "'\n"
      << "plot ";
   for (size_t i = 0; i < curves.size(); ++i)
-    gp << "'" << outDir << "/" << study << ".dat' index " << i << " using 1:2 with linespoints pt " << (i % 12) + 1 << " title \"" << curves[i]
-       << "\", ";
-  gp << "'" << outDir << "/" << study << ".dat' index " << curves.size()
-     << " using 1:2 with lines lw 3 lc rgb '#80808080' dt 2 title 'Pareto front', '' index " << curves.size()
-     << " using 1:2 with points pt 6 ps 2 lc rgb 'black' notitle\n";
+    gp << "'" << outDir << "/" << study << ".dat' index " << i << " using 1:2 with linespoints pt " << (i % 12) + 1 << " title \"" << curves[i] << "\", ";
+  gp << "'" << outDir << "/" << study << ".dat' index " << curves.size() << " using 1:2 with lines lw 3 lc rgb '#80808080' dt 2 title 'Pareto front', '' index "
+     << curves.size() << " using 1:2 with points pt 6 ps 2 lc rgb 'black' notitle\n";
 }
 
 /// Every point of a study; `knobName` empty (or "spp", already a column) leaves the knob out.
 void table(const std::string& study, const std::string& knobName, bool withBytes = false, const std::string& bytesName = "bytes") {
   const bool knob = !knobName.empty() && knobName != "spp";
-  gTables << "| curve |" << (knob ? " " + knobName + " |" : "") << " spp | seconds | RMSE | max | luminance RMSE | bias | noise |" << (withBytes ? " " + bytesName + " |" : "")
-          << " Pareto |\n|---|" << (knob ? "---|" : "") << "---|---|---|---|---|---|---|" << (withBytes ? "---|" : "") << "---|\n";
+  gTables << "| curve |" << (knob ? " " + knobName + " |" : "") << " spp | seconds | RMSE | max | luminance RMSE | bias | noise |"
+          << (withBytes ? " " + bytesName + " |" : "") << " Pareto |\n|---|" << (knob ? "---|" : "") << "---|---|---|---|---|---|---|"
+          << (withBytes ? "---|" : "") << "---|\n";
   for (const Point& p : gPoints) {
     if (p.study != study) continue;
     gTables << "| " << p.curve << " |" << (knob ? " " + fmt(p.knob) + " |" : "") << " " << p.spp << " | " << fmt(p.seconds, "%.4f") << " | "
@@ -231,8 +230,8 @@ void strategyTable(const std::string& study) {
   for (const Point& a : gPoints)
     for (const Point& b : gPoints)
       if (a.study == study && b.study == study && a.spp == b.spp && a.curve[0] == 'p' && b.curve[0] == 'o')
-        gTables << "| " << a.spp << " | " << fmt(a.seconds, "%.4f") << " | " << fmt(b.seconds, "%.4f") << " | " << fmt(b.seconds / a.seconds, "%.2f")
-                << " | " << fmt(a.rmse, "%.2e") << " |\n";
+        gTables << "| " << a.spp << " | " << fmt(a.seconds, "%.4f") << " | " << fmt(b.seconds, "%.4f") << " | " << fmt(b.seconds / a.seconds, "%.2f") << " | "
+                << fmt(a.rmse, "%.2e") << " |\n";
   gTables << "\n";
 }
 
@@ -292,15 +291,14 @@ glm::dvec3 colourOf(int i) {
 /// (when given) the brute-force coverage of the exact motion with `exactAt` (defaults to the
 /// stored path).
 struct MotionScene {
-  std::function<Poly(int, double)> corners;              // raster corners of the exact motion
+  std::function<Poly(int, double)> corners;  // raster corners of the exact motion
   std::function<double(int, double)> depth = [](int, double) { return 5.0; };
   /// Camera-space corners at t when the exact motion is camera-linear between its ends (motion in
   /// depth); empty: unproject the raster corners at depth(t).
   std::function<std::array<glm::dvec3, 4>(const TestScene&, int, double)> camCorners;
 };
 
-std::shared_ptr<const store::StoreReader> writeMotion(const MotionScene& ms, int knots, const std::string& name,
-                                                     std::vector<store::AttrCodec> codecs = {}) {
+std::shared_ptr<const store::StoreReader> writeMotion(const MotionScene& ms, int knots, const std::string& name, std::vector<store::AttrCodec> codecs = {}) {
   std::vector<double> times;
   for (int k = 0; k < knots; ++k) times.push_back(knots == 1 ? 0.0 : double(k) / (knots - 1));
   TestScene s = test::makeScene(kW, kH, times);
@@ -326,7 +324,9 @@ std::shared_ptr<const store::StoreReader> writeMotion(const MotionScene& ms, int
 Img bruteReference(const std::function<Poly(int, double)>& corners) {
   Img ref;
   ref.resize(kW, kH);
-  for (int cell = 0; cell < 12; ++cell) addSwept(ref, [&](double t) { return corners(cell, t); }, colourOf(cell), gQuick ? 512 : 2048);
+  for (int cell = 0; cell < 12; ++cell)
+    addSwept(
+        ref, [&](double t) { return corners(cell, t); }, colourOf(cell), gQuick ? 512 : 2048);
   return ref;
 }
 
@@ -349,13 +349,14 @@ void sweepTimeBounds(const std::string& study, std::shared_ptr<const store::Stor
   for (bool per : {true, false})
     for (int n : sppSides({1, 2, 4, 8, 16}))
       if (per || n <= oneBoundMaxSide)
-        measure(study, per ? "per-stratum time bounds" : "one bound over the shutter", n * n,
-                [&](uint64_t seed) {
-                  RenderSpec spec = specOf(store, n, seed);
-                  spec.raster.perStratumBounds = per;
-                  return spec;
-                },
-                ref, seeds);
+        measure(
+            study, per ? "per-stratum time bounds" : "one bound over the shutter", n * n,
+            [&](uint64_t seed) {
+              RenderSpec spec = specOf(store, n, seed);
+              spec.raster.perStratumBounds = per;
+              return spec;
+            },
+            ref, seeds);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -392,8 +393,8 @@ void studySpp(const std::string& out) {
   }
   sweepTimeBounds("spp", store, ref, 3, 16);
   plot(out, "spp", "Samples per pixel and time-bound strategy (moving squares, analytic reference)");
-  gTables << "### Samples per pixel and time-bound strategy\n\nScene: 12 opaque squares (14–26 px) moving 10–30 px over the shutter, " << kW << "×"
-          << kH << ", box filter 1×1; reference: `analyticCoverage` (exact). 3 seeds per point.\n\n";
+  gTables << "### Samples per pixel and time-bound strategy\n\nScene: 12 opaque squares (14–26 px) moving 10–30 px over the shutter, " << kW << "×" << kH
+          << ", box filter 1×1; reference: `analyticCoverage` (exact). 3 seeds per point.\n\n";
   table("spp", "spp");
   strategyTable("spp");
 }
@@ -453,9 +454,11 @@ void studyKnots(const std::string& out, bool rotate) {
   for (int M : {2, 3, 5, 9}) {
     auto store = writeMotion(ms, M, study + std::to_string(M));
     for (int n : sppSides({2, 4, 8, 16}))
-      measure(study, "M = " + std::to_string(M) + " knots", M, [&](uint64_t seed) { return specOf(store, n, seed); }, ref, 2);
+      measure(
+          study, "M = " + std::to_string(M) + " knots", M, [&](uint64_t seed) { return specOf(store, n, seed); }, ref, 2);
   }
-  plot(out, study, rotate ? "Motion knots M, rotating squares (45-180 deg), exact reference" : "Motion knots M, accelerating squares (x = A t^2), exact reference");
+  plot(out, study,
+       rotate ? "Motion knots M, rotating squares (45-180 deg), exact reference" : "Motion knots M, accelerating squares (x = A t^2), exact reference");
   gTables << "### Motion knots, " << (rotate ? "rotation" : "acceleration") << "\n\nScene: 12 opaque "
           << (rotate ? "24 px squares turning 45°–180° about their centres" : "16 px squares starting at rest, x = x₀ + A·t², A = 10–40 px")
           << "; each store holds M evenly spaced knots of the exact motion (linear between them). Reference: exact pixel coverage of the true motion, "
@@ -476,7 +479,8 @@ void studyDepth(const std::string& out) {
     const double z = t == 0 ? z0 : z1;
     const glm::dvec3 centre = s0.cam(c.x + (t == 0 ? -12 : 12), c.y, z);
     const double h = 0.5 * (0.2 + 0.05 * (cell % 3));
-    return std::array<glm::dvec3, 4>{centre + glm::dvec3(-h, -h, 0), centre + glm::dvec3(h, -h, 0), centre + glm::dvec3(h, h, 0), centre + glm::dvec3(-h, h, 0)};
+    return std::array<glm::dvec3, 4>{centre + glm::dvec3(-h, -h, 0), centre + glm::dvec3(h, -h, 0), centre + glm::dvec3(h, h, 0),
+                                     centre + glm::dvec3(-h, h, 0)};
   };
   store::Projector proj(s0.meta.cameras[0]);
   auto camAt = [&](int cell, double t) {
@@ -507,9 +511,12 @@ void studyDepth(const std::string& out) {
   const Img ref = bruteReference(exact.corners);
   auto cam = writeMotion(exact, 2, "depth-camera");
   auto scr = writeMotion(screen, 33, "depth-screen");
-  for (int n : sppSides({2, 4, 8, 16})) measure("depth", "camera-space (reshutter, 2 knots)", 2, [&](uint64_t seed) { return specOf(cam, n, seed); }, ref, 2);
   for (int n : sppSides({2, 4, 8, 16}))
-    measure("depth", "screen-space (emulated, 33 knots)", 33, [&](uint64_t seed) { return specOf(scr, n, seed); }, ref, 2);
+    measure(
+        "depth", "camera-space (reshutter, 2 knots)", 2, [&](uint64_t seed) { return specOf(cam, n, seed); }, ref, 2);
+  for (int n : sppSides({2, 4, 8, 16}))
+    measure(
+        "depth", "screen-space (emulated, 33 knots)", 33, [&](uint64_t seed) { return specOf(scr, n, seed); }, ref, 2);
   plot(out, "depth", "Interpolation under motion in depth: camera space vs screen space");
   gTables << "### Camera-space vs screen-space interpolation (motion in depth)\n\nScene: 12 squares moving from z = 2.5 to 12 or back while sliding "
              "sideways, linear in camera space. reshutter's 2-knot store interpolates in camera space (exact); the screen-space store holds "
@@ -547,30 +554,28 @@ void studyCodecs(const std::string& out) {
     std::string name;
     std::vector<C> codecs;
   };
-  const std::vector<Cfg> cfgs = {{"lossless", {C::Lossless, C::Lossless, C::Lossless}},
-                                 {"Ci half", {C::Half, C::Lossless, C::Lossless}},
-                                 {"Ci unorm16", {C::Unorm16, C::Lossless, C::Lossless}},
-                                 {"Oi half", {C::Lossless, C::Half, C::Lossless}},
-                                 {"Oi unorm16", {C::Lossless, C::Unorm16, C::Lossless}},
-                                 {"Ci+Oi half, N oct32", {C::Half, C::Half, C::Oct32}},
+  const std::vector<Cfg> cfgs = {{"lossless", {C::Lossless, C::Lossless, C::Lossless}},         {"Ci half", {C::Half, C::Lossless, C::Lossless}},
+                                 {"Ci unorm16", {C::Unorm16, C::Lossless, C::Lossless}},        {"Oi half", {C::Lossless, C::Half, C::Lossless}},
+                                 {"Oi unorm16", {C::Lossless, C::Unorm16, C::Lossless}},        {"Ci+Oi half, N oct32", {C::Half, C::Half, C::Oct32}},
                                  {"Ci+Oi unorm16, N oct32", {C::Unorm16, C::Unorm16, C::Oct32}}};
   auto lossless = build(cfgs[0].codecs, "lossless");
   RenderSpec base = specOf(lossless, 4, 1);
   const Img ref = toImg(render(base));
   for (const Cfg& c : cfgs) {
     auto st = build(c.codecs, std::to_string(&c - cfgs.data()));
-    Point p = measure("codec", c.name, 0, [&](uint64_t) { return specOf(st, 4, 1); }, ref, 1);
+    Point p = measure(
+        "codec", c.name, 0, [&](uint64_t) { return specOf(st, 4, 1); }, ref, 1);
     gPoints.back().bytes = double(std::filesystem::file_size(st->path()));
     (void)p;
   }
   // Noise scale for comparison: the lossless store at another seed.
-  measure("codec-noise", "lossless, other seed", 0, [&](uint64_t) { return specOf(lossless, 4, 2); }, ref, 1);
+  measure(
+      "codec-noise", "lossless, other seed", 0, [&](uint64_t) { return specOf(lossless, 4, 2); }, ref, 1);
   plot(out, "codec", "Colour / opacity codecs: error vs store size (16 spp, same samples)", true, "RMSE vs lossless render");
   gTables << "### Colour and opacity codecs\n\nScene: two layers of 4 px micropolygons with colour gradients, the front one semi-transparent "
              "(coloured opacity), moving. Error: against the lossless store rendered with the same samples (16 spp, one seed), so it is the "
              "codec's alone. For scale, the same render at another seed differs by RMSE "
-          << fmt(gPoints.back().rmse, "%.2e")
-          << " (16-spp noise). Positions have no lossy codec (always float32), so there is no position-codec row.\n\n";
+          << fmt(gPoints.back().rmse, "%.2e") << " (16-spp noise). Positions have no lossy codec (always float32), so there is no position-codec row.\n\n";
   table("codec", "", true, "store bytes");
 }
 
@@ -593,11 +598,13 @@ void studyFilters(const std::string& out) {
       return s;
     };
     const Img ref = toImg(render(crop(specOf(store, refSide, 424242, f))));
-    for (int n : sppSides({1, 2, 4, 8})) measure("filter", f, n * n, [&](uint64_t seed) { return crop(specOf(store, n, seed, f)); }, ref, 2);
+    for (int n : sppSides({1, 2, 4, 8}))
+      measure(
+          "filter", f, n * n, [&](uint64_t seed) { return crop(specOf(store, n, seed, f)); }, ref, 2);
   }
   plot(out, "filter", "Pixel filters: error vs converged render with the same filter");
-  gTables << "### Pixel filters\n\nScene: rotating squares (90°, 9 knots), 128×128 crop. Reference per filter: the same filter at "
-          << refSide * refSide << " spp (its own noise is a floor for the 64-spp points). 2 seeds.\n\n";
+  gTables << "### Pixel filters\n\nScene: rotating squares (90°, 9 knots), 128×128 crop. Reference per filter: the same filter at " << refSide * refSide
+          << " spp (its own noise is a floor for the 64-spp points). 2 seeds.\n\n";
   table("filter", "spp");
 }
 
@@ -643,8 +650,14 @@ void studyFields(const std::string& out) {
   const int refSide = gQuick ? 8 : 24;
   const Img ref = toImg(render(demoSpec({sA, sB}, fields, refSide, 99)));
   for (int n : sppSides({1, 2, 4, 8})) {
-    measure("fields", "shade once, re-sample both fields", n * n, [&](uint64_t seed) { return demoSpec({sOnce}, fields, n, seed); }, ref, 3, tOnce);
-    measure("fields", "re-shade each field", n * n, [&](uint64_t seed) { return demoSpec({sA, sB}, fields, n, seed); }, ref, 3, tA + tB);
+    measure(
+        "fields", "shade once, re-sample both fields", n * n, [&](uint64_t seed) { return demoSpec({sOnce}, fields, n, seed); }, ref, 3, tOnce);
+    measure(
+        "fields", "re-shade each field", n * n,
+        [&](uint64_t seed) {
+          return demoSpec({sA, sB}, fields, n, seed);
+        },
+        ref, 3, tA + tB);
   }
   // The shading error alone: both at the reference's samples.
   const Img onceAtRefSamples = toImg(render(demoSpec({sOnce}, fields, refSide, 99)));
@@ -668,10 +681,11 @@ void studyFields(const std::string& out) {
           << refSide * refSide << " spp. Shading: once " << fmt(tOnce, "%.3f") << " s; per field " << fmt(tA, "%.3f") << " + " << fmt(tB, "%.3f")
           << " s. The error of shading once alone (same " << refSide * refSide << " samples as the reference): RMSE " << fmt(shadingErr.rmse, "%.2e")
           << ", max " << fmt(shadingErr.max, "%.2e") << ", luminance RMSE " << fmt(shadingErr.lum, "%.2e") << "; field 1 rows (shaded at 0.0 "
-          << "either way; a 2-px filter still reaches the neighbouring field-2 rows) RMSE " << fmt(fieldErr[0].rmse, "%.2e") << " / max " << fmt(fieldErr[0].max, "%.2e") << ", field 2 rows (shaded at 0.0 "
+          << "either way; a 2-px filter still reaches the neighbouring field-2 rows) RMSE " << fmt(fieldErr[0].rmse, "%.2e") << " / max "
+          << fmt(fieldErr[0].max, "%.2e") << ", field 2 rows (shaded at 0.0 "
           << "instead of 0.5) RMSE " << fmt(fieldErr[1].rmse, "%.2e") << " / max " << fmt(fieldErr[1].max, "%.2e") << ".\n\n";
-  std::fprintf(stderr, "  shading error: all %.3e, field 1 %.3e (max %.3e), field 2 %.3e (max %.3e)\n", shadingErr.rmse, fieldErr[0].rmse,
-               fieldErr[0].max, fieldErr[1].rmse, fieldErr[1].max);
+  std::fprintf(stderr, "  shading error: all %.3e, field 1 %.3e (max %.3e), field 2 %.3e (max %.3e)\n", shadingErr.rmse, fieldErr[0].rmse, fieldErr[0].max,
+               fieldErr[1].rmse, fieldErr[1].max);
   table("fields", "spp");
 }
 
@@ -692,7 +706,10 @@ void studyMotionFactor(const std::string& out) {
     if (mf == 0) ref = toImg(render(spec(1)));
     measure("motionfactor", "motion factor", mf, spec, ref, 1, ts);
     gPoints.back().bytes = double(mps);
-    if (mf == 0) noise = measure("motionfactor-noise", "noise", 0, [&](uint64_t) { return spec(2); }, ref, 1).rmse;
+    if (mf == 0)
+      noise = measure(
+                  "motionfactor-noise", "noise", 0, [&](uint64_t) { return spec(2); }, ref, 1)
+                  .rmse;
   }
   plot(out, "motionfactor", "Motion factor (demo): shading + 16-spp render time vs error");
   gTables << "### Motion factor\n\nScene: the demo at " << kDW << "×" << kDH
@@ -757,7 +774,8 @@ std::string headlines() {
     h << "- **Interlaced frame, shade once vs re-shade each field** (demo " << kDW << "×" << kDH << ", 16 spp): " << fmt(a->seconds, "%.2f")
       << " s from one shading pass vs " << fmt(b->seconds, "%.2f") << " s re-shading each field (" << fmt(100 * (1 - a->seconds / b->seconds), "%.0f")
       << " % less); the price is a shading-time bias of RMSE " << fmt(a->bias, "%.1e") << " (max " << fmt(a->max, "%.2f")
-      << ": the spinning cube and tumbling metal torus lit as at the frame's open, not each field's) against 16-spp noise of " << fmt(b->noise, "%.1e") << ".\n";
+      << ": the spinning cube and tumbling metal torus lit as at the frame's open, not each field's) against 16-spp noise of " << fmt(b->noise, "%.1e")
+      << ".\n";
   if (auto a = find("timebounds", "per-stratum", 64), b = find("timebounds", "one bound", 64); a && b)
     h << "- **Time bounds**: 1-px micropolygons moving 50 px at 64 spp render in " << fmt(a->seconds, "%.2f") << " s with per-stratum bounds vs "
       << fmt(b->seconds, "%.1f") << " s with one bound over the shutter (" << fmt(b->seconds / a->seconds, "%.0f") << "×), same error (RMSE "
@@ -853,8 +871,8 @@ int main(int argc, char** argv) {
   std::ofstream csv(out + "/study.csv");
   csv << "study,curve,knob,spp,seconds,rmse,max,lum_rmse,bias,noise,bytes,pareto\n";
   for (const Point& p : gPoints)
-    csv << p.study << ",\"" << p.curve << "\"," << p.knob << "," << p.spp << "," << p.seconds << "," << p.rmse << "," << p.max << "," << p.lum << ","
-        << p.bias << "," << p.noise << "," << p.bytes << "," << int(p.pareto) << "\n";
+    csv << p.study << ",\"" << p.curve << "\"," << p.knob << "," << p.spp << "," << p.seconds << "," << p.rmse << "," << p.max << "," << p.lum << "," << p.bias
+        << "," << p.noise << "," << p.bytes << "," << int(p.pareto) << "\n";
   std::ofstream(out + "/tables.md") << gTables.str();
   std::ofstream(out + "/headlines.md") << headlines();
   std::fprintf(stderr, "accuracy_study: %.1f s, %s\n", total.seconds(), bench::machineLine().c_str());

@@ -53,8 +53,8 @@ int main(int argc, char** argv) {
   }
   try {
     auto store = std::make_shared<const store::StoreReader>(path);
-    std::printf("# %s: %s, %llu micropolygons, filter %s, %d spp\n", path.c_str(), bench::machineLine().c_str(),
-                (unsigned long long)store->micropolygonCount(), filter.c_str(), spp);
+    std::printf("# %s: %s, %llu micropolygons, filter %s, %d spp\n", path.c_str(), bench::machineLine().c_str(), (unsigned long long)store->micropolygonCount(),
+                filter.c_str(), spp);
 
     bench::Stopwatch sw;
     const RenderResult flat = run(store, filter, spp, false, 0.01f);
@@ -69,8 +69,7 @@ int main(int argc, char** argv) {
     writeExr(flatPath, flat.image, flat.provenance);
     const double flatWrite = sw.seconds();
     const double flatBytes = double(std::filesystem::file_size(flatPath));
-    std::printf("render: flat %.2f s, flat + deep %.2f s (deep formation +%.0f %%)\n", flatRender, deepRender,
-                100.0 * (deepRender - flatRender) / flatRender);
+    std::printf("render: flat %.2f s, flat + deep %.2f s (deep formation +%.0f %%)\n", flatRender, deepRender, 100.0 * (deepRender - flatRender) / flatRender);
     std::printf("| output | samples/pixel | bytes/pixel | file MB | write s |\n|---|---|---|---|---|\n");
     std::printf("| flat EXR (zip, R G B A Z float) | 1 | %.1f | %.1f | %.2f |\n", flatBytes / pixels, flatBytes / 1e6, flatWrite);
     for (auto [name, comp] : {std::pair{"zips", DeepCompression::Zips}, {"rle", DeepCompression::Rle}, {"none", DeepCompression::None}}) {

@@ -62,9 +62,13 @@ int main(int argc, char** argv) {
       Imf::Compression compression;
       int zipLevel;
     };
-    const Codec codecs[] = {{"none", Imf::NO_COMPRESSION, 4},  {"rle", Imf::RLE_COMPRESSION, 4},        {"zips", Imf::ZIPS_COMPRESSION, 4},
-                            {"zip, level 1", Imf::ZIP_COMPRESSION, 1}, {"zip, level 4 (OpenEXR's)", Imf::ZIP_COMPRESSION, 4},
-                            {"zip, level 6", Imf::ZIP_COMPRESSION, 6}, {"piz", Imf::PIZ_COMPRESSION, 4},
+    const Codec codecs[] = {{"none", Imf::NO_COMPRESSION, 4},
+                            {"rle", Imf::RLE_COMPRESSION, 4},
+                            {"zips", Imf::ZIPS_COMPRESSION, 4},
+                            {"zip, level 1", Imf::ZIP_COMPRESSION, 1},
+                            {"zip, level 4 (OpenEXR's)", Imf::ZIP_COMPRESSION, 4},
+                            {"zip, level 6", Imf::ZIP_COMPRESSION, 6},
+                            {"piz", Imf::PIZ_COMPRESSION, 4},
                             {"pxr24 (lossy for float)", Imf::PXR24_COMPRESSION, 4}};
     std::printf("%s\n%s, one thread, best of 3\n\n", reshutter::bench::machineLine().c_str(), input.c_str());
     std::printf("| compression | MB | write s | read s |\n|---|---|---|---|\n");

@@ -105,8 +105,8 @@ int main(int argc, char** argv) {
     const double total = st.scanSeconds + st.ingestSeconds;
     std::printf("ingest gz, %d thread%s: %5.2f M mp/s wall, %5.2f M mp/s per CPU-second (%d pass%s), store %.1f MB = %.1f B/mp, RIB.gz / store = %.2f\n",
                 threads, threads > 1 ? "s" : " ", double(st.micropolygons) / 1e6 / total, double(st.micropolygons) / 1e6 / cpu, st.passes,
-                st.passes > 1 ? "es" : "",
-                double(st.write.fileBytes) / 1e6, double(st.write.fileBytes) / double(st.micropolygons), gzMB * 1e6 / double(st.write.fileBytes));
+                st.passes > 1 ? "es" : "", double(st.write.fileBytes) / 1e6, double(st.write.fileBytes) / double(st.micropolygons),
+                gzMB * 1e6 / double(st.write.fileBytes));
   }
   std::printf("peak RSS after ingest (writer budget 64 MB): %.0f MB\n", double(bench::peakRssBytes()) / 1e6);
 

@@ -5,13 +5,13 @@
 // Usage: shade_bench [--quick] [--dir DIR]      (one line of results per configuration)
 //        shade_bench --motion-factors DIR          (demo stores for motion factor 0, 0.5, 1, 2, 4 in DIR,
 //                                                   for the accuracy study in bench/RESULTS.md)
+#include <sys/resource.h>
 #include <cinttypes>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <string>
 #include <thread>
-#include <sys/resource.h>
 
 #include <tbb/global_control.h>
 
@@ -60,10 +60,10 @@ void run(const char* label, int w, int h, double rateScale, int threads, const s
   }
   const double s = sw.seconds(), cpu = cpuSeconds() - cpu0;
   const double mps = double(st.micropolygons) / s;
-  std::printf("%-6s %4dx%-4d rate x%-3g %2d thr %9" PRIu64 " mp (%" PRIu64 " moving) %6" PRIu64 " grids %7.3f s wall %7.3f s cpu  %5.2f M mp/s  %5.2f M mp/s per cpu-s  %s  scene %.3f s  peak RSS %.0f MB\n",
+  std::printf("%-6s %4dx%-4d rate x%-3g %2d thr %9" PRIu64 " mp (%" PRIu64 " moving) %6" PRIu64
+              " grids %7.3f s wall %7.3f s cpu  %5.2f M mp/s  %5.2f M mp/s per cpu-s  %s  scene %.3f s  peak RSS %.0f MB\n",
               label, w, h, rateScale, threads, st.micropolygons, st.movingMicropolygons, st.grids, s, cpu, mps / 1e6, double(st.micropolygons) / cpu / 1e6,
-              storePath.empty() ? "null sink" : (std::to_string(bytes / 1000000) + " MB store").c_str(), buildSeconds,
-              bench::peakRssBytes() / 1e6);
+              storePath.empty() ? "null sink" : (std::to_string(bytes / 1000000) + " MB store").c_str(), buildSeconds, bench::peakRssBytes() / 1e6);
   std::fflush(stdout);
 }
 

@@ -5,13 +5,13 @@
 //   micropolygons as a gzipped ASCII RIB dump (size and write time; bench/rib_bench.cpp measures parsing it).
 // Usage: store_bench [--mp N] [--texture T] [--dir DIR] [--rib]    (one line of results per run)
 //        store_bench stream FILE                                   (child: streaming pass)
+#include <sys/wait.h>
+#include <unistd.h>
 #include <cinttypes>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <string>
-#include <sys/wait.h>
-#include <unistd.h>
 
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
@@ -129,7 +129,9 @@ int main(int argc, char** argv) {
 
   std::printf("machine: %s\n", bench::machineLine().c_str());
   std::printf("micropolygons %.0f, texture %.2f, file %.1f MB\n", n, opt.texture, ws.fileBytes / 1e6);
-  std::printf("| micropolygons | bytes/mp | write M mp/s (1 core) | write M mp/s (all cores) | decode M mp/s (1 core) | decode M mp/s (all cores) | stream peak RSS MB | first tile ms |\n");
+  std::printf(
+      "| micropolygons | bytes/mp | write M mp/s (1 core) | write M mp/s (all cores) | decode M mp/s (1 core) | decode M mp/s (all cores) | stream peak RSS MB "
+      "| first tile ms |\n");
   std::printf("| %.0f | %.2f | %.2f | %.2f | %.2f | %.2f | %.1f | %.2f |\n", n, ws.fileBytes / n, n / write1 / 1e6, n / write2 / 1e6, n / decode1 / 1e6,
               n / decode2 / 1e6, streamPeakMb, firstTileMs);
 

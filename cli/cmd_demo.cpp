@@ -21,8 +21,7 @@ struct DemoCommand {
   std::vector<int> res{shade::kDemoWidth, shade::kDemoHeight};
 
   int run() const {
-    if (res.size() != 2 || res[0] <= 0 || res[1] <= 0 || res[0] > 16384 || res[1] > 16384)
-      fail("--res", "expected a width and a height, e.g. --res 1920 1080");
+    if (res.size() != 2 || res[0] <= 0 || res[1] <= 0 || res[0] > 16384 || res[1] > 16384) fail("--res", "expected a width and a height, e.g. --res 1920 1080");
     std::error_code ec;
     std::filesystem::create_directories(outDir, ec);
     if (ec) fail(outDir, "cannot create the output directory: ", ec.message());
@@ -33,9 +32,9 @@ struct DemoCommand {
 
     std::printf("reshutter demo (%dx%d)\n", res[0], res[1]);
     std::printf("  store     %s\n", storePath.c_str());
-    std::printf("            %s micropolygons in %s grids (%s moving), %s (%.1f bytes/micropolygon)\n",
-                grouped(r.shade.micropolygons).c_str(), grouped(r.shade.grids).c_str(), grouped(r.shade.movingGrids).c_str(),
-                humanBytes(double(r.write.fileBytes)).c_str(), r.shade.micropolygons ? double(r.write.fileBytes) / double(r.shade.micropolygons) : 0.0);
+    std::printf("            %s micropolygons in %s grids (%s moving), %s (%.1f bytes/micropolygon)\n", grouped(r.shade.micropolygons).c_str(),
+                grouped(r.shade.grids).c_str(), grouped(r.shade.movingGrids).c_str(), humanBytes(double(r.write.fileBytes)).c_str(),
+                r.shade.micropolygons ? double(r.write.fileBytes) / double(r.shade.micropolygons) : 0.0);
     std::printf("  shading   %.2f s (shaded once at t=%g, every motion knot kept)\n", r.shade.seconds, r.shade.shadeAt);
 
     // Re-sample the one shading pass: no shading from here on.
@@ -56,13 +55,13 @@ struct DemoCommand {
       o.writeOutputs(result, outDir + "/" + name + ".exr", meta.frame);
       return result.stats.wallSeconds;
     };
-    const double progressive = renderWith(resample::ShutterModel::progressive(F + meta.shutterOpen, F + meta.shutterClose), "gaussian:2x2",
-                                          "progressive", true);
+    const double progressive =
+        renderWith(resample::ShutterModel::progressive(F + meta.shutterOpen, F + meta.shutterClose), "gaussian:2x2", "progressive", true);
     // The reference workflow's fields: Shutter 0 0.25 and 0.5 0.75 of the frame, rows alternating.
     const double interlaced = renderWith(resample::ShutterModel::fields(resample::ShutterGroup{F, F + 0.25}, resample::ShutterGroup{F + 0.5, F + 0.75}, 0),
                                          "gaussian:2x1", "interlaced", false);
-    std::printf("  resample  progressive frame [%g, %g]: %.2f s -> %s/progressive.exr, progressive_deep.exr, progressive.png\n",
-                meta.shutterOpen, meta.shutterClose, progressive, outDir.c_str());
+    std::printf("  resample  progressive frame [%g, %g]: %.2f s -> %s/progressive.exr, progressive_deep.exr, progressive.png\n", meta.shutterOpen,
+                meta.shutterClose, progressive, outDir.c_str());
     std::printf("            interlaced frame, fields [0, 0.25] + [0.5, 0.75], one pass: %.2f s -> %s/interlaced.exr, interlaced.png\n", interlaced,
                 outDir.c_str());
     std::printf("  next      reshutter info %s\n", storePath.c_str());

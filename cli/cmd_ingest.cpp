@@ -47,12 +47,11 @@ struct IngestCommand {
     shade::IngestStats st = shade::ingestDump(input, output, opt);
     if (bar) bar->finish();
     const double secs = st.scanSeconds + st.ingestSeconds;
-    note(cat("wrote ", output, ": ", grouped(st.micropolygons), " micropolygons (", grouped(st.quads), " quads, ", grouped(st.triangles),
-             " triangles; ", grouped(st.movingMicropolygons), " moving",
+    note(cat("wrote ", output, ": ", grouped(st.micropolygons), " micropolygons (", grouped(st.quads), " quads, ", grouped(st.triangles), " triangles; ",
+             grouped(st.movingMicropolygons), " moving",
              st.write.stillMicropolygons ? cat(", ", grouped(st.write.stillMicropolygons), " with equal knots stored static") : std::string(), ") from ",
-             grouped(st.primitives), " primitives, ",
-             humanBytes(double(st.write.fileBytes)), " (", humanBytes(double(fileBytes)), " RIB, ", humanBytes(double(st.ribBytes)),
-             " decompressed) in ", secs, " s"));
+             grouped(st.primitives), " primitives, ", humanBytes(double(st.write.fileBytes)), " (", humanBytes(double(fileBytes)), " RIB, ",
+             humanBytes(double(st.ribBytes)), " decompressed) in ", secs, " s"));
     if (st.fannedPolygons || st.earClippedPolygons)
       note(cat("split ", grouped(st.fannedPolygons), " convex polygons into quads and triangulated ", grouped(st.earClippedPolygons), " non-convex ones"));
     return 0;

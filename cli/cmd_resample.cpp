@@ -38,8 +38,8 @@ struct ResampleCommand {
     render.writeOutputs(result, output, meta.frame);
     const auto& img = result.image;
     const std::string wrote = output.empty() ? render.deep : render.deep.empty() ? output : output + " and " + render.deep;
-    note(cat("wrote ", wrote, ": ", img.width, "x", img.height, ", ", spec.samplesX * spec.samplesY, " spp, shutter [", open, ", ", close,
-             "] in ", result.stats.wallSeconds, " s"));
+    note(cat("wrote ", wrote, ": ", img.width, "x", img.height, ", ", spec.samplesX * spec.samplesY, " spp, shutter [", open, ", ", close, "] in ",
+             result.stats.wallSeconds, " s"));
     if (render.stats) std::printf("%s", result.stats.report().c_str());
     return 0;
   }

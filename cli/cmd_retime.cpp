@@ -24,8 +24,8 @@ using resample::RenderSpec;
 
 /// Renders a sequence: checks every store and output name first, then renders frame by frame
 /// with a progress bar over frames.
-int renderSequence(const std::string& storePattern, const std::string& outPattern, const std::vector<OutputFrame>& frames,
-                   const RenderOptions& render, const std::string& what) {
+int renderSequence(const std::string& storePattern, const std::string& outPattern, const std::vector<OutputFrame>& frames, const RenderOptions& render,
+                   const std::string& what) {
   if (frames.empty()) fail("--frames", "no frames to render");
   if (outPattern.empty() && render.deep.empty()) fail(what, "nothing to write: give -o OUT.####.exr, --deep DEEP.####.exr or both");
   if (frames.size() > 1 && !outPattern.empty() && !hasFramePlaceholder(outPattern))
@@ -98,8 +98,8 @@ struct FieldsCommand {
       out.provenance.frame = f;
       render.writeOutputs(out, output.empty() ? "" : expandFramePattern(output, f), f);
       if (render.stats)
-        std::printf("frame %lld, field 1\n%sframe %lld, field 2\n%s", static_cast<long long>(f), field[0].stats.report().c_str(),
-                    static_cast<long long>(f), field[1].stats.report().c_str());
+        std::printf("frame %lld, field 1\n%sframe %lld, field 2\n%s", static_cast<long long>(f), field[0].stats.report().c_str(), static_cast<long long>(f),
+                    field[1].stats.report().c_str());
       progress.advance();
     }
     return 0;
@@ -155,8 +155,7 @@ void addRetimeCommands(CLI::App& app, Registry& registry) {
         ->check(CLI::IsMember({"start", "center", "end"}))
         ->capture_default_str()
         ->group("Shutter");
-    sub->add_flag("--two-pass", cmd->twoPass, "Render each field as a full frame and interlace (the reference; twice the work)")
-        ->group("Shutter");
+    sub->add_flag("--two-pass", cmd->twoPass, "Render each field as a full frame and interlace (the reference; twice the work)")->group("Shutter");
     cmd->shutter.addTo(sub, false);
     cmd->render.addTo(sub);
     sub->footer(

@@ -48,21 +48,20 @@ struct ShadeCommand {
     shade::Scene sceneBuilder([&](shade::FrameScene& frame) {
       const int64_t n = frame.options.frame;
       if (!wanted.empty() && std::find(wanted.begin(), wanted.end(), n) == wanted.end()) return;
-      if (written > 0 && !hasFramePlaceholder(output))
-        fail("-o", "the scene has several frames: name the outputs with a frame pattern such as shot.####.mps");
+      if (written > 0 && !hasFramePlaceholder(output)) fail("-o", "the scene has several frames: name the outputs with a frame pattern such as shot.####.mps");
       frame.source = scene;
       const std::string path = expandFramePattern(output, n);
       shade::StoreResult r = shade::shadeToStore(frame, opt, path);
       ++written;
-      std::printf("frame %lld: %s micropolygons in %s grids (%s moving), shaded at t=%g in %.2f s -> %s (%s, %.1f bytes/micropolygon)\n",
-                  (long long)n, grouped(r.shade.micropolygons).c_str(), grouped(r.shade.grids).c_str(), grouped(r.shade.movingGrids).c_str(),
-                  r.shade.shadeAt, r.shade.seconds, path.c_str(), humanBytes(double(r.write.fileBytes)).c_str(),
+      std::printf("frame %lld: %s micropolygons in %s grids (%s moving), shaded at t=%g in %.2f s -> %s (%s, %.1f bytes/micropolygon)\n", (long long)n,
+                  grouped(r.shade.micropolygons).c_str(), grouped(r.shade.grids).c_str(), grouped(r.shade.movingGrids).c_str(), r.shade.shadeAt,
+                  r.shade.seconds, path.c_str(), humanBytes(double(r.write.fileBytes)).c_str(),
                   r.shade.micropolygons ? double(r.write.fileBytes) / double(r.shade.micropolygons) : 0.0);
       std::fflush(stdout);
       if (verbosity() == Verbosity::Verbose)
-        note(cat("frame ", n, ": ", r.shade.primitives, " primitives, ", r.shade.culledPieces, " pieces culled (off screen, behind the eye or beyond the far plane), ",
-                 r.shade.eyeSplits, " eye splits, ", r.shade.droppedMicropolygons, " micropolygons dropped at the near plane, ", r.shade.vertices,
-                 " vertices shaded"));
+        note(cat("frame ", n, ": ", r.shade.primitives, " primitives, ", r.shade.culledPieces,
+                 " pieces culled (off screen, behind the eye or beyond the far plane), ", r.shade.eyeSplits, " eye splits, ", r.shade.droppedMicropolygons,
+                 " micropolygons dropped at the near plane, ", r.shade.vertices, " vertices shaded"));
     });
     shade::readRibScene(scene, sceneBuilder);
     if (sceneBuilder.framesShaded() == 0) fail(scene, "no WorldBegin/WorldEnd block: nothing to shade");
@@ -84,12 +83,10 @@ void addShadeCommand(CLI::App& app, Registry& registry) {
                   "(reference mode, e.g. each field of an interlaced frame shaded on its own)");
   sub->add_option("--frame-range", cmd->frames, "Only these frames (FrameBegin numbers), e.g. 1-10 or 3,5,7");
   sub->add_option("--fps", cmd->fps, "Frame rate recorded in the store")->capture_default_str();
-  sub->add_option("--motion-factor", cmd->motionFactor,
-                  "Override GeometricApproximation \"motionfactor\": shading rate x (1 + F x motion in pixels / 16)");
+  sub->add_option("--motion-factor", cmd->motionFactor, "Override GeometricApproximation \"motionfactor\": shading rate x (1 + F x motion in pixels / 16)");
   sub->add_option("--rate-scale", cmd->rateScale, "Multiply every ShadingRate (quality knob)")->capture_default_str();
   sub->add_option("--grid-size", cmd->gridSize, "Largest grid, in micropolygons per side")->capture_default_str();
-  sub->add_option("--overscan", cmd->overscan,
-                  "Keep geometry this far beyond the screen edges (fraction of the resolution), for re-framing and other cameras")
+  sub->add_option("--overscan", cmd->overscan, "Keep geometry this far beyond the screen edges (fraction of the resolution), for re-framing and other cameras")
       ->capture_default_str();
   registry.add(sub, [cmd] { return cmd->run(); });
 }

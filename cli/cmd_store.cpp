@@ -68,8 +68,8 @@ std::string cameraLine(const Camera& c) {
   double sw[4];
   c.effectiveScreenWindow(sw);
   std::string p = c.projection == Projection::Perspective ? cat("perspective fov ", c.fovDegrees) : std::string("orthographic");
-  return cat(c.name, ": ", p, ", ", c.width, "x", c.height, ", pixel aspect ", c.pixelAspect, ", screen [", sw[0], " ", sw[1], " ", sw[2], " ",
-             sw[3], "], clip [", c.nearClip, " ", c.farClip, "]");
+  return cat(c.name, ": ", p, ", ", c.width, "x", c.height, ", pixel aspect ", c.pixelAspect, ", screen [", sw[0], " ", sw[1], " ", sw[2], " ", sw[3],
+             "], clip [", c.nearClip, " ", c.farClip, "]");
 }
 
 int runInfo(const std::string& path, bool json) {
@@ -120,7 +120,8 @@ int runInfo(const std::string& path, bool json) {
   std::printf("  frame          %" PRId64 " at %" PRId64 "/%" PRId64 " fps (%.6g), shutter [%g, %g]\n", m.frame, m.fps.num, m.fps.den, m.fps.value(),
               m.shutterOpen, m.shutterClose);
   for (size_t i = 0; i < m.schedules.size(); ++i)
-    std::printf("  %-14s %s\n", i == 0 ? "motion knots" : "", i == 0 ? "schedule 0: static" : cat("schedule ", i, ": ", m.schedules[i].size(), " knots ", knotList(m.schedules[i])).c_str());
+    std::printf("  %-14s %s\n", i == 0 ? "motion knots" : "",
+                i == 0 ? "schedule 0: static" : cat("schedule ", i, ": ", m.schedules[i].size(), " knots ", knotList(m.schedules[i])).c_str());
   std::printf("  micropolygons  %s (%s vertices) in %s parts over %s tiles of %d px\n", grouped(s.micropolygons).c_str(), grouped(s.vertices).c_str(),
               grouped(s.parts).c_str(), grouped(s.tiles).c_str(), m.tileSize);
   if (s.behindCamera) std::printf("                 %s never in front of the camera (kept for other cameras)\n", grouped(s.behindCamera).c_str());
@@ -129,8 +130,7 @@ int runInfo(const std::string& path, bool json) {
     const auto& a = m.schema.attrs[i];
     std::printf("  %-14s %-10s %-7s per %-13s %s\n", i == 0 ? "schema" : "", a.name.c_str(), toString(a.type), toString(a.rate), toString(a.codec));
   }
-  if (!s.screen.empty)
-    std::printf("  screen bounds  x [%.1f, %.1f]  y [%.1f, %.1f] over the shutter\n", s.screen.x0, s.screen.x1, s.screen.y0, s.screen.y1);
+  if (!s.screen.empty) std::printf("  screen bounds  x [%.1f, %.1f]  y [%.1f, %.1f] over the shutter\n", s.screen.x0, s.screen.x1, s.screen.y0, s.screen.y1);
   std::string eff;
   for (const auto& [name, n] : s.effectParts) eff += cat(eff.empty() ? "" : ", ", name, " ", n);
   std::printf("  effects        %s\n", eff.empty() ? "none (static, opaque)" : (eff + " parts").c_str());
@@ -144,8 +144,8 @@ int runVerify(const std::vector<std::string>& paths) {
     Progress bar("verify", reader.entries().size());
     VerifyReport rep = reader.verify([&](size_t) { bar.advance(); });
     bar.finish();
-    std::printf("%s: OK (%s micropolygons in %s parts; checksums, bounds, tiles and flags verified)\n", path.c_str(),
-                grouped(rep.micropolygons).c_str(), grouped(rep.parts).c_str());
+    std::printf("%s: OK (%s micropolygons in %s parts; checksums, bounds, tiles and flags verified)\n", path.c_str(), grouped(rep.micropolygons).c_str(),
+                grouped(rep.parts).c_str());
   }
   return 0;
 }
@@ -191,7 +191,9 @@ void addStoreCommands(CLI::App& app, Registry& registry) {
     sub->add_option("--zstd-level", *level, "zstd level")->capture_default_str()->check(CLI::Range(-7, 19));
     sub->add_option("--memory-mb", *budget, "Writer memory budget in MB")->capture_default_str();
     sub->add_option("--color-codec", *colorCodec, "Ci codec: lossless or half")->capture_default_str()->check(CLI::IsMember({"lossless", "half"}));
-    sub->add_option("--opacity-codec", *opacityCodec, "Oi codec: lossless, half or unorm16")->capture_default_str()->check(CLI::IsMember({"lossless", "half", "unorm16"}));
+    sub->add_option("--opacity-codec", *opacityCodec, "Oi codec: lossless, half or unorm16")
+        ->capture_default_str()
+        ->check(CLI::IsMember({"lossless", "half", "unorm16"}));
     sub->footer("Example:\n  reshutter generate -n 2000000 -o synthetic.mps && reshutter info synthetic.mps");
     registry.add(sub, [=] {
       parseAttrCodec(*colorCodec, opt->colorCodec);

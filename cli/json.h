@@ -27,8 +27,7 @@ class JsonWriter {
     return field(key, b);
   }
   template <typename I>
-    requires std::is_integral_v<I>
-  JsonWriter& value(const char* key, I v) { return field(key, std::to_string(v)); }
+  requires std::is_integral_v<I> JsonWriter& value(const char* key, I v) { return field(key, std::to_string(v)); }
 
  private:
   static std::string quote(const std::string& s) {

@@ -13,9 +13,9 @@ namespace reshutter::cli {
 void RenderOptions::addTo(CLI::App* app) {
   auto* s = app->add_option("--spp", spp, "Samples per pixel (default 16), stratified in position and time")->group("Sampling");
   app->add_option("--samples", samples, "Samples per pixel as a grid, e.g. 4x4")->excludes(s)->group("Sampling");
-  app->add_option("--filter", filter,
-                  "Pixel filter NAME[:WIDTH[xHEIGHT]]: box triangle gaussian catmull-rom sinc blackman-harris mitchell")
-      ->capture_default_str()->group("Sampling");
+  app->add_option("--filter", filter, "Pixel filter NAME[:WIDTH[xHEIGHT]]: box triangle gaussian catmull-rom sinc blackman-harris mitchell")
+      ->capture_default_str()
+      ->group("Sampling");
   app->add_option("--seed", seed, "Sample pattern seed (same seed, same image, any thread count)")->capture_default_str()->group("Sampling");
   app->add_option("--aov", aovs,
                   "Output variable NAME[:FILTER], repeatable: a store variable (N, P, s, Cs ...), id (object id) or z;\n"
@@ -24,29 +24,35 @@ void RenderOptions::addTo(CLI::App* app) {
   app->add_option("--res", res, "Output resolution W H (default: the store camera's)")->expected(2)->group("Outputs");
   app->add_option("--crop", crop, "Render only pixels x0 <= x < x1, y0 <= y < y1 (the EXR data window)")->expected(4)->group("Outputs");
   app->add_flag("--half", half, "Write R G B A as half floats")->group("Outputs");
-  app->add_option("--compression", compression, "OpenEXR compression: none rle zips zip piz pxr24 b44 b44a dwaa dwab\n"
+  app->add_option("--compression", compression,
+                  "OpenEXR compression: none rle zips zip piz pxr24 b44 b44a dwaa dwab\n"
                   "(piz: lossless; on noisy float renders smaller and faster to write than zip, see bench/RESULTS.md)")
-      ->capture_default_str()->group("Outputs");
-  app->add_option("--preview", previews,
-                  "Also write an 8/16-bit PNG or TIFF: PATH or PATH=CHANNELS (default R,G,B,A; e.g. n.png=N.X,N.Y,N.Z)")
+      ->capture_default_str()
       ->group("Outputs");
-  app->add_option("--deep", deep, "Also write a deep OpenEXR (scanline, tidy; see docs/deep.md); %04d-style frame patterns expand")
+  app->add_option("--preview", previews, "Also write an 8/16-bit PNG or TIFF: PATH or PATH=CHANNELS (default R,G,B,A; e.g. n.png=N.X,N.Y,N.Z)")
       ->group("Outputs");
+  app->add_option("--deep", deep, "Also write a deep OpenEXR (scanline, tidy; see docs/deep.md); %04d-style frame patterns expand")->group("Outputs");
   app->add_option("--deep-compression", deepCompression, "Deep OpenEXR compression: zips rle none")->capture_default_str()->group("Outputs");
   app->add_option("--deep-tolerance", deepTolerance,
                   "Relative depth gap below which one object's fragments form one deep sample (larger: fewer samples, less separation)")
-      ->capture_default_str()->check(CLI::Range(0.0, 1e3))->group("Outputs");
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1e3))
+      ->group("Outputs");
   app->add_option("--quantize", quantize, "Preview quantisation ZERO,ONE,MIN,MAX (MAX > 255 gives 16 bits)")->capture_default_str()->group("Outputs");
   app->add_option("--dither", dither, "Preview dither amplitude")->capture_default_str()->group("Outputs");
   app->add_option("--opacity-threshold", opacityThreshold, "A sample stops once its opacity reaches this")
-      ->capture_default_str()->check(CLI::Range(0.0, 1.0))->group("Compositing");
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 1.0))
+      ->group("Compositing");
   app->add_flag("--backface-cull", backfaceCull, "Knock out micropolygons facing away (unless two-sided)")->group("Compositing");
   app->add_option("--bucket", bucket, "Bucket size in pixels")->capture_default_str()->group("Performance");
   app->add_option("--cache-mb", cacheMb, "Decoded tile cache per store, MB")->capture_default_str()->group("Performance");
   app->add_option("--simd", simd,
                   "Instruction set of the rasterizer's inner loops: auto (the widest this CPU runs), avx512, avx2 or none\n"
                   "(scalar); every choice gives the same image, bit for bit")
-      ->capture_default_str()->check(CLI::IsMember({"auto", "avx512", "avx2", "none"}))->group("Performance");
+      ->capture_default_str()
+      ->check(CLI::IsMember({"auto", "avx512", "avx2", "none"}))
+      ->group("Performance");
   app->add_flag("--stats", stats, "Print sample tests, hits, efficiency and time per phase")->group("Performance");
 }
 
@@ -113,7 +119,6 @@ void RenderOptions::applyTo(resample::RenderSpec& spec) const {
   resample::parseDeepCompression(deepCompression, "--deep-compression");
   parseQuantize(quantize, dither);
 }
-
 
 void RenderOptions::checkOutputs(const std::string& exrPath, int64_t frame) const {
   if (!exrPath.empty()) checkCanCreate(exrPath);

@@ -14,12 +14,12 @@
 namespace reshutter::cli {
 
 struct RenderOptions {
-  std::string spp;                 // "16"
-  std::string samples;             // "4x4"
+  std::string spp;      // "16"
+  std::string samples;  // "4x4"
   std::string filter = "gaussian:2x2";
   std::vector<std::string> aovs;
-  std::vector<int> res;            // W H
-  std::vector<int> crop;           // x0 x1 y0 y1 (pixels, end exclusive)
+  std::vector<int> res;   // W H
+  std::vector<int> crop;  // x0 x1 y0 y1 (pixels, end exclusive)
   uint64_t seed = 0;
   int bucket = resample::kDefaultBucketSize;
   double opacityThreshold = 0.996;
@@ -31,8 +31,8 @@ struct RenderOptions {
   double dither = 0.5;
   bool stats = false;
   double cacheMb = 256;
-  std::string simd = "auto";          // inner-loop instruction set: auto avx512 avx2 none
-  std::string deep;                   // deep OpenEXR path ("" = none)
+  std::string simd = "auto";  // inner-loop instruction set: auto avx512 avx2 none
+  std::string deep;           // deep OpenEXR path ("" = none)
   std::string deepCompression = "zips";
   double deepTolerance = 0.01;
 

@@ -15,10 +15,7 @@ void ShutterOptions::addTo(CLI::App* app, bool withInterval) {
                               "Interval OPEN:CLOSE relative to the target frame's nominal time, in target frames\n"
                               "(OPEN = CLOSE: the exact instant)")
                   ->group("Shutter");
-    app->add_option("--shutter-angle", angle, "Shutter angle in degrees (360 = the whole frame)")
-        ->check(CLI::Range(0.0, 360.0))
-        ->excludes(s)
-        ->group("Shutter");
+    app->add_option("--shutter-angle", angle, "Shutter angle in degrees (360 = the whole frame)")->check(CLI::Range(0.0, 360.0))->excludes(s)->group("Shutter");
     app->add_option("--shutter-position", position, "Where the shutter sits on the nominal time: start, center or end (as Blender)")
         ->check(CLI::IsMember({"start", "center", "end"}))
         ->capture_default_str()

@@ -29,7 +29,7 @@ struct ShutterOptions {
   double angle = -1;               // degrees; < 0: not given
   std::string position = "start";  // start center end
   std::string shape = "box";
-  double rolling = 0;              // read-out duration in target frames
+  double rolling = 0;  // read-out duration in target frames
   std::string direction = "down";
 
   void addTo(CLI::App* app, bool withInterval = true);

@@ -19,7 +19,7 @@ static_assert(std::endian::native == std::endian::little, "reshutter's file form
 class ByteWriter {
  public:
   template <typename T>
-    requires std::is_trivially_copyable_v<T>
+  requires std::is_trivially_copyable_v<T>
   void put(const T& v) {
     const auto* p = reinterpret_cast<const uint8_t*>(&v);
     bytes_.insert(bytes_.end(), p, p + sizeof(T));
@@ -44,8 +44,7 @@ class ByteReader {
   ByteReader(std::span<const uint8_t> data, std::string context) : data_(data), context_(std::move(context)) {}
 
   template <typename T>
-    requires std::is_trivially_copyable_v<T>
-  T get() {
+  requires std::is_trivially_copyable_v<T> T get() {
     need(sizeof(T));
     T v;
     std::memcpy(&v, data_.data() + pos_, sizeof(T));

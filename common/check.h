@@ -20,9 +20,9 @@ class InternalError : public std::logic_error {
 
 }  // namespace reshutter
 
-#define CHECK(condition, ...)                                                                          \
-  do {                                                                                                 \
-    if (!(condition)) [[unlikely]]                                                                     \
+#define CHECK(condition, ...)                                                                                     \
+  do {                                                                                                            \
+    if (!(condition)) [[unlikely]]                                                                                \
       ::reshutter::failInternal(__FILE__, __LINE__, #condition, ::reshutter::cat("" __VA_OPT__(, ) __VA_ARGS__)); \
   } while (0)
 

@@ -15,8 +15,7 @@ int64_t parseInt(const std::string& text, size_t& pos, const std::string& where)
   int64_t v = 0;
   const char* b = text.data() + start + (text[start] == '+' ? 1 : 0);
   auto [end, ec] = std::from_chars(b, text.data() + pos, v);
-  if (ec != std::errc() || end != text.data() + pos || pos == start)
-    fail(where, "expected a frame number at position ", start + 1, " of '", text, "'");
+  if (ec != std::errc() || end != text.data() + pos || pos == start) fail(where, "expected a frame number at position ", start + 1, " of '", text, "'");
   return v;
 }
 

@@ -43,8 +43,7 @@ void warnOnce(std::string_view kind, std::string_view message) {
 void flushWarningCounts() {
   std::lock_guard lock(g_mutex);
   for (const auto& [kind, n] : kinds())
-    if (n > 1 && verbosity() != Verbosity::Quiet)
-      std::fprintf(stderr, "reshutter: warning: %s: %zu more like this\n", kind.c_str(), n - 1);
+    if (n > 1 && verbosity() != Verbosity::Quiet) std::fprintf(stderr, "reshutter: warning: %s: %zu more like this\n", kind.c_str(), n - 1);
   kinds().clear();
 }
 

@@ -1,8 +1,8 @@
 #include "common/progress.h"
 
+#include <unistd.h>
 #include <algorithm>
 #include <cstdio>
-#include <unistd.h>
 
 #include "common/log.h"
 
@@ -11,8 +11,7 @@ namespace reshutter {
 bool Progress::enabledForTerminal() { return ::isatty(2) && verbosity() != Verbosity::Quiet; }
 
 Progress::Progress(std::string label, uint64_t total)
-    : label_(std::move(label)), total_(total ? total : 1), start_(std::chrono::steady_clock::now()),
-      enabled_(enabledForTerminal()) {}
+    : label_(std::move(label)), total_(total ? total : 1), start_(std::chrono::steady_clock::now()), enabled_(enabledForTerminal()) {}
 
 Progress::~Progress() { finish(); }
 

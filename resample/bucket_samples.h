@@ -66,13 +66,13 @@ struct BucketSamples {
   // lines: with P itself (a multiple of 64 lines for the default bucket) every plane's pixel p
   // maps to the same L1 set, and a micropolygon's 16 strata evict each other.
   size_t PS = 0;
-  size_t sampleSlots = 0;                     // N * PS: the length of every per-sample array
-  SkewedArray<float> sx{0}, sy{8}, st{16};    // stratum-major: [s * PS + p]
-  std::vector<uint32_t> idxOf;                // [p * N + i] → s * PS + p (sample i of pixel p lies in stratum s)
-  std::vector<uint8_t> rowGroup;              // per region row
+  size_t sampleSlots = 0;                   // N * PS: the length of every per-sample array
+  SkewedArray<float> sx{0}, sy{8}, st{16};  // stratum-major: [s * PS + p]
+  std::vector<uint32_t> idxOf;              // [p * N + i] → s * PS + p (sample i of pixel p lies in stratum s)
+  std::vector<uint8_t> rowGroup;            // per region row
   std::vector<uint8_t> groupPresent;
-  bool multiGroup = false;                    // more than one shutter group (fields): rows differ
-  std::vector<double> stratumLo, stratumHi;   // [g * N + s], absolute frames
+  bool multiGroup = false;                   // more than one shutter group (fields): rows differ
+  std::vector<double> stratumLo, stratumHi;  // [g * N + s], absolute frames
   double tMin = 0, tMax = 0;
   // The base of the stored times (st): the whole frame before the earliest time, not the earliest
   // time itself, so a field rendered alone and the same field inside an interlaced frame get

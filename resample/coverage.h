@@ -50,9 +50,7 @@ struct RasterScale {
 /// Edge order of a quad: 01 12 23 30 and the diagonal 02. A triangle uses 01 12 02.
 inline constexpr int kEdgeVerts[5][2] = {{0, 1}, {1, 2}, {2, 3}, {3, 0}, {0, 2}};
 
-inline glm::dvec3 cross(const glm::dvec3& a, const glm::dvec3& b) {
-  return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x};
-}
+inline glm::dvec3 cross(const glm::dvec3& a, const glm::dvec3& b) { return {a.y * b.z - a.z * b.y, a.z * b.x - a.x * b.z, a.x * b.y - a.y * b.x}; }
 
 /// A camera-space point as the edge functions see it: (x, y, z) under perspective, (x, y, 1) for
 /// an orthographic camera (the edge through two points is then the line through them).
@@ -108,8 +106,9 @@ inline bool triangleCovers(double a0, double a1, double a2, EdgeVector vecOf, bo
 /// its edges 23 and 30 are zero), in raster form.
 inline void fixedEdges(const glm::vec3* const p[4], bool triangle, const kernels::RasterScale& s, glm::dvec3 E[5]) {
   for (int k = 0; k < 5; ++k)
-    E[k] = triangle && (k == 2 || k == 3) ? glm::dvec3(0.0)
-                                          : toRaster(cross(homogeneous(*p[kEdgeVerts[k][0]], s.perspective), homogeneous(*p[kEdgeVerts[k][1]], s.perspective)), s);
+    E[k] = triangle && (k == 2 || k == 3)
+               ? glm::dvec3(0.0)
+               : toRaster(cross(homogeneous(*p[kEdgeVerts[k][0]], s.perspective), homogeneous(*p[kEdgeVerts[k][1]], s.perspective)), s);
 }
 
 /// The edges of a micropolygon moving linearly from corners at[j] to to[j] over a knot segment, as
@@ -139,9 +138,14 @@ inline bool coversFixed(const glm::dvec3 E[5], bool triangle, bool cullBack, dou
   for (int k = 0; k < 5; ++k)
     if (!triangle || k == 0 || k == 1 || k == 4) e[k] = edgeAt(x, y, E[k]);
   triOut = 0;
-  if (triangleCovers(e[1], -e[4], e[0], [&](int i) { return i == 0 ? E[1] : i == 1 ? -E[4] : E[0]; }, cullBack, bOut)) return true;
+  if (triangleCovers(
+          e[1], -e[4], e[0], [&](int i) { return i == 0   ? E[1]
+                                                 : i == 1 ? -E[4]
+                                                          : E[0]; }, cullBack, bOut))
+    return true;
   triOut = 1;
-  return !triangle && triangleCovers(e[2], e[3], e[4], [&](int i) { return E[2 + i]; }, cullBack, bOut);
+  return !triangle && triangleCovers(
+                          e[2], e[3], e[4], [&](int i) { return E[2 + i]; }, cullBack, bOut);
 }
 
 /// Coverage of raster sample (x, y) at segment parameter f by a micropolygon moving with edges q
@@ -151,9 +155,14 @@ inline bool coversMoving(const EdgeQuad q[5], bool triangle, bool cullBack, doub
   auto edgeValue = [&](int ei) { return edgeAt(x, y, q[ei].at(f)); };
   const double e0 = edgeValue(0), e1 = edgeValue(1), e4 = edgeValue(4);
   triOut = 0;
-  if (triangleCovers(e1, -e4, e0, [&](int i) { return i == 0 ? q[1].at(f) : i == 1 ? -q[4].at(f) : q[0].at(f); }, cullBack, bOut)) return true;
+  if (triangleCovers(
+          e1, -e4, e0, [&](int i) { return i == 0   ? q[1].at(f)
+                                           : i == 1 ? -q[4].at(f)
+                                                    : q[0].at(f); }, cullBack, bOut))
+    return true;
   triOut = 1;
-  return !triangle && triangleCovers(edgeValue(2), edgeValue(3), e4, [&](int i) { return q[2 + i].at(f); }, cullBack, bOut);
+  return !triangle && triangleCovers(
+                          edgeValue(2), edgeValue(3), e4, [&](int i) { return q[2 + i].at(f); }, cullBack, bOut);
 }
 
 // ------------------------------------------------------------------------------------------
@@ -181,10 +190,10 @@ struct EdgeTestSetup {
   const float* st;  // the candidates' times and raster positions (Candidates::t, x, y)
   const float* sx;
   const float* sy;
-  float fOffset, fScale;  // f = clamp((st + fOffset) fScale, 0, 1)
-  bool triangle;          // edges 23 and 30 unused
-  bool cullBackFaces;     // back-face knock-out applies to this micropolygon
-  bool fixed = false;     // a static micropolygon: the edges are c[e][0..2] at any time (f = 0)
+  float fOffset, fScale;         // f = clamp((st + fOffset) fScale, 0, 1)
+  bool triangle;                 // edges 23 and 30 unused
+  bool cullBackFaces;            // back-face knock-out applies to this micropolygon
+  bool fixed = false;            // a static micropolygon: the edges are c[e][0..2] at any time (f = 0)
   float za[4] = {}, zb[4] = {};  // corner depths at the segment's two ends (equal when fixed)
 };
 

@@ -643,11 +643,10 @@ void writeDeepExr(const std::string& path, const DeepImage& image, const ImagePr
       // OpenEXR addresses pixels absolutely: shift the bases by the chunk's first pixel.
       const ptrdiff_t origin = ptrdiff_t(ys) * W + image.x0;
       Imf::DeepFrameBuffer fb;
-      fb.insertSampleCountSlice(Imf::Slice(Imf::UINT, reinterpret_cast<char*>(counts.data() - origin), sizeof(unsigned int),
-                                           sizeof(unsigned int) * size_t(W)));
+      fb.insertSampleCountSlice(Imf::Slice(Imf::UINT, reinterpret_cast<char*>(counts.data() - origin), sizeof(unsigned int), sizeof(unsigned int) * size_t(W)));
       for (size_t c = 0; c < outs.size(); ++c)
-        fb.insert(outs[c].name, Imf::DeepSlice(outs[c].isUInt ? Imf::UINT : Imf::FLOAT, reinterpret_cast<char*>(ptrs[c].data() - origin),
-                                               sizeof(char*), sizeof(char*) * size_t(W), 4 * (outs[c].isUInt ? nu : nf)));
+        fb.insert(outs[c].name, Imf::DeepSlice(outs[c].isUInt ? Imf::UINT : Imf::FLOAT, reinterpret_cast<char*>(ptrs[c].data() - origin), sizeof(char*),
+                                               sizeof(char*) * size_t(W), 4 * (outs[c].isUInt ? nu : nf)));
       out.setFrameBuffer(fb);
       out.writePixels(rows);
     }

@@ -62,8 +62,8 @@ constexpr uint32_t kDeepFlagMatte = 0x2;
 /// Which output variables a deep image carries and where their values come from.
 struct DeepLayout {
   struct Aux {
-    std::string name;       // channel name
-    int source = 0;         // index into SampleFragment::aov (float) or ::aovU (uint)
+    std::string name;           // channel name
+    int source = 0;             // index into SampleFragment::aov (float) or ::aovU (uint)
     bool premultiplied = true;  // float only: composited (premultiplied by A) or the nearest value
   };
   std::vector<Aux> floats, uints;

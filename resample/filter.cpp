@@ -105,7 +105,7 @@ float filter1D(FilterKind k, float xf, float width) {
     case FilterKind::Triangle: return float(1.0 - std::abs(u));
     case FilterKind::Gaussian: return float(std::exp(-2.0 * u * u));  // RenderMan: exp(-2 (2x/width)^2)
     case FilterKind::CatmullRom: return float(catmullRom(2.0 * u));
-    case FilterKind::Sinc: return float(sincPi(x) * sincPi(u));       // Lanczos window over the support
+    case FilterKind::Sinc: return float(sincPi(x) * sincPi(u));  // Lanczos window over the support
     case FilterKind::BlackmanHarris: {
       const double n = 0.5 * (u + 1.0);
       return float(0.35875 - 0.48829 * std::cos(2 * M_PI * n) + 0.14128 * std::cos(4 * M_PI * n) - 0.01168 * std::cos(6 * M_PI * n));

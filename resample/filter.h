@@ -36,15 +36,13 @@ float filter1D(FilterKind k, float x, float width);
 class FilterTable {
  public:
   FilterTable(const FilterSpec& spec, const SamplePattern& pattern);
-  int margin() const { return margin_; }   // neighbours each side
+  int margin() const { return margin_; }  // neighbours each side
   int span() const { return 2 * margin_ + 1; }
   /// Weights for `pattern` at neighbour offset (dx, dy) ∈ [-margin, margin]², one per sample.
   const float* weights(int pattern, int dx, int dy) const {
     return &weights_[((size_t(pattern) * span() + size_t(dy + margin_)) * span() + size_t(dx + margin_)) * spp_];
   }
-  float weightSum(int pattern, int dx, int dy) const {
-    return sums_[(size_t(pattern) * span() + size_t(dy + margin_)) * span() + size_t(dx + margin_)];
-  }
+  float weightSum(int pattern, int dx, int dy) const { return sums_[(size_t(pattern) * span() + size_t(dy + margin_)) * span() + size_t(dx + margin_)]; }
 
  private:
   int margin_, spp_;

@@ -28,8 +28,8 @@ struct SampleRows {
   const float* st;  // sample time offsets
   const float* sx;  // raster positions
   const float* sy;
-  size_t first;     // index of the range's first sample
-  size_t stride;    // region width
+  size_t first;   // index of the range's first sample
+  size_t stride;  // region width
   int cols, rows;
   const uint8_t* rowGroup = nullptr;  // when set: skip rows whose group differs from `group`
   uint8_t group = 0;
@@ -77,10 +77,10 @@ size_t gatherStrata(Isa isa, const SampleRows& region, const StrataSpans& spans,
 /// motion (dx, dy) that the chunk's micropolygons share more or less, so that each one's box over
 /// the whole interval, compensated, stays about its own size. Square cells of `size` pixels.
 struct CellGrid {
-  float x0, y0;     // compensated position of cell (0, 0)'s corner
-  float invSize;    // 1 / cell size
-  int cols, rows;   // cols * rows <= 65535
-  float dx, dy;     // the reference motion
+  float x0, y0;    // compensated position of cell (0, 0)'s corner
+  float invSize;   // 1 / cell size
+  int cols, rows;  // cols * rows <= 65535
+  float dx, dy;    // the reference motion
   float thetaA, invLen;
 };
 
@@ -94,8 +94,8 @@ void sortByCell(Isa isa, const CellGrid& grid, const Candidates& in, size_t n, c
 /// their own time (gatherInBox()'s test) and whose nearest surface so far, depth[index], lies
 /// beyond zCull; returns the new count. Reads up to 15 entries past `end`, writes up to 15 past
 /// the count.
-size_t filterCandidates(Isa isa, const Candidates& in, size_t begin, size_t end, const MovingBox& box, const float* depth, float zCull,
-                        const Candidates& out, size_t n);
+size_t filterCandidates(Isa isa, const Candidates& in, size_t begin, size_t end, const MovingBox& box, const float* depth, float zCull, const Candidates& out,
+                        size_t n);
 
 /// The camera's map from camera space to raster, as the rasterizer's project() applies it:
 /// x = float(ax (x / z) + bx) with the division as 1 / z in double (perspective), or

@@ -7,8 +7,7 @@ namespace reshutter::resample {
 namespace {
 
 // Interpolates attribute `ai` for micropolygon m at barycentrics b over triangle verts v.
-void attrAt(const store::TilePart& part, const store::Schema& schema, int ai, uint32_t m, const uint32_t v[3], const float b[3],
-                   float* outv) {
+void attrAt(const store::TilePart& part, const store::Schema& schema, int ai, uint32_t m, const uint32_t v[3], const float b[3], float* outv) {
   const auto& decl = schema.attrs[size_t(ai)];
   const auto& arr = part.attrs[size_t(ai)];
   const int nc = store::componentCount(decl.type);
@@ -20,8 +19,7 @@ void attrAt(const store::TilePart& part, const store::Schema& schema, int ai, ui
     for (int c = 0; c < nc; ++c) outv[c] = arr.f[size_t(m) * nc + c];
     return;
   }
-  for (int c = 0; c < nc; ++c)
-    outv[c] = b[0] * arr.f[size_t(v[0]) * nc + c] + b[1] * arr.f[size_t(v[1]) * nc + c] + b[2] * arr.f[size_t(v[2]) * nc + c];
+  for (int c = 0; c < nc; ++c) outv[c] = b[0] * arr.f[size_t(v[0]) * nc + c] + b[1] * arr.f[size_t(v[1]) * nc + c] + b[2] * arr.f[size_t(v[2]) * nc + c];
 }
 
 }  // namespace
@@ -113,8 +111,8 @@ void HitBuffer::recordAnyHit(const HitContext& hc, uint32_t sample, uint32_t m, 
   ++counters.fragments;
 }
 
-void HitBuffer::aovValues(const store::TilePart& part, const store::Schema& schema, uint32_t m, const uint32_t v[3], const float b[3], float z,
-               float* f, uint32_t* u) const {
+void HitBuffer::aovValues(const store::TilePart& part, const store::Schema& schema, uint32_t m, const uint32_t v[3], const float b[3], float z, float* f,
+                          uint32_t* u) const {
   for (size_t a = 0; a < aovs.size(); ++a) {
     const auto& ch = aovs[a];
     if (ch.isUInt) {

@@ -93,8 +93,8 @@ struct HitBuffer {
     ++counters.hits;
     const float *c0 = hc.colour + size_t(v[0]) * 3, *c1 = hc.colour + size_t(v[1]) * 3, *c2 = hc.colour + size_t(v[2]) * 3;
     const store::TilePart& part = *hc.part;
-    const SurfaceColour c{b[0] * c0[0] + b[1] * c1[0] + b[2] * c2[0], b[0] * c0[1] + b[1] * c1[1] + b[2] * c2[1],
-                          b[0] * c0[2] + b[1] * c1[2] + b[2] * c2[2], uint32_t(part.flags[m] & store::kMatte)};
+    const SurfaceColour c{b[0] * c0[0] + b[1] * c1[0] + b[2] * c2[0], b[0] * c0[1] + b[1] * c1[1] + b[2] * c2[1], b[0] * c0[2] + b[1] * c1[2] + b[2] * c2[2],
+                          uint32_t(part.flags[m] & store::kMatte)};
     // No branch: whether a surface is nearer is a coin toss that the predictor loses, so the
     // depth is a min and the colour goes to the sample or, when hidden, to a scratch record.
     // Ties keep the surface drawn first: deterministic by draw order (rasterizeQueued).

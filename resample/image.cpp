@@ -5,17 +5,17 @@
 #include <csetjmp>
 #include <filesystem>
 
+#include <Imath/half.h>
 #include <OpenEXR/ImfChannelList.h>
+#include <OpenEXR/ImfDoubleAttribute.h>
 #include <OpenEXR/ImfFrameBuffer.h>
 #include <OpenEXR/ImfHeader.h>
+#include <OpenEXR/ImfIntAttribute.h>
 #include <OpenEXR/ImfOutputFile.h>
 #include <OpenEXR/ImfStandardAttributes.h>
-#include <OpenEXR/ImfThreading.h>
 #include <OpenEXR/ImfStringAttribute.h>
-#include <OpenEXR/ImfIntAttribute.h>
+#include <OpenEXR/ImfThreading.h>
 #include <OpenEXR/ImfVecAttribute.h>
-#include <OpenEXR/ImfDoubleAttribute.h>
-#include <Imath/half.h>
 #include <png.h>
 #include <tiffio.h>
 
@@ -50,10 +50,9 @@ void setExrThreads(int threads) { Imf::setGlobalThreadCount(threads); }
 
 ExrCompression parseExrCompression(const std::string& s, const std::string& where) {
   static const std::pair<const char*, ExrCompression> names[] = {
-      {"none", ExrCompression::None}, {"rle", ExrCompression::Rle},     {"zips", ExrCompression::Zips},
-      {"zip", ExrCompression::Zip},   {"piz", ExrCompression::Piz},     {"pxr24", ExrCompression::Pxr24},
-      {"b44", ExrCompression::B44},   {"b44a", ExrCompression::B44a},   {"dwaa", ExrCompression::Dwaa},
-      {"dwab", ExrCompression::Dwab}};
+      {"none", ExrCompression::None}, {"rle", ExrCompression::Rle},     {"zips", ExrCompression::Zips}, {"zip", ExrCompression::Zip},
+      {"piz", ExrCompression::Piz},   {"pxr24", ExrCompression::Pxr24}, {"b44", ExrCompression::B44},   {"b44a", ExrCompression::B44a},
+      {"dwaa", ExrCompression::Dwaa}, {"dwab", ExrCompression::Dwab}};
   for (auto [n, c] : names)
     if (s == n) return c;
   fail(where, "unknown OpenEXR compression '", s, "' (none rle zips zip piz pxr24 b44 b44a dwaa dwab)");

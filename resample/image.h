@@ -39,7 +39,7 @@ struct ImageProvenance {
   glm::dmat4 worldToNdc{1.0};  // homogeneous: NDC = (M·p).xy / (M·p).w, (0,0) top-left of the display window
   int64_t frame = 1;
   int64_t fpsNum = 24, fpsDen = 1;
-  std::string shutter;           // human-readable shutter description
+  std::string shutter;                       // human-readable shutter description
   double shutterOpen = 0, shutterClose = 0;  // frames, overall
   std::string software = "reshutter 0.1.0";
   std::string comments;
@@ -69,7 +69,6 @@ struct Quantize {
 
 /// Writes channels (1 = grey, 3 = RGB, 4 = RGBA) as PNG or TIFF by extension. Colour channels
 /// are un-premultiplied by `alpha` when it is given (previews use straight alpha).
-void writePreview(const std::string& path, const FlatImage& image, const std::vector<std::string>& channels, const Quantize& q,
-                  uint64_t seed);
+void writePreview(const std::string& path, const FlatImage& image, const std::vector<std::string>& channels, const Quantize& q, uint64_t seed);
 
 }  // namespace reshutter::resample

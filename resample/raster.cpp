@@ -134,8 +134,8 @@ void BucketRasterizer::Impl::rasterizeChunk(const Source& src, const TileEntry& 
   }
 }
 
-BucketRasterizer::BucketRasterizer(const SamplePattern& pattern, const ShutterModel& shutter, const View& view,
-                                   const std::vector<AovChannel>& aovs, const RasterOptions& options)
+BucketRasterizer::BucketRasterizer(const SamplePattern& pattern, const ShutterModel& shutter, const View& view, const std::vector<AovChannel>& aovs,
+                                   const RasterOptions& options)
     : impl_(std::make_unique<Impl>(pattern, shutter, view, aovs, options)) {
   int floats = 0, uints = 0;
   for (const auto& a : aovs) (a.isUInt ? uints : floats) += a.isUInt ? 1 : a.components;

@@ -50,7 +50,7 @@ struct Source {
 
 /// An output variable requested on the image, resolved against the stores' schema.
 struct AovChannel {
-  std::string name;      // attribute name in the store ("N", "s", "Cs") or "id" / "z"
+  std::string name;  // attribute name in the store ("N", "s", "Cs") or "id" / "z"
   FilterSpec filter;
   int components = 1;
   bool isUInt = false;   // object ids
@@ -89,8 +89,8 @@ struct RasterOptions {
 struct RasterStats {
   uint64_t sampleTests = 0, hits = 0, micropolygons = 0, parts = 0, fragments = 0;
   uint64_t staticMicropolygons = 0, transparentParts = 0;
-  uint64_t linearMicropolygons = 0;  // moving ones bounded from their interval ends (one knot segment)
-  uint64_t chunkCulledMicropolygons = 0;  // moving ones skipped with their whole chunk (its path misses the region)
+  uint64_t linearMicropolygons = 0;         // moving ones bounded from their interval ends (one knot segment)
+  uint64_t chunkCulledMicropolygons = 0;    // moving ones skipped with their whole chunk (its path misses the region)
   uint64_t chunkGatheredMicropolygons = 0;  // linear-path ones whose candidates came from their chunk's one gather
   void add(const RasterStats& o);
 };

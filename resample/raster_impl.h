@@ -45,11 +45,11 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
 
   View view;
   RasterOptions opt;
-  const bool vectorKernels;  // the vector loops of gather.h / coverage.h (same results as the scalar ones)
-  const kernels::Isa isa;    // with vectorKernels: AVX-512 where the CPU and the options allow
+  const bool vectorKernels;                        // the vector loops of gather.h / coverage.h (same results as the scalar ones)
+  const kernels::Isa isa;                          // with vectorKernels: AVX-512 where the CPU and the options allow
   const kernels::RasterScale rasterScale;          // toRaster() for the edge tests
   const kernels::ProjectionScale projectionScale;  // project() for the projection kernel
-  RasterStats stats;  // HitBuffer counts its hits here too
+  RasterStats stats;                               // HitBuffer counts its hits here too
 
   // ------------------------------------------------------------------------------------------
   // The bucket (raster.cpp)
@@ -100,8 +100,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   // Appends to `candidates` (from position n) the samples of strata [s0, s1) and group g (< 0:
   // any) in pixels [px0, px1] × [py0, py1] that lie in `box` at their own time and inside the
   // source's coverage; returns the new count.
-  size_t gatherCandidates(int s0, int s1, int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover, float zCull,
-                          size_t n);
+  size_t gatherCandidates(int s0, int s1, int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover, float zCull, size_t n);
   kernels::Candidates candidateList() { return {candidates.data(), candT.data(), candX.data(), candY.data()}; }
 
   // Runs the vector edge test of micropolygon m over the first n candidates and records its hits,
@@ -109,8 +108,8 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   // the scalar paths' arithmetic: zv_j = za_j + f (zb_j - za_j), z = sum b_j zv_j (for fixed
   // edges f = 0, so zv_j = za_j exactly).
   template <class ScalarTest>
-  void recordKernelHits(const HitContext& hc, uint32_t m, const uint32_t* c, const kernels::EdgeTestSetup& setup, const kernels::LinearEdges& edges,
-                        size_t n, ScalarTest scalarTest) {
+  void recordKernelHits(const HitContext& hc, uint32_t m, const uint32_t* c, const kernels::EdgeTestSetup& setup, const kernels::LinearEdges& edges, size_t n,
+                        ScalarTest scalarTest) {
     const size_t hits = kernels::testLinearEdges(isa, setup, edges, n, edgeHits.data());
     for (size_t hi = 0; hi < hits; ++hi) {
       const kernels::EdgeHit& eh = edgeHits[hi];
@@ -134,8 +133,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   // ------------------------------------------------------------------------------------------
   // The static path (raster_static.cpp)
 
-  void rasterizeStatic(const Source& src, const store::TilePart& part, const HitContext& hc, const glm::vec3* chunkPos, int onlyGroup,
-                       const Chunk& ch);
+  void rasterizeStatic(const Source& src, const store::TilePart& part, const HitContext& hc, const glm::vec3* chunkPos, int onlyGroup, const Chunk& ch);
   void testStatic(const HitContext& hc, uint32_t m, const uint32_t* c, bool tri, const glm::dvec3 E[5], const float zv[4], uint32_t idx);
 
   std::vector<float> projX, projY;  // per chunk vertex (static) or [(v - vBase) * T + theta] (moving); projX NaN = before the near plane
@@ -162,16 +160,16 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
     const Source* src = nullptr;  // the key: source, schedule, group
     uint32_t schedule = 0;
     int g = 0;
-    std::vector<double> thetaTimes;               // distinct local times to project vertices at
-    std::vector<int> stratumFirst, stratumLast;   // theta index range per stratum
-    std::vector<uint32_t> thetaSeg;               // knot segment of each theta time
-    std::vector<float> thetaF;                    // and the parameter inside it
-    std::vector<uint32_t> cullTheta;              // theta indices the cull projects at
+    std::vector<double> thetaTimes;              // distinct local times to project vertices at
+    std::vector<int> stratumFirst, stratumLast;  // theta index range per stratum
+    std::vector<uint32_t> thetaSeg;              // knot segment of each theta time
+    std::vector<float> thetaF;                   // and the parameter inside it
+    std::vector<uint32_t> cullTheta;             // theta indices the cull projects at
     SegmentMap seg{};
     Coverage cover{};
     bool linearPath = false;
     LinearInterval li{};
-    std::vector<float> stratumU0, stratumU1;      // linear path: stratum s's span [u0, u1] in the group interval, 0..1, padded to whole vectors
+    std::vector<float> stratumU0, stratumU1;  // linear path: stratum s's span [u0, u1] in the group interval, 0..1, padded to whole vectors
   };
   const MovingTimes& timesFor(const Source& src, uint32_t schedule, const store::Schedule& knots, int g);
   std::vector<std::unique_ptr<MovingTimes>> movingTimes;  // this bucket's
@@ -262,7 +260,6 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   std::vector<uint16_t> cellScratch;
 };
 
-
 // ------------------------------------------------------------------------------------------
 // Gathering a micropolygon's candidates, for the static and moving paths (inline: per micropolygon).
 
@@ -271,11 +268,21 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
 // source's coverage; returns the new count. The scalar loop is branch-free: the in/out pattern is random, so
 // branches would mispredict.
 inline size_t BucketRasterizer::Impl::gatherCandidates(int s0, int s1, int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover,
-                                                float zCull, size_t n) {
+                                                       float zCull, size_t n) {
   if (vectorKernels && !cover.check) {
-    const kernels::SampleRows rows{st.data(), sx.data(), sy.data(), size_t(s0) * PS + size_t(py0 - y0) * w + size_t(px0 - x0), size_t(w),
-                                   px1 - px0 + 1, py1 - py0 + 1, multiGroup && g >= 0 ? &rowGroup[size_t(py0 - y0)] : nullptr, uint8_t(g),
-                                   s1 - s0, PS, zbuf.data(), zCull};
+    const kernels::SampleRows rows{st.data(),
+                                   sx.data(),
+                                   sy.data(),
+                                   size_t(s0) * PS + size_t(py0 - y0) * w + size_t(px0 - x0),
+                                   size_t(w),
+                                   px1 - px0 + 1,
+                                   py1 - py0 + 1,
+                                   multiGroup && g >= 0 ? &rowGroup[size_t(py0 - y0)] : nullptr,
+                                   uint8_t(g),
+                                   s1 - s0,
+                                   PS,
+                                   zbuf.data(),
+                                   zCull};
     return kernels::gatherInBox(isa, rows, box, candidateList(), n);
   }
   uint32_t* __restrict cand = candidates.data();
@@ -283,21 +290,21 @@ inline size_t BucketRasterizer::Impl::gatherCandidates(int s0, int s1, int g, in
   float* __restrict cx = candX.data();
   float* __restrict cy = candY.data();
   for (int s = s0; s < s1; ++s)
-  for (int py = py0; py <= py1; ++py) {
-    if (multiGroup && g >= 0 && rowGroup[size_t(py - y0)] != g) continue;
-    const uint32_t rowBase = uint32_t(size_t(s) * PS + size_t(py - y0) * w - size_t(x0));
-    for (int px = px0; px <= px1; ++px) {
-      const uint32_t idx = rowBase + uint32_t(px);
-      const float t = st[idx];
-      const float u = std::min(std::max((t - box.thetaA) * box.invLen, 0.f), 1.f);  // minss/maxss, no branches
-      const float x = sx[idx], y = sy[idx];
-      bool in = (x >= box.x0 + u * box.dx0) & (x <= box.x1 + u * box.dx1) & (y >= box.y0 + u * box.dy0) & (y <= box.y1 + u * box.dy1);
-      if (cover.check) in &= (double(t) >= cover.lo) & (double(t) <= cover.hi);
-      in &= zbuf[idx] > zCull;  // the early depth test
-      cand[n] = idx, ct[n] = t, cx[n] = x, cy[n] = y;
-      n += in;
+    for (int py = py0; py <= py1; ++py) {
+      if (multiGroup && g >= 0 && rowGroup[size_t(py - y0)] != g) continue;
+      const uint32_t rowBase = uint32_t(size_t(s) * PS + size_t(py - y0) * w - size_t(x0));
+      for (int px = px0; px <= px1; ++px) {
+        const uint32_t idx = rowBase + uint32_t(px);
+        const float t = st[idx];
+        const float u = std::min(std::max((t - box.thetaA) * box.invLen, 0.f), 1.f);  // minss/maxss, no branches
+        const float x = sx[idx], y = sy[idx];
+        bool in = (x >= box.x0 + u * box.dx0) & (x <= box.x1 + u * box.dx1) & (y >= box.y0 + u * box.dy0) & (y <= box.y1 + u * box.dy1);
+        if (cover.check) in &= (double(t) >= cover.lo) & (double(t) <= cover.hi);
+        in &= zbuf[idx] > zCull;  // the early depth test
+        cand[n] = idx, ct[n] = t, cx[n] = x, cy[n] = y;
+        n += in;
+      }
     }
-  }
   return n;
 }
 
@@ -345,8 +352,8 @@ inline void BucketRasterizer::Impl::testCandidatesVector(const MovingPart& mp, u
   }
   kernels::LinearEdges edges;
   kernels::linearEdges(isa, at, to, rasterScale, edges);
-  kernels::EdgeTestSetup setup{candT.data(), candX.data(), candY.data(), mp.times.seg.fOffset, mp.times.seg.fScale, tri,
-                               opt.backfaceCull && !(flags & store::kTwoSided)};
+  kernels::EdgeTestSetup setup{
+      candT.data(), candX.data(), candY.data(), mp.times.seg.fOffset, mp.times.seg.fScale, tri, opt.backfaceCull && !(flags & store::kTwoSided)};
   for (int j = 0; j < (tri ? 3 : 4); ++j) setup.za[j] = part.position(0, c[j]).z, setup.zb[j] = part.position(1, c[j]).z;
   recordKernelHits(mp.hc, mi, c, setup, edges, n, [&](uint32_t idx) { testCandidate(mp, mi, c, tri, flags, idx); });
 }

@@ -40,7 +40,6 @@ inline void BucketRasterizer::Impl::prepareLinearVertices(uint32_t nV) {
   }
 }
 
-
 // The linear path: a micropolygon over a group interval inside one knot segment, from its
 // corners' raster positions A and B at the interval's ends (cullX/cullY rows 0 and 1). Corner
 // j's raster position at fraction u is x_j(u) = A_j + (B_j - A_j) g_j(u), a straight line in
@@ -104,8 +103,7 @@ inline BucketRasterizer::Impl::LinearState BucketRasterizer::Impl::linearBox(con
   const float mx = 1e-3f + 1e-6f * mag + slack * mvx, my = 1e-3f + 1e-6f * mag + slack * mvy;
   if (!(std::isfinite(mx) && std::isfinite(my))) return LinearState::Unbounded;
   // The whole interval first: most parts' micropolygons miss a given bucket.
-  if (std::max(ax1, bx1) + mx < mp.rx0 || std::min(ax0, bx0) - mx >= mp.rx1 || std::max(ay1, by1) + my < mp.ry0 ||
-      std::min(ay0, by0) - my >= mp.ry1)
+  if (std::max(ax1, bx1) + mx < mp.rx0 || std::min(ax0, bx0) - mx >= mp.rx1 || std::max(ay1, by1) + my < mp.ry0 || std::min(ay0, by0) - my >= mp.ry1)
     return LinearState::Misses;
   // Depths are linear over the interval; a sample's rounded time may stray li.uErr of it.
   out.zCull = cullDepth(zNear) - li.uErr * dz;
@@ -132,8 +130,8 @@ inline void BucketRasterizer::Impl::drawLinear(const MovingPart& mp, uint32_t mi
     // Every stratum's pixel range and samples in one vector pass: cheaper than the shared
     // ranges below whenever the micropolygon moves at all (the ranges are computed eight at a
     // time; cachegrind: -3 % on a quarter shutter), though not when one range serves all strata.
-    const kernels::SampleRows region{st.data(), sx.data(), sy.data(), 0, size_t(w), w, h, multiGroup ? rowGroup.data() : nullptr,
-                                     uint8_t(mp.g), N, PS, zbuf.data(), zCull};
+    const kernels::SampleRows region{st.data(),     sx.data(), sy.data(), 0,           size_t(w), w, h, multiGroup ? rowGroup.data() : nullptr,
+                                     uint8_t(mp.g), N,         PS,        zbuf.data(), zCull};
     const kernels::StrataSpans spans{mp.times.stratumU0.data(), mp.times.stratumU1.data(), N, x0, y0, w, h, lb.rangeMargin};
     n = kernels::gatherStrata(isa, region, spans, box, candidateList());
     if (n) testCandidates(mp, mi, c, tri, flags, n);
@@ -157,7 +155,6 @@ inline void BucketRasterizer::Impl::drawLinear(const MovingPart& mp, uint32_t mi
   // Every stratum's candidates tested together: the vector test fills its lanes.
   if (n) testCandidates(mp, mi, c, tri, flags, n);
 }
-
 
 // The linear path's boxes for the chunk's micropolygons, and - for each run of them from one
 // grid, which moves together - one gather for the run. A micropolygon's own gather reads every
@@ -248,8 +245,8 @@ inline void BucketRasterizer::Impl::gatherRun(const MovingPart& mp, uint32_t r) 
     cm.cx0 = cell(b.x0 + std::min(0.f, b.dx0 - dx) - ec, gx0, cellGrid.cols), cm.cx1 = cell(b.x1 + std::max(0.f, b.dx1 - dx) + ec, gx0, cellGrid.cols);
     cm.cy0 = cell(b.y0 + std::min(0.f, b.dy0 - dy) - ec, gy0, cellGrid.rows), cm.cy1 = cell(b.y1 + std::max(0.f, b.dy1 - dy) + ec, gy0, cellGrid.rows);
   }
-  const kernels::SampleRows region{st.data(), sx.data(), sy.data(), 0, size_t(w), w, h, multiGroup ? rowGroup.data() : nullptr,
-                                   uint8_t(mp.g), N, PS, zbuf.data(), zCull};
+  const kernels::SampleRows region{st.data(),     sx.data(), sy.data(), 0,           size_t(w), w, h, multiGroup ? rowGroup.data() : nullptr,
+                                   uint8_t(mp.g), N,         PS,        zbuf.data(), zCull};
   const kernels::StrataSpans spans{mp.times.stratumU0.data(), mp.times.stratumU1.data(), N, x0, y0, w, h, margin + e};
   const kernels::Candidates gathered{chunkIndex.data(), chunkT.data(), chunkX.data(), chunkY.data()};
   const size_t n = kernels::gatherStrata(isa, region, spans, box, gathered);

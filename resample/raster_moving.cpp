@@ -16,7 +16,6 @@ namespace reshutter::resample {
 using store::kNoCorner;
 using store::TilePart;
 
-
 const BucketRasterizer::Impl::MovingTimes& BucketRasterizer::Impl::timesFor(const Source& src, uint32_t schedule, const store::Schedule& knots, int g) {
   for (const auto& t : movingTimes)
     if (t->src == &src && t->schedule == schedule && t->g == g) return *t;
@@ -84,8 +83,7 @@ const BucketRasterizer::Impl::MovingTimes& BucketRasterizer::Impl::timesFor(cons
 
 // Micropolygons [ch.m0, ch.m1) of a moving part in shutter group mt.g. Per-vertex work covers
 // the chunk's vertices [ch.vLo, ch.vHi] only.
-void BucketRasterizer::Impl::rasterizeMoving(const MovingTimes& mt, const TilePart& part, const store::Schedule& knots, const HitContext& hc,
-                                             const Chunk& ch) {
+void BucketRasterizer::Impl::rasterizeMoving(const MovingTimes& mt, const TilePart& part, const store::Schedule& knots, const HitContext& hc, const Chunk& ch) {
   const uint32_t K = part.numKnots, vBase = ch.vLo, nV = ch.vHi - ch.vLo + 1;
   const size_t T = mt.thetaTimes.size(), C = mt.cullTheta.size();
   cullX.resize(C * nV), cullY.resize(C * nV), cullZ.resize(C * nV);
@@ -247,13 +245,19 @@ void BucketRasterizer::Impl::drawMoving(const MovingPart& mp, uint32_t mi) {
     }
     MovingBox box{ta.sx0, 0.f, ta.sx1, 0.f, ta.sy0, 0.f, ta.sy1, 0.f};
     if (std::isfinite(mx) && std::isfinite(my))
-      box = {tx0[first] - mx, tx0[last] - tx0[first], tx1[first] + mx, tx1[last] - tx1[first],
-             ty0[first] - my, ty0[last] - ty0[first], ty1[first] + my, ty1[last] - ty1[first],
-             float(thetaTimes[size_t(first)] - toLocal), float(1.0 / (thetaTimes[size_t(last)] - thetaTimes[size_t(first)]))};
+      box = {tx0[first] - mx,
+             tx0[last] - tx0[first],
+             tx1[first] + mx,
+             tx1[last] - tx1[first],
+             ty0[first] - my,
+             ty0[last] - ty0[first],
+             ty1[first] + my,
+             ty1[last] - ty1[first],
+             float(thetaTimes[size_t(first)] - toLocal),
+             float(1.0 / (thetaTimes[size_t(last)] - thetaTimes[size_t(first)]))};
     const size_t n = gatherCandidates(s, s + 1, g, ta.px0, ta.py0, ta.px1, ta.py1, box, cover, zCull, 0);
     if (n) testCandidates(mp, mi, c, tri, flags, n);
   }
-
 }
 
 // Raster positions of the chunk's vertex vi (vBase + vi) at every theta time (projX/projY
@@ -301,8 +305,5 @@ void BucketRasterizer::Impl::projectVertexPath(const MovingTimes& mt, const Tile
   for (size_t i = 0; i + 1 < T; ++i) rho[i] = perspectiveLag(zs[i], zs[i + 1]);
   rho[T - 1] = 0.f;
 }
-
-
-
 
 }  // namespace reshutter::resample

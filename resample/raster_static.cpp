@@ -97,8 +97,7 @@ void BucketRasterizer::Impl::rasterizeStatic(const Source& src, const TilePart& 
 }
 
 // Exact coverage test of static micropolygon m (edge vectors E, corner depths zv) against one sample.
-void BucketRasterizer::Impl::testStatic(const HitContext& hc, uint32_t m, const uint32_t* c, bool tri, const glm::dvec3 E[5], const float zv[4],
-                                        uint32_t idx) {
+void BucketRasterizer::Impl::testStatic(const HitContext& hc, uint32_t m, const uint32_t* c, bool tri, const glm::dvec3 E[5], const float zv[4], uint32_t idx) {
   float b[3];
   int t;
   if (!coversFixed(E, tri, opt.backfaceCull && !(hc.part->flags[m] & store::kTwoSided), sx[idx], sy[idx], t, b)) return;

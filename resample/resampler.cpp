@@ -37,12 +37,12 @@ std::string RenderStats::report() const {
   s << "  sample tests       " << raster.sampleTests << "\n";
   s << "  hits               " << raster.hits << "\n";
   s << "  test efficiency    " << ste << " (hits / tests)\n";
-  s << "  micropolygons      " << raster.micropolygons << " processed (" << raster.staticMicropolygons << " on the static path, "
-    << raster.linearMicropolygons << " bounded from their interval ends, " << raster.chunkGatheredMicropolygons << " of those gathered by chunk, "
-    << raster.chunkCulledMicropolygons << " skipped with their chunk), "
-    << raster.parts << " parts (" << raster.transparentParts << " transparent)\n";
+  s << "  micropolygons      " << raster.micropolygons << " processed (" << raster.staticMicropolygons << " on the static path, " << raster.linearMicropolygons
+    << " bounded from their interval ends, " << raster.chunkGatheredMicropolygons << " of those gathered by chunk, " << raster.chunkCulledMicropolygons
+    << " skipped with their chunk), " << raster.parts << " parts (" << raster.transparentParts << " transparent)\n";
   s << "  fragments          " << raster.fragments << " transparent\n";
-  s << "  parts              " << partsFetched << " fetched, " << partsDecoded << " decoded, " << partsWaited << " waited for (another thread was decoding them)\n";
+  s << "  parts              " << partsFetched << " fetched, " << partsDecoded << " decoded, " << partsWaited
+    << " waited for (another thread was decoding them)\n";
   s << "  time (thread-sum)  set-up " << setupSeconds << " s, parts " << partsSeconds << " s (decode, or wait for another thread's), rasterize "
     << rasterSeconds << " s, resolve " << resolveSeconds << " s, filter " << filterSeconds << " s\n";
   s << "  wall               " << wallSeconds << " s";
@@ -161,8 +161,12 @@ float specialFilter(FilterKind k, const float* v, const float* z, int n, float e
     switch (k) {
       case FilterKind::Min: best = std::min(best, v[i]); break;
       case FilterKind::Max: best = std::max(best, v[i]); break;
-      case FilterKind::ZMin: if (z[i] < bestZ) best = v[i], bestZ = z[i]; break;
-      case FilterKind::ZMax: if (z[i] > bestZ) best = v[i], bestZ = z[i]; break;
+      case FilterKind::ZMin:
+        if (z[i] < bestZ) best = v[i], bestZ = z[i];
+        break;
+      case FilterKind::ZMax:
+        if (z[i] > bestZ) best = v[i], bestZ = z[i];
+        break;
       default: break;
     }
     sum += v[i];
@@ -249,9 +253,18 @@ std::vector<std::unique_ptr<FilterTable>> aovFilterTables(const std::vector<AovC
 /// view, the sample pattern, the output variables and their filters, the buckets.
 struct Plan {
   Plan(const RenderSpec& spec, const Window& window, const ShutterModel& shutter)
-      : spec(spec), meta0(spec.sources[0].store->meta()), cam(meta0.cameras[0]), win(window), shutter(shutter), view(makeView(cam, win.W, win.H)),
-        pattern(spec.samplesX, spec.samplesY, spec.seed), N(pattern.spp()), aovs(resolveAovs(spec.aovs, meta0.schema, spec.filter)),
-        mainTable(spec.filter, pattern), aovTables(aovFilterTables(aovs, pattern)), buckets(planBuckets(win, spec.bucketSize)) {
+      : spec(spec),
+        meta0(spec.sources[0].store->meta()),
+        cam(meta0.cameras[0]),
+        win(window),
+        shutter(shutter),
+        view(makeView(cam, win.W, win.H)),
+        pattern(spec.samplesX, spec.samplesY, spec.seed),
+        N(pattern.spp()),
+        aovs(resolveAovs(spec.aovs, meta0.schema, spec.filter)),
+        mainTable(spec.filter, pattern),
+        aovTables(aovFilterTables(aovs, pattern)),
+        buckets(planBuckets(win, spec.bucketSize)) {
     // Samples beyond the bucket: as many pixels as the widest filter reaches.
     margin = mainTable.margin();
     for (const auto& t : aovTables) margin = std::max(margin, t->margin());
@@ -275,7 +288,7 @@ struct Plan {
   const SamplePattern pattern;
   const int N;  // samples per pixel
   const std::vector<AovChannel> aovs;
-  const FilterTable mainTable;                               // R G B A
+  const FilterTable mainTable;                                // R G B A
   const std::vector<std::unique_ptr<FilterTable>> aovTables;  // per output variable
   const std::vector<Bucket> buckets;
   int margin = 0;
@@ -340,9 +353,9 @@ struct ThreadState {
   std::unique_ptr<BucketRasterizer> raster;
   RenderStats stats;
   std::vector<int> patterns;
-  std::vector<std::pair<size_t, size_t>> parts;  // (source, entry)
+  std::vector<std::pair<size_t, size_t>> parts;              // (source, entry)
   std::vector<std::shared_ptr<const store::TilePart>> held;  // the bucket's decoded parts
-  std::vector<const float*> tapWeights;  // one pixel's filter neighbourhood (accumulateTaps)
+  std::vector<const float*> tapWeights;                      // one pixel's filter neighbourhood (accumulateTaps)
   std::vector<size_t> tapOffsets;
 
   BucketRasterizer& rasterizer(const Plan& plan) {
@@ -506,8 +519,7 @@ class BucketFilter {
 };
 
 /// One bucket, start to end: its pixels of the flat (and deep) image, its figures in ts.stats.
-void renderBucket(const Plan& plan, const std::vector<std::vector<int>>& aovImageChannel, size_t b, ThreadState& ts, FlatImage& img,
-                  DeepFormer* deepFormer) {
+void renderBucket(const Plan& plan, const std::vector<std::vector<int>>& aovImageChannel, size_t b, ThreadState& ts, FlatImage& img, DeepFormer* deepFormer) {
   const Bucket& bk = plan.buckets[b];
   BucketRasterizer& r = ts.rasterizer(plan);
   const Region rg{bk.x0 - plan.margin, bk.y0 - plan.margin, bk.x1 - bk.x0 + 2 * plan.margin, bk.y1 - bk.y0 + 2 * plan.margin};
@@ -575,11 +587,10 @@ std::string describeShutter(const ShutterModel& shutter) {
   sh.precision(9);
   for (size_t g = 0; g < shutter.groups().size(); ++g) {
     const auto& gr = shutter.groups()[g];
-    sh << (g ? "; " : "") << (shutter.groups().size() > 1 ? (g == 0 ? "field 1 " : "field 2 ") : "") << "[" << gr.open << ", " << gr.close
-       << "] frames, " << gr.shape.description();
+    sh << (g ? "; " : "") << (shutter.groups().size() > 1 ? (g == 0 ? "field 1 " : "field 2 ") : "") << "[" << gr.open << ", " << gr.close << "] frames, "
+       << gr.shape.description();
   }
-  if (shutter.rolling().duration != 0)
-    sh << "; rolling " << shutter.rolling().duration << " frames " << (shutter.rolling().upward ? "upward" : "downward");
+  if (shutter.rolling().duration != 0) sh << "; rolling " << shutter.rolling().duration << " frames " << (shutter.rolling().upward ? "upward" : "downward");
   return sh.str();
 }
 

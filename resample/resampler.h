@@ -33,20 +33,20 @@ struct AovRequest {
 inline constexpr int kDefaultBucketSize = 96;
 
 struct RenderSpec {
-  std::vector<Source> sources;   // stores in time order; sources[0] sets camera and schema
-  ShutterModel shutter;          // absolute frames
-  int width = 0, height = 0;     // 0: the store camera's resolution
+  std::vector<Source> sources;  // stores in time order; sources[0] sets camera and schema
+  ShutterModel shutter;         // absolute frames
+  int width = 0, height = 0;    // 0: the store camera's resolution
   /// Data window [x0, x1) × [y0, y1) in output pixels; empty = the whole image.
   int cropX0 = 0, cropX1 = 0, cropY0 = 0, cropY1 = 0;
   int samplesX = 4, samplesY = 4;
   uint64_t seed = 0;
-  FilterSpec filter;             // for R G B A (Z always takes zmin)
+  FilterSpec filter;  // for R G B A (Z always takes zmin)
   std::vector<AovRequest> aovs;
   RasterOptions raster;
   int bucketSize = kDefaultBucketSize;
   size_t cacheBytes = size_t(256) << 20;  // decoded-part cache per store
   bool progress = true;
-  bool halfColor = false;        // write R G B A as half
+  bool halfColor = false;  // write R G B A as half
   /// Deep output (resample/deep.h): formed alongside the flat image when set.
   bool deep = false;
   DeepFormOptions deepOptions;

@@ -53,8 +53,7 @@ std::vector<OutputFrame> fieldFrames(const std::vector<int64_t>& frames, const F
 
 std::pair<ShutterModel, ShutterModel> fieldPassShutters(int64_t frame, const FieldShutter& fields) {
   auto [g1, g2] = fieldGroups(frame, fields);
-  std::pair<ShutterModel, ShutterModel> passes{ShutterModel::progressive(g1.open, g1.close, g1.shape),
-                                               ShutterModel::progressive(g2.open, g2.close, g2.shape)};
+  std::pair<ShutterModel, ShutterModel> passes{ShutterModel::progressive(g1.open, g1.close, g1.shape), ShutterModel::progressive(g2.open, g2.close, g2.shape)};
   passes.first.setRolling(fields.rolling);
   passes.second.setRolling(fields.rolling);
   return passes;

@@ -50,7 +50,7 @@ struct FieldShutter {
   int firstFieldParity = 0;      // rows with row % 2 == parity are field 1: 0 upper dominance, 1 lower
   double open = 0, close = 0.5;  // each field's interval relative to its nominal time, field durations
   ShutterShape shape = ShutterShape::box();
-  RollingShutter rolling;        // duration in frames (the frame's rows are read out once)
+  RollingShutter rolling;  // duration in frames (the frame's rows are read out once)
 };
 
 /// Parity of field 1's rows: "upper" (row 0 in field 1) → 0, "lower" → 1; Error naming `where` otherwise.

@@ -13,8 +13,7 @@ ShutterShape ShutterShape::box() { return ShutterShape{}; }
 ShutterShape ShutterShape::curve(std::vector<std::pair<double, double>> points) {
   ShutterShape s;
   std::sort(points.begin(), points.end());
-  if (points.size() < 2 || points.front().first != 0.0 || points.back().first != 1.0)
-    fail("shutter shape", "a curve needs points at fractions 0 and 1");
+  if (points.size() < 2 || points.front().first != 0.0 || points.back().first != 1.0) fail("shutter shape", "a curve needs points at fractions 0 and 1");
   s.box_ = false;
   double area = 0;
   s.cdf_.push_back(0);

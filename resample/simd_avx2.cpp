@@ -38,8 +38,8 @@ struct BoxLanes {
   __m256 thetaA, invLen, x0, dx0, x1, dx1, y0, dy0, y1, dy1;
 };
 inline BoxLanes boxLanes(const MovingBox& b) {
-  return {_mm256_set1_ps(b.thetaA), _mm256_set1_ps(b.invLen), _mm256_set1_ps(b.x0), _mm256_set1_ps(b.dx0), _mm256_set1_ps(b.x1),
-          _mm256_set1_ps(b.dx1),    _mm256_set1_ps(b.y0),     _mm256_set1_ps(b.dy0), _mm256_set1_ps(b.y1), _mm256_set1_ps(b.dy1)};
+  return {_mm256_set1_ps(b.thetaA), _mm256_set1_ps(b.invLen), _mm256_set1_ps(b.x0),  _mm256_set1_ps(b.dx0), _mm256_set1_ps(b.x1),
+          _mm256_set1_ps(b.dx1),    _mm256_set1_ps(b.y0),     _mm256_set1_ps(b.dy0), _mm256_set1_ps(b.y1),  _mm256_set1_ps(b.dy1)};
 }
 // A fixed box (no motion, invLen 0, as the static path builds it): the same answer as
 // insideAtOwnTime() for any finite time, as x0 + u * 0 is x0, with no time at all.
@@ -75,8 +75,8 @@ inline size_t appendLanes(__m256 in, __m256i live, __m256i idx, __m256 t, __m256
 // insideFixed()) and the early depth test; appends those among lanesLive. The two-row step of
 // every narrow gather.
 template <bool kFixed = false>
-__attribute__((always_inline)) inline size_t appendRowPair(const BoxLanes& b, const SampleRows& r, __m256 zCull, size_t lo, size_t hi,
-                                                                          unsigned lanesLive, const Candidates& out, size_t n) {
+__attribute__((always_inline)) inline size_t appendRowPair(const BoxLanes& b, const SampleRows& r, __m256 zCull, size_t lo, size_t hi, unsigned lanesLive,
+                                                           const Candidates& out, size_t n) {
   const __m256 t = _mm256_loadu2_m128(r.st + hi, r.st + lo), x = _mm256_loadu2_m128(r.sx + hi, r.sx + lo), y = _mm256_loadu2_m128(r.sy + hi, r.sy + lo);
   const __m256 visible = _mm256_cmp_ps(_mm256_loadu2_m128(r.depth + hi, r.depth + lo), zCull, _CMP_GT_OQ);
   const __m256 in = kFixed ? insideFixed(b, x, y) : insideAtOwnTime(b, t, x, y);
@@ -91,8 +91,8 @@ __attribute__((always_inline)) inline size_t appendRowPair(const BoxLanes& b, co
 // a's rows (starting at alo, ahi) in lanes 0-1 and 4-5, b's (blo, bhi) in lanes 2-3 and 6-7;
 // tested as appendRowPair() does and appended among lanesLive.
 template <bool kFixed = false>
-__attribute__((always_inline)) inline size_t appendPlanePair(const BoxLanes& b, const SampleRows& r, __m256 zCull, size_t alo, size_t ahi,
-                                                                            size_t blo, size_t bhi, unsigned lanesLive, const Candidates& out, size_t n) {
+__attribute__((always_inline)) inline size_t appendPlanePair(const BoxLanes& b, const SampleRows& r, __m256 zCull, size_t alo, size_t ahi, size_t blo,
+                                                             size_t bhi, unsigned lanesLive, const Candidates& out, size_t n) {
   auto pairedRows = [&](const float* v) {
     const __m128 lo = _mm_loadh_pi(_mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(v + alo))), reinterpret_cast<const __m64*>(v + blo));
     const __m128 hi = _mm_loadh_pi(_mm_castsi128_ps(_mm_loadl_epi64(reinterpret_cast<const __m128i*>(v + ahi))), reinterpret_cast<const __m64*>(v + bhi));
@@ -138,9 +138,7 @@ __attribute__((always_inline)) inline size_t gatherRows(const BoxLanes& b, const
     // Narrow boxes (a small micropolygon's stratum box is 2 - 4 pixels wide): two rows per
     // vector, four lanes each, so that half the lanes are not idle.
     const unsigned colBits = (1u << r.cols) - 1;
-    auto rowPair = [&](size_t lo, size_t hi, bool pair) {
-      n = appendRowPair<kFixed>(b, r, zCull, lo, hi, pair ? colBits | colBits << 4 : colBits, out, n);
-    };
+    auto rowPair = [&](size_t lo, size_t hi, bool pair) { n = appendRowPair<kFixed>(b, r, zCull, lo, hi, pair ? colBits | colBits << 4 : colBits, out, n); };
     for (int plane = 0; plane < r.planes; ++plane) {
       const size_t planeBase = r.first + size_t(plane) * r.planeStride;
       if (!r.rowGroup) {
@@ -168,17 +166,18 @@ __attribute__((always_inline)) inline size_t gatherRows(const BoxLanes& b, const
   }
   const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
   for (int plane = 0; plane < r.planes; ++plane)
-  for (int row = 0; row < r.rows; ++row) {
-    if (r.rowGroup && r.rowGroup[row] != r.group) continue;
-    const size_t base = r.first + size_t(plane) * r.planeStride + size_t(row) * r.stride;
-    for (int c = 0; c < r.cols; c += 8) {
-      const size_t at = base + size_t(c);
-      const __m256 t = _mm256_loadu_ps(r.st + at), x = _mm256_loadu_ps(r.sx + at), y = _mm256_loadu_ps(r.sy + at);
-      const __m256 visible = _mm256_cmp_ps(_mm256_loadu_ps(r.depth + at), zCull, _CMP_GT_OQ);
-      const __m256i live = _mm256_cmpgt_epi32(_mm256_set1_epi32(r.cols - c), lane);
-      n = appendLanes(_mm256_and_ps(insideAtOwnTime(b, t, x, y), visible), live, _mm256_add_epi32(_mm256_set1_epi32(int(uint32_t(at))), lane), t, x, y, out, n);
+    for (int row = 0; row < r.rows; ++row) {
+      if (r.rowGroup && r.rowGroup[row] != r.group) continue;
+      const size_t base = r.first + size_t(plane) * r.planeStride + size_t(row) * r.stride;
+      for (int c = 0; c < r.cols; c += 8) {
+        const size_t at = base + size_t(c);
+        const __m256 t = _mm256_loadu_ps(r.st + at), x = _mm256_loadu_ps(r.sx + at), y = _mm256_loadu_ps(r.sy + at);
+        const __m256 visible = _mm256_cmp_ps(_mm256_loadu_ps(r.depth + at), zCull, _CMP_GT_OQ);
+        const __m256i live = _mm256_cmpgt_epi32(_mm256_set1_epi32(r.cols - c), lane);
+        n = appendLanes(_mm256_and_ps(insideAtOwnTime(b, t, x, y), visible), live, _mm256_add_epi32(_mm256_set1_epi32(int(uint32_t(at))), lane), t, x, y, out,
+                        n);
+      }
     }
-  }
   return n;
 }
 
@@ -248,13 +247,12 @@ size_t gatherStrataAvx2(const SampleRows& region, const StrataSpans& sp, const M
     _mm256_store_si256(reinterpret_cast<__m256i*>(third + s), row2);
     _mm256_store_si256(reinterpret_cast<__m256i*>(fourth + s), _mm256_add_epi32(row2, _mm256_and_si256(fourRows, stride)));
     const __m256i colBits = _mm256_sub_epi32(_mm256_sllv_epi32(ione, _mm256_min_epi32(c, _mm256_set1_epi32(4))), ione);
-    _mm256_store_si256(reinterpret_cast<__m256i*>(laneMask + s),
-                       _mm256_or_si256(colBits, _mm256_and_si256(twoRows, _mm256_slli_epi32(colBits, 4))));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(laneMask + s), _mm256_or_si256(colBits, _mm256_and_si256(twoRows, _mm256_slli_epi32(colBits, 4))));
     _mm256_store_si256(reinterpret_cast<__m256i*>(laneMask2 + s),
                        _mm256_or_si256(_mm256_and_si256(threeRows, colBits), _mm256_and_si256(fourRows, _mm256_slli_epi32(colBits, 4))));
   }
   if (N < 64) nonEmpty &= (uint64_t(1) << N) - 1, halfVector &= (uint64_t(1) << N) - 1;  // the padding lanes past the last stratum
-  if (region.rowGroup) oneVector = 0, halfVector = 0;  // fields: gatherRows() skips the other group's rows
+  if (region.rowGroup) oneVector = 0, halfVector = 0;                                    // fields: gatherRows() skips the other group's rows
   // Locals, so that the candidate stores (which may alias anything) do not force reloads.
   const Candidates list = out;
   SampleRows rr = region;
@@ -304,8 +302,8 @@ size_t gatherStrataAvx2(const SampleRows& region, const StrataSpans& sp, const M
 
 // filterCandidates() with eight lanes: the depths gathered by index, the survivors packed with
 // the permutation table.
-size_t filterCandidatesAvx2(const Candidates& in, size_t begin, size_t end, const MovingBox& box, const float* depth, float zCull,
-                                          const Candidates& out, size_t n) {
+size_t filterCandidatesAvx2(const Candidates& in, size_t begin, size_t end, const MovingBox& box, const float* depth, float zCull, const Candidates& out,
+                            size_t n) {
   const BoxLanes b = boxLanes(box);
   const __m256 zc = _mm256_set1_ps(zCull);
   const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
@@ -345,8 +343,7 @@ inline Lanes3 crossLanes(const Lanes3& a, const Lanes3& b) {
 // stored to lanes [lane0, lane0 + 4) of out.
 // kFixed: the constant term only (D unused).
 template <bool kFixed = false>
-inline void edgeLanes(const Lanes3& A, const Lanes3& D, const Lanes3& Ab, const Lanes3& Db, const RasterScale& m, LinearEdges& out,
-                                     int lane0) {
+inline void edgeLanes(const Lanes3& A, const Lanes3& D, const Lanes3& Ab, const Lanes3& Db, const RasterScale& m, LinearEdges& out, int lane0) {
   const __m256d invAx = _mm256_set1_pd(m.invAx), invAy = _mm256_set1_pd(m.invAy), bx = _mm256_set1_pd(m.bx), by = _mm256_set1_pd(m.by);
   const Lanes3 c0 = crossLanes(A, Ab);
   Lanes3 c1{}, c2{};
@@ -411,8 +408,8 @@ inline TriangleMasks triangleMasks(__m256d a0, __m256d a1, __m256d a2, bool cull
   if (cullBack) counts = _mm256_andnot_pd(_mm256_cmp_pd(S, zero, _CMP_GT_OQ), counts);
   const __m256d flip = _mm256_cmp_pd(S, zero, _CMP_LT_OQ);
   const __m256d in = _mm256_and_pd(_mm256_and_pd(innerSide(a0, flip), innerSide(a1, flip)), innerSide(a2, flip));
-  const __m256d anyZero = _mm256_or_pd(_mm256_or_pd(_mm256_cmp_pd(a0, zero, _CMP_EQ_OQ), _mm256_cmp_pd(a1, zero, _CMP_EQ_OQ)),
-                                       _mm256_cmp_pd(a2, zero, _CMP_EQ_OQ));
+  const __m256d anyZero =
+      _mm256_or_pd(_mm256_or_pd(_mm256_cmp_pd(a0, zero, _CMP_EQ_OQ), _mm256_cmp_pd(a1, zero, _CMP_EQ_OQ)), _mm256_cmp_pd(a2, zero, _CMP_EQ_OQ));
   TriangleMasks m;
   m.hit = _mm256_movemask_pd(_mm256_and_pd(counts, in));
   m.tie = _mm256_movemask_pd(_mm256_and_pd(counts, anyZero));
@@ -467,8 +464,7 @@ size_t testLinearEdgesAvx2(const EdgeTestSetup& s, const LinearEdges& E, size_t 
 
 }  // namespace
 
-bool avx2::projectLerped(const float* a, const float* b, float f, size_t n, const ProjectionScale& s, float* xo, float* yo, float* zo,
-                                     float box[4]) {
+bool avx2::projectLerped(const float* a, const float* b, float f, size_t n, const ProjectionScale& s, float* xo, float* yo, float* zo, float box[4]) {
   const __m128 fv = _mm_set1_ps(f), nearClip = _mm_set1_ps(s.nearClip), inf = _mm_set1_ps(INFINITY), absMask = _mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF));
   const __m256d ax = _mm256_set1_pd(s.ax), bx = _mm256_set1_pd(s.bx), ay = _mm256_set1_pd(s.ay), by = _mm256_set1_pd(s.by), one = _mm256_set1_pd(1.0);
   __m128 lo_x = inf, lo_y = inf, hi_x = _mm_set1_ps(-INFINITY), hi_y = hi_x;
@@ -526,8 +522,10 @@ void cellsOfAvx2(const CellGrid& g, const float* t, const float* x, const float*
   const __m256 maxCol = _mm256_set1_ps(float(g.cols - 1)), maxRow = _mm256_set1_ps(float(g.rows - 1)), cols = _mm256_set1_ps(float(g.cols));
   for (size_t i = 0; i < n; i += 8) {
     const __m256 u = _mm256_min_ps(one, _mm256_max_ps(zero, _mm256_mul_ps(_mm256_sub_ps(_mm256_loadu_ps(t + i), thetaA), invLen)));
-    const __m256 cx = _mm256_min_ps(_mm256_max_ps(_mm256_floor_ps(_mm256_mul_ps(_mm256_sub_ps(_mm256_sub_ps(_mm256_loadu_ps(x + i), _mm256_mul_ps(u, dx)), gx), inv)), zero), maxCol);
-    const __m256 cy = _mm256_min_ps(_mm256_max_ps(_mm256_floor_ps(_mm256_mul_ps(_mm256_sub_ps(_mm256_sub_ps(_mm256_loadu_ps(y + i), _mm256_mul_ps(u, dy)), gy), inv)), zero), maxRow);
+    const __m256 cx = _mm256_min_ps(
+        _mm256_max_ps(_mm256_floor_ps(_mm256_mul_ps(_mm256_sub_ps(_mm256_sub_ps(_mm256_loadu_ps(x + i), _mm256_mul_ps(u, dx)), gx), inv)), zero), maxCol);
+    const __m256 cy = _mm256_min_ps(
+        _mm256_max_ps(_mm256_floor_ps(_mm256_mul_ps(_mm256_sub_ps(_mm256_sub_ps(_mm256_loadu_ps(y + i), _mm256_mul_ps(u, dy)), gy), inv)), zero), maxRow);
     const __m256i cell = _mm256_cvttps_epi32(_mm256_add_ps(_mm256_mul_ps(cy, cols), cx));  // exact: cells < 2^16
     const __m128i packed = _mm_packus_epi32(_mm256_castsi256_si128(cell), _mm256_extracti128_si256(cell, 1));
     _mm_storeu_si128(reinterpret_cast<__m128i*>(cellOf + i), packed);
@@ -536,7 +534,7 @@ void cellsOfAvx2(const CellGrid& g, const float* t, const float* x, const float*
 
 }  // namespace
 
-const IsaKernels kAvx2Kernels = {gatherInBoxAvx2, gatherStrataAvx2, filterCandidatesAvx2, cellsOfAvx2, avx2::projectLerped,
-                                 linearEdgesAvx2, fixedEdgesAvx2, testLinearEdgesAvx2<false>, testLinearEdgesAvx2<true>};
+const IsaKernels kAvx2Kernels = {gatherInBoxAvx2, gatherStrataAvx2,           filterCandidatesAvx2,     cellsOfAvx2, avx2::projectLerped, linearEdgesAvx2,
+                                 fixedEdgesAvx2,  testLinearEdgesAvx2<false>, testLinearEdgesAvx2<true>};
 
 }  // namespace reshutter::resample::kernels

@@ -26,8 +26,8 @@ struct BoxLanes512 {
   __m512 thetaA, invLen, x0, dx0, x1, dx1, y0, dy0, y1, dy1;
 };
 inline BoxLanes512 boxLanes512(const MovingBox& b) {
-  return {_mm512_set1_ps(b.thetaA), _mm512_set1_ps(b.invLen), _mm512_set1_ps(b.x0), _mm512_set1_ps(b.dx0), _mm512_set1_ps(b.x1),
-          _mm512_set1_ps(b.dx1),    _mm512_set1_ps(b.y0),     _mm512_set1_ps(b.dy0), _mm512_set1_ps(b.y1), _mm512_set1_ps(b.dy1)};
+  return {_mm512_set1_ps(b.thetaA), _mm512_set1_ps(b.invLen), _mm512_set1_ps(b.x0),  _mm512_set1_ps(b.dx0), _mm512_set1_ps(b.x1),
+          _mm512_set1_ps(b.dx1),    _mm512_set1_ps(b.y0),     _mm512_set1_ps(b.dy0), _mm512_set1_ps(b.y1),  _mm512_set1_ps(b.dy1)};
 }
 // insideFixed() on sixteen lanes, among the lanes of `live`.
 inline __mmask16 insideFixed512(__mmask16 live, const BoxLanes512& b, __m512 x, __m512 y) {
@@ -48,7 +48,7 @@ inline __mmask16 insideAtOwnTime512(__mmask16 live, const BoxLanes512& b, __m512
 // Row segments waiting for a vector: segment k covers samples start[k] .. start[k] + 3, of which
 // the set bits of bits[k] (at most four) are in the range.
 struct Segments {
-  static constexpr size_t kCap = 512;  // a multiple of four; 64 strata of four rows fill 256
+  static constexpr size_t kCap = 512;     // a multiple of four; 64 strata of four rows fill 256
   alignas(64) uint32_t start[kCap + 16];  // the compresses store sixteen lanes
   alignas(64) uint8_t bits[kCap + 16];
   size_t count = 0;
@@ -58,8 +58,7 @@ struct Segments {
 // lane is stored and the count advances by the mask (whether a vector holds a candidate is data
 // the predictor cannot learn). `out` needs room for n + 16 entries.
 template <bool kFixed = false>
-inline size_t appendSegmentVector(const BoxLanes512& b, const SampleRows& r, __m512 zCull, const Segments& seg, size_t g,
-                                                 const Candidates& out, size_t n) {
+inline size_t appendSegmentVector(const BoxLanes512& b, const SampleRows& r, __m512 zCull, const Segments& seg, size_t g, const Candidates& out, size_t n) {
   const uint32_t* at = seg.start + g;
   auto rows4 = [&](const float* v) {
     __m512 a = _mm512_zextps128_ps512(_mm_loadu_ps(v + at[0]));
@@ -86,8 +85,7 @@ inline size_t appendSegmentVector(const BoxLanes512& b, const SampleRows& r, __m
 // Tests every whole vector of waiting segments; keeps the (at most three) left over, or with
 // `all` pads them to a vector and tests them too.
 template <bool kFixed = false>
-inline size_t flushSegments(const BoxLanes512& b, const SampleRows& r, __m512 zCull, Segments& seg, bool all, const Candidates& out,
-                                           size_t n) {
+inline size_t flushSegments(const BoxLanes512& b, const SampleRows& r, __m512 zCull, Segments& seg, bool all, const Candidates& out, size_t n) {
   size_t whole = seg.count & ~size_t(3);
   if (all && whole < seg.count) {
     for (size_t k = seg.count; k < whole + 4; ++k) seg.start[k] = 0, seg.bits[k] = 0;  // sample 0 exists; no lane live
@@ -103,8 +101,8 @@ inline size_t flushSegments(const BoxLanes512& b, const SampleRows& r, __m512 zC
 // A fixed box of at most two rows of two pixels (a static micropolygon's, nearly always) over
 // four sample planes in one vector: plane q's first row in lanes 4q, 4q+1 and its second row
 // (`second` samples further; 0 repeats the first, masked off by `lanes`) in lanes 4q+2, 4q+3.
-inline size_t appendPlaneQuad(const BoxLanes512& b, const SampleRows& r, __m512 zCull, size_t first, size_t second, __mmask16 lanes,
-                                             const Candidates& out, size_t n) {
+inline size_t appendPlaneQuad(const BoxLanes512& b, const SampleRows& r, __m512 zCull, size_t first, size_t second, __mmask16 lanes, const Candidates& out,
+                              size_t n) {
   const size_t ps = r.planeStride;
   auto quad = [&](const float* v) {
     auto plane = [&](size_t at) {
@@ -121,8 +119,8 @@ inline size_t appendPlaneQuad(const BoxLanes512& b, const SampleRows& r, __m512 
   const __m512 t = quad(r.st);
   const int s2 = int(second), p1 = int(ps);
   const __m512i idx = _mm512_add_epi32(_mm512_set1_epi32(int(uint32_t(first))),
-                                       _mm512_setr_epi32(0, 1, s2, s2 + 1, p1, p1 + 1, p1 + s2, p1 + s2 + 1, 2 * p1, 2 * p1 + 1, 2 * p1 + s2,
-                                                         2 * p1 + s2 + 1, 3 * p1, 3 * p1 + 1, 3 * p1 + s2, 3 * p1 + s2 + 1));
+                                       _mm512_setr_epi32(0, 1, s2, s2 + 1, p1, p1 + 1, p1 + s2, p1 + s2 + 1, 2 * p1, 2 * p1 + 1, 2 * p1 + s2, 2 * p1 + s2 + 1,
+                                                         3 * p1, 3 * p1 + 1, 3 * p1 + s2, 3 * p1 + s2 + 1));
   _mm512_storeu_si512(out.index + n, _mm512_maskz_compress_epi32(k, idx));
   _mm512_storeu_ps(out.t + n, _mm512_maskz_compress_ps(k, t));
   _mm512_storeu_ps(out.x + n, _mm512_maskz_compress_ps(k, x));
@@ -176,8 +174,8 @@ size_t gatherInBoxAvx512(const SampleRows& rows, const MovingBox& box, const Can
 }
 
 // filterCandidates() with sixteen lanes.
-size_t filterCandidatesAvx512(const Candidates& in, size_t begin, size_t end, const MovingBox& box, const float* depth, float zCull,
-                                              const Candidates& out, size_t n) {
+size_t filterCandidatesAvx512(const Candidates& in, size_t begin, size_t end, const MovingBox& box, const float* depth, float zCull, const Candidates& out,
+                              size_t n) {
   const BoxLanes512 b = boxLanes512(box);
   const __m512 zc = _mm512_set1_ps(zCull);
   for (size_t k = begin; k < end; k += 16) {
@@ -272,7 +270,6 @@ size_t gatherStrataAvx512(const SampleRows& region, const StrataSpans& sp, const
   return flushSegments(lanes, rr, zCull, seg, true, list, n);
 }
 
-
 // linearEdges() and fixedEdges() in one pass of eight lanes: lanes 0-3 pair corner j with corner
 // j + 1 (edges 01 12 23 30), lanes 4-7 with corner j + 2 (lane 4 is edge 02, the rest padding) -
 // the two passes of linearEdgesAvx2(), lane for lane.
@@ -339,9 +336,7 @@ inline TriangleMasks512 triangleMasks512(__m512d a0, __m512d a1, __m512d a2, boo
   __mmask8 counts = _mm512_cmp_pd_mask(S, zero, _CMP_NEQ_UQ);
   if (cullBack) counts &= __mmask8(~_mm512_cmp_pd_mask(S, zero, _CMP_GT_OQ));
   const __mmask8 flip = _mm512_cmp_pd_mask(S, zero, _CMP_LT_OQ);
-  auto inner = [&](__m512d a) {
-    return __mmask8((_mm512_cmp_pd_mask(a, zero, _CMP_GT_OQ) & ~flip) | (_mm512_cmp_pd_mask(a, zero, _CMP_LT_OQ) & flip));
-  };
+  auto inner = [&](__m512d a) { return __mmask8((_mm512_cmp_pd_mask(a, zero, _CMP_GT_OQ) & ~flip) | (_mm512_cmp_pd_mask(a, zero, _CMP_LT_OQ) & flip)); };
   const __mmask8 in = inner(a0) & inner(a1) & inner(a2);
   const __mmask8 anyZero = _mm512_cmp_pd_mask(a0, zero, _CMP_EQ_OQ) | _mm512_cmp_pd_mask(a1, zero, _CMP_EQ_OQ) | _mm512_cmp_pd_mask(a2, zero, _CMP_EQ_OQ);
   TriangleMasks512 m;
@@ -401,8 +396,12 @@ void cellsOfAvx512(const CellGrid& g, const float* t, const float* x, const floa
   constexpr int kFloor = _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC;
   for (size_t i = 0; i < n; i += 16) {
     const __m512 u = _mm512_min_ps(one, _mm512_max_ps(zero, _mm512_mul_ps(_mm512_sub_ps(_mm512_loadu_ps(t + i), thetaA), invLen)));
-    const __m512 cx = _mm512_min_ps(_mm512_max_ps(_mm512_roundscale_ps(_mm512_mul_ps(_mm512_sub_ps(_mm512_sub_ps(_mm512_loadu_ps(x + i), _mm512_mul_ps(u, dx)), gx), inv), kFloor), zero), maxCol);
-    const __m512 cy = _mm512_min_ps(_mm512_max_ps(_mm512_roundscale_ps(_mm512_mul_ps(_mm512_sub_ps(_mm512_sub_ps(_mm512_loadu_ps(y + i), _mm512_mul_ps(u, dy)), gy), inv), kFloor), zero), maxRow);
+    const __m512 cx = _mm512_min_ps(
+        _mm512_max_ps(_mm512_roundscale_ps(_mm512_mul_ps(_mm512_sub_ps(_mm512_sub_ps(_mm512_loadu_ps(x + i), _mm512_mul_ps(u, dx)), gx), inv), kFloor), zero),
+        maxCol);
+    const __m512 cy = _mm512_min_ps(
+        _mm512_max_ps(_mm512_roundscale_ps(_mm512_mul_ps(_mm512_sub_ps(_mm512_sub_ps(_mm512_loadu_ps(y + i), _mm512_mul_ps(u, dy)), gy), inv), kFloor), zero),
+        maxRow);
     _mm256_storeu_si256(reinterpret_cast<__m256i*>(cellOf + i), _mm512_cvtepi32_epi16(_mm512_cvttps_epi32(_mm512_add_ps(_mm512_mul_ps(cy, cols), cx))));
   }
 }
@@ -411,7 +410,8 @@ void fixedEdgesAvx512(const float* const at[4], const RasterScale& m, LinearEdge
 
 }  // namespace
 
-const IsaKernels kAvx512Kernels = {gatherInBoxAvx512, gatherStrataAvx512, filterCandidatesAvx512, cellsOfAvx512, avx2::projectLerped,
-                                   edgesAvx512<false>, fixedEdgesAvx512, testLinearEdgesAvx512<false>, testLinearEdgesAvx512<true>};
+const IsaKernels kAvx512Kernels = {gatherInBoxAvx512, gatherStrataAvx512,           filterCandidatesAvx512,
+                                   cellsOfAvx512,     avx2::projectLerped,          edgesAvx512<false>,
+                                   fixedEdgesAvx512,  testLinearEdgesAvx512<false>, testLinearEdgesAvx512<true>};
 
 }  // namespace reshutter::resample::kernels

@@ -15,8 +15,8 @@ bool available() {
 
 bool available(Isa isa) {
   if (isa == Isa::Avx2) return available();
-  static const bool ok = available() && __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw") &&
-                         __builtin_cpu_supports("avx512dq") && __builtin_cpu_supports("avx512vl") && __builtin_cpu_supports("bmi2");
+  static const bool ok = available() && __builtin_cpu_supports("avx512f") && __builtin_cpu_supports("avx512bw") && __builtin_cpu_supports("avx512dq") &&
+                         __builtin_cpu_supports("avx512vl") && __builtin_cpu_supports("bmi2");
   return ok;
 }
 
@@ -48,8 +48,8 @@ size_t gatherStrata(Isa isa, const SampleRows& region, const StrataSpans& spans,
   return kernelsFor(isa).gatherStrata(region, spans, box, out);
 }
 
-size_t filterCandidates(Isa isa, const Candidates& in, size_t begin, size_t end, const MovingBox& box, const float* depth, float zCull,
-                        const Candidates& out, size_t n) {
+size_t filterCandidates(Isa isa, const Candidates& in, size_t begin, size_t end, const MovingBox& box, const float* depth, float zCull, const Candidates& out,
+                        size_t n) {
   return kernelsFor(isa).filterCandidates(in, begin, end, box, depth, zCull, out, n);
 }
 

@@ -20,8 +20,8 @@ namespace reshutter::resample::kernels {
 struct IsaKernels {
   size_t (*gatherInBox)(const SampleRows& rows, const MovingBox& box, const Candidates& out, size_t n);
   size_t (*gatherStrata)(const SampleRows& region, const StrataSpans& spans, const MovingBox& box, const Candidates& out);
-  size_t (*filterCandidates)(const Candidates& in, size_t begin, size_t end, const MovingBox& box, const float* depth, float zCull,
-                             const Candidates& out, size_t n);
+  size_t (*filterCandidates)(const Candidates& in, size_t begin, size_t end, const MovingBox& box, const float* depth, float zCull, const Candidates& out,
+                             size_t n);
   /// sortByCell()'s cell of each of n candidates (times t, positions x, y).
   void (*cellsOf)(const CellGrid& grid, const float* t, const float* x, const float* y, size_t n, uint16_t* cellOf);
   bool (*projectLerped)(const float* a, const float* b, float f, size_t n, const ProjectionScale& scale, float* x, float* y, float* z, float box[4]);
@@ -49,8 +49,8 @@ namespace {
 // which triangle a sample hit is a coin toss, so it indexes rather than branches. (The list has
 // room for L - 1 entries past the last kept.)
 template <int L>
-inline __attribute__((always_inline)) size_t writeEdgeHits(const float (&bz)[2][4][L], unsigned undecided, unsigned hitB, unsigned any, size_t i,
-                                                            EdgeHit* hits, size_t h) {
+inline __attribute__((always_inline)) size_t writeEdgeHits(const float (&bz)[2][4][L], unsigned undecided, unsigned hitB, unsigned any, size_t i, EdgeHit* hits,
+                                                           size_t h) {
   for (int l = 0; l < L; ++l) {
     EdgeHit& out = hits[h];
     out.candidate = uint32_t(i + size_t(l));

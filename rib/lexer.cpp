@@ -413,7 +413,8 @@ bool Lexer::binaryToken(uint8_t code, TokenType& out) {
     return out = TokenType::String, true;
   }
   --pos_;
-  fail(cat("bad binary code 0x", "0123456789abcdef"[code >> 4], "0123456789abcdef"[code & 15], code == 0xff ? " (end of RunProgram block outside one)" : " (reserved)"),
+  fail(cat("bad binary code 0x", "0123456789abcdef"[code >> 4], "0123456789abcdef"[code & 15],
+           code == 0xff ? " (end of RunProgram block outside one)" : " (reserved)"),
        true);
 }
 

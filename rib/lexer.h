@@ -65,7 +65,7 @@ class Lexer {
   TokenType asciiString();
   TokenType asciiNumber();
   bool binaryToken(uint8_t code, TokenType& out);  // false: a definition, no token
-  bool stringToken(const char* what);  // the next token must be a string (for 0xCC/0xCD)
+  bool stringToken(const char* what);              // the next token must be a string (for 0xCC/0xCD)
 
   std::unique_ptr<ByteSource> source_;
   std::string name_;

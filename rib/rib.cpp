@@ -65,9 +65,9 @@ std::string parseDeclaration(std::string_view text, bool withName, ParamDecl& ou
     }
   size_t k = 0;
   ParamDecl d;
-  static const std::pair<const char*, StorageClass> classes[] = {
-      {"constant", StorageClass::Constant}, {"uniform", StorageClass::Uniform},         {"varying", StorageClass::Varying},
-      {"vertex", StorageClass::Vertex},     {"facevarying", StorageClass::FaceVarying}, {"facevertex", StorageClass::FaceVertex}};
+  static const std::pair<const char*, StorageClass> classes[] = {{"constant", StorageClass::Constant},       {"uniform", StorageClass::Uniform},
+                                                                 {"varying", StorageClass::Varying},         {"vertex", StorageClass::Vertex},
+                                                                 {"facevarying", StorageClass::FaceVarying}, {"facevertex", StorageClass::FaceVertex}};
   if (k < w.size())
     for (auto& [n, c] : classes)
       if (w[k] == n) {
@@ -94,10 +94,10 @@ std::string parseDeclaration(std::string_view text, bool withName, ParamDecl& ou
     type = type.substr(0, br);
     while (!type.empty() && type.back() == ' ') type.remove_suffix(1);
   }
-  static const std::pair<const char*, ParamType> types[] = {
-      {"float", ParamType::Float},   {"integer", ParamType::Integer}, {"int", ParamType::Integer}, {"point", ParamType::Point},
-      {"vector", ParamType::Vector}, {"normal", ParamType::Normal},   {"color", ParamType::Color}, {"string", ParamType::String},
-      {"hpoint", ParamType::HPoint}, {"matrix", ParamType::Matrix},   {"bool", ParamType::Bool}};
+  static const std::pair<const char*, ParamType> types[] = {{"float", ParamType::Float},   {"integer", ParamType::Integer}, {"int", ParamType::Integer},
+                                                            {"point", ParamType::Point},   {"vector", ParamType::Vector},   {"normal", ParamType::Normal},
+                                                            {"color", ParamType::Color},   {"string", ParamType::String},   {"hpoint", ParamType::HPoint},
+                                                            {"matrix", ParamType::Matrix}, {"bool", ParamType::Bool}};
   bool found = false;
   for (auto& [n, t] : types)
     if (type == n) d.type = t, found = true;
@@ -118,32 +118,88 @@ DeclMap standardDeclarations() {
   // RISpec 3.2 standard variables and the standard shaders', lights', options' and attributes'
   // parameters, so that real files parse without their own Declare lines.
   static const char* table[][2] = {
-      {"P", "vertex point"}, {"Pw", "vertex hpoint"}, {"Pz", "vertex float"}, {"N", "varying normal"}, {"Np", "uniform normal"},
-      {"Cs", "varying color"}, {"Os", "varying color"}, {"s", "varying float"}, {"t", "varying float"}, {"st", "varying float[2]"},
-      {"width", "varying float"}, {"constantwidth", "constant float"},
+      {"P", "vertex point"},
+      {"Pw", "vertex hpoint"},
+      {"Pz", "vertex float"},
+      {"N", "varying normal"},
+      {"Np", "uniform normal"},
+      {"Cs", "varying color"},
+      {"Os", "varying color"},
+      {"s", "varying float"},
+      {"t", "varying float"},
+      {"st", "varying float[2]"},
+      {"width", "varying float"},
+      {"constantwidth", "constant float"},
       // Shaders and lights.
-      {"Ka", "uniform float"}, {"Kd", "uniform float"}, {"Ks", "uniform float"}, {"Kr", "uniform float"},
-      {"roughness", "uniform float"}, {"specularcolor", "uniform color"}, {"intensity", "uniform float"},
-      {"lightcolor", "uniform color"}, {"from", "uniform point"}, {"to", "uniform point"}, {"coneangle", "uniform float"},
-      {"conedeltaangle", "uniform float"}, {"beamdistribution", "uniform float"}, {"amplitude", "uniform float"},
-      {"texturename", "uniform string"}, {"mindistance", "uniform float"}, {"maxdistance", "uniform float"},
-      {"background", "uniform color"}, {"distance", "uniform float"}, {"shadowname", "uniform string"},
-      {"__category", "uniform string"}, {"__nondiffuse", "uniform float"}, {"__nonspecular", "uniform float"},
+      {"Ka", "uniform float"},
+      {"Kd", "uniform float"},
+      {"Ks", "uniform float"},
+      {"Kr", "uniform float"},
+      {"roughness", "uniform float"},
+      {"specularcolor", "uniform color"},
+      {"intensity", "uniform float"},
+      {"lightcolor", "uniform color"},
+      {"from", "uniform point"},
+      {"to", "uniform point"},
+      {"coneangle", "uniform float"},
+      {"conedeltaangle", "uniform float"},
+      {"beamdistribution", "uniform float"},
+      {"amplitude", "uniform float"},
+      {"texturename", "uniform string"},
+      {"mindistance", "uniform float"},
+      {"maxdistance", "uniform float"},
+      {"background", "uniform color"},
+      {"distance", "uniform float"},
+      {"shadowname", "uniform string"},
+      {"__category", "uniform string"},
+      {"__nondiffuse", "uniform float"},
+      {"__nonspecular", "uniform float"},
       // Cameras, displays, options and attributes.
-      {"fov", "uniform float"}, {"origin", "uniform integer[2]"}, {"compression", "uniform string"}, {"quality", "uniform integer"},
-      {"bucketsize", "uniform integer[2]"}, {"gridsize", "uniform integer"}, {"texturememory", "uniform integer"},
-      {"eyesplits", "uniform integer"}, {"shader", "uniform string"}, {"texture", "uniform string"}, {"archive", "uniform string"},
-      {"procedural", "uniform string"}, {"display", "uniform string"}, {"resource", "uniform string"},
-      {"endofframe", "uniform integer"}, {"filename", "uniform string"}, {"sphere", "uniform float"},
-      {"coordinatesystem", "uniform string"}, {"name", "uniform string"}, {"shadows", "uniform string"},
-      {"jitter", "uniform integer"}, {"subpixel", "uniform integer"}, {"depthfilter", "uniform string"},
-      {"motionfactor", "uniform float"}, {"focusfactor", "uniform float"}, {"binary", "uniform integer"},
-      {"clampmotion", "uniform integer"}, {"offset", "uniform float"}, {"sides", "uniform integer"},
-      {"quantize", "uniform float[4]"}, {"dither", "uniform float"}, {"exposure", "uniform float[2]"},
-      {"zthreshold", "uniform color"}, {"extremedisplacement", "uniform integer"}, {"emit", "uniform integer"},
-      {"interpolateboundary", "uniform integer"}, {"trace", "uniform integer"}, {"transmission", "uniform string"},
-      {"camera", "uniform integer"}, {"diffuse", "uniform integer"}, {"specular", "uniform integer"},
-      {"photon", "uniform integer"}, {"cull", "uniform integer"}, {"backfacing", "uniform integer"}, {"hidden", "uniform integer"},
+      {"fov", "uniform float"},
+      {"origin", "uniform integer[2]"},
+      {"compression", "uniform string"},
+      {"quality", "uniform integer"},
+      {"bucketsize", "uniform integer[2]"},
+      {"gridsize", "uniform integer"},
+      {"texturememory", "uniform integer"},
+      {"eyesplits", "uniform integer"},
+      {"shader", "uniform string"},
+      {"texture", "uniform string"},
+      {"archive", "uniform string"},
+      {"procedural", "uniform string"},
+      {"display", "uniform string"},
+      {"resource", "uniform string"},
+      {"endofframe", "uniform integer"},
+      {"filename", "uniform string"},
+      {"sphere", "uniform float"},
+      {"coordinatesystem", "uniform string"},
+      {"name", "uniform string"},
+      {"shadows", "uniform string"},
+      {"jitter", "uniform integer"},
+      {"subpixel", "uniform integer"},
+      {"depthfilter", "uniform string"},
+      {"motionfactor", "uniform float"},
+      {"focusfactor", "uniform float"},
+      {"binary", "uniform integer"},
+      {"clampmotion", "uniform integer"},
+      {"offset", "uniform float"},
+      {"sides", "uniform integer"},
+      {"quantize", "uniform float[4]"},
+      {"dither", "uniform float"},
+      {"exposure", "uniform float[2]"},
+      {"zthreshold", "uniform color"},
+      {"extremedisplacement", "uniform integer"},
+      {"emit", "uniform integer"},
+      {"interpolateboundary", "uniform integer"},
+      {"trace", "uniform integer"},
+      {"transmission", "uniform string"},
+      {"camera", "uniform integer"},
+      {"diffuse", "uniform integer"},
+      {"specular", "uniform integer"},
+      {"photon", "uniform integer"},
+      {"cull", "uniform integer"},
+      {"backfacing", "uniform integer"},
+      {"hidden", "uniform integer"},
   };
   DeclMap m;
   for (auto& e : table) {
@@ -215,13 +271,10 @@ std::vector<Param> Args::params(size_t first) const {
     const bool isString = p.decl.type == ParamType::String;
     const Value::Kind k = p.value->kind;
     const bool empty = k == Value::Kind::NumberArray && p.value->numbers.empty();
-    if (isString && !(k == Value::Kind::String || k == Value::Kind::StringArray || empty))
-      fail(cat("parameter '", p.decl.name, "' must be given strings"));
-    if (!isString && !(k == Value::Kind::Number || k == Value::Kind::NumberArray))
-      fail(cat("parameter '", p.decl.name, "' must be given numbers"));
+    if (isString && !(k == Value::Kind::String || k == Value::Kind::StringArray || empty)) fail(cat("parameter '", p.decl.name, "' must be given strings"));
+    if (!isString && !(k == Value::Kind::Number || k == Value::Kind::NumberArray)) fail(cat("parameter '", p.decl.name, "' must be given numbers"));
     const size_t per = size_t(p.decl.components()) * size_t(p.decl.arraySize);
-    if (!isString && p.value->size() % per != 0)
-      fail(cat("parameter '", p.decl.name, "' has ", p.value->size(), " numbers, not a multiple of ", per));
+    if (!isString && p.value->size() % per != 0) fail(cat("parameter '", p.decl.name, "' has ", p.value->size(), " numbers, not a multiple of ", per));
     if (isString && p.value->size() % size_t(p.decl.arraySize) != 0)
       fail(cat("parameter '", p.decl.name, "' has ", p.value->size(), " strings, not a multiple of ", p.decl.arraySize));
     out.push_back(std::move(p));
@@ -235,8 +288,8 @@ std::vector<Param> Args::params(size_t first) const {
 struct Reader::Impl {
   ReaderOptions options;
   DeclMap declared;
-  uint64_t bytesDone = 0;                 // finished lexers
-  std::vector<const Lexer*> active;       // open lexers (ReadArchive nests)
+  uint64_t bytesDone = 0;                  // finished lexers
+  std::vector<const Lexer*> active;        // open lexers (ReadArchive nests)
   std::vector<std::vector<double>> spare;  // recycled array storage
 
   void parse(Lexer& lx, RequestHandler& handler, Reader& self, int depth);

@@ -21,7 +21,7 @@ struct Location {
   std::string file;
   uint64_t line = 1;
   uint64_t byteOffset = 0;
-  bool binary = false;  // the request was encoded in binary: messages use the byte offset
+  bool binary = false;      // the request was encoded in binary: messages use the byte offset
   std::string str() const;  // "scene.rib:42" or "scene.rib: byte 1234"
 };
 
@@ -73,7 +73,7 @@ class Args {
  public:
   Args(const Request& r, const class Reader& reader);
   size_t count() const;
-  double number(size_t i) const;           // a number, or a one-element number array
+  double number(size_t i) const;  // a number, or a one-element number array
   const std::string& string(size_t i) const;
   const std::vector<double>& numbers(size_t i) const;  // a number array (a single number is not one)
   /// The parameter list starting at value `first`: name/value pairs, names resolved through

@@ -60,10 +60,8 @@ DumpWriter::DumpWriter(const std::string& path, const DumpHeader& h, bool gzip, 
   I.buf += "##RenderMan RIB\nversion 3.04\n# micropolygon dump: Cs = shaded colour, Os = shaded opacity (premultiplied)\n";
   I.buf += "Declare \"blurP\" \"varying point\"\n";
   I.buf += cat("FrameBegin ", h.frame, "\nFormat ", h.width, " ", h.height, " ", h.pixelAspect, "\n");
-  if (h.perspective)
-    I.buf += cat("Projection \"perspective\" \"fov\" [", h.fovDegrees, "]\n");
-  else
-    I.buf += "Projection \"orthographic\"\n";
+  if (h.perspective) I.buf += cat("Projection \"perspective\" \"fov\" [", h.fovDegrees, "]\n");
+  else I.buf += "Projection \"orthographic\"\n";
   I.buf += cat("ScreenWindow ", sw[0], " ", sw[1], " ", sw[2], " ", sw[3], "\nClipping ", h.nearClip, " ", h.farClip, "\n");
   I.buf += cat("Shutter ", h.shutterOpen, " ", h.shutterClose, "\nWorldBegin\nCoordSysTransform \"camera\"\nSides 2\n");
 }
@@ -77,9 +75,8 @@ const std::string& DumpWriter::path() const { return impl_->path; }
 
 void DumpWriter::addGrid(const DumpGrid& g) {
   auto& I = *impl_;
-  CHECK(g.P.size() == size_t(g.numVertices) * 3 && (g.blurP.empty() || g.blurP.size() == g.P.size()) && g.corners.size() % 4 == 0,
-        I.path, ": a grid of ", g.numVertices, " vertices with ", g.P.size(), " P, ", g.blurP.size(), " blurP numbers and ", g.corners.size(),
-        " corners");
+  CHECK(g.P.size() == size_t(g.numVertices) * 3 && (g.blurP.empty() || g.blurP.size() == g.P.size()) && g.corners.size() % 4 == 0, I.path, ": a grid of ",
+        g.numVertices, " vertices with ", g.P.size(), " P, ", g.blurP.size(), " blurP numbers and ", g.corners.size(), " corners");
   const size_t nMp = g.corners.size() / 4;
   I.buf += "PointsPolygons [";
   for (size_t m = 0; m < nMp; ++m) I.integer(g.corners[m * 4 + 3] == kNoCorner ? 3 : 4);

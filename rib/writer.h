@@ -27,7 +27,7 @@ struct DumpHeader {
   int width = 640, height = 480;
   double pixelAspect = 1.0;
   bool perspective = true;
-  double fovDegrees = 90.0;  // perspective only
+  double fovDegrees = 90.0;                 // perspective only
   double screenWindow[4] = {-1, 1, -1, 1};  // left right bottom top, written as given
   double nearClip = 1e-4, farClip = 1e30;
   double shutterOpen = 0.0, shutterClose = 1.0;

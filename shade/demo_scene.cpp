@@ -196,9 +196,9 @@ void buildDemoScene(Scene& s, int width, int height) {
 
   s.lightSource("ambientlight", "ambient", {{"intensity", {0.12}}, {"lightcolor", {0.8, 0.85, 1.0}}});
   s.lightSource("distantlight", "key", {{"intensity", {0.8}}, {"lightcolor", {1.0, 0.93, 0.82}}, {"from", {-6, 9, -5}}, {"to", {0, 0, 4}}});
-  s.lightSource("spotlight", "spot",
-                {{"intensity", {45}}, {"lightcolor", {1.0, 0.95, 0.9}}, {"from", {3, 8, 0}}, {"to", {0.5, 0, 4}}, {"coneangle", {0.55}},
-                 {"conedeltaangle", {0.2}}});
+  s.lightSource(
+      "spotlight", "spot",
+      {{"intensity", {45}}, {"lightcolor", {1.0, 0.95, 0.9}}, {"from", {3, 8, 0}}, {"to", {0.5, 0, 4}}, {"coneangle", {0.55}}, {"conedeltaangle", {0.2}}});
   s.lightSource("pointlight", "fill", {{"intensity", {12}}, {"lightcolor", {0.55, 0.65, 1.0}}, {"from", {-3, 3, -6}}});
 
   backdrop(s);

@@ -127,8 +127,7 @@ struct Estimate {
 
 class Splitter {
  public:
-  Splitter(const Primitive& p, const std::vector<double>& knots, const store::Camera& cam, const DiceOptions& o, std::vector<Leaf>& out,
-           DiceStats& stats)
+  Splitter(const Primitive& p, const std::vector<double>& knots, const store::Camera& cam, const DiceOptions& o, std::vector<Leaf>& out, DiceStats& stats)
       : p_(p), proj_(cam), cam_(cam), o_(o), out_(out), stats_(stats) {
     for (double t : knots) {
       shapes_.push_back(p.shapeAt(t));
@@ -257,13 +256,12 @@ class Splitter {
 
 }  // namespace
 
-void splitPrimitive(const Primitive& p, const std::vector<double>& knots, const store::Camera& camera, const DiceOptions& options,
-                    std::vector<Leaf>& out, DiceStats& stats) {
+void splitPrimitive(const Primitive& p, const std::vector<double>& knots, const store::Camera& camera, const DiceOptions& options, std::vector<Leaf>& out,
+                    DiceStats& stats) {
   Splitter(p, knots, camera, options, out, stats).run();
 }
 
-void diceLeaf(const Primitive& p, const Leaf& leaf, const std::vector<double>& knots, double shadeAt, double nearClip, bool perspective,
-              DicedGrid& g) {
+void diceLeaf(const Primitive& p, const Leaf& leaf, const std::vector<double>& knots, double shadeAt, double nearClip, bool perspective, DicedGrid& g) {
   const int nu = leaf.nu, nv = leaf.nv, row = nu + 1;
   const uint32_t nV = uint32_t(row * (nv + 1));
   const size_t K = knots.size();

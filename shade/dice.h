@@ -57,8 +57,8 @@ struct DiceStats {
 std::vector<double> clipKnots(const Primitive& p, double open, double close);
 
 /// Splits `p` into leaves for `camera` (positions at `knots`, or its only shape when empty).
-void splitPrimitive(const Primitive& p, const std::vector<double>& knots, const store::Camera& camera, const DiceOptions& options,
-                    std::vector<Leaf>& out, DiceStats& stats);
+void splitPrimitive(const Primitive& p, const std::vector<double>& knots, const store::Camera& camera, const DiceOptions& options, std::vector<Leaf>& out,
+                    DiceStats& stats);
 
 /// One diced grid: positions at every knot, and the shading-time geometry per vertex.
 struct DicedGrid {
@@ -73,7 +73,6 @@ struct DicedGrid {
 };
 
 /// Dices `leaf` of `p`: positions at each of `knots` (one when empty), geometry at `shadeAt`.
-void diceLeaf(const Primitive& p, const Leaf& leaf, const std::vector<double>& knots, double shadeAt, double nearClip,
-              bool perspective, DicedGrid& out);
+void diceLeaf(const Primitive& p, const Leaf& leaf, const std::vector<double>& knots, double shadeAt, double nearClip, bool perspective, DicedGrid& out);
 
 }  // namespace reshutter::shade

@@ -68,8 +68,7 @@ namespace {
 
 /// One pass when the first primitive's variables are every primitive's (dumps are uniform);
 /// nothing (and no store) when a later primitive brought more.
-std::optional<IngestStats> ingestInOnePass(const std::string& ribPath, const std::string& storePath, const IngestOptions& options,
-                                           Clock::time_point t0) {
+std::optional<IngestStats> ingestInOnePass(const std::string& ribPath, const std::string& storePath, const IngestOptions& options, Clock::time_point t0) {
   IngestStats stats;
   std::unique_ptr<StoreWriter> writer;
   try {

@@ -53,13 +53,13 @@ struct IngestOptions {
 };
 
 struct IngestStats {
-  uint64_t ribBytes = 0;            // decompressed RIB bytes per pass
-  uint64_t primitives = 0;          // polygon requests (motion copies count once)
-  uint64_t polygons = 0;            // faces read
+  uint64_t ribBytes = 0;    // decompressed RIB bytes per pass
+  uint64_t primitives = 0;  // polygon requests (motion copies count once)
+  uint64_t polygons = 0;    // faces read
   uint64_t micropolygons = 0, quads = 0, triangles = 0;
   uint64_t fannedPolygons = 0, earClippedPolygons = 0;
   uint64_t movingMicropolygons = 0;
-  int passes = 1;                   // 2 when the schema grew after the first primitive
+  int passes = 1;  // 2 when the schema grew after the first primitive
   double scanSeconds = 0, ingestSeconds = 0;
   store::WriteStats write;
 };
@@ -68,8 +68,7 @@ struct IngestStats {
 store::StoreMeta scanDump(const std::string& ribPath, const IngestOptions& options = {});
 
 /// Pass 2 alone into any sink, with metadata from scanDump (tests and benchmarks).
-void ingestDumpInto(const std::string& ribPath, const store::StoreMeta& meta, store::GridSink& sink, IngestStats& stats,
-                    const IngestOptions& options = {});
+void ingestDumpInto(const std::string& ribPath, const store::StoreMeta& meta, store::GridSink& sink, IngestStats& stats, const IngestOptions& options = {});
 
 /// Into a new store at `storePath` (written atomically): one pass, or two when needed (above).
 IngestStats ingestDump(const std::string& ribPath, const std::string& storePath, const IngestOptions& options = {});

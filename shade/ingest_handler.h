@@ -32,7 +32,7 @@ namespace reshutter::shade::ingest {
 // Moving transforms
 
 struct Motion {
-  std::vector<double> times;                   // empty: static
+  std::vector<double> times;                    // empty: static
   std::vector<glm::dmat4> mats{glm::dmat4(1)};  // one per time, or one
   bool moving() const { return mats.size() > 1; }
   glm::dmat4 at(double t) const {
@@ -125,10 +125,15 @@ enum class Mode { Scan, Emit, Optimistic };
 
 class DumpHandler final : public rib::RequestHandler {
  public:
-  DumpHandler(Mode mode, const std::string& file, const IngestOptions& opt, const store::StoreMeta* meta, store::GridSink* sink,
-              IngestStats* stats)
-      : collect_(mode != Mode::Emit), emit_(mode != Mode::Scan), optimistic_(mode == Mode::Optimistic), file_(file), opt_(opt), meta_(meta),
-        sink_(sink), stats_(stats) {
+  DumpHandler(Mode mode, const std::string& file, const IngestOptions& opt, const store::StoreMeta* meta, store::GridSink* sink, IngestStats* stats)
+      : collect_(mode != Mode::Emit),
+        emit_(mode != Mode::Scan),
+        optimistic_(mode == Mode::Optimistic),
+        file_(file),
+        opt_(opt),
+        meta_(meta),
+        sink_(sink),
+        stats_(stats) {
     attrs_.emplace_back();
   }
   /// Optimistic mode: opens the sink once the schema is known.

@@ -266,7 +266,8 @@ bool DumpHandler::polygons(const Request& r, const Args& a) {
   for (size_t i = 0; !differs && i < copy.vars.size(); ++i)
     differs = copy.vars[i].decl.name != prim_.vars[i].decl.name || copy.vars[i].values != prim_.vars[i].values;
   if (differs && collect_)
-    warnOnce("ingest-appearance-knots", cat(r.where.str(), " (", r.name, "): variables other than P change between motion copies; ingest keeps the first knot's"));
+    warnOnce("ingest-appearance-knots",
+             cat(r.where.str(), " (", r.name, "): variables other than P change between motion copies; ingest keeps the first knot's"));
   prim_.P.push_back(std::move(copy.P[0]));
   return true;
 }
@@ -407,8 +408,7 @@ bool DumpHandler::collectSchema(const Args& a, const Prim& p) {
         schemaOrder_.push_back(o.name);
         grew = true;
       } else {
-        if (it->second.type != o.type)
-          a.fail(cat("\"", v.decl.name, "\" is a ", toString(o.type), " here and a ", toString(it->second.type), " elsewhere"));
+        if (it->second.type != o.type) a.fail(cat("\"", v.decl.name, "\" is a ", toString(o.type), " here and a ", toString(it->second.type), " elsewhere"));
         grew |= perVertex && !it->second.perVertex;
         it->second.perVertex |= perVertex;
       }

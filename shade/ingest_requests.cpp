@@ -344,10 +344,31 @@ void DumpHandler::endMotion(const Args& a) {
 /// Already-shaded micropolygons need no shading, display or sampling settings: taken and
 /// dropped (counting as a motion copy inside a motion block). False for anything else.
 bool DumpHandler::ignored(std::string_view n) {
-  static const std::set<std::string_view> ignoredRequests = {
-      "Display", "DisplayChannel", "PixelSamples", "PixelFilter", "PixelVariance", "Exposure", "Quantize", "Hider", "ShadingRate",
-      "ShadingInterpolation", "Surface", "Atmosphere", "Interior", "Exterior", "Displacement", "LightSource", "AreaLightSource",
-      "Illuminate", "GeometricApproximation", "Option", "Attribute", "Imager", "Declare", "DisplayChannel", "RelativeDetail"};
+  static const std::set<std::string_view> ignoredRequests = {"Display",
+                                                             "DisplayChannel",
+                                                             "PixelSamples",
+                                                             "PixelFilter",
+                                                             "PixelVariance",
+                                                             "Exposure",
+                                                             "Quantize",
+                                                             "Hider",
+                                                             "ShadingRate",
+                                                             "ShadingInterpolation",
+                                                             "Surface",
+                                                             "Atmosphere",
+                                                             "Interior",
+                                                             "Exterior",
+                                                             "Displacement",
+                                                             "LightSource",
+                                                             "AreaLightSource",
+                                                             "Illuminate",
+                                                             "GeometricApproximation",
+                                                             "Option",
+                                                             "Attribute",
+                                                             "Imager",
+                                                             "Declare",
+                                                             "DisplayChannel",
+                                                             "RelativeDetail"};
   if (!ignoredRequests.count(n)) return false;
   if (inMotion_) ++motionCount_;
   return true;

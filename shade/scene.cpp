@@ -2,11 +2,11 @@
 #include "shade/scene.h"
 
 #include <algorithm>
-#include <span>
 #include <cmath>
+#include <span>
 
-#include <glm/gtc/matrix_transform.hpp>
 #include <glm/gtc/matrix_inverse.hpp>
+#include <glm/gtc/matrix_transform.hpp>
 
 #include "common/error.h"
 #include "common/log.h"
@@ -184,10 +184,9 @@ std::vector<double> Primitive::knotTimes() const { return unionTimes(times, xfor
 
 const std::vector<OutputVar>& knownOutputVars() {
   using store::AttrType;
-  static const std::vector<OutputVar> vars = {
-      {"P", AttrType::Point},   {"N", AttrType::Normal},  {"Ng", AttrType::Normal}, {"s", AttrType::Float},
-      {"t", AttrType::Float},   {"u", AttrType::Float},   {"v", AttrType::Float},   {"Cs", AttrType::Color},
-      {"Os", AttrType::Color},  {"depth", AttrType::Float}, {"specular", AttrType::Color}};
+  static const std::vector<OutputVar> vars = {{"P", AttrType::Point},  {"N", AttrType::Normal},    {"Ng", AttrType::Normal},     {"s", AttrType::Float},
+                                              {"t", AttrType::Float},  {"u", AttrType::Float},     {"v", AttrType::Float},       {"Cs", AttrType::Color},
+                                              {"Os", AttrType::Color}, {"depth", AttrType::Float}, {"specular", AttrType::Color}};
   return vars;
 }
 
@@ -287,8 +286,7 @@ Scene::State Scene::pop(Block b, const char* request) {
   // transform ends must match exactly.
   if (b == Block::World || b == Block::Frame) {
     size_t open = 0;
-    while (!stack_.empty() && stack_.back().block != b && stack_.back().block != Block::World && stack_.back().block != Block::Frame)
-      stack_.pop_back(), ++open;
+    while (!stack_.empty() && stack_.back().block != b && stack_.back().block != Block::World && stack_.back().block != Block::Frame) stack_.pop_back(), ++open;
     if (open) warn(cat(where, ": ", open, " AttributeBegin/TransformBegin without End at ", request));
   }
   if (stack_.empty() || stack_.back().block != b) error(cat(request, " without a matching begin"));
@@ -413,8 +411,7 @@ void Scene::opacity(const glm::dvec3& o) {
 }
 void Scene::surface(const std::string& name, const ParamMap& params) {
   SurfaceShader s;
-  if (!SurfaceShader::named(name, s))
-    warnOnce(cat("surface:", name), cat(where, ": surface shader '", name, "' is not built in; using defaultsurface"));
+  if (!SurfaceShader::named(name, s)) warnOnce(cat("surface:", name), cat(where, ": surface shader '", name, "' is not built in; using defaultsurface"));
   applyParams(s, params);
   if (motionTake(Pending::Surface)) return motion_.surfaces.push_back(s);
   mutableAttrs().surface = Animated<SurfaceShader>(s);
@@ -488,8 +485,7 @@ void Scene::motionEnd() {
       ctmShared_.reset();
       break;
     case Pending::Set:
-      cur_.ctm = (inWorld_ ? frame_.worldToCamera : MotionXform())
-                     .then(MotionXform(times, m.times.size() > 1 ? m.mats : std::vector<glm::dmat4>{m.mats[0]}));
+      cur_.ctm = (inWorld_ ? frame_.worldToCamera : MotionXform()).then(MotionXform(times, m.times.size() > 1 ? m.mats : std::vector<glm::dmat4>{m.mats[0]}));
       ctmShared_.reset();
       break;
     case Pending::Color:
@@ -565,9 +561,7 @@ void Scene::quadric(PrimKind kind, const std::array<double, 5>& q, size_t used) 
   addPrims({std::move(p)});
 }
 void Scene::sphere(double radius, double zmin, double zmax, double thetamax) { quadric(PrimKind::Sphere, {radius, zmin, zmax, thetamax, 0}, 4); }
-void Scene::cylinder(double radius, double zmin, double zmax, double thetamax) {
-  quadric(PrimKind::Cylinder, {radius, zmin, zmax, thetamax, 0}, 4);
-}
+void Scene::cylinder(double radius, double zmin, double zmax, double thetamax) { quadric(PrimKind::Cylinder, {radius, zmin, zmax, thetamax, 0}, 4); }
 void Scene::cone(double height, double radius, double thetamax) { quadric(PrimKind::Cone, {height, radius, thetamax, 0, 0}, 3); }
 void Scene::disk(double height, double radius, double thetamax) { quadric(PrimKind::Disk, {height, radius, thetamax, 0, 0}, 3); }
 void Scene::torus(double rmajor, double rminor, double phimin, double phimax, double thetamax) {
@@ -590,8 +584,8 @@ void Scene::patch(const std::array<glm::dvec3, 4>& P, const VertexData& vd) {
   addPrims({std::move(p)});
 }
 
-void Scene::emitFaces(const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P,
-                      const VertexData& vd, std::vector<Primitive>& out) {
+void Scene::emitFaces(const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P, const VertexData& vd,
+                      std::vector<Primitive>& out) {
   size_t total = 0;
   for (int n : nverts) {
     if (n < 0) error("negative vertex count");
@@ -635,8 +629,7 @@ void Scene::emitFaces(const std::vector<int>& nverts, const std::vector<int>& ve
   }
 }
 
-void Scene::pointsPolygons(const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P,
-                           const VertexData& vd) {
+void Scene::pointsPolygons(const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P, const VertexData& vd) {
   std::vector<Primitive> out;
   emitFaces(nverts, verts, P, vd, out);
   addPrims(std::move(out));

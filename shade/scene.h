@@ -91,10 +91,10 @@ struct Attributes {
   Animated<SurfaceShader> surface{SurfaceShader{}};
   std::vector<uint32_t> lights;  // indices into FrameScene::lights that illuminate
   double shadingRate = 1.0;
-  double motionFactor = 0.0;     // GeometricApproximation "motionfactor"
+  double motionFactor = 0.0;  // GeometricApproximation "motionfactor"
   bool matte = false, twoSided = true;
-  bool orientationRH = false;    // Orientation: "lh" (RenderMan's default, "outside") or "rh"
-  uint32_t objectId = 0;         // 0: unnamed; otherwise 1 + index into FrameScene::objectNames
+  bool orientationRH = false;  // Orientation: "lh" (RenderMan's default, "outside") or "rh"
+  uint32_t objectId = 0;       // 0: unnamed; otherwise 1 + index into FrameScene::objectNames
 };
 
 enum class PrimKind : uint8_t { Sphere, Cylinder, Cone, Disk, Torus, Patch };
@@ -125,8 +125,8 @@ struct Primitive {
   std::vector<double> times;  // deformation knot times; empty: one key
   std::vector<Shape> keys;
   bool triangle = false;
-  std::shared_ptr<const MeshData> mesh;   // patches with vertex data; null otherwise
-  std::array<uint32_t, 4> meshPoint{};    // the corners' (P00 P10 P01 P11) points in `mesh`
+  std::shared_ptr<const MeshData> mesh;  // patches with vertex data; null otherwise
+  std::array<uint32_t, 4> meshPoint{};   // the corners' (P00 P10 P01 P11) points in `mesh`
   uint32_t meshFace = 0;
   std::shared_ptr<const MotionXform> xform;  // object → camera
   std::shared_ptr<const Attributes> attrs;
@@ -152,8 +152,8 @@ const std::vector<OutputVar>& knownOutputVars();
 /// Options and camera of one frame (RenderMan options, frozen at WorldBegin).
 struct FrameOptions {
   int64_t frame = 1;
-  store::Camera camera;          // the primary ("world") camera; worldToCamera at shutter open
-  double frameAspectRatio = 0;   // 0: from Format
+  store::Camera camera;         // the primary ("world") camera; worldToCamera at shutter open
+  double frameAspectRatio = 0;  // 0: from Format
   double shutterOpen = 0, shutterClose = 0;
   std::vector<store::Camera> namedCameras;
   std::vector<std::string> outputs;  // requested output variables, in request order, unique
@@ -241,8 +241,7 @@ class Scene {
   };
   void patch(const std::array<glm::dvec3, 4>& P, const VertexData& vd = {});
   /// General polygons: `nverts` per face, `verts` indices into P (and the vertex data).
-  void pointsPolygons(const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P,
-                      const VertexData& vd = {});
+  void pointsPolygons(const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P, const VertexData& vd = {});
   void polygon(const std::vector<glm::dvec3>& P, const VertexData& vd = {});
 
   const FrameOptions& options() const { return options_; }
@@ -271,8 +270,8 @@ class Scene {
   Attributes& mutableAttrs();
   void applyTransform(const glm::dmat4& m, bool set);
   void addPrims(std::vector<Primitive> prims);
-  void emitFaces(const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P,
-                 const VertexData& vd, std::vector<Primitive>& out);
+  void emitFaces(const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P, const VertexData& vd,
+                 std::vector<Primitive>& out);
   Primitive basePrim(PrimKind kind);
   /// Sphere, Cylinder, Cone, Disk and Torus: one keyframe of parameters, the first `used` checked finite.
   void quadric(PrimKind kind, const std::array<double, 5>& q, size_t used);

@@ -81,8 +81,7 @@ glm::dvec3 diffuse(const glm::dvec3& P, const glm::dvec3& Nn, std::span<const Li
   return c;
 }
 
-glm::dvec3 specular(const glm::dvec3& P, const glm::dvec3& Nn, const glm::dvec3& V, double roughness,
-                    std::span<const LitLight> lights) {
+glm::dvec3 specular(const glm::dvec3& P, const glm::dvec3& Nn, const glm::dvec3& V, double roughness, std::span<const LitLight> lights) {
   glm::dvec3 c(0.0), L, Cl;
   const double exponent = 1.0 / std::max(roughness, 1e-6);
   for (const auto& l : lights) {
@@ -100,8 +99,8 @@ glm::dvec3 specular(const glm::dvec3& P, const glm::dvec3& Nn, const glm::dvec3&
 
 namespace {
 // diffuse() and specular() in one pass over the lights: each light is evaluated once.
-void diffuseSpecular(const glm::dvec3& P, const glm::dvec3& Nn, const glm::dvec3& V, double roughness, std::span<const LitLight> lights,
-                     glm::dvec3& diff, glm::dvec3& spec) {
+void diffuseSpecular(const glm::dvec3& P, const glm::dvec3& Nn, const glm::dvec3& V, double roughness, std::span<const LitLight> lights, glm::dvec3& diff,
+                     glm::dvec3& spec) {
   glm::dvec3 L, Cl;
   diff = spec = glm::dvec3(0.0);
   const double exponent = 1.0 / std::max(roughness, 1e-6);
@@ -130,12 +129,8 @@ SurfaceOutput shadeSurface(const SurfaceShader& s, const SurfaceInput& in, std::
   const double il = glm::length(in.I);
   const glm::dvec3 V = il > 0 ? -in.I / il : glm::dvec3(0, 0, -1);
   switch (s.kind) {
-    case SurfaceKind::Constant:
-      out.Ci = in.Os * in.Cs;
-      break;
-    case SurfaceKind::Matte:
-      out.Ci = in.Os * in.Cs * (s.Ka * ambient(lights) + s.Kd * diffuse(in.P, Nf, lights));
-      break;
+    case SurfaceKind::Constant: out.Ci = in.Os * in.Cs; break;
+    case SurfaceKind::Matte: out.Ci = in.Os * in.Cs * (s.Ka * ambient(lights) + s.Kd * diffuse(in.P, Nf, lights)); break;
     case SurfaceKind::Metal: {
       glm::dvec3 spec = in.Os * in.Cs * s.Ks * specular(in.P, Nf, V, s.roughness, lights);
       out.Ci = in.Os * in.Cs * s.Ka * ambient(lights) + spec;

@@ -45,8 +45,7 @@ glm::dvec3 ambient(std::span<const LitLight> lights);
 glm::dvec3 diffuse(const glm::dvec3& P, const glm::dvec3& Nn, std::span<const LitLight> lights);
 /// Σ Cl · max(0, Nn·H)^(1/roughness), over lights in the hemisphere of Nn; V is the unit vector
 /// towards the eye.
-glm::dvec3 specular(const glm::dvec3& P, const glm::dvec3& Nn, const glm::dvec3& V, double roughness,
-                    std::span<const LitLight> lights);
+glm::dvec3 specular(const glm::dvec3& P, const glm::dvec3& Nn, const glm::dvec3& V, double roughness, std::span<const LitLight> lights);
 
 struct SurfaceInput {
   glm::dvec3 P{0.0}, N{0, 0, -1}, Ng{0, 0, -1}, I{0, 0, 1};

@@ -32,8 +32,7 @@ Interval intervalOf(const FrameScene& scene, const ShadeOptions& o) {
   Interval iv{opt.shutterOpen, opt.shutterClose, 0};
   if (o.interval) {
     iv.open = o.interval->first, iv.close = o.interval->second;
-    if (!std::isfinite(iv.open) || !std::isfinite(iv.close) || iv.close < iv.open)
-      fail("--interval", "[", iv.open, ", ", iv.close, "] is not an interval");
+    if (!std::isfinite(iv.open) || !std::isfinite(iv.close) || iv.close < iv.open) fail("--interval", "[", iv.open, ", ", iv.close, "] is not an interval");
   }
   iv.shadeAt = o.shadeAt ? *o.shadeAt : iv.open;
   if (!std::isfinite(iv.shadeAt)) fail("--shade-at", "time is not finite");
@@ -59,17 +58,25 @@ using BatchPtr = std::shared_ptr<Batch>;
 enum class Var : uint8_t { Ci, Oi, P, N, Ng, s, t, u, v, Cs, Os, depth, specular };
 
 Var varOf(const std::string& name) {
-  static const std::pair<const char*, Var> table[] = {{"Ci", Var::Ci}, {"Oi", Var::Oi}, {"P", Var::P},   {"N", Var::N},   {"Ng", Var::Ng},
-                                                      {"s", Var::s},   {"t", Var::t},   {"u", Var::u},   {"v", Var::v},   {"Cs", Var::Cs},
-                                                      {"Os", Var::Os}, {"depth", Var::depth}, {"specular", Var::specular}};
+  static const std::pair<const char*, Var> table[] = {{"Ci", Var::Ci},
+                                                      {"Oi", Var::Oi},
+                                                      {"P", Var::P},
+                                                      {"N", Var::N},
+                                                      {"Ng", Var::Ng},
+                                                      {"s", Var::s},
+                                                      {"t", Var::t},
+                                                      {"u", Var::u},
+                                                      {"v", Var::v},
+                                                      {"Cs", Var::Cs},
+                                                      {"Os", Var::Os},
+                                                      {"depth", Var::depth},
+                                                      {"specular", Var::specular}};
   for (const auto& [n, v] : table)
     if (name == n) return v;
   fail("schema", "output variable '", name, "' is not computable");
 }
 
-void put3(std::vector<float>& dst, size_t i, const glm::dvec3& v) {
-  dst[i * 3 + 0] = float(v.x), dst[i * 3 + 1] = float(v.y), dst[i * 3 + 2] = float(v.z);
-}
+void put3(std::vector<float>& dst, size_t i, const glm::dvec3& v) { dst[i * 3 + 0] = float(v.x), dst[i * 3 + 1] = float(v.y), dst[i * 3 + 2] = float(v.z); }
 
 glm::dvec3 bilinear(const std::array<glm::dvec3, 4>& c, double u, double v) {
   return (1 - u) * (1 - v) * c[0] + u * (1 - v) * c[1] + (1 - u) * v * c[2] + u * v * c[3];
@@ -77,9 +84,7 @@ glm::dvec3 bilinear(const std::array<glm::dvec3, 4>& c, double u, double v) {
 
 // A non-finite shading result (a light at the shaded point, an overflow) would poison the store:
 // the writer rejects it. Clamp to zero here, where the cause is known.
-glm::dvec3 finite(const glm::dvec3& c) {
-  return {std::isfinite(c.x) ? c.x : 0.0, std::isfinite(c.y) ? c.y : 0.0, std::isfinite(c.z) ? c.z : 0.0};
-}
+glm::dvec3 finite(const glm::dvec3& c) { return {std::isfinite(c.x) ? c.x : 0.0, std::isfinite(c.y) ? c.y : 0.0, std::isfinite(c.z) ? c.z : 0.0}; }
 
 }  // namespace
 
@@ -98,8 +103,8 @@ store::StoreMeta storeMeta(const FrameScene& scene, const ShadeOptions& o) {
   for (const auto& name : scene.options.outputs)
     for (const auto& v : knownOutputVars())
       if (v.name == name) m.schema.attrs.push_back({name, v.type, store::AttrRate::Vertex, store::AttrCodec::Lossless});
-  std::string prov = cat("reshutter shade: ", scene.source.empty() ? "scene" : scene.source, "; frame ", scene.options.frame, "; shaded at t=",
-                         iv.shadeAt, "; interval [", iv.open, ", ", iv.close, "]");
+  std::string prov = cat("reshutter shade: ", scene.source.empty() ? "scene" : scene.source, "; frame ", scene.options.frame, "; shaded at t=", iv.shadeAt,
+                         "; interval [", iv.open, ", ", iv.close, "]");
   if (!scene.objectNames.empty()) {
     prov += "; objects:";
     for (size_t i = 0; i < scene.objectNames.size(); ++i) prov += cat(" ", i + 1, "=\"", scene.objectNames[i], "\"");
@@ -115,8 +120,8 @@ namespace {
 // 1. Split: knots and leaves per primitive, then every leaf in scene order.
 
 struct SplitScene {
-  std::vector<std::vector<double>> knots;  // per primitive: its knots inside the interval
-  std::vector<std::vector<Leaf>> leaves;   // per primitive, in dicing order
+  std::vector<std::vector<double>> knots;              // per primitive: its knots inside the interval
+  std::vector<std::vector<Leaf>> leaves;               // per primitive, in dicing order
   std::vector<std::pair<uint32_t, const Leaf*>> flat;  // (primitive, leaf): primitive order, then dicing order
 };
 
@@ -149,8 +154,8 @@ struct ShadeContext {
   const FrameScene& scene;
   const SplitScene& split;
   const store::Schema& schema;
-  std::vector<Var> vars;       // what each schema attribute holds
-  std::vector<LitLight> lit;   // every light, resolved once at the shading time
+  std::vector<Var> vars;      // what each schema attribute holds
+  std::vector<LitLight> lit;  // every light, resolved once at the shading time
   double shadeAt;
   double nearClip;
   bool perspective;

@@ -92,12 +92,8 @@ void unshuffle(const uint8_t* in, size_t n, uint8_t* out) {
 inline uint32_t bitsOf(float f) { return std::bit_cast<uint32_t>(f); }
 inline float floatOf(uint32_t u) { return std::bit_cast<float>(u); }
 
-uint16_t lossyEncode(const AttrDecl& a, float v) {
-  return a.codec == AttrCodec::Half ? encodeHalf(v) : encodeUnorm16(v);
-}
-float lossyDecode(const AttrDecl& a, uint16_t q) {
-  return a.codec == AttrCodec::Half ? decodeHalf(q) : decodeUnorm16(q);
-}
+uint16_t lossyEncode(const AttrDecl& a, float v) { return a.codec == AttrCodec::Half ? encodeHalf(v) : encodeUnorm16(v); }
+float lossyDecode(const AttrDecl& a, uint16_t q) { return a.codec == AttrCodec::Half ? decodeHalf(q) : decodeUnorm16(q); }
 
 }  // namespace
 
@@ -124,20 +120,25 @@ void encodeRaw(const Schema& schema, const TilePart& part, uint64_t presence, st
       const float* cur = pos + size_t(k) * nV * 3 + comp;
       const float* base = pos + comp;
       if (k == 0)
-        deltaEncode(nV, [&](uint32_t i) { return bitsOf(cur[i * 3]); }, [](uint32_t) { return 0u; }, w);
+        deltaEncode(
+            nV, [&](uint32_t i) { return bitsOf(cur[i * 3]); }, [](uint32_t) { return 0u; }, w);
       else
-        deltaEncode(nV, [&](uint32_t i) { return bitsOf(cur[i * 3]); }, [&](uint32_t i) { return bitsOf(base[i * 3]); }, w);
+        deltaEncode(
+            nV, [&](uint32_t i) { return bitsOf(cur[i * 3]); }, [&](uint32_t i) { return bitsOf(base[i * 3]); }, w);
       w += nV;
     }
   const uint32_t* cn = part.corners.data();
-  deltaEncode(nMp, [&](uint32_t i) { return cn[i * 4]; }, [](uint32_t) { return 0u; }, w);
+  deltaEncode(
+      nMp, [&](uint32_t i) { return cn[i * 4]; }, [](uint32_t) { return 0u; }, w);
   w += nMp;
   for (int j = 1; j < 4; ++j) {
-    deltaEncode(nMp, [&](uint32_t i) { return cn[i * 4 + j]; }, [&](uint32_t i) { return cn[i * 4]; }, w);
+    deltaEncode(
+        nMp, [&](uint32_t i) { return cn[i * 4 + j]; }, [&](uint32_t i) { return cn[i * 4]; }, w);
     w += nMp;
   }
   for (const auto* ids : {&part.objectId, &part.gridId}) {
-    deltaEncode(nMp, [&](uint32_t i) { return (*ids)[i]; }, [](uint32_t) { return 0u; }, w);
+    deltaEncode(
+        nMp, [&](uint32_t i) { return (*ids)[i]; }, [](uint32_t) { return 0u; }, w);
     w += nMp;
   }
   for (size_t ai = 0; ai < schema.attrs.size(); ++ai) {
@@ -147,11 +148,13 @@ void encodeRaw(const Schema& schema, const TilePart& part, uint64_t presence, st
     const uint32_t n = countOf(a, nV, nMp);
     const int nc = componentCount(a.type);
     if (a.type == AttrType::UInt) {
-      deltaEncode(n, [&](uint32_t i) { return arr.u[i]; }, [](uint32_t) { return 0u; }, w);
+      deltaEncode(
+          n, [&](uint32_t i) { return arr.u[i]; }, [](uint32_t) { return 0u; }, w);
       w += n;
     } else if (a.codec == AttrCodec::Lossless) {
       for (int comp = 0; comp < nc; ++comp) {
-        deltaEncode(n, [&](uint32_t i) { return bitsOf(arr.f[size_t(i) * nc + comp]); }, [](uint32_t) { return 0u; }, w);
+        deltaEncode(
+            n, [&](uint32_t i) { return bitsOf(arr.f[size_t(i) * nc + comp]); }, [](uint32_t) { return 0u; }, w);
         w += n;
       }
     } else if (a.codec == AttrCodec::Oct32) {
@@ -195,22 +198,27 @@ void decodeRaw(const Schema& schema, std::span<const uint8_t> raw, uint64_t pres
       float* cur = pos + size_t(k) * nV * 3 + comp;
       const float* base = pos + comp;
       if (k == 0)
-        deltaDecode(nV, w, [](uint32_t) { return 0u; }, [&](uint32_t i, uint32_t v) { cur[i * 3] = floatOf(v); });
+        deltaDecode(
+            nV, w, [](uint32_t) { return 0u; }, [&](uint32_t i, uint32_t v) { cur[i * 3] = floatOf(v); });
       else
-        deltaDecode(nV, w, [&](uint32_t i) { return bitsOf(base[i * 3]); }, [&](uint32_t i, uint32_t v) { cur[i * 3] = floatOf(v); });
+        deltaDecode(
+            nV, w, [&](uint32_t i) { return bitsOf(base[i * 3]); }, [&](uint32_t i, uint32_t v) { cur[i * 3] = floatOf(v); });
       w += nV;
     }
   part.corners.resize(size_t(nMp) * 4);
   uint32_t* cn = part.corners.data();
-  deltaDecode(nMp, w, [](uint32_t) { return 0u; }, [&](uint32_t i, uint32_t v) { cn[i * 4] = v; });
+  deltaDecode(
+      nMp, w, [](uint32_t) { return 0u; }, [&](uint32_t i, uint32_t v) { cn[i * 4] = v; });
   w += nMp;
   for (int j = 1; j < 4; ++j) {
-    deltaDecode(nMp, w, [&](uint32_t i) { return cn[i * 4]; }, [&](uint32_t i, uint32_t v) { cn[i * 4 + j] = v; });
+    deltaDecode(
+        nMp, w, [&](uint32_t i) { return cn[i * 4]; }, [&](uint32_t i, uint32_t v) { cn[i * 4 + j] = v; });
     w += nMp;
   }
   for (auto* ids : {&part.objectId, &part.gridId}) {
     ids->resize(nMp);
-    deltaDecode(nMp, w, [](uint32_t) { return 0u; }, [&](uint32_t i, uint32_t v) { (*ids)[i] = v; });
+    deltaDecode(
+        nMp, w, [](uint32_t) { return 0u; }, [&](uint32_t i, uint32_t v) { (*ids)[i] = v; });
     w += nMp;
   }
   part.attrs.assign(schema.attrs.size(), AttrArray{});
@@ -222,12 +230,14 @@ void decodeRaw(const Schema& schema, std::span<const uint8_t> raw, uint64_t pres
     const int nc = componentCount(a.type);
     if (a.type == AttrType::UInt) {
       arr.u.resize(n);
-      deltaDecode(n, w, [](uint32_t) { return 0u; }, [&](uint32_t i, uint32_t v) { arr.u[i] = v; });
+      deltaDecode(
+          n, w, [](uint32_t) { return 0u; }, [&](uint32_t i, uint32_t v) { arr.u[i] = v; });
       w += n;
     } else if (a.codec == AttrCodec::Lossless) {
       arr.f.resize(size_t(n) * nc);
       for (int comp = 0; comp < nc; ++comp) {
-        deltaDecode(n, w, [](uint32_t) { return 0u; }, [&](uint32_t i, uint32_t v) { arr.f[size_t(i) * nc + comp] = floatOf(v); });
+        deltaDecode(
+            n, w, [](uint32_t) { return 0u; }, [&](uint32_t i, uint32_t v) { arr.f[size_t(i) * nc + comp] = floatOf(v); });
         w += n;
       }
     } else if (a.codec == AttrCodec::Oct32) {

@@ -27,8 +27,7 @@
 namespace reshutter::store {
 
 /// Exact size of a part's uncompressed payload for the given counts and attribute presence.
-size_t rawPayloadSize(const Schema& schema, uint32_t numVertices, uint32_t numMps, uint32_t numKnots,
-                      uint64_t attrPresence);
+size_t rawPayloadSize(const Schema& schema, uint32_t numVertices, uint32_t numMps, uint32_t numKnots, uint64_t attrPresence);
 
 /// Serialises `part` (attributes marked in `attrPresence`) into the uncompressed payload.
 void encodeRaw(const Schema& schema, const TilePart& part, uint64_t attrPresence, std::vector<uint8_t>& out);

@@ -1,16 +1,19 @@
 #include "store/format.h"
 
 #include <algorithm>
-#include <vector>
 #include <cmath>
+#include <vector>
 
 namespace reshutter::store {
 
 std::string effectNames(uint32_t e) {
-  static const std::pair<uint32_t, const char*> names[] = {
-      {kEffectMoving, "moving"},       {kEffectTransparent, "transparent"}, {kEffectMatte, "matte"},
-      {kEffectTwoSided, "two-sided"},  {kEffectTriangles, "triangles"},     {kEffectNearCrossing, "near-crossing"},
-      {kEffectColouredOpacity, "coloured-opacity"}};
+  static const std::pair<uint32_t, const char*> names[] = {{kEffectMoving, "moving"},
+                                                           {kEffectTransparent, "transparent"},
+                                                           {kEffectMatte, "matte"},
+                                                           {kEffectTwoSided, "two-sided"},
+                                                           {kEffectTriangles, "triangles"},
+                                                           {kEffectNearCrossing, "near-crossing"},
+                                                           {kEffectColouredOpacity, "coloured-opacity"}};
   std::string s;
   for (auto [bit, name] : names)
     if (e & bit) s += (s.empty() ? "" : " ") + std::string(name);
@@ -261,8 +264,7 @@ std::vector<TileEntry> readIndex(ByteReader& r, const StoreMeta& meta) {
     if (e.schedule >= meta.schedules.size()) fail(where(), "names motion schedule ", e.schedule, " of ", meta.schedules.size());
     if (e.numMicropolygons > kMaxPartMicropolygons || e.numVertices > kMaxPartVertices)
       fail(where(), "implausible counts (", e.numMicropolygons, " micropolygons, ", e.numVertices, " vertices)");
-    if (meta.schema.attrs.size() < 64 && (e.attrPresence >> meta.schema.attrs.size()) != 0)
-      fail(where(), "marks attributes the schema does not declare");
+    if (meta.schema.attrs.size() < 64 && (e.attrPresence >> meta.schema.attrs.size()) != 0) fail(where(), "marks attributes the schema does not declare");
     e.knots.resize(meta.schedules[e.schedule].size());
     for (auto& k : e.knots) {
       for (float& v : k.raster) v = r.get<float>();

@@ -51,9 +51,9 @@ std::string effectNames(uint32_t effects);
 
 /// Conservative bounds of a part at one motion knot.
 struct KnotBounds {
-  float raster[4] = {0, 0, 0, 0};  // x0 y0 x1 y1 in the primary camera's raster (valid if rasterFinite)
+  float raster[4] = {0, 0, 0, 0};        // x0 y0 x1 y1 in the primary camera's raster (valid if rasterFinite)
   float camera[6] = {0, 0, 0, 0, 0, 0};  // camera-space box: min xyz, max xyz
-  bool rasterFinite = true;  // false when some vertex is before the near plane at this knot
+  bool rasterFinite = true;              // false when some vertex is before the near plane at this knot
 };
 
 struct TileEntry {

@@ -80,9 +80,8 @@ void Camera::effectiveScreenWindow(double out[4]) const {
 bool Camera::operator==(const Camera& o) const {
   for (int i = 0; i < 4; ++i)
     if (screenWindow[i] != o.screenWindow[i]) return false;
-  return name == o.name && projection == o.projection && fovDegrees == o.fovDegrees && width == o.width &&
-         height == o.height && pixelAspect == o.pixelAspect && nearClip == o.nearClip && farClip == o.farClip &&
-         worldToCamera == o.worldToCamera;
+  return name == o.name && projection == o.projection && fovDegrees == o.fovDegrees && width == o.width && height == o.height && pixelAspect == o.pixelAspect &&
+         nearClip == o.nearClip && farClip == o.farClip && worldToCamera == o.worldToCamera;
 }
 
 Projector::Projector(const Camera& cam) {
@@ -143,8 +142,7 @@ void StoreMeta::validate(const std::string& where) const {
       if (!std::isfinite(k[i])) fail(where, "motion schedule ", s, ": knot time ", i, " is not finite");
       if (s > 0 && (k[i] < shutterOpen || k[i] > shutterClose))
         fail(where, "motion schedule ", s, ": knot time ", k[i], " lies outside the shutter [", shutterOpen, ", ", shutterClose, "]");
-      if (i > 0 && !(k[i] > k[i - 1]))
-        fail(where, "motion schedule ", s, ": knot times not strictly increasing (", k[i - 1], " then ", k[i], ")");
+      if (i > 0 && !(k[i] > k[i - 1])) fail(where, "motion schedule ", s, ": knot times not strictly increasing (", k[i - 1], " then ", k[i], ")");
     }
   }
   if (cameras.empty()) fail(where, "no camera");

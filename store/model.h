@@ -62,8 +62,8 @@ enum class Projection : uint8_t { Perspective = 0, Orthographic = 1 };
 struct Camera {
   std::string name = "world";
   Projection projection = Projection::Perspective;
-  double fovDegrees = 90.0;        // perspective: full angle across the shorter screen axis
-  int width = 640, height = 480;   // raster resolution
+  double fovDegrees = 90.0;       // perspective: full angle across the shorter screen axis
+  int width = 640, height = 480;  // raster resolution
   double pixelAspect = 1.0;
   double screenWindow[4] = {0, 0, 0, 0};  // left right bottom top; all zero = RenderMan default
   double nearClip = 1e-4, farClip = 1e30;
@@ -113,7 +113,7 @@ using Schedule = std::vector<double>;
 struct StoreMeta {
   int64_t frame = 1;
   Rational fps{24, 1};
-  double shutterOpen = 0.0, shutterClose = 1.0;  // frame-relative, as RenderMan's Shutter
+  double shutterOpen = 0.0, shutterClose = 1.0;    // frame-relative, as RenderMan's Shutter
   std::vector<Schedule> schedules{Schedule{0.0}};  // [0] is static
   std::vector<Camera> cameras{Camera{}};           // [0] is the primary: its raster space tiles the store
   Schema schema;
@@ -143,14 +143,14 @@ struct AttrValues {
 /// Corners are in ring order (p0 p1 p2 p3 around the quad); the bilinear quad is
 /// P(u,v) = (1-u)(1-v)·p0 + u(1-v)·p1 + u·v·p2 + (1-u)·v·p3, a triangle is (p0 p1 p2).
 struct GridInput {
-  uint32_t schedule = 0;      // index into StoreMeta::schedules
+  uint32_t schedule = 0;  // index into StoreMeta::schedules
   uint32_t numVertices = 0;
   std::span<const glm::vec3> positions;  // knots × numVertices, knot-major, camera space
   std::span<const uint32_t> corners;     // 4 per micropolygon; corners[4i+3] == kNoCorner: triangle
   uint32_t objectId = 0;
   uint32_t gridId = 0;
-  uint8_t flags = 0;                     // MpFlag bits, for every micropolygon of the grid
-  std::vector<AttrValues> attrs;         // parallel to Schema::attrs
+  uint8_t flags = 0;              // MpFlag bits, for every micropolygon of the grid
+  std::vector<AttrValues> attrs;  // parallel to Schema::attrs
   size_t numMicropolygons() const { return corners.size() / 4; }
   /// Every knot's positions equal the first's, bit for bit: the grid stands still although it
   /// was given several knots (a P + blurP dump's static objects, a motion block that does not
@@ -188,7 +188,7 @@ struct TilePart {
   std::vector<uint32_t> corners;     // 4 per micropolygon
   std::vector<uint32_t> objectId, gridId;
   std::vector<uint8_t> flags;
-  std::vector<AttrArray> attrs;      // parallel to Schema::attrs; empty when absent in this part
+  std::vector<AttrArray> attrs;  // parallel to Schema::attrs; empty when absent in this part
   size_t memoryBytes() const;
   const glm::vec3& position(uint32_t knot, uint32_t vertex) const { return positions[size_t(knot) * numVertices + vertex]; }
 };

@@ -65,8 +65,7 @@ struct StoreReader::Impl {
     if (std::memcmp(data, kHeaderMagic, 8) != 0) fail(path, "not a reshutter store (bad magic)");
     uint32_t version;
     std::memcpy(&version, data + 8, 4);
-    if (version > kFormatVersion)
-      fail(path, "written by a newer reshutter (format version ", version, "; this build reads up to ", kFormatVersion, ")");
+    if (version > kFormatVersion) fail(path, "written by a newer reshutter (format version ", version, "; this build reads up to ", kFormatVersion, ")");
     if (version == 0) fail(path, "invalid format version 0");
     if (size < kHeaderSize + kFooterSize) fail(path, "truncated (", size, " bytes; no room for the footer)");
 
@@ -147,8 +146,7 @@ struct StoreReader::Impl {
     for (uint32_t m = 0; m < part.numMicropolygons; ++m)
       for (int j = 0; j < 4; ++j) {
         uint32_t c = part.corners[size_t(m) * 4 + j];
-        if (c >= part.numVertices && !(j == 3 && c == kNoCorner))
-          fail(where(i), "micropolygon ", m, " names vertex ", c, " of ", part.numVertices);
+        if (c >= part.numVertices && !(j == 3 && c == kNoCorner)) fail(where(i), "micropolygon ", m, " names vertex ", c, " of ", part.numVertices);
       }
     for (size_t v = 0; v < part.positions.size(); ++v) {
       const auto& p = part.positions[v];
@@ -280,8 +278,7 @@ VerifyReport StoreReader::verify(const std::function<void(size_t)>& progress) co
         const glm::vec3& p = part.position(k, v);
         if (k > 0 && p != part.position(0, v)) effects |= kEffectMoving;
         for (int a = 0; a < 3; ++a)
-          if (p[a] < kb.camera[a] || p[a] > kb.camera[a + 3])
-            fail(I.where(i), "vertex ", v, " at knot ", k, " lies outside the camera-space bound");
+          if (p[a] < kb.camera[a] || p[a] > kb.camera[a + 3]) fail(I.where(i), "vertex ", v, " at knot ", k, " lies outside the camera-space bound");
         bool front = !I.projector.perspective || double(p.z) >= I.projector.nearClip;
         if (!front) effects |= kEffectNearCrossing;
         if (front && kb.rasterFinite) {
@@ -320,8 +317,7 @@ VerifyReport StoreReader::verify(const std::function<void(size_t)>& progress) co
         if (o[j] != o[j + 1] || o[j + 1] != o[j + 2]) effects |= kEffectColouredOpacity;
       }
     }
-    if ((effects & ~e.effects) != 0)
-      fail(I.where(i), "effect flags [", effectNames(e.effects), "] miss [", effectNames(effects & ~e.effects), "]");
+    if ((effects & ~e.effects) != 0) fail(I.where(i), "effect flags [", effectNames(e.effects), "] miss [", effectNames(effects & ~e.effects), "]");
     report.parts++;
     report.micropolygons += part.numMicropolygons;
     report.vertices += part.numVertices;

@@ -25,13 +25,12 @@ std::shared_ptr<const StoreReader> ShotStores::open(int64_t frame) {
   ro.cacheBytes = cacheBytes_;
   auto reader = std::make_shared<const StoreReader>(pathOf(frame), ro);
   const auto& m = reader->meta();
-  if (hasFramePlaceholder(pattern_) && m.frame != frame)
-    fail(pathOf(frame), "the store says it holds frame ", m.frame, ", its name says frame ", frame);
+  if (hasFramePlaceholder(pattern_) && m.frame != frame) fail(pathOf(frame), "the store says it holds frame ", m.frame, ", its name says frame ", frame);
   if (first_) {
     const auto& f = first_->meta();
     if (m.shutterOpen != f.shutterOpen || m.shutterClose != f.shutterClose)
-      fail(pathOf(frame), "its shutter [", m.shutterOpen, ", ", m.shutterClose, "] differs from ", first_->path(), "'s [", f.shutterOpen, ", ",
-           f.shutterClose, "]; a shot's stores must share one shutter");
+      fail(pathOf(frame), "its shutter [", m.shutterOpen, ", ", m.shutterClose, "] differs from ", first_->path(), "'s [", f.shutterOpen, ", ", f.shutterClose,
+           "]; a shot's stores must share one shutter");
   }
   openStores_[frame] = reader;
   return reader;

@@ -19,8 +19,7 @@ StoreMeta syntheticMeta(const SyntheticOptions& o) {
   cam.nearClip = 0.1;
   cam.farClip = 1000.0;
   m.cameras = {cam};
-  m.schema.attrs = {{"Ci", AttrType::Color, AttrRate::Vertex, o.colorCodec},
-                    {"Oi", AttrType::Color, AttrRate::Vertex, o.opacityCodec}};
+  m.schema.attrs = {{"Ci", AttrType::Color, AttrRate::Vertex, o.colorCodec}, {"Oi", AttrType::Color, AttrRate::Vertex, o.opacityCodec}};
   m.provenance = "reshutter synthetic scene";
   return m;
 }

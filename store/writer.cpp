@@ -226,15 +226,13 @@ struct StoreWriter::Impl {
     return it->second;
   }
 
-  Impl(const std::string& path, StoreMeta m, WriterOptions o)
-      : meta(std::move(m)), options(o), file(path), projector(meta.cameras.at(0)), layout(meta.schema) {
+  Impl(const std::string& path, StoreMeta m, WriterOptions o) : meta(std::move(m)), options(o), file(path), projector(meta.cameras.at(0)), layout(meta.schema) {
     char header[kHeaderSize] = {};
     std::copy(std::begin(kHeaderMagic), std::end(kHeaderMagic), header);
     uint32_t v = kFormatVersion;
     std::memcpy(header + 8, &v, 4);
     writeAll(file.fd(), header, kHeaderSize, file.tempPath());
-    if (options.maxPartMicropolygons == 0 || options.maxPartMicropolygons > kMaxPartMicropolygons)
-      options.maxPartMicropolygons = kMaxPartMicropolygons;
+    if (options.maxPartMicropolygons == 0 || options.maxPartMicropolygons > kMaxPartMicropolygons) options.maxPartMicropolygons = kMaxPartMicropolygons;
   }
 
   std::string where() const { return file.finalPath(); }
@@ -286,8 +284,7 @@ struct StoreWriter::Impl {
     for (size_t i = 0; i < nMp; ++i)
       for (int j = 0; j < 4; ++j) {
         uint32_t c = g.corners[i * 4 + j];
-        if (c >= g.numVertices && !(j == 3 && c == kNoCorner))
-          fail(w, "micropolygon ", i, " corner ", j, " names vertex ", c, " of ", g.numVertices);
+        if (c >= g.numVertices && !(j == 3 && c == kNoCorner)) fail(w, "micropolygon ", i, " corner ", j, " names vertex ", c, " of ", g.numVertices);
       }
     if (!g.attrs.empty() && g.attrs.size() != meta.schema.attrs.size())
       fail(w, "gives ", g.attrs.size(), " attribute slots; the schema has ", meta.schema.attrs.size());
@@ -353,9 +350,7 @@ struct StoreWriter::Impl {
         glm::dvec2 centre(0.0);
         for (int j = 0; j < nc; ++j) centre += raster[base + c[j]];
         centre /= double(nc);
-        auto coord = [&](double v) {
-          return int32_t(std::clamp(std::floor(v * invTile), double(-kTileCoordLimit), double(kTileCoordLimit)));
-        };
+        auto coord = [&](double v) { return int32_t(std::clamp(std::floor(v * invTile), double(-kTileCoordLimit), double(kTileCoordLimit))); };
         key.tx = coord(centre.x), key.ty = coord(centre.y);
         break;
       }
@@ -480,9 +475,8 @@ struct StoreWriter::Impl {
     std::vector<Builder*> order;
     order.reserve(builders.size());
     for (auto& [k, b] : builders) order.push_back(b.get());
-    std::sort(order.begin(), order.end(), [](const Builder* a, const Builder* b) {
-      return a->chunks() != b->chunks() ? a->chunks() > b->chunks() : a->key.order() < b->key.order();
-    });
+    std::sort(order.begin(), order.end(),
+              [](const Builder* a, const Builder* b) { return a->chunks() != b->chunks() ? a->chunks() > b->chunks() : a->key.order() < b->key.order(); });
     // Retired builders hold their chunks until written, so count what stays behind.
     size_t remaining = chunks.bytesInUse();
     for (Builder* b : order) {

@@ -30,7 +30,8 @@ TEST(CliStore, GenerateInfoVerify) {
   EXPECT_NE(info.out.find("moving"), std::string::npos);
   EXPECT_NE(info.out.find("320x240"), std::string::npos);
 
-  auto json = runCommand(std::string(RESHUTTER_BINARY) + " info --json " + store + " | jq -e '.micropolygons == 20224 and .cameras[0].width == 320 and (.schema | length) == 2'");
+  auto json = runCommand(std::string(RESHUTTER_BINARY) + " info --json " + store +
+                         " | jq -e '.micropolygons == 20224 and .cameras[0].width == 320 and (.schema | length) == 2'");
   EXPECT_EQ(json.exitCode, 0) << json.out << json.err;
 
   auto verify = runReshutter("verify " + store);
@@ -64,8 +65,8 @@ TEST(CliStore, UsageErrorsExitTwoAndHelpTeaches) {
   // form, exit status 2, and nothing written.
   reshutter::test::ScratchDir dir;
   const std::string out = dir.path("x.mps");
-  for (const std::string& args : std::vector<std::string>{"", "info", "resample", "generate -o " + out + " --still 2",
-                                                          "generate -o " + out + " --nonesuch", "generate -o " + out + " -n abc"}) {
+  for (const std::string& args : std::vector<std::string>{"", "info", "resample", "generate -o " + out + " --still 2", "generate -o " + out + " --nonesuch",
+                                                          "generate -o " + out + " -n abc"}) {
     auto r = runReshutter(args);
     EXPECT_EQ(r.exitCode, 2) << args;
     EXPECT_EQ(lines(r.err), 1u) << args << ": " << r.err;

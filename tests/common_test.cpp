@@ -68,9 +68,7 @@ TEST(AtomicFile, NothingUnderFinalNameUntilCommit) {
   EXPECT_EQ(std::distance(std::filesystem::directory_iterator(dir.dir()), {}), 1);
 }
 
-TEST(AtomicFile, UnwritableDirectoryIsAnError) {
-  EXPECT_THROW(AtomicFile("/nonexistent-dir/x.mps"), Error);
-}
+TEST(AtomicFile, UnwritableDirectoryIsAnError) { EXPECT_THROW(AtomicFile("/nonexistent-dir/x.mps"), Error); }
 
 // checkCanCreate() refuses what AtomicFile's constructor refuses, creates nothing, and accepts
 // what it accepts.

@@ -79,8 +79,8 @@ std::vector<Quad> lattice(int n, glm::vec2 offset) {
   std::vector<Quad> quads;
   for (int j = 0; j < n; ++j)
     for (int i = 0; i < n; ++i) {
-      const glm::vec3 c[4] = {{i + offset.x, j + offset.y, 1}, {i + 1 + offset.x, j + offset.y, 1}, {i + 1 + offset.x, j + 1 + offset.y, 1},
-                              {i + offset.x, j + 1 + offset.y, 1}};
+      const glm::vec3 c[4] = {
+          {i + offset.x, j + offset.y, 1}, {i + 1 + offset.x, j + offset.y, 1}, {i + 1 + offset.x, j + 1 + offset.y, 1}, {i + offset.x, j + 1 + offset.y, 1}};
       Quad q;
       const int r = (i + j) % 2;  // rotate the corners: the diagonal 02 alternates
       for (int k = 0; k < 4; ++k) q.p[k] = c[(k + r) % 4];
@@ -270,8 +270,8 @@ TEST(Coverage, VectorKernelsMatchTheScalarReference) {
           const float f = fixed ? 0.f : std::clamp(st[i], 0.f, 1.f);
           int tri;
           float bary[3];
-          const bool hit = fixed ? coversFixed(E, triangle, cullBack, sx[i], sy[i], tri, bary)
-                                 : coversMoving(q, triangle, cullBack, sx[i], sy[i], f, tri, bary);
+          const bool hit =
+              fixed ? coversFixed(E, triangle, cullBack, sx[i], sy[i], tri, bary) : coversMoving(q, triangle, cullBack, sx[i], sy[i], f, tri, bary);
           const kernels::EdgeHit* vh = byCandidate[i];
           if (vh && vh->undecided) continue;  // an exact zero: the scalar tie rule decides
           ++decided;

@@ -8,11 +8,11 @@
 
 #include <gtest/gtest.h>
 
+#include <OpenEXR/ImfChannelList.h>
 #include <OpenEXR/ImfCheckFile.h>
+#include <OpenEXR/ImfFrameBuffer.h>
 #include <OpenEXR/ImfHeader.h>
 #include <OpenEXR/ImfInputFile.h>
-#include <OpenEXR/ImfChannelList.h>
-#include <OpenEXR/ImfFrameBuffer.h>
 
 #include "common/error.h"
 #include "common/random.h"
@@ -40,7 +40,7 @@ struct Rect {
   float c[3] = {0.5f, 0.5f, 0.5f};          // straight colour
   float o[3] = {1, 1, 1};                   // opacity
   bool matte = false;
-  double mpSize = 1.0;                      // micropolygon size in pixels
+  double mpSize = 1.0;  // micropolygon size in pixels
 };
 
 store::StoreMeta sceneMeta(int w, int h) {
@@ -160,8 +160,8 @@ std::string describePixel(const RenderResult& res, int x, int y) {
   s += buf;
   for (size_t i = 0; i < px.size(); ++i) {
     const float* r = px.at(i);
-    std::snprintf(buf, sizeof buf, "  Z %.5f..%.5f RGB %.5f %.5f %.5f A %.5f obj %u flags %u\n", r[kDeepZ], r[kDeepZBack], r[kDeepR], r[kDeepG],
-                  r[kDeepB], r[kDeepA], px.uat(i)[kDeepObjectId], px.uat(i)[kDeepFlags]);
+    std::snprintf(buf, sizeof buf, "  Z %.5f..%.5f RGB %.5f %.5f %.5f A %.5f obj %u flags %u\n", r[kDeepZ], r[kDeepZBack], r[kDeepR], r[kDeepG], r[kDeepB],
+                  r[kDeepA], px.uat(i)[kDeepObjectId], px.uat(i)[kDeepFlags]);
     s += buf;
   }
   return s;
@@ -444,8 +444,8 @@ TEST(DeepRender, NegativeLobeFiltersFlattenToTheirPositivePart) {
         lobeEffect = std::max(lobeEffect, std::abs(deep[c] - f));
       }
     }
-  std::printf("catmull-rom, 1 spp: flattened deep vs positive part %.3g, flat vs signed filter %.3g, deep vs flat %.3g; %d negative weights\n",
-              worstDeep, worstFlat, lobeEffect, negativeWeights);
+  std::printf("catmull-rom, 1 spp: flattened deep vs positive part %.3g, flat vs signed filter %.3g, deep vs flat %.3g; %d negative weights\n", worstDeep,
+              worstFlat, lobeEffect, negativeWeights);
   EXPECT_GT(negativeWeights, 1000);
   EXPECT_LT(worstFlat, 1e-5) << "the sample values or the weights are not the renderer's";
   EXPECT_LT(worstDeep, 1e-5) << "the flattened deep image is not the image filtered with the filter's positive part";
@@ -657,8 +657,7 @@ TEST(DeepFile, CliAndOpenImageIOAgree) {
   for (auto [file, buf] : {std::pair{&a, &fa}, {&b, &fb}}) {
     Imf::FrameBuffer frame;
     const char* names[] = {"R", "G", "B", "A"};
-    for (int c = 0; c < 4; ++c)
-      frame.insert(names[c], Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(buf->data() + c), 16, 16 * size_t(W)));
+    for (int c = 0; c < 4; ++c) frame.insert(names[c], Imf::Slice(Imf::FLOAT, reinterpret_cast<char*>(buf->data() + c), 16, 16 * size_t(W)));
     file->setFrameBuffer(frame);
     file->readPixels(dw.min.y, dw.max.y);
   }

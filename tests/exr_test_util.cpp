@@ -63,13 +63,21 @@ DeepExr readDeepExr(const std::string& path) {
   Imf::DeepFrameBuffer fb;
   fb.insertSampleCountSlice(Imf::Slice(Imf::UINT, reinterpret_cast<char*>(counts.data() - origin), 4, 4 * size_t(W)));
   const int nf = kDeepFixedFloats, nu = kDeepFixedUInts;
-  for (auto [name, field] : {std::pair{"R", int(kDeepR)}, {"G", kDeepG}, {"B", kDeepB}, {"A", kDeepA}, {"Z", kDeepZ}, {"ZBack", kDeepZBack},
-                             {"AR", kDeepAR}, {"AG", kDeepAG}, {"AB", kDeepAB}, {"objectid", kDeepObjectId}}) {
+  for (auto [name, field] : {std::pair{"R", int(kDeepR)},
+                             {"G", kDeepG},
+                             {"B", kDeepB},
+                             {"A", kDeepA},
+                             {"Z", kDeepZ},
+                             {"ZBack", kDeepZBack},
+                             {"AR", kDeepAR},
+                             {"AG", kDeepAG},
+                             {"AB", kDeepAB},
+                             {"objectid", kDeepObjectId}}) {
     if (!present(name)) continue;
     const bool isUInt = std::string(name) == "objectid";
     Field& f = fields.emplace_back(Field{field, isUInt, std::vector<char*>(n)});
-    fb.insert(name, Imf::DeepSlice(isUInt ? Imf::UINT : Imf::FLOAT, reinterpret_cast<char*>(f.ptrs.data() - origin), sizeof(char*),
-                                   sizeof(char*) * size_t(W), 4 * size_t(isUInt ? nu : nf)));
+    fb.insert(name, Imf::DeepSlice(isUInt ? Imf::UINT : Imf::FLOAT, reinterpret_cast<char*>(f.ptrs.data() - origin), sizeof(char*), sizeof(char*) * size_t(W),
+                                   4 * size_t(isUInt ? nu : nf)));
   }
   in.setFrameBuffer(fb);
   in.readPixelSampleCounts(dw.min.y, dw.max.y);

@@ -254,8 +254,9 @@ TEST(IngestTest, MotionBlocksWithAnyKnotTimes) {
   EXPECT_EQ(r.meta.shutterClose, 2);
 
   // Three knots, and a shutter shorter than the motion: clipped, interpolated at the shutter end.
-  r = ingestText("Shutter 0 0.75\nWorldBegin\nMotionBegin [0 0.5 1]\nPolygon \"P\" [0 0 1 1 0 1 1 1 1]\nPolygon \"P\" [0 0 2 1 0 2 1 1 2]\n"
-                 "Polygon \"P\" [0 0 4 1 0 4 1 1 4]\nMotionEnd\n");
+  r = ingestText(
+      "Shutter 0 0.75\nWorldBegin\nMotionBegin [0 0.5 1]\nPolygon \"P\" [0 0 1 1 0 1 1 1 1]\nPolygon \"P\" [0 0 2 1 0 2 1 1 2]\n"
+      "Polygon \"P\" [0 0 4 1 0 4 1 1 4]\nMotionEnd\n");
   ASSERT_EQ(r.grids.size(), 1u);
   EXPECT_EQ(r.grids[0].knots, (Schedule{0, 0.5, 0.75}));
   EXPECT_FLOAT_EQ(r.grids[0].positions[6].z, 3.0f);
@@ -272,8 +273,10 @@ TEST(IngestTest, MotionBlocksWithAnyKnotTimes) {
 
 TEST(IngestTest, MovingTransformsAndWorldSpaceGeometry) {
   // A camera transform before WorldBegin, and a moving transform around static geometry.
-  auto r = ingestText("Shutter 0 1\nProjection \"perspective\"\nTranslate 0 0 10\nWorldBegin\nAttributeBegin\nMotionBegin [0 1]\nTranslate 0 0 0\n"
-                      "Translate 3 0 0\nMotionEnd\nPolygon " + kSquare + "\nAttributeEnd\nPolygon " + kSquare + "\n");
+  auto r = ingestText(
+      "Shutter 0 1\nProjection \"perspective\"\nTranslate 0 0 10\nWorldBegin\nAttributeBegin\nMotionBegin [0 1]\nTranslate 0 0 0\n"
+      "Translate 3 0 0\nMotionEnd\nPolygon " +
+      kSquare + "\nAttributeEnd\nPolygon " + kSquare + "\n");
   ASSERT_EQ(r.grids.size(), 2u);
   EXPECT_EQ(r.meta.cameras[0].worldToCamera[3][2], 10.0);
   EXPECT_EQ(r.grids[0].knots, (Schedule{0, 1}));
@@ -294,9 +297,9 @@ TEST(IngestTest, MovingTransformsAndWorldSpaceGeometry) {
 
 TEST(IngestTest, PolygonsAreKeptOrSplit) {
   auto r = ingestText(kHeader +
-                      "Polygon \"P\" [0 0 5  2 0 5  3 1 5  1 2 5  -1 1 5]\n"                      // convex pentagon
+                      "Polygon \"P\" [0 0 5  2 0 5  3 1 5  1 2 5  -1 1 5]\n"                    // convex pentagon
                       "Polygon \"P\" [0 0 5  1 0 5  2 0.5 5  2 1.5 5  1 2 5  0 2 5  -1 1 5]\n"  // convex heptagon
-                      "Polygon \"P\" [0 0 5  3 0 5  3 1 5  1 1 5  1 3 5  0 3 5]\n"               // L shape: not convex
+                      "Polygon \"P\" [0 0 5  3 0 5  3 1 5  1 1 5  1 3 5  0 3 5]\n"              // L shape: not convex
                       "PointsPolygons [3 4] [0 1 2  0 2 3 4] \"P\" [0 0 5  1 0 5  1 1 5  0 1 5  9 9 5]\n");
   ASSERT_EQ(r.grids.size(), 4u);
   auto kinds = [](const Grid& g) {
@@ -336,7 +339,8 @@ TEST(IngestTest, EveryDeclaredVariableBecomesAnOutput) {
                       "  \"N\" [0 0 -1  0 0 -1  0 0 -1  0 0 -1  0 0 -1] \"s\" [0 1 1 0 2] \"id\" [7 8]\n"
                       "  \"varying float[2] uv\" [0 0  1 0  1 1  0 1  2 0] \"constant color tint\" [0.5 0.25 1]\n"
                       "  \"Cs\" [1 0 0  0 1 0  0 0 1  1 1 1  0 0 0] \"uniform string label\" [\"a\" \"b\"]\n"
-                      "PointsPolygons [4] [0 1 2 3] " + kSquare + " \"facevarying float fv\" [1 2 3 4] \"Os\" [1 1 1  1 1 1  1 1 1  1 1 1]\n");
+                      "PointsPolygons [4] [0 1 2 3] " +
+                      kSquare + " \"facevarying float fv\" [1 2 3 4] \"Os\" [1 1 1  1 1 1  1 1 1  1 1 1]\n");
   const auto& s = r.meta.schema;
   auto rate = [&](const char* n) {
     int i = s.find(n);
@@ -371,8 +375,9 @@ TEST(IngestTest, EveryDeclaredVariableBecomesAnOutput) {
 }
 
 TEST(IngestTest, NormalsAndPointsMoveToCameraSpace) {
-  auto r = ingestText("Projection \"perspective\"\nWorldBegin\nTranslate 0 0 5\nRotate 90 0 1 0\nDeclare \"Pref\" \"vertex point\"\n"
-                      "Polygon \"P\" [0 0 0  0 1 0  0 0 1] \"N\" [1 0 0  1 0 0  1 0 0] \"Pref\" [0 0 0  0 0 0  0 0 0]\n");
+  auto r = ingestText(
+      "Projection \"perspective\"\nWorldBegin\nTranslate 0 0 5\nRotate 90 0 1 0\nDeclare \"Pref\" \"vertex point\"\n"
+      "Polygon \"P\" [0 0 0  0 1 0  0 0 1] \"N\" [1 0 0  1 0 0  1 0 0] \"Pref\" [0 0 0  0 0 0  0 0 0]\n");
   const auto& n = r.attr(0, "N");
   EXPECT_NEAR(n[0], 0, 1e-6);
   EXPECT_NEAR(n[2], -1, 1e-6);
@@ -409,9 +414,13 @@ TEST(IngestTest, AppearanceChangingPerKnotKeepsTheFirstWithAWarning) {
 }
 
 TEST(IngestTest, CameraShutterAndFramesComeFromTheRib) {
-  auto r = ingestText("FrameBegin 3\nFormat 320 240 2\nFrameAspectRatio 2\nProjection \"orthographic\"\nClipping 0.5 500\nShutter 0.1 0.6\n"
-                      "WorldBegin\nPolygon " + kSquare + "\nWorldEnd\nFrameEnd\n"
-                      "FrameBegin 4\nWorldBegin\nPolygon " + kSquare + "\nPolygon " + kSquare + "\nWorldEnd\nFrameEnd\n");
+  auto r = ingestText(
+      "FrameBegin 3\nFormat 320 240 2\nFrameAspectRatio 2\nProjection \"orthographic\"\nClipping 0.5 500\nShutter 0.1 0.6\n"
+      "WorldBegin\nPolygon " +
+      kSquare +
+      "\nWorldEnd\nFrameEnd\n"
+      "FrameBegin 4\nWorldBegin\nPolygon " +
+      kSquare + "\nPolygon " + kSquare + "\nWorldEnd\nFrameEnd\n");
   const Camera& c = r.meta.cameras[0];
   EXPECT_EQ(r.meta.frame, 3);
   EXPECT_EQ(c.width, 320);
@@ -456,7 +465,8 @@ TEST(IngestTest, OnePassUnlessALaterPrimitiveBringsNewVariables) {
   EXPECT_EQ(s.attrs[size_t(s.ci())].rate, AttrRate::Vertex);
   EXPECT_EQ(reader.micropolygonCount(), 2u);
   size_t files = 0;
-  for (const auto& e : std::filesystem::directory_iterator(dir.dir())) files += e.path().extension() == ".mps" || e.path().string().find(".tmp") != std::string::npos;
+  for (const auto& e : std::filesystem::directory_iterator(dir.dir()))
+    files += e.path().extension() == ".mps" || e.path().string().find(".tmp") != std::string::npos;
   EXPECT_EQ(files, 2u);  // no temporary left behind by the abandoned first pass
 }
 
@@ -470,8 +480,8 @@ TEST(IngestHardTest, BadDumpsGiveOneClearError) {
       {kHeader + "PointsPolygons [4 4] [0 1 2 3] " + kSquare + "\n", "dump.rib:5 (PointsPolygons)", "vertex counts need 8"},
       {kHeader + "PointsPolygons [4] [0 1 2 3] \"P\" [0 0 5 1 0 5 1 1 5 0 1]\n", "dump.rib:5 (PointsPolygons)", "not a multiple of 3"},
       {kHeader + "PointsPolygons [4] [0 1 2 3] " + kSquare + " \"bogus\" [1 2 3 4]\n", "dump.rib:5 (PointsPolygons)", "unknown parameter 'bogus'"},
-      {kHeader + "PointsGeneralPolygons [2] [4 3] [0 1 2 3 4 5 6] \"P\" [0 0 5 4 0 5 4 4 5 0 4 5 1 1 5 2 1 5 2 2 5]\n",
-       "dump.rib:5 (PointsGeneralPolygons)", "holes are not supported"},
+      {kHeader + "PointsGeneralPolygons [2] [4 3] [0 1 2 3 4 5 6] \"P\" [0 0 5 4 0 5 4 4 5 0 4 5 1 1 5 2 1 5 2 2 5]\n", "dump.rib:5 (PointsGeneralPolygons)",
+       "holes are not supported"},
       {kHeader + "Polygon \"P\" [0 0 5 2 0 5 0 2 5 2 2 5 1 -1 5]\n", "dump.rib:5 (Polygon)", "self-intersecting"},
       {kHeader + "PointsPolygons [4] [0 1 2 3] " + kSquare + " \"blurP\" [0 0 5]\n", "dump.rib:5 (PointsPolygons)", "\"blurP\" has 1 points"},
       {kHeader + "MotionBegin [0 1]\nPolygon " + kSquare + "\nPolygon \"P\" [0 0 5 1 0 5 1 1 5]\nMotionEnd\n", "dump.rib:7 (Polygon)", "different topology"},
@@ -521,15 +531,16 @@ TEST(IngestTest, CliIngestsAndReportsErrorsOnOneLine) {
 TEST(IngestHardTest, MutatedDumpsFailCleanlyOrIngest) {
   // A dump using most of what ingest reads, damaged at random: every run either ingests or throws
   // reshutter::Error (under ASan/UBSan in the sanitizer build: no memory errors, no UB).
-  const std::string base = "FrameBegin 1\nFormat 64 48 1\nProjection \"perspective\" \"fov\" [45]\nShutter 0 1\nTranslate 0 0 1\nWorldBegin\n"
-                           "Declare \"blurP\" \"vertex point\"\nAttributeBegin\nOrientation \"inside\"\nSides 1\nColor [1 0.5 0.25]\n"
-                           "MotionBegin [0 0.5 1]\nTranslate 0 0 0\nTranslate 1 0 0\nTranslate 2 0 1\nMotionEnd\n"
-                           "PointsPolygons [4 3 5] [0 1 2 3  1 4 2  0 5 6 7 8] \"P\" [0 0 5  1 0 5  1 1 5  0 1 5  2 0 5  -1 -1 5  0 -2 5  1 -1 5  0 0.5 5]\n"
-                           "  \"Cs\" [1 0 0  0 1 0  0 0 1  1 1 1  0 0 0  1 0 0  0 1 0  0 0 1  1 1 1] \"uniform float id\" [1 2 3]\n"
-                           "  \"facevarying float fv\" [1 2 3 4 5 6 7 8 9 10 11 12]\nAttributeEnd\n"
-                           "MotionBegin [0 1]\nPolygon \"P\" [0 0 5 1 0 5 1 1 5]\nPolygon \"P\" [0 0 6 1 0 6 1 1 6]\nMotionEnd\n"
-                           "CoordSysTransform \"camera\"\nPointsPolygons [4] [0 1 2 3] \"P\" [0 0 5 1 0 5 1 1 5 0 1 5] \"blurP\" [0 0 6 1 0 6 1 1 6 0 1 6]\n"
-                           "WorldEnd\nFrameEnd\n";
+  const std::string base =
+      "FrameBegin 1\nFormat 64 48 1\nProjection \"perspective\" \"fov\" [45]\nShutter 0 1\nTranslate 0 0 1\nWorldBegin\n"
+      "Declare \"blurP\" \"vertex point\"\nAttributeBegin\nOrientation \"inside\"\nSides 1\nColor [1 0.5 0.25]\n"
+      "MotionBegin [0 0.5 1]\nTranslate 0 0 0\nTranslate 1 0 0\nTranslate 2 0 1\nMotionEnd\n"
+      "PointsPolygons [4 3 5] [0 1 2 3  1 4 2  0 5 6 7 8] \"P\" [0 0 5  1 0 5  1 1 5  0 1 5  2 0 5  -1 -1 5  0 -2 5  1 -1 5  0 0.5 5]\n"
+      "  \"Cs\" [1 0 0  0 1 0  0 0 1  1 1 1  0 0 0  1 0 0  0 1 0  0 0 1  1 1 1] \"uniform float id\" [1 2 3]\n"
+      "  \"facevarying float fv\" [1 2 3 4 5 6 7 8 9 10 11 12]\nAttributeEnd\n"
+      "MotionBegin [0 1]\nPolygon \"P\" [0 0 5 1 0 5 1 1 5]\nPolygon \"P\" [0 0 6 1 0 6 1 1 6]\nMotionEnd\n"
+      "CoordSysTransform \"camera\"\nPointsPolygons [4] [0 1 2 3] \"P\" [0 0 5 1 0 5 1 1 5 0 1 5] \"blurP\" [0 0 6 1 0 6 1 1 6 0 1 6]\n"
+      "WorldEnd\nFrameEnd\n";
   setVerbosity(Verbosity::Quiet);
   std::mt19937 rng(12345);
   const char alphabet[] = " []\"0123456789.-eP#\nMotionBeginEnd\x80\x8f\xa6\xcc";

@@ -82,7 +82,7 @@ FlatExr readFlat(const std::string& path) {
 struct DeepExr {
   Imath::Box2i data, display;
   std::vector<ExrChannel> channels;
-  std::vector<unsigned> counts;                      // per pixel
+  std::vector<unsigned> counts;                            // per pixel
   std::vector<std::vector<std::vector<uint32_t>>> values;  // [channel][pixel][sample]
   uint64_t total = 0;
   int width() const { return data.max.x - data.min.x + 1; }
@@ -102,8 +102,8 @@ DeepExr readDeep(const std::string& path) {
   fb.insertSampleCountSlice(Imf::Slice(Imf::UINT, reinterpret_cast<char*>(img.counts.data() - origin), 4, 4 * size_t(W)));
   std::vector<std::vector<char*>> pointers(img.channels.size(), std::vector<char*>(P, nullptr));
   for (size_t c = 0; c < img.channels.size(); ++c)
-    fb.insert(img.channels[c].name.c_str(), Imf::DeepSlice(readType(img.channels[c].type), reinterpret_cast<char*>(pointers[c].data() - origin),
-                                                           sizeof(char*), sizeof(char*) * size_t(W), 4));
+    fb.insert(img.channels[c].name.c_str(), Imf::DeepSlice(readType(img.channels[c].type), reinterpret_cast<char*>(pointers[c].data() - origin), sizeof(char*),
+                                                           sizeof(char*) * size_t(W), 4));
   in.setFrameBuffer(fb);
   in.readPixelSampleCounts(img.data.min.y, img.data.max.y);
   img.values.assign(img.channels.size(), std::vector<std::vector<uint32_t>>(P));
@@ -143,8 +143,8 @@ void expectSameFlatPixels(const FlatExr& got, const FlatExr& want, const std::st
         const uint32_t a = got.at(c, x, y), b = want.at(c, x, y);
         if (a == b) continue;
         if (++differing <= 5)
-          ADD_FAILURE() << what << ": " << got.channels[c].name << " at " << x << "," << y << ": " << asFloat(a) << " (0x" << std::hex << a
-                        << ") against " << asFloat(b) << " (0x" << b << std::dec << ")";
+          ADD_FAILURE() << what << ": " << got.channels[c].name << " at " << x << "," << y << ": " << asFloat(a) << " (0x" << std::hex << a << ") against "
+                        << asFloat(b) << " (0x" << b << std::dec << ")";
       }
   EXPECT_EQ(differing, 0u) << what << ": values that differ";
 }
@@ -170,8 +170,8 @@ void expectSameDeepPixels(const DeepExr& got, const DeepExr& want, const std::st
           const uint32_t a = got.values[c][g][i], b = want.values[c][w][i];
           if (a == b) continue;
           if (++differing <= 5)
-            ADD_FAILURE() << what << ": " << got.channels[c].name << " of sample " << i << " at " << x << "," << y << ": " << asFloat(a) << " (0x"
-                          << std::hex << a << ") against " << asFloat(b) << " (0x" << b << std::dec << ")";
+            ADD_FAILURE() << what << ": " << got.channels[c].name << " of sample " << i << " at " << x << "," << y << ": " << asFloat(a) << " (0x" << std::hex
+                          << a << ") against " << asFloat(b) << " (0x" << b << std::dec << ")";
         }
     }
   EXPECT_EQ(differing, 0u) << what << ": pixels or samples that differ";
@@ -180,8 +180,7 @@ void expectSameDeepPixels(const DeepExr& got, const DeepExr& want, const std::st
 // A moving, partly transparent synthetic store, 128×96 (~2.5 layers deep).
 std::string generateStore(const ScratchDir& dir) {
   const std::string path = dir.path("gen.mps");
-  const test::CommandResult r =
-      test::runReshutter("generate -n 30000 --width 128 --height 96 --transparent 0.4 --motion 25 --knots 3 --seed 5 -o " + path);
+  const test::CommandResult r = test::runReshutter("generate -n 30000 --width 128 --height 96 --transparent 0.4 --motion 25 --knots 3 --seed 5 -o " + path);
   if (r.exitCode != 0) throw std::runtime_error("reshutter generate failed: " + r.err);
   return path;
 }
@@ -206,11 +205,10 @@ TEST(CropInvariance, CroppedFilesHoldTheWholeRendersPixels) {
   for (auto [shutter, filter] : {std::pair{"0:1", "gaussian:3"}, std::pair{"0.3:0.55", "catmull-rom:4"}}) {
     const std::string what = std::string("shutter ") + shutter + " " + filter;
     const std::string args = std::string(" --spp 9 --seed 3 --aov z --aov id --aov Oi --shutter ") + shutter + " --filter " + filter;
-    const std::string whole = dir.path("whole.exr"), wholeDeep = dir.path("whole_deep.exr"), crop = dir.path("crop.exr"),
-                      cropDeep = dir.path("crop_deep.exr");
+    const std::string whole = dir.path("whole.exr"), wholeDeep = dir.path("whole_deep.exr"), crop = dir.path("crop.exr"), cropDeep = dir.path("crop_deep.exr");
     ASSERT_TRUE(runResample("resample " + store + " -o " + whole + " --deep " + wholeDeep + args));
-    ASSERT_TRUE(runResample("resample " + store + " -o " + crop + " --deep " + cropDeep + args + " --crop " + std::to_string(x0) + " " +
-                            std::to_string(x1) + " " + std::to_string(y0) + " " + std::to_string(y1)));
+    ASSERT_TRUE(runResample("resample " + store + " -o " + crop + " --deep " + cropDeep + args + " --crop " + std::to_string(x0) + " " + std::to_string(x1) +
+                            " " + std::to_string(y0) + " " + std::to_string(y1)));
     for (const std::string& f : {wholeDeep, cropDeep}) EXPECT_FALSE(Imf::checkOpenEXRFile(f.c_str(), false, false, true)) << f;
 
     const FlatExr w = readFlat(whole), c = readFlat(crop);
@@ -270,8 +268,8 @@ TEST(CropInvariance, RenderSpecCropsAreTheWholeRendersPixels) {
       cs.cropX0 = c.x0, cs.cropX1 = c.x1, cs.cropY0 = c.y0, cs.cropY1 = c.y1;
       cs.bucketSize = 16;
       const RenderResult crop = render(cs);
-      const std::string what = "shutter " + std::to_string(open) + ":" + std::to_string(close) + " crop " + std::to_string(c.x0) + " " +
-                               std::to_string(c.x1) + " " + std::to_string(c.y0) + " " + std::to_string(c.y1);
+      const std::string what = "shutter " + std::to_string(open) + ":" + std::to_string(close) + " crop " + std::to_string(c.x0) + " " + std::to_string(c.x1) +
+                               " " + std::to_string(c.y0) + " " + std::to_string(c.y1);
       ASSERT_EQ(crop.image.x0, c.x0) << what;
       ASSERT_EQ(crop.image.y0, c.y0) << what;
       ASSERT_EQ(crop.image.width, c.x1 - c.x0) << what;

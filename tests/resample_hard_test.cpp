@@ -3,17 +3,17 @@
 // of 1e-6 px and 5000 px, knots 1e-7 frames apart, exact depth ties, filters whose weights sum to
 // ~0 at the border. Each asserts finite output and agreement with the brute-force ray caster
 // (tests/resample_test_util.h) within a stated bound.
-#include <iostream>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
+#include <iostream>
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
 
 #include "common/random.h"
-#include "resample/deep.h"
 #include "resample/coverage.h"
+#include "resample/deep.h"
 #include "resample/gather.h"
 #include "store/synthetic.h"
 #include "store/writer.h"
@@ -46,8 +46,7 @@ double compareWithRayCaster(const TestScene& s, const std::string& path, double 
   const int W = s.meta.cameras[0].width, H = s.meta.cameras[0].height;
   Reference ref = rayCast(s, spec, W, H);
   double diff = 0;
-  for (size_t p = 0; p < ref.a.size(); ++p)
-    diff += std::abs(channel(r, "A").f[p] - ref.a[p]) + std::abs(channel(r, "R").f[p] - ref.r[p]);
+  for (size_t p = 0; p < ref.a.size(); ++p) diff += std::abs(channel(r, "A").f[p] - ref.a[p]) + std::abs(channel(r, "R").f[p] - ref.r[p]);
   return diff / (2.0 * ref.a.size());
 }
 
@@ -93,8 +92,7 @@ RenderSpec comparisonSpec(std::shared_ptr<const store::StoreReader> reader, int 
 }
 
 std::array<glm::dvec3, 4> square(double cx, double cy, double half, double z) {
-  return {glm::dvec3(cx - half, cy - half, z), glm::dvec3(cx + half, cy - half, z), glm::dvec3(cx + half, cy + half, z),
-          glm::dvec3(cx - half, cy + half, z)};
+  return {glm::dvec3(cx - half, cy - half, z), glm::dvec3(cx + half, cy - half, z), glm::dvec3(cx + half, cy + half, z), glm::dvec3(cx - half, cy + half, z)};
 }
 
 }  // namespace
@@ -120,8 +118,7 @@ TEST(ResampleHard, StaticWallThroughTheEyePlaneInSmallBuckets) {
   ScratchDir dir;
   TestScene s = makeScene(32, 24, {0.0});
   const glm::dvec3 top = s.cam(17, -4, 20), bottom = s.cam(17, 28, 20);
-  s.mps.push_back(cameraQuad({{glm::dvec3(top.x, top.y, -3), glm::dvec3(top.x, top.y, 20), glm::dvec3(top.x, bottom.y, 20),
-                               glm::dvec3(top.x, bottom.y, -3)}}));
+  s.mps.push_back(cameraQuad({{glm::dvec3(top.x, top.y, -3), glm::dvec3(top.x, top.y, 20), glm::dvec3(top.x, bottom.y, 20), glm::dvec3(top.x, bottom.y, -3)}}));
   EXPECT_LT(compareWithRayCaster(s, dir.path("wall.mps"), 0, 1, 4, 8), 3e-3);
   EXPECT_LT(compareWithRayCaster(s, dir.path("wall.mps"), 0.5, 0.5, 4, 8), 3e-3);
 }
@@ -130,7 +127,7 @@ TEST(ResampleHard, BehindTheCameraAndFarOffScreen) {
   ScratchDir dir;
   TestScene s = makeScene(24, 16);
   s.mps.push_back(cameraQuad({square(0, 0, 5, -3), square(1, 0, 5, -1)}));  // always behind
-  const double far = 1e7;                                                    // pixels off screen
+  const double far = 1e7;                                                   // pixels off screen
   s.mps.push_back(cameraQuad({{s.cam(far, far, 10), s.cam(far + 3, far, 10), s.cam(far + 3, far + 3, 10), s.cam(far, far + 3, 10)},
                               {s.cam(far, far, 10), s.cam(far + 3, far, 10), s.cam(far + 3, far + 3, 10), s.cam(far, far + 3, 10)}}));
   auto reader = writeScene(s, dir.path("away.mps"));
@@ -150,7 +147,7 @@ TEST(ResampleHard, DegenerateAndBowTieMicropolygons) {
   ScratchDir dir;
   TestScene s = makeScene(24, 16);
   const auto p = s.cam(5, 5, 10);
-  s.mps.push_back(cameraQuad({{p, p, p, p}, {p, p, p, p}}));                                  // a point
+  s.mps.push_back(cameraQuad({{p, p, p, p}, {p, p, p, p}}));                                             // a point
   s.mps.push_back(cameraQuad({{s.cam(2, 2, 10), s.cam(8, 8, 10), s.cam(14, 14, 10), s.cam(20, 20, 10)},  // collinear
                               {s.cam(3, 2, 10), s.cam(9, 8, 10), s.cam(15, 14, 10), s.cam(21, 20, 10)}}));
   auto degenerate = writeScene(s, dir.path("degenerate.mps"));
@@ -194,11 +191,11 @@ TEST(ResampleHard, TinyAndHugeMotion) {
         disagreeing += std::round(std::abs(A[p] - ref.a[p]) * N);
         coveredPixels += ref.a[p] > 0;
         disagreeingPixels += std::max({std::abs(A[p] - ref.a[p]), std::abs(R[p] - ref.r[p]), std::abs(B[p] - ref.b[p])}) > 1e-5;
-        analytic += N * (analyticCoverage(px, py, 10.3, 8.2, 12.4, 11.7, motion, motion * 0.3, 0, 1) +
-                         analyticCoverage(px, py, -2000, 0, 20, 30, motion, 0, 0, 1));
+        analytic +=
+            N * (analyticCoverage(px, py, 10.3, 8.2, 12.4, 11.7, motion, motion * 0.3, 0, 1) + analyticCoverage(px, py, -2000, 0, 20, 30, motion, 0, 0, 1));
       }
-    std::printf("motion %g px: %.0f samples covered (ray caster %.0f, exact %.1f) in %d pixels; %.0f samples, %d pixels disagree\n", motion,
-                covered, refCovered, analytic, coveredPixels, disagreeing, disagreeingPixels);
+    std::printf("motion %g px: %.0f samples covered (ray caster %.0f, exact %.1f) in %d pixels; %.0f samples, %d pixels disagree\n", motion, covered,
+                refCovered, analytic, coveredPixels, disagreeing, disagreeingPixels);
     // Both quads are seen (they never overlap in time): ~3600 samples at 1e-6 px, ~130 at 5000 px,
     // within four standard deviations of a Poisson count of the exact coverage.
     EXPECT_GT(refCovered, motion > 1 ? 60.0 : 3000.0) << motion;
@@ -217,8 +214,8 @@ TEST(ResampleHard, StrongDepthMotionUnderPerspective) {
   ScratchDir dir;
   TestScene s = makeScene(48, 32);
   // Rushing at the camera while sliding across the frame, and receding the other way.
-  s.mps.push_back(cameraQuad({{s.cam(2, 4, 20), s.cam(14, 4, 20), s.cam(14, 16, 20), s.cam(2, 16, 20)},
-                              {s.cam(20, 6, 1), s.cam(46, 6, 1), s.cam(46, 30, 1), s.cam(20, 30, 1)}}));
+  s.mps.push_back(cameraQuad(
+      {{s.cam(2, 4, 20), s.cam(14, 4, 20), s.cam(14, 16, 20), s.cam(2, 16, 20)}, {s.cam(20, 6, 1), s.cam(46, 6, 1), s.cam(46, 30, 1), s.cam(20, 30, 1)}}));
   s.mps.push_back(cameraQuad({{s.cam(40, 2, 1.2), s.cam(47, 2, 1.2), s.cam(47, 12, 1.5), s.cam(40, 12, 1.5)},
                               {s.cam(5, 20, 25), s.cam(9, 20, 25), s.cam(9, 28, 25), s.cam(5, 28, 25)}},
                              {0.1f, 0.3f, 0.9f}));
@@ -440,8 +437,8 @@ TEST(ResampleHard, VectorAndScalarKernelsAgreeOrthographic) {
       TestMp mp;
       for (double u : moving ? std::vector<double>{0.0, 1.0} : std::vector<double>{0.0}) {
         const double ox = x + u * mx, oy = y + u * my;
-        mp.knots.push_back({s.cam(ox, oy, z), s.cam(ox + size, oy + 0.2 * size, z + tilt), s.cam(ox + size, oy + size, z),
-                            s.cam(ox - 0.1 * size, oy + size, z - tilt)});
+        mp.knots.push_back(
+            {s.cam(ox, oy, z), s.cam(ox + size, oy + 0.2 * size, z + tilt), s.cam(ox + size, oy + size, z), s.cam(ox - 0.1 * size, oy + size, z - tilt)});
       }
       mp.triangle = i % 3 == 0;
       mp.ci = {float(rng.uniform()), float(rng.uniform()), float(rng.uniform())};
@@ -587,23 +584,23 @@ TEST(ResampleHard, VectorEdgeTestHitsMissesAndDefersTies) {
   rx.resize(16), ry.resize(16);
   const kernels::EdgeTestSetup setup{st.data(), rx.data(), ry.data(), 0.f, 0.f, true, false, true};
   for (kernels::Isa isa : {kernels::Isa::Avx2, kernels::Isa::Avx512}) {
-  if (!kernels::available(isa)) continue;
-  SCOPED_TRACE(isa == kernels::Isa::Avx512 ? "avx512" : "avx2");
-  std::vector<kernels::EdgeHit> hits(16);
-  const size_t n = kernels::testLinearEdges(isa, setup, edges, 4, hits.data());
-  ASSERT_EQ(n, 3u);
-  EXPECT_EQ(hits[0].candidate, 0u);
-  EXPECT_FALSE(hits[0].undecided);
-  EXPECT_EQ(hits[1].candidate, 2u);
-  EXPECT_TRUE(hits[1].undecided);
-  EXPECT_EQ(hits[2].candidate, 3u);
-  EXPECT_FALSE(hits[2].undecided);
-  for (size_t h : {size_t(0), size_t(2)}) {
-    EXPECT_NEAR(hits[h].b[0] + hits[h].b[1] + hits[h].b[2], 1.f, 1e-6f);
-    // Barycentrics reproduce the sample position: sum b_j V_j.
-    const double x = hits[h].b[1] * 4.0, y = hits[h].b[2] * 4.0;
-    EXPECT_NEAR(x, rx[hits[h].candidate], 1e-5);
-    EXPECT_NEAR(y, ry[hits[h].candidate], 1e-5);
-  }
+    if (!kernels::available(isa)) continue;
+    SCOPED_TRACE(isa == kernels::Isa::Avx512 ? "avx512" : "avx2");
+    std::vector<kernels::EdgeHit> hits(16);
+    const size_t n = kernels::testLinearEdges(isa, setup, edges, 4, hits.data());
+    ASSERT_EQ(n, 3u);
+    EXPECT_EQ(hits[0].candidate, 0u);
+    EXPECT_FALSE(hits[0].undecided);
+    EXPECT_EQ(hits[1].candidate, 2u);
+    EXPECT_TRUE(hits[1].undecided);
+    EXPECT_EQ(hits[2].candidate, 3u);
+    EXPECT_FALSE(hits[2].undecided);
+    for (size_t h : {size_t(0), size_t(2)}) {
+      EXPECT_NEAR(hits[h].b[0] + hits[h].b[1] + hits[h].b[2], 1.f, 1e-6f);
+      // Barycentrics reproduce the sample position: sum b_j V_j.
+      const double x = hits[h].b[1] * 4.0, y = hits[h].b[2] * 4.0;
+      EXPECT_NEAR(x, rx[hits[h].candidate], 1e-5);
+      EXPECT_NEAR(y, ry[hits[h].candidate], 1e-5);
+    }
   }
 }

@@ -501,8 +501,8 @@ TEST(ResampleFilters, ConstantImageStaysConstantForEveryFilter) {
 }
 
 TEST(ResampleFilters, FilterShapesAreWhatTheyClaim) {
-  for (FilterKind k : {FilterKind::Box, FilterKind::Triangle, FilterKind::Gaussian, FilterKind::CatmullRom, FilterKind::Sinc,
-                       FilterKind::BlackmanHarris, FilterKind::Mitchell}) {
+  for (FilterKind k : {FilterKind::Box, FilterKind::Triangle, FilterKind::Gaussian, FilterKind::CatmullRom, FilterKind::Sinc, FilterKind::BlackmanHarris,
+                       FilterKind::Mitchell}) {
     const float w = defaultFilterWidth(k);
     EXPECT_GT(filter1D(k, 0.f, w), 0.f) << filterName(k);
     EXPECT_EQ(filter1D(k, w / 2 + 0.01f, w), 0.f) << filterName(k);
@@ -517,8 +517,8 @@ TEST(ResampleFilters, FilterShapesAreWhatTheyClaim) {
 // documented running sums, in neighbour order, and the total is the weighted sum of the samples.
 TEST(ResampleFilters, TapSumsAreTheWeightedSamples) {
   Rng rng(11);
-  for (auto [n, nc, taps] : {std::tuple{16, 4, 9}, std::tuple{16, 3, 25}, std::tuple{9, 4, 9}, std::tuple{4, 1, 49}, std::tuple{64, 4, 9},
-                             std::tuple{17, 6, 9}, std::tuple{16, 8, 4}, std::tuple{24, 2, 1}}) {
+  for (auto [n, nc, taps] : {std::tuple{16, 4, 9}, std::tuple{16, 3, 25}, std::tuple{9, 4, 9}, std::tuple{4, 1, 49}, std::tuple{64, 4, 9}, std::tuple{17, 6, 9},
+                             std::tuple{16, 8, 4}, std::tuple{24, 2, 1}}) {
     std::vector<std::vector<float>> values(static_cast<size_t>(nc), std::vector<float>(static_cast<size_t>(n * taps * 2)));
     for (auto& v : values)
       for (float& x : v) x = float(rng.uniform(0.0, 10.0));
@@ -651,8 +651,9 @@ TEST(ResampleCli, ImagesOpenInAnIndependentReader) {
   ASSERT_EQ(runReshutter("-j 2 resample " + store + " -o " + b + " --spp 9 --aov z --aov id --crop 20 140 10 80 --shutter 0.25:0.75 --bucket 16").exitCode, 0);
   CommandResult info = runImageTool("iinfo -v " + a);
   ASSERT_EQ(info.exitCode, 0) << info.err;
-  for (const char* want : {"120 x   70", "full/display size: 160 x 90", "pixel data origin: x=20, y=10", "R (float), G (float), B (float), A (float), Z (float), z (float), id (uint)", "worldToCamera", "worldToNDC",
-                           "reshutter/shutterInterval", "software"})
+  for (const char* want :
+       {"120 x   70", "full/display size: 160 x 90", "pixel data origin: x=20, y=10",
+        "R (float), G (float), B (float), A (float), Z (float), z (float), id (uint)", "worldToCamera", "worldToNDC", "reshutter/shutterInterval", "software"})
     EXPECT_NE(info.out.find(want), std::string::npos) << want << " not in\n" << info.out;
   // Same image from another thread count and bucket size, as an independent reader sees it.
   CommandResult diff = runImageTool("idiff -q -fail 0 -failpercent 0 -warn 0 " + a + " " + b);
@@ -694,7 +695,7 @@ TEST(ResampleCli, UnwritableOutputFailsBeforeAnythingIsWritten) {
   ASSERT_EQ(runReshutter("generate -n 2000 --width 64 --height 48 -o " + store).exitCode, 0);
   const std::string flat = dir.path("flat.exr");
   for (const std::string& extra : {" --preview " + dir.path("missing/p.png"), " --deep " + dir.path("missing/d.exr"),
-                                  " --preview " + dir.path("p.png") + " --quantize 1,2", std::string(" --compression bogus")}) {
+                                   " --preview " + dir.path("p.png") + " --quantize 1,2", std::string(" --compression bogus")}) {
     CommandResult r = runReshutter("resample " + store + " -o " + flat + extra + " --stats");
     EXPECT_EQ(r.exitCode, 1) << extra;
     EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << extra << ": " << r.err;

@@ -200,7 +200,8 @@ double analyticCoverage(int px, int py, double x0, double y0, double w, double h
     if (shapeTimes.empty()) return 1.0;
     if (t <= shapeTimes.front()) return shapeWeights.front();
     for (size_t i = 1; i < shapeTimes.size(); ++i)
-      if (t <= shapeTimes[i]) return shapeWeights[i - 1] + (t - shapeTimes[i - 1]) / (shapeTimes[i] - shapeTimes[i - 1]) * (shapeWeights[i] - shapeWeights[i - 1]);
+      if (t <= shapeTimes[i])
+        return shapeWeights[i - 1] + (t - shapeTimes[i - 1]) / (shapeTimes[i] - shapeTimes[i - 1]) * (shapeWeights[i] - shapeWeights[i - 1]);
     return shapeWeights.back();
   };
   if (a == b) return area(a);

@@ -20,7 +20,7 @@ namespace reshutter::test {
 struct TestMp {
   std::vector<std::array<glm::dvec3, 4>> knots;  // corners p0 p1 p2 p3 per knot
   bool triangle = false;
-  glm::vec3 ci{1, 1, 1}, oi{1, 1, 1};             // Ci premultiplied
+  glm::vec3 ci{1, 1, 1}, oi{1, 1, 1};  // Ci premultiplied
   uint32_t objectId = 1, gridId = 0;
   uint8_t flags = 0;
 };

@@ -29,8 +29,8 @@ struct Motion {
 };
 
 // The store of frame F: knots at F + open and F + close (frame-relative open/close).
-std::shared_ptr<const store::StoreReader> frameStore(const Motion& m, int64_t frame, const std::string& path, double open = 0, double close = 1,
-                                                    int W = 48, int H = 36) {
+std::shared_ptr<const store::StoreReader> frameStore(const Motion& m, int64_t frame, const std::string& path, double open = 0, double close = 1, int W = 48,
+                                                     int H = 36) {
   TestScene s = makeScene(W, H, {open, close});
   s.meta.frame = frame;
   s.meta.shutterOpen = open, s.meta.shutterClose = close;
@@ -352,9 +352,8 @@ TEST(RetimeFieldGroups, AnglesPositionsAndExplicitIntervalsAreInFieldDurations) 
     ShutterPosition position;
     double open1, close1;  // field 1 of frame 10, worked out by hand; field 2 is half a frame later
   };
-  for (const Case& c : {Case{360, ShutterPosition::Start, 10, 10.5}, Case{360, ShutterPosition::Center, 9.75, 10.25},
-                        Case{180, ShutterPosition::End, 9.75, 10}, Case{90, ShutterPosition::Center, 9.9375, 10.0625},
-                        Case{0, ShutterPosition::Start, 10, 10}}) {
+  for (const Case& c : {Case{360, ShutterPosition::Start, 10, 10.5}, Case{360, ShutterPosition::Center, 9.75, 10.25}, Case{180, ShutterPosition::End, 9.75, 10},
+                        Case{90, ShutterPosition::Center, 9.9375, 10.0625}, Case{0, ShutterPosition::Start, 10, 10}}) {
     FieldShutter fs;
     std::tie(fs.open, fs.close) = angleInterval(c.angle, c.position);
     const auto [g1, g2] = fieldGroups(10, fs);
@@ -527,7 +526,7 @@ TEST(RetimeSources, FramesReachTheStoresTheirShuttersNeed) {
   ASSERT_EQ(spec.sources.size(), 1u);
   EXPECT_EQ(spec.sources[0].frame, 1);
   EXPECT_NEAR(spec.shutter.earliest(), 1.6, 1e-12);
-  rc.close = 1;  // 360°
+  rc.close = 1;                                              // 360°
   spec = frameSpec(shot, retimeFrames({2}, rc)[0].shutter);  // [1.6, 2.4]
   ASSERT_EQ(spec.sources.size(), 2u);
   EXPECT_EQ(spec.sources[0].frame, 1);
@@ -553,14 +552,15 @@ TEST(RetimeCli, FieldsAndRetimeWriteSequencesThatOpenElsewhere) {
   CommandResult fields =
       runReshutter("fields " + shot + " --frames 1-3 --spp 4 --filter box:1 -o " + dir.path("f.####.exr") + " --deep " + dir.path("fd.####.exr"));
   ASSERT_EQ(fields.exitCode, 0) << fields.err;
-  CommandResult twoPass = runReshutter("fields " + shot + " --frames 1-3 --spp 4 --filter box:1 --two-pass -o " + dir.path("t.%04d.exr") + " --deep " +
-                                       dir.path("td.%04d.exr"));
+  CommandResult twoPass =
+      runReshutter("fields " + shot + " --frames 1-3 --spp 4 --filter box:1 --two-pass -o " + dir.path("t.%04d.exr") + " --deep " + dir.path("td.%04d.exr"));
   ASSERT_EQ(twoPass.exitCode, 0) << twoPass.err;
   for (int f = 1; f <= 3; ++f) {
     const std::string n = std::to_string(f);
     // OpenImageIO, an independent reader, finds the single pass identical to the two-pass one, flat
     // and deep (with a one-row filter no row sees the other field's samples).
-    for (auto [a, b] : {std::pair{dir.path("f.000" + n + ".exr"), dir.path("t.000" + n + ".exr")}, {dir.path("fd.000" + n + ".exr"), dir.path("td.000" + n + ".exr")}}) {
+    for (auto [a, b] :
+         {std::pair{dir.path("f.000" + n + ".exr"), dir.path("t.000" + n + ".exr")}, {dir.path("fd.000" + n + ".exr"), dir.path("td.000" + n + ".exr")}}) {
       ASSERT_TRUE(std::filesystem::exists(a)) << a;
       CommandResult diff = runImageTool("idiff -q -fail 0 -failpercent 0 -warn 0 " + a + " " + b);
       EXPECT_EQ(diff.exitCode, 0) << a << " " << b << "\n" << diff.out << diff.err;
@@ -581,8 +581,7 @@ TEST(RetimeCli, FieldsAndRetimeWriteSequencesThatOpenElsewhere) {
   }
   // 24 → 30 fps, 180°: output frame k exposes [0.8k, 0.8k + 0.4], frame 2 within store 1, frame 4
   // [3.2, 3.6] within store 3; the square's coverage over that interval is known exactly.
-  CommandResult retime =
-      runReshutter("retime " + shot + " --from-fps 24 --to-fps 30 --frames 2-4x2 --spp 64 --filter box:1 -o " + dir.path("r.####.exr"));
+  CommandResult retime = runReshutter("retime " + shot + " --from-fps 24 --to-fps 30 --frames 2-4x2 --spp 64 --filter box:1 -o " + dir.path("r.####.exr"));
   ASSERT_EQ(retime.exitCode, 0) << retime.err;
   EXPECT_FALSE(std::filesystem::exists(dir.path("r.0003.exr")));
   for (int k : {2, 4}) {
@@ -657,8 +656,8 @@ TEST(RetimeCli, TwoPassDeepFlattensToTheTwoPassFlatImageOnEveryRow) {
   DeepExr fieldDeep[2];
   for (int k = 0; k < 2; ++k) {
     const std::string flat = dir.path("field" + std::to_string(k) + ".exr"), deep = dir.path("field" + std::to_string(k) + "d.exr");
-    CommandResult r = runReshutter("resample " + dir.path("shot.0002.mps") + " --shutter " + (k == 0 ? "0:0.25" : "0.5:0.75") + common + " -o " + flat +
-                                   " --deep " + deep);
+    CommandResult r =
+        runReshutter("resample " + dir.path("shot.0002.mps") + " --shutter " + (k == 0 ? "0:0.25" : "0.5:0.75") + common + " -o " + flat + " --deep " + deep);
     ASSERT_EQ(r.exitCode, 0) << r.err;
     fieldFlat[k] = readFlatExr(flat);
     fieldDeep[k] = readDeepExr(deep);
@@ -680,7 +679,8 @@ TEST(RetimeCli, TwoPassDeepFlattensToTheTwoPassFlatImageOnEveryRow) {
       EXPECT_LT(rowFlattenError(deep.image, flat, y), 1e-5) << dominance << " dominance, row " << y << " (field " << k + 1 << ")";
       bool sameAsField = true, sameAsOther = true;
       for (int x = 0; x < flat.width; ++x) {
-        for (const char* c : {"R", "G", "B", "A"}) sameAsField &= flat.find(c)->f[size_t(y) * flat.width + x] == fieldFlat[k].find(c)->f[size_t(y) * flat.width + x];
+        for (const char* c : {"R", "G", "B", "A"})
+          sameAsField &= flat.find(c)->f[size_t(y) * flat.width + x] == fieldFlat[k].find(c)->f[size_t(y) * flat.width + x];
         deep.image.getPixel(x, y, a);
         fieldDeep[k].image.getPixel(x, y, b);
         fieldDeep[1 - k].image.getPixel(x, y, other);
@@ -714,8 +714,8 @@ TEST(RetimeCli, UnwritableOutputFailsBeforeTheFirstFrame) {
   for (int64_t f = 1; f <= 3; ++f) frameStore(m, f, dir.path("shot.000" + std::to_string(f) + ".mps"));
   const std::string shot = dir.path("shot.####.mps"), deep = " --deep " + dir.path("missing/d.####.exr");
   for (const std::string& args : {"fields " + shot + " --frames 1-2 --spp 1 -o " + dir.path("f.####.exr") + deep,
-                                 "fields " + shot + " --frames 1-2 --spp 1 --two-pass -o " + dir.path("f.####.exr") + deep,
-                                 "retime " + shot + " --to-fps 24 --frames 1-2 --spp 1 -o " + dir.path("f.####.exr") + deep}) {
+                                  "fields " + shot + " --frames 1-2 --spp 1 --two-pass -o " + dir.path("f.####.exr") + deep,
+                                  "retime " + shot + " --to-fps 24 --frames 1-2 --spp 1 -o " + dir.path("f.####.exr") + deep}) {
     CommandResult r = runReshutter(args);
     EXPECT_EQ(r.exitCode, 1) << args;
     EXPECT_NE(r.err.find("missing/d.0001.exr"), std::string::npos) << r.err;
@@ -728,9 +728,10 @@ TEST(RetimeCli, BadShutterArgumentsGiveOneLineAndNoOutput) {
   Motion m;
   frameStore(m, 1, dir.path("shot.0001.mps"));
   const std::string shot = dir.path("shot.####.mps"), out = dir.path("o.####.exr");
-  for (const std::string& args : {"fields " + shot + " --frames 1 --field-shutter 0.5:0.1 -o " + out, "fields " + shot + " --frames 1 --field-shutter x -o " + out,
-                                 "fields " + shot + " --frames 1", "retime " + shot + " --to-fps 30 --frames 1 --shutter 1:0 -o " + out,
-                                 "retime " + shot + " --to-fps 0/0 --frames 1 -o " + out, "fields " + shot + " --frames 1-2 -o " + dir.path("same.exr")}) {
+  for (const std::string& args :
+       {"fields " + shot + " --frames 1 --field-shutter 0.5:0.1 -o " + out, "fields " + shot + " --frames 1 --field-shutter x -o " + out,
+        "fields " + shot + " --frames 1", "retime " + shot + " --to-fps 30 --frames 1 --shutter 1:0 -o " + out,
+        "retime " + shot + " --to-fps 0/0 --frames 1 -o " + out, "fields " + shot + " --frames 1-2 -o " + dir.path("same.exr")}) {
     CommandResult r = runReshutter(args);
     EXPECT_NE(r.exitCode, 0) << args;
     EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << args << ": " << r.err;

@@ -93,9 +93,7 @@ std::string gzipBytes(const std::string& s) {
   return out;
 }
 
-void writeFile(const std::string& path, const std::string& bytes) {
-  std::ofstream(path, std::ios::binary).write(bytes.data(), std::streamsize(bytes.size()));
-}
+void writeFile(const std::string& path, const std::string& bytes) { std::ofstream(path, std::ios::binary).write(bytes.data(), std::streamsize(bytes.size())); }
 
 // ---------------------------------------------------------------------------------------------
 // A small binary RIB encoder (RISpec 3.2 appendix C), independent of the reader.
@@ -197,11 +195,12 @@ TEST(RibReaderTest, EveryRealFileParsesWithAHandlerThatTakesNothing) {
 
 TEST(RibReaderTest, RealFilesParameterListsResolveThroughStandardDeclarations) {
   // Where each request's parameter list starts.
-  const std::map<std::string, size_t> firstParam = {
-      {"PointsPolygons", 2}, {"Polygon", 0},   {"GeneralPolygon", 1}, {"PointsGeneralPolygons", 3}, {"Patch", 1},  {"Sphere", 4},
-      {"Cylinder", 4},      {"Cone", 3},      {"Disk", 3},           {"Paraboloid", 4},            {"Hyperboloid", 7}, {"Points", 0},
-      {"Curves", 3},        {"LightSource", 2}, {"Surface", 1},      {"Displacement", 1},          {"Attribute", 1},   {"Option", 1},
-      {"Display", 3},       {"Projection", 1}, {"Hider", 1}};
+  const std::map<std::string, size_t> firstParam = {{"PointsPolygons", 2}, {"Polygon", 0},     {"GeneralPolygon", 1}, {"PointsGeneralPolygons", 3},
+                                                    {"Patch", 1},          {"Sphere", 4},      {"Cylinder", 4},       {"Cone", 3},
+                                                    {"Disk", 3},           {"Paraboloid", 4},  {"Hyperboloid", 7},    {"Points", 0},
+                                                    {"Curves", 3},         {"LightSource", 2}, {"Surface", 1},        {"Displacement", 1},
+                                                    {"Attribute", 1},      {"Option", 1},      {"Display", 3},        {"Projection", 1},
+                                                    {"Hider", 1}};
   struct Checker : RequestHandler {
     const std::map<std::string, size_t>* first;
     size_t lists = 0, params = 0;
@@ -295,8 +294,26 @@ TEST(RibReaderTest, AsciiTokenKinds) {
   EXPECT_EQ(d.type, ParamType::Color);
   EXPECT_TRUE(reader.lookup("st", d));
   EXPECT_EQ(d.arraySize, 2);
-  for (const char* n : {"P", "N", "Os", "s", "t", "Pw", "Np", "fov", "intensity", "lightcolor", "from", "to", "coneangle", "conedeltaangle",
-                        "beamdistribution", "Ka", "Kd", "Ks", "roughness", "specularcolor"})
+  for (const char* n : {"P",
+                        "N",
+                        "Os",
+                        "s",
+                        "t",
+                        "Pw",
+                        "Np",
+                        "fov",
+                        "intensity",
+                        "lightcolor",
+                        "from",
+                        "to",
+                        "coneangle",
+                        "conedeltaangle",
+                        "beamdistribution",
+                        "Ka",
+                        "Kd",
+                        "Ks",
+                        "roughness",
+                        "specularcolor"})
     EXPECT_TRUE(reader.lookup(n, d)) << n;
   EXPECT_FALSE(reader.lookup("nosuchname", d));
   EXPECT_FALSE(reader.lookup("varying colour x", d));
@@ -335,8 +352,7 @@ TEST(RibReaderTest, ReadArchiveIsRelativeToTheIncludingFile) {
     }
   } h;
   Reader().parseFile(dir.path("top.rib"), h);
-  EXPECT_EQ(h.seen, (std::vector<std::string>{"WorldBegin@top.rib:1", "Declare@a.rib:1", "A1@a.rib:2", "B1@b.rib:1", "A2@a.rib:4",
-                                              "WorldEnd@top.rib:3"}));
+  EXPECT_EQ(h.seen, (std::vector<std::string>{"WorldBegin@top.rib:1", "Declare@a.rib:1", "A1@a.rib:2", "B1@b.rib:1", "A2@a.rib:4", "WorldEnd@top.rib:3"}));
   // A cycle stops at the depth limit with a clear error.
   writeFile(dir.path("loop.rib"), "ReadArchive \"loop.rib\"\n");
   try {
@@ -353,7 +369,7 @@ TEST(RibReaderTest, BinaryEncodingParsesLikeAscii) {
   std::string ascii;
   BinaryWriter bin;
   // Integers in every width, signed.
-  const std::vector<std::pair<int64_t, int>> ints = {{0, 0},     {127, 0},    {-128, 0},       {-1, 0},        {300, 1},
+  const std::vector<std::pair<int64_t, int>> ints = {{0, 0},      {127, 0},     {-128, 0},     {-1, 0},         {300, 1},
                                                      {-32768, 1}, {8388607, 2}, {-8388608, 2}, {2147483647, 3}, {-2147483647 - 1, 3}};
   ascii += "Ints";
   bin.defineRequest(1, "Ints");
@@ -368,8 +384,8 @@ TEST(RibReaderTest, BinaryEncodingParsesLikeAscii) {
   bin.ascii("Scale ");
   bin.fixed(1, 0, 0), bin.fixed(-1, 0, 0), bin.fixed(1, 0, 0);
   bin.ascii("\n");
-  const std::vector<std::tuple<double, int, int>> fx = {{-1.5, 1, 1}, {0.25, 0, 1}, {-0.00390625, 0, 1}, {123.75, 2, 1},
-                                                       {-2.5, 2, 2},  {1.0 / 65536, 1, 2}, {-3.125, 3, 3}, {-5.0 / 16777216, 0, 3}};
+  const std::vector<std::tuple<double, int, int>> fx = {{-1.5, 1, 1}, {0.25, 0, 1},        {-0.00390625, 0, 1}, {123.75, 2, 1},
+                                                        {-2.5, 2, 2}, {1.0 / 65536, 1, 2}, {-3.125, 3, 3},      {-5.0 / 16777216, 0, 3}};
   ascii += "Fixed";
   bin.defineRequest(200, "Fixed");
   bin.request(200);
@@ -446,9 +462,9 @@ TEST(RibReaderTest, BinaryEncodingParsesLikeAscii) {
   EXPECT_EQ(b[1].values[1].number, -1);  // signed, not 255
   ASSERT_EQ(b[3].name, "Widths");
   ASSERT_EQ(b[3].values.size(), 32u);
-  EXPECT_EQ(b[3].values[0].number, -128);      // 0x80: one byte, most negative
+  EXPECT_EQ(b[3].values[0].number, -128);  // 0x80: one byte, most negative
   EXPECT_EQ(b[3].values[1].number, 127);
-  EXPECT_EQ(b[3].values[2].number, -0.5);      // 0x84: -128 / 256
+  EXPECT_EQ(b[3].values[2].number, -0.5);                                      // 0x84: -128 / 256
   EXPECT_EQ(b[3].values[30].number, double(float(-2147483648.0 / 16777216)));  // 0x8F
   EXPECT_TRUE(b[0].where.binary);
   EXPECT_EQ(b[0].where.str().find("binary.rib: byte "), 0u);
@@ -549,7 +565,9 @@ TEST(RibReaderHardTest, BadInputGivesOneClearErrorNamingFileLineAndRequest) {
       {"Declare \"x\" \"varying colour\"\n", "bad.rib:1 (Declare)", "unknown type"},
       {"Declare \"x\"\n", "bad.rib:1 (Declare)", "expects a name and a declaration"},
       {"ReadArchive \"does/not/exist.rib\"\n", "bad.rib:1 (ReadArchive)", "cannot open archive"},
-      {"Sphere 1 \x95" "ab", "(Sphere)", "truncated"},
+      {"Sphere 1 \x95"
+       "ab",
+       "(Sphere)", "truncated"},
       {"Sphere 1 \x82\x01", "(Sphere)", "truncated"},
       {"Sphere 1 \xa8", "bad.rib: byte 9 (Sphere)", "bad binary code 0xa8"},
       {"Sphere 1 \xff", "bad.rib: byte 9 (Sphere)", "bad binary code 0xff"},
@@ -557,7 +575,9 @@ TEST(RibReaderHardTest, BadInputGivesOneClearErrorNamingFileLineAndRequest) {
       {"Sphere \xcf\x09", "bad.rib: byte", "used before it was defined"},
       {"\xcc\x01 3 ", "bad.rib: byte", "must be followed by a string"},
       {"Sphere \xc9\x00", "(Sphere)", "truncated"},
-      {"Sphere \xa1\xff\xff" "abc", "(Sphere)", "truncated"},
+      {"Sphere \xa1\xff\xff"
+       "abc",
+       "(Sphere)", "truncated"},
       {std::string("\x1f\x8b\x08\x00garbage", 12), "bad.rib", "gzip"},
   };
   for (const auto& c : cases) {

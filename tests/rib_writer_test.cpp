@@ -158,9 +158,9 @@ TEST(RibWriterTest, DumpReadsBackAsTheGridsAndCameraWritten) {
     EXPECT_EQ(bytes[0] == 0x1f && bytes[1] == 0x8b, gzip) << "gzip magic";
 
     const ReadBack r = readBack(path);
-    const std::vector<std::string> expectNames = {"Declare", "FrameBegin", "Format", "Projection", "ScreenWindow", "Clipping", "Shutter",
-                                                  "WorldBegin", "CoordSysTransform", "Sides", "PointsPolygons", "PointsPolygons",
-                                                  "PointsPolygons", "WorldEnd", "FrameEnd"};
+    const std::vector<std::string> expectNames = {"Declare",        "FrameBegin",     "Format",         "Projection",        "ScreenWindow",
+                                                  "Clipping",       "Shutter",        "WorldBegin",     "CoordSysTransform", "Sides",
+                                                  "PointsPolygons", "PointsPolygons", "PointsPolygons", "WorldEnd",          "FrameEnd"};
     EXPECT_EQ(r.names, expectNames);
     EXPECT_EQ(numbersOf(r.header.at("FrameBegin")), (std::vector<double>{42}));
     EXPECT_EQ(numbersOf(r.header.at("Format")), (std::vector<double>{320, 180, 1.5}));

@@ -9,10 +9,10 @@
 #include <map>
 #include <set>
 
-#include <glm/geometric.hpp>
-#include <glm/gtc/matrix_transform.hpp>
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
+#include <glm/geometric.hpp>
+#include <glm/gtc/matrix_transform.hpp>
 
 #include "common/error.h"
 #include "common/log.h"
@@ -302,14 +302,17 @@ TEST_P(ShadeShaders, SpherePointsMatchAnalyticFormulas) {
   const double cone = 0.6, delta = 0.15, beam = 3;
   FrameScene f = frameOf(
       [&](Scene& s) {
-        ParamMap lp = {{"intensity", {intensity}}, {"lightcolor", {lightColor.x, lightColor.y, lightColor.z}},
-                       {"from", {from.x, from.y, from.z}}, {"to", {to.x, to.y, to.z}}, {"coneangle", {cone}},
-                       {"conedeltaangle", {delta}}, {"beamdistribution", {beam}}};
+        ParamMap lp = {{"intensity", {intensity}},
+                       {"lightcolor", {lightColor.x, lightColor.y, lightColor.z}},
+                       {"from", {from.x, from.y, from.z}},
+                       {"to", {to.x, to.y, to.z}},
+                       {"coneangle", {cone}},
+                       {"conedeltaangle", {delta}},
+                       {"beamdistribution", {beam}}};
         s.lightSource(lit.light, "1", lp);
         s.color(Cs);
         s.opacity(Os);
-        s.surface(lit.shader, {{"Ka", {Ka}}, {"Kd", {Kd}}, {"Ks", {Ks}}, {"roughness", {rough}},
-                               {"specularcolor", {specColor.x, specColor.y, specColor.z}}});
+        s.surface(lit.shader, {{"Ka", {Ka}}, {"Kd", {Kd}}, {"Ks", {Ks}}, {"roughness", {rough}}, {"specularcolor", {specColor.x, specColor.y, specColor.z}}});
         s.translate(0, 0, 6);
         s.rotate(30, 1, 1, 0);
         s.sphere(1.5, -1.5, 1.5, 360);
@@ -372,9 +375,9 @@ TEST_P(ShadeShaders, SpherePointsMatchAnalyticFormulas) {
 
 INSTANTIATE_TEST_SUITE_P(AllShadersAndLights, ShadeShaders,
                          ::testing::Values(Lit{"constant", "pointlight"}, Lit{"matte", "ambientlight"}, Lit{"matte", "distantlight"},
-                                           Lit{"matte", "pointlight"}, Lit{"matte", "spotlight"}, Lit{"metal", "distantlight"},
-                                           Lit{"metal", "pointlight"}, Lit{"plastic", "ambientlight"}, Lit{"plastic", "pointlight"},
-                                           Lit{"plastic", "spotlight"}, Lit{"plastic", "distantlight"}),
+                                           Lit{"matte", "pointlight"}, Lit{"matte", "spotlight"}, Lit{"metal", "distantlight"}, Lit{"metal", "pointlight"},
+                                           Lit{"plastic", "ambientlight"}, Lit{"plastic", "pointlight"}, Lit{"plastic", "spotlight"},
+                                           Lit{"plastic", "distantlight"}),
                          [](const auto& info) { return std::string(info.param.shader) + "_" + info.param.light; });
 
 // ---------------------------------------------------------------------------------------------
@@ -426,7 +429,8 @@ TEST(ShadeMotion, StaticPrimitivesGetOneKnotAndMovingCameraMovesEverything) {
         s.translate(0, 0, 5);
         s.sphere(1, -1, 1, 360);
       },
-      320, 240, 40, {}, [](Scene& s) {
+      320, 240, 40, {},
+      [](Scene& s) {
         s.motionBegin({0, 1});
         s.translate(0, 0, 0);
         s.translate(-0.5, 0, 0);
@@ -456,7 +460,8 @@ TEST(ShadeMotion, NestedMovingCoordinateSystemsUnionTheirKnots) {
         s.motionEnd();
         s.patch({dvec3(-1, -1, 0), dvec3(1, -1, 0), dvec3(-1, 1, 0), dvec3(1, 1, 0)});
       },
-      320, 240, 40, {}, [](Scene& s) {
+      320, 240, 40, {},
+      [](Scene& s) {
         s.motionBegin({0, 1});
         s.translate(0, 0, 0);
         s.translate(-1, 0, 0);
@@ -625,7 +630,8 @@ TEST(ShadeAttributes, NamedCamerasAndIlluminateReachTheStore) {
         s.translate(0, 0, 5);
         s.sphere(1, -1, 1, 360);
       },
-      160, 120, 40, {}, [](Scene& s) {
+      160, 120, 40, {},
+      [](Scene& s) {
         s.transformBegin();
         s.translate(-1, 0, 0);
         s.camera("right");
@@ -643,10 +649,12 @@ TEST(ShadeAttributes, NamedCamerasAndIlluminateReachTheStore) {
 TEST(ShadeOutputs, OnlyRequestedVariablesAreStored) {
   FrameScene plain = frameOf([](Scene& s) { s.sphere(1, -1, 1, 360); });
   EXPECT_EQ(storeMeta(plain, {}).schema.attrs.size(), 2u);
-  FrameScene f = frameOf([](Scene& s) {
-    s.translate(0, 0, 5);
-    s.sphere(1, -1, 1, 360);
-  }, 160, 120, 40, {"N", "s", "Cs", "depth", "bogus", "rgba"});
+  FrameScene f = frameOf(
+      [](Scene& s) {
+        s.translate(0, 0, 5);
+        s.sphere(1, -1, 1, 360);
+      },
+      160, 120, 40, {"N", "s", "Cs", "depth", "bogus", "rgba"});
   const auto schema = storeMeta(f, {}).schema;
   std::vector<std::string> names;
   for (const auto& a : schema.attrs) names.push_back(a.name);

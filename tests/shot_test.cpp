@@ -61,7 +61,7 @@ TEST(ShotStores, FramesForFindsTheStoresAnIntervalOverlaps) {
   EXPECT_EQ(shot.framesFor(1.8, 2.2), Frames({1, 2}));  // across a frame boundary: both stores
   EXPECT_EQ(shot.framesFor(1.0, 2.0), Frames({1}));     // frame 0 ends at 1.0, frame 2 starts at 2.0
   EXPECT_EQ(shot.framesFor(2.0, 2.5), Frames({2}));
-  EXPECT_EQ(shot.framesFor(2.5, 2.5), Frames({2}));     // an instant inside one frame
+  EXPECT_EQ(shot.framesFor(2.5, 2.5), Frames({2}));           // an instant inside one frame
   EXPECT_EQ(shot.framesFor(0.5, 3.5), Frames({0, 1, 2, 3}));  // frame 0 has no store: finding frames does not check files
   EXPECT_EQ(shot.pathOf(3), dir.path("shot.0003.mps"));
   EXPECT_EQ(shot.firstMeta(99).frame, 1) << "the shot's shutter comes from the store nearest the first time asked for";

@@ -107,8 +107,7 @@ TEST(StoreCodec, RawPayloadRoundTripAndSize) {
   EXPECT_EQ(out.flags, part.flags);
   for (size_t a = 0; a < schema.attrs.size(); ++a) {
     ASSERT_EQ(out.attrs[a].f.size(), part.attrs[a].f.size());
-    for (size_t i = 0; i < part.attrs[a].f.size(); ++i)
-      EXPECT_EQ(std::bit_cast<uint32_t>(out.attrs[a].f[i]), std::bit_cast<uint32_t>(part.attrs[a].f[i]));
+    for (size_t i = 0; i < part.attrs[a].f.size(); ++i) EXPECT_EQ(std::bit_cast<uint32_t>(out.attrs[a].f[i]), std::bit_cast<uint32_t>(part.attrs[a].f[i]));
     EXPECT_EQ(out.attrs[a].u, part.attrs[a].u);
   }
   EXPECT_THROW(decompress(z, raw.size() + 1, back, "test"), Error);

@@ -6,9 +6,9 @@
 #include <cmath>
 #include <set>
 
-#include <glm/geometric.hpp>
 #include <gtest/gtest.h>
 #include <tbb/parallel_for.h>
+#include <glm/geometric.hpp>
 
 #include "store/codec.h"
 #include "tests/store_test_util.h"
@@ -57,8 +57,8 @@ struct Written {
   WriteStats stats;
 };
 
-Written writeRandomStore(const std::string& path, const StoreMeta& meta, const std::vector<test::GridSpec>& specs, int gridsEach,
-                         WriterOptions options = {}, uint64_t seed = 7) {
+Written writeRandomStore(const std::string& path, const StoreMeta& meta, const std::vector<test::GridSpec>& specs, int gridsEach, WriterOptions options = {},
+                         uint64_t seed = 7) {
   Written w;
   StoreWriter writer(path, meta, options);
   Rng rng(seed);
@@ -167,7 +167,7 @@ TEST(StoreRoundTrip, StillGridsAreStoredStatic) {
   for (int n = 0; n < 60; ++n) {
     test::GridSpec spec;
     spec.knots = 2, spec.schedule = twoKnots;
-    spec.spread = 0.5;  // small grids: still and moving ones share tiles
+    spec.spread = 0.5;       // small grids: still and moving ones share tiles
     const int kind = n % 3;  // 0 still, 1 moving, 2 still but for one coordinate one ulp off
     spec.motion = kind == 1 ? 0.5 : 0.0;
     auto g = test::randomGrid(rng, schema, spec, gridId++, mpid);
@@ -193,8 +193,7 @@ TEST(StoreRoundTrip, StillGridsAreStoredStatic) {
   for (size_t e = 0; e < reader.entries().size(); ++e) {
     const auto& en = reader.entries()[e];
     const TilePart part = reader.decode(e);
-    for (uint32_t m = 0; m < part.numMicropolygons; ++m)
-      EXPECT_EQ(en.schedule == 0, stillGrids.count(part.gridId[m]) == 1) << "grid " << part.gridId[m];
+    for (uint32_t m = 0; m < part.numMicropolygons; ++m) EXPECT_EQ(en.schedule == 0, stillGrids.count(part.gridId[m]) == 1) << "grid " << part.gridId[m];
     if (en.schedule == 0) {
       ++staticParts;
       EXPECT_EQ(part.numKnots, 1u);

@@ -8,12 +8,17 @@ using namespace store;
 Schema fullSchema(AttrCodec colorCodec, AttrCodec opacityCodec, AttrCodec normalCodec) {
   Schema s;
   s.attrs = {
-      {"Ci", AttrType::Color, AttrRate::Vertex, colorCodec},      {"Oi", AttrType::Color, AttrRate::Vertex, opacityCodec},
+      {"Ci", AttrType::Color, AttrRate::Vertex, colorCodec},
+      {"Oi", AttrType::Color, AttrRate::Vertex, opacityCodec},
       {"mpid", AttrType::UInt, AttrRate::Micropolygon, AttrCodec::Lossless},
-      {"s", AttrType::Float, AttrRate::Vertex, AttrCodec::Lossless}, {"P", AttrType::Point, AttrRate::Vertex, AttrCodec::Lossless},
-      {"dPdtime", AttrType::Vector, AttrRate::Vertex, AttrCodec::Lossless}, {"N", AttrType::Normal, AttrRate::Vertex, normalCodec},
-      {"Cs", AttrType::Color, AttrRate::Micropolygon, colorCodec},  {"area", AttrType::Float, AttrRate::Micropolygon, AttrCodec::Lossless},
-      {"Ng", AttrType::Normal, AttrRate::Micropolygon, normalCodec}, {"id", AttrType::UInt, AttrRate::Vertex, AttrCodec::Lossless},
+      {"s", AttrType::Float, AttrRate::Vertex, AttrCodec::Lossless},
+      {"P", AttrType::Point, AttrRate::Vertex, AttrCodec::Lossless},
+      {"dPdtime", AttrType::Vector, AttrRate::Vertex, AttrCodec::Lossless},
+      {"N", AttrType::Normal, AttrRate::Vertex, normalCodec},
+      {"Cs", AttrType::Color, AttrRate::Micropolygon, colorCodec},
+      {"area", AttrType::Float, AttrRate::Micropolygon, AttrCodec::Lossless},
+      {"Ng", AttrType::Normal, AttrRate::Micropolygon, normalCodec},
+      {"id", AttrType::UInt, AttrRate::Vertex, AttrCodec::Lossless},
   };
   return s;
 }
@@ -113,11 +118,13 @@ void flatten(const OwnedGrid& g, const Schema& schema, FlatStore& out) {
       if (!present) continue;
       if (d.rate == AttrRate::Micropolygon) {
         if (d.type == AttrType::UInt) f.attrU[a].push_back(g.u[a][m]);
-        else for (int i = 0; i < nc; ++i) f.attrF[a].push_back(g.f[a][m * nc + i]);
+        else
+          for (int i = 0; i < nc; ++i) f.attrF[a].push_back(g.f[a][m * nc + i]);
       } else {
         for (int j = 0; j < f.corners; ++j) {
           if (d.type == AttrType::UInt) f.attrU[a].push_back(g.u[a][c[j]]);
-          else for (int i = 0; i < nc; ++i) f.attrF[a].push_back(g.f[a][size_t(c[j]) * nc + i]);
+          else
+            for (int i = 0; i < nc; ++i) f.attrF[a].push_back(g.f[a][size_t(c[j]) * nc + i]);
         }
       }
     }
@@ -148,11 +155,13 @@ FlatStore flatten(const StoreReader& reader) {
         int nc = componentCount(d.type);
         if (d.rate == AttrRate::Micropolygon) {
           if (d.type == AttrType::UInt) f.attrU[a].push_back(arr.u[m]);
-          else for (int i = 0; i < nc; ++i) f.attrF[a].push_back(arr.f[size_t(m) * nc + i]);
+          else
+            for (int i = 0; i < nc; ++i) f.attrF[a].push_back(arr.f[size_t(m) * nc + i]);
         } else {
           for (int j = 0; j < f.corners; ++j) {
             if (d.type == AttrType::UInt) f.attrU[a].push_back(arr.u[c[j]]);
-            else for (int i = 0; i < nc; ++i) f.attrF[a].push_back(arr.f[size_t(c[j]) * nc + i]);
+            else
+              for (int i = 0; i < nc; ++i) f.attrF[a].push_back(arr.f[size_t(c[j]) * nc + i]);
           }
         }
       }

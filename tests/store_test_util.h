@@ -19,8 +19,8 @@ struct FlatMp {
   uint8_t flags = 0;
   int corners = 4;
   uint32_t schedule = 0;
-  std::vector<glm::vec3> positions;            // knots × 4
-  std::vector<std::vector<float>> attrF;       // per schema attr: vertex rate 4×nc, mp rate nc
+  std::vector<glm::vec3> positions;       // knots × 4
+  std::vector<std::vector<float>> attrF;  // per schema attr: vertex rate 4×nc, mp rate nc
   std::vector<std::vector<uint32_t>> attrU;
 };
 
@@ -56,15 +56,15 @@ store::Schema fullSchema(store::AttrCodec colorCodec = store::AttrCodec::Lossles
 store::StoreMeta testMeta(const store::Schema& schema, int width = 256, int height = 192);
 
 struct GridSpec {
-  int nu = 4, nv = 3;           // micropolygons per side
+  int nu = 4, nv = 3;  // micropolygons per side
   uint32_t schedule = 0;
   int knots = 1;
-  bool triangles = false;       // split every quad into two triangles
+  bool triangles = false;  // split every quad into two triangles
   double zMin = 2, zMax = 60;
-  double spread = 2.0;          // camera-space extent of the grid
-  double motion = 0.5;          // camera-space motion per knot
-  bool randomBits = true;       // attribute values with full-entropy mantissas
-  bool dropOptional = false;    // leave out every attribute but Ci, Oi, mpid
+  double spread = 2.0;        // camera-space extent of the grid
+  double motion = 0.5;        // camera-space motion per knot
+  bool randomBits = true;     // attribute values with full-entropy mantissas
+  bool dropOptional = false;  // leave out every attribute but Ci, Oi, mpid
 };
 
 /// A random grid; `nextMpId` numbers its micropolygons.

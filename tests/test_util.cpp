@@ -1,10 +1,10 @@
 #include "tests/test_util.h"
 
+#include <sys/wait.h>
+#include <unistd.h>
 #include <array>
 #include <cstdio>
 #include <random>
-#include <sys/wait.h>
-#include <unistd.h>
 
 namespace reshutter::test {
 

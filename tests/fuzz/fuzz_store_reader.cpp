@@ -19,7 +19,6 @@
 using namespace reshutter;
 using namespace reshutter::store;
 
-
 extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   static bool quiet = (setVerbosity(Verbosity::Quiet), true);
   (void)quiet;

@@ -14,7 +14,6 @@
 
 namespace reshutter::store {
 
-
 inline void repairChecksums(std::vector<uint8_t>& b) {
   if (b.size() < kHeaderSize + kFooterSize) return;
   uint64_t f[6];
@@ -37,7 +36,6 @@ inline void repairChecksums(std::vector<uint8_t>& b) {
   f[5] = checksum({b.data() + f[3], f[4]});
   std::memcpy(b.data() + b.size() - kFooterSize, f, sizeof f);
 }
-
 
 inline std::vector<uint8_t> storeFromFuzzInput(const uint8_t* data, size_t size) {
   if (size == 0) return {};
