@@ -4,6 +4,7 @@
 #include <gtest/gtest.h>
 
 #include "common/atomic_file.h"
+#include "common/check.h"
 #include "common/error.h"
 #include "common/frame_range.h"
 #include "tests/test_util.h"
@@ -89,4 +90,23 @@ TEST(ErrorModel, WhereAndProblemJoinIntoOneLine) {
   Error e("scene.rib:12 (Sphere)", "expected 4 numbers");
   EXPECT_STREQ(e.what(), "scene.rib:12 (Sphere): expected 4 numbers");
   EXPECT_EQ(e.where(), "scene.rib:12 (Sphere)");
+}
+
+// A broken invariant is an InternalError naming the file, line and condition - never a
+// reshutter::Error, which the CLI would report as bad input (exit 1 instead of 3).
+TEST(Check, FailedCheckIsAnInternalErrorNotBadInput) {
+  int evaluated = 0;
+  CHECK(++evaluated == 1, "never shown");
+  EXPECT_EQ(evaluated, 1);  // the condition runs exactly once
+  try {
+    const int parts = 3;
+    CHECK(parts == 4, "part count ", parts);
+    FAIL() << "CHECK did not throw";
+  } catch (const reshutter::Error&) {
+    FAIL() << "an internal failure was dressed as bad input";
+  } catch (const reshutter::InternalError& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("common_test.cpp:"), std::string::npos) << what;
+    EXPECT_NE(what.find("check 'parts == 4' failed: part count 3"), std::string::npos) << what;
+  }
 }
