@@ -292,7 +292,7 @@ TEST(CropInvariance, RenderSpecCropsAreTheWholeRendersPixels) {
           crop.deep.getPixel(x, y, a), whole.deep.getPixel(x, y, b);
           samples += a.size();
           ASSERT_EQ(a.size(), b.size()) << what << " deep pixel " << x << "," << y;
-          ASSERT_EQ(std::memcmp(a.f.data(), b.f.data(), a.f.size() * sizeof(float)), 0) << what << " deep pixel " << x << "," << y;
+          ASSERT_TRUE(a.f.empty() || std::memcmp(a.f.data(), b.f.data(), a.f.size() * sizeof(float)) == 0) << what << " deep pixel " << x << "," << y;
           ASSERT_EQ(a.u, b.u) << what << " deep pixel " << x << "," << y;
         }
       EXPECT_GT(samples, uint64_t((c.x1 - c.x0) * (c.y1 - c.y0))) << what << ": the window must see surfaces";
