@@ -44,8 +44,14 @@ struct View {
 struct Source {
   std::shared_ptr<const store::StoreReader> store;
   int64_t frame = 0;
+  /// Another store of the render starts where this one ends (whole-frame stores of consecutive
+  /// frames): a time exactly at coverEnd() is that store's - coverage [start, end) - so a surface
+  /// is drawn once, not twice, at a frame boundary (render() sets it).
+  bool endShared = false;
   double coverStart() const { return double(frame) + store->meta().shutterOpen; }
   double coverEnd() const { return double(frame) + store->meta().shutterClose; }
+  /// Whether absolute time t (frames) lies in this store's coverage.
+  static bool covers(double t, double start, double end, bool endShared) { return t >= start && (endShared ? t < end : t <= end); }
 };
 
 /// An output variable requested on the image, resolved against the stores' schema.

@@ -95,6 +95,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   struct Coverage {
     bool check;
     double lo, hi;
+    bool openEnd = false;  // [lo, hi): the source's end is shared (Source::endShared)
   };
 
   // Appends to `candidates` (from position n) the samples of strata [s0, s1) and group g (< 0:
@@ -299,7 +300,7 @@ inline size_t BucketRasterizer::Impl::gatherCandidates(int s0, int s1, int g, in
         const float u = std::min(std::max((t - box.thetaA) * box.invLen, 0.f), 1.f);  // minss/maxss, no branches
         const float x = sx[idx], y = sy[idx];
         bool in = (x >= box.x0 + u * box.dx0) & (x <= box.x1 + u * box.dx1) & (y >= box.y0 + u * box.dy0) & (y <= box.y1 + u * box.dy1);
-        if (cover.check) in &= (double(t) >= cover.lo) & (double(t) <= cover.hi);
+        if (cover.check) in &= Source::covers(double(t), cover.lo, cover.hi, cover.openEnd);
         in &= zbuf[idx] > zCull;  // the early depth test
         cand[n] = idx, ct[n] = t, cx[n] = x, cy[n] = y;
         n += in;

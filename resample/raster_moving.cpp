@@ -25,7 +25,9 @@ const BucketRasterizer::Impl::MovingTimes& BucketRasterizer::Impl::timesFor(cons
   const uint32_t K = uint32_t(knots.size());
   const double F = double(src.frame);
   const double toLocal = tBase - F;  // local time = st + toLocal
-  mt.cover = {tMin < src.coverStart() || tMax > src.coverEnd(), src.coverStart() - tBase, src.coverEnd() - tBase};
+  const double covLo = src.coverStart(), covHi = src.coverEnd();
+  mt.cover = {!Source::covers(tMin, covLo, covHi, src.endShared) || !Source::covers(tMax, covLo, covHi, src.endShared), covLo - tBase, covHi - tBase,
+              src.endShared};
   const double* lo = &stratumLo[size_t(g) * N];
   const double* hi = &stratumHi[size_t(g) * N];
 

@@ -16,7 +16,7 @@ using store::TilePart;
 void BucketRasterizer::Impl::rasterizeStatic(const Source& src, const TilePart& part, const HitContext& hc, const glm::vec3* chunkPos, int onlyGroup,
                                              const Chunk& ch) {
   const double covLo = src.coverStart(), covHi = src.coverEnd();
-  const bool checkCover = tMin < covLo || tMax > covHi;
+  const bool checkCover = !Source::covers(tMin, covLo, covHi, src.endShared) || !Source::covers(tMax, covLo, covHi, src.endShared);
   const uint32_t vBase = ch.vLo, nV = ch.vHi - ch.vLo + 1;
   projX.resize(nV), projY.resize(nV);
   // Each vertex is projected once, not once per micropolygon that shares it (about four).
@@ -86,7 +86,7 @@ void BucketRasterizer::Impl::rasterizeStatic(const Source& src, const TilePart& 
         for (int s = 0; s < N; ++s) {
           const size_t idx = size_t(s) * PS + p;
           if (sx[idx] < sbx0 || sx[idx] > sbx1 || sy[idx] < sby0 || sy[idx] > sby1) continue;
-          if (checkCover && !(tBase + st[idx] >= covLo && tBase + st[idx] <= covHi)) continue;
+          if (checkCover && !Source::covers(tBase + st[idx], covLo, covHi, src.endShared)) continue;
           if (!(zbuf[idx] > zCull)) continue;  // the early depth test
           ++stats.sampleTests;
           testStatic(hc, m, c, tri, E, zv, uint32_t(idx));

@@ -249,11 +249,21 @@ std::vector<std::unique_ptr<FilterTable>> aovFilterTables(const std::vector<AovC
   return tables;
 }
 
+/// The sources with Source::endShared set where another source starts exactly where one ends, so
+/// that a time on the boundary (an instant there, or a sample that lands on it) is drawn from one
+/// store only.
+std::vector<Source> withSharedEnds(std::vector<Source> sources) {
+  for (Source& s : sources)
+    s.endShared = std::any_of(sources.begin(), sources.end(), [&](const Source& o) { return &o != &s && o.coverStart() == s.coverEnd(); });
+  return sources;
+}
+
 /// Everything the buckets read and none writes: the validated window and shutter, the camera's
 /// view, the sample pattern, the output variables and their filters, the buckets.
 struct Plan {
   Plan(const RenderSpec& spec, const Window& window, const ShutterModel& shutter)
       : spec(spec),
+        sources(withSharedEnds(spec.sources)),
         meta0(spec.sources[0].store->meta()),
         cam(meta0.cameras[0]),
         win(window),
@@ -280,6 +290,7 @@ struct Plan {
   }
 
   const RenderSpec& spec;
+  const std::vector<Source> sources;  // spec.sources, with the ends they share marked
   const store::StoreMeta& meta0;
   const store::Camera& cam;
   const Window win;
@@ -367,8 +378,8 @@ struct ThreadState {
 /// Lists, into `parts`, every part whose bound over the region's time range touches the region.
 void gatherParts(const Plan& plan, const BucketRasterizer& r, const Region& rg, std::vector<std::pair<size_t, size_t>>& parts) {
   parts.clear();
-  for (size_t si = 0; si < plan.spec.sources.size(); ++si) {
-    const Source& src = plan.spec.sources[si];
+  for (size_t si = 0; si < plan.sources.size(); ++si) {
+    const Source& src = plan.sources[si];
     const auto& m = src.store->meta();
     const double lo = std::max(r.earliestTime() - double(src.frame), m.shutterOpen);
     const double hi = std::min(r.latestTime() - double(src.frame), m.shutterClose);
@@ -389,7 +400,7 @@ double rasterizeParts(const Plan& plan, BucketRasterizer& r, ThreadState& ts) {
   constexpr uint64_t kQueuedBytes = 128ull << 20;
   uint64_t queuedBytes = 0;
   for (auto [si, e] : ts.parts) {
-    const Source& src = plan.spec.sources[si];
+    const Source& src = plan.sources[si];
     const store::TileEntry& entry = src.store->entries()[e];
     if (queuedBytes > 0 && queuedBytes + entry.rawSize > kQueuedBytes) {
       r.rasterizeQueued();

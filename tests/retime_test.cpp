@@ -514,6 +514,43 @@ TEST(RetimeInterlace, RowsComeFromTheirFieldByRasterRow) {
 // The stores a sequence reaches: a frame's spec gets the stores its shutter overlaps (both across
 // a boundary), and every store any frame needs is checked before any work, all missing ones
 // named at once.
+// Consecutive whole-frame stores share their boundary: frame 1's covers [1, 2], frame 2's [2, 3].
+// A translucent surface at an instant on that boundary - or any sample that lands on it - must be
+// drawn from one store, not composited over itself (alpha 0.6 + 0.4 * 0.6 = 0.84 instead of 0.6);
+// at the last store's own end, with no store after it, it must still be drawn.
+TEST(RetimeSources, AnInstantOnAFrameBoundaryDrawsEachSurfaceOnce) {
+  ScratchDir dir;
+  const Motion m;
+  auto translucent = [&](int64_t frame) {
+    TestScene s = makeScene(48, 36, {0.0, 1.0});
+    s.meta.frame = frame;
+    TestMp mp;
+    for (double t : {0.0, 1.0}) {
+      const double T = double(frame) + t;
+      mp.knots.push_back(s.rect(m.x0 + 30 + m.vx * T, m.y0 + m.vy * T, m.x0 + 30 + m.w + m.vx * T, m.y0 + m.h + m.vy * T, m.z));
+    }
+    mp.oi = {0.6f, 0.6f, 0.6f}, mp.ci = {0.3f, 0.3f, 0.3f};
+    s.mps.push_back(mp);
+    return writeScene(s, dir.path("t" + std::to_string(frame) + ".mps"));
+  };
+  const auto s1 = translucent(1), s2 = translucent(2);
+  for (double t : {2.0, 3.0, 1.0, 1.5}) {
+    SCOPED_TRACE("instant " + std::to_string(t));
+    const RenderResult r = render(baseSpec({Source{s1, 1}, Source{s2, 2}}, ShutterModel::progressive(t, t), 4));
+    const auto& A = r.image.find("A")->f;
+    const float most = *std::max_element(A.begin(), A.end());
+    EXPECT_NEAR(most, 0.6f, 1e-6f);  // full pixels of the square: one layer of 0.6
+    size_t full = 0;
+    for (float a : A) full += std::abs(a - 0.6f) < 1e-6f;
+    EXPECT_GT(full, 50u);  // the square (11.7 x 13.2 px) is on screen at this instant
+    // Every hit is a sample's only one: hits = the covered samples (16 per full pixel and fewer at
+    // the edges), not twice as many.
+    double coveredSamples = 0;
+    for (float a : A) coveredSamples += a / 0.6 * 16;
+    EXPECT_NEAR(double(r.stats.raster.hits), coveredSamples, 0.5);
+  }
+}
+
 TEST(RetimeSources, FramesReachTheStoresTheirShuttersNeed) {
   ScratchDir dir;
   Motion m;
