@@ -1,7 +1,9 @@
 #include "common/frame_range.h"
 
+#include <algorithm>
 #include <charconv>
 #include <cstdio>
+#include <filesystem>
 
 #include "common/error.h"
 
@@ -96,6 +98,35 @@ std::string expandFramePattern(const std::string& pattern, int64_t frame) {
   findPlaceholder(pattern, b, e, w);
   if (b == std::string::npos) return pattern;
   return pattern.substr(0, b) + padded(frame, w) + pattern.substr(e);
+}
+
+std::vector<int64_t> framesOnDisk(const std::string& pattern) {
+  size_t b, e;
+  int w = 0;
+  findPlaceholder(pattern, b, e, w);
+  std::vector<int64_t> frames;
+  if (b == std::string::npos) return frames;
+  const std::filesystem::path full(pattern);
+  const std::filesystem::path dir = full.has_parent_path() ? full.parent_path() : std::filesystem::path(".");
+  // The placeholder must lie in the file name: a frame number in a directory name is not a shot.
+  const std::string name = full.filename().string();
+  const size_t nameStart = pattern.size() - name.size();
+  if (b < nameStart) return frames;
+  const std::string prefix = pattern.substr(nameStart, b - nameStart), suffix = pattern.substr(e);
+  std::error_code ec;
+  for (const auto& entry : std::filesystem::directory_iterator(dir, ec)) {
+    const std::string file = entry.path().filename().string();
+    if (file.size() <= prefix.size() + suffix.size() || file.compare(0, prefix.size(), prefix) != 0 ||
+        file.compare(file.size() - suffix.size(), suffix.size(), suffix) != 0)
+      continue;
+    const std::string digits = file.substr(prefix.size(), file.size() - prefix.size() - suffix.size());
+    const size_t sign = digits[0] == '-' ? 1 : 0;
+    if (digits.size() == sign || digits.size() > 18 || !std::all_of(digits.begin() + sign, digits.end(), [](char c) { return c >= '0' && c <= '9'; })) continue;
+    const int64_t frame = std::stoll(digits);
+    if (expandFramePattern(name, frame) == file) frames.push_back(frame);  // the pattern's own padding
+  }
+  std::sort(frames.begin(), frames.end());
+  return frames;
 }
 
 }  // namespace reshutter

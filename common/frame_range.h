@@ -20,4 +20,9 @@ bool hasFramePlaceholder(const std::string& pattern);
 /// Negative frames keep their sign in front of the padding ("-001").
 std::string expandFramePattern(const std::string& pattern, int64_t frame);
 
+/// The frames whose files exist for `pattern`, ascending: every file in the pattern's directory
+/// that the pattern expands to for some frame (so "shot.####.mps" finds shot.0007.mps but not
+/// shot.7.mps or shot.0007.mps.tmp). Empty when the directory cannot be read.
+std::vector<int64_t> framesOnDisk(const std::string& pattern);
+
 }  // namespace reshutter

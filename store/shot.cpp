@@ -1,5 +1,6 @@
 #include "store/shot.h"
 
+#include <algorithm>
 #include <cmath>
 #include <filesystem>
 #include <sstream>
@@ -49,7 +50,17 @@ void ShotStores::probe(double near) {
     for (int64_t d = 0; d <= 4 && !first_; ++d)
       for (int64_t f : {centre + d, centre - d})
         if (!first_ && std::filesystem::exists(pathOf(f))) first_ = open(f);
-    if (!first_) fail(pattern_, "no store found near frame ", centre, " (looked for ", pathOf(centre), " and its neighbours)");
+    if (!first_) {
+      // Nothing near the time asked for (a caller may only guess it, as retime does for the
+      // shot's own rate): the stored frame nearest to it, if the pattern matches any file.
+      const std::vector<int64_t> onDisk = framesOnDisk(pattern_);
+      if (!onDisk.empty()) {
+        const auto after = std::lower_bound(onDisk.begin(), onDisk.end(), centre);
+        const int64_t f = after == onDisk.end() ? onDisk.back() : after == onDisk.begin() || *after - centre <= centre - *(after - 1) ? *after : *(after - 1);
+        first_ = open(f);
+      }
+    }
+    if (!first_) fail(pattern_, "no store found near frame ", centre, " (looked for ", pathOf(centre), " and its neighbours) or anywhere the pattern matches");
   }
   open_ = first_->meta().shutterOpen, close_ = first_->meta().shutterClose;
   probed_ = true;

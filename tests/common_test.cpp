@@ -110,3 +110,18 @@ TEST(Check, FailedCheckIsAnInternalErrorNotBadInput) {
     EXPECT_NE(what.find("check 'parts == 4' failed: part count 3"), std::string::npos) << what;
   }
 }
+
+// The frames a pattern finds on disk: exactly the files it expands to, with its own padding.
+TEST(FrameRange, FramesOnDiskAreTheFilesThePatternExpandsTo) {
+  test::ScratchDir dir;
+  for (const char* name : {"shot.0001.mps", "shot.0007.mps", "shot.-0001.mps", "shot.-001.mps", "shot.7.mps", "shot.0003.mps.tmp", "other.0002.mps",
+                           "shot.00x1.mps", "shot..mps", "12.mps", "3.mps"})
+    std::ofstream(dir.path(name)) << "x";
+  EXPECT_EQ(framesOnDisk(dir.path("shot.####.mps")), (std::vector<int64_t>{-1, 1, 7}));
+  EXPECT_EQ(framesOnDisk(dir.path("shot.%04d.mps")), (std::vector<int64_t>{-1, 1, 7}));
+  EXPECT_EQ(framesOnDisk(dir.path("shot.@.mps")), (std::vector<int64_t>{7}));
+  EXPECT_EQ(framesOnDisk(dir.path("#.mps")), (std::vector<int64_t>{3, 12}));  // # pads to at least one digit
+  EXPECT_EQ(framesOnDisk(dir.path("@@.mps")), (std::vector<int64_t>{12}));
+  EXPECT_TRUE(framesOnDisk(dir.path("missing/shot.####.mps")).empty());
+  EXPECT_TRUE(framesOnDisk(dir.path("shot.0001.mps")).empty());  // no placeholder
+}

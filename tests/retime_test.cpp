@@ -656,6 +656,8 @@ TEST(RetimeCli, RetimeFramesEqualResampleOfTheSameInterval) {
       {"--from-fps 24 --to-fps 24 --frames 2-3 --shutter-angle 360", 3, "shot.0003.mps", 3, 4},
       {"--from-fps 24 --to-fps 12 --frames 1 --shutter-angle 180", 1, "shot.0002.mps", 2, 3},
       {"--to-fps 12 --frames 1", 1, "shot.0002.mps --shutter 0:1", 2, 3},
+      // The stores' own rate with no store near the output frame number (9 at 48 fps is source time 4.5).
+      {"--to-fps 48 --frames 9 --shutter-angle 0", 9, "shot.0004.mps --shutter 0.5:0.5", 4.5, 4.5},
   };
   for (const Case& c : cases) {
     const std::string out = dir.path("r.####.exr"), ref = dir.path("ref.exr");

@@ -185,3 +185,16 @@ TEST(ShotStores, StoresBehindASequenceAreReleased) {
   ASSERT_EQ(again.size(), 1u);
   EXPECT_EQ(again[0].reader->meta().frame, 2);
 }
+
+// A caller that can only guess the time (retime reading the shot's own rate before it knows how
+// output frames map onto source frames) still finds the shot when no store lies near the guess:
+// the stored frame nearest to it.
+TEST(ShotStores, AGuessFarFromEveryStoreFindsTheNearestStoredFrame) {
+  ScratchDir dir;
+  const std::string pattern = dir.path("far.####.mps");
+  for (int64_t f : {3, 4, 9}) writeFrame(expandFramePattern(pattern, f), f);
+  for (auto [guess, expected] : {std::pair{40.0, int64_t(9)}, std::pair{-20.0, int64_t(3)}, std::pair{6.7, int64_t(4)}}) {
+    ShotStores shot(pattern, 0);
+    EXPECT_EQ(shot.firstMeta(guess).frame, expected) << "guess " << guess;
+  }
+}
