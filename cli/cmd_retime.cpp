@@ -22,19 +22,35 @@ using resample::OutputFrame;
 using resample::RenderResult;
 using resample::RenderSpec;
 
+/// Checks a sequence before any work, so that a bad one writes nothing: something to write, a
+/// frame placeholder where several frames are written, every store any of `shutters` reaches, and
+/// every output name of `frameNumbers`.
+void checkSequence(store::ShotStores& stores, const std::string& outPattern, const std::vector<int64_t>& frameNumbers, const std::vector<OutputFrame>& shutters,
+                   const RenderOptions& render, const std::string& what) {
+  if (frameNumbers.empty()) fail("--frames", "no frames to render");
+  if (outPattern.empty() && render.deep.empty()) fail(what, "nothing to write: give -o OUT.####.exr, --deep DEEP.####.exr or both");
+  const size_t n = frameNumbers.size();
+  if (n > 1 && !outPattern.empty() && !hasFramePlaceholder(outPattern))
+    fail("-o", "'", outPattern, "' has no frame placeholder (####, %04d, @) but ", n, " frames are rendered");
+  if (n > 1 && !render.deep.empty() && !hasFramePlaceholder(render.deep))
+    fail("--deep", "'", render.deep, "' has no frame placeholder (####, %04d, @) but ", n, " frames are rendered");
+  resample::requireStores(stores, shutters);  // every store any frame needs
+  for (int64_t f : frameNumbers) render.checkOutputs(outPattern.empty() ? "" : expandFramePattern(outPattern, f), f);
+}
+
+void noteWritten(const std::string& outPattern, const RenderOptions& render, size_t frames, double seconds) {
+  const std::string wrote = outPattern.empty() ? render.deep : render.deep.empty() ? outPattern : outPattern + " and " + render.deep;
+  note(cat("wrote ", frames, " frame", frames == 1 ? "" : "s", " (", wrote, ") in ", seconds, " s"));
+}
+
 /// Renders a sequence: checks every store and output name first, then renders frame by frame
 /// with a progress bar over frames.
 int renderSequence(const std::string& storePattern, const std::string& outPattern, const std::vector<OutputFrame>& frames, const RenderOptions& render,
                    const std::string& what) {
-  if (frames.empty()) fail("--frames", "no frames to render");
-  if (outPattern.empty() && render.deep.empty()) fail(what, "nothing to write: give -o OUT.####.exr, --deep DEEP.####.exr or both");
-  if (frames.size() > 1 && !outPattern.empty() && !hasFramePlaceholder(outPattern))
-    fail("-o", "'", outPattern, "' has no frame placeholder (####, %04d, @) but ", frames.size(), " frames are rendered");
-  if (frames.size() > 1 && !render.deep.empty() && !hasFramePlaceholder(render.deep))
-    fail("--deep", "'", render.deep, "' has no frame placeholder (####, %04d, @) but ", frames.size(), " frames are rendered");
   store::ShotStores stores(storePattern, size_t(render.cacheMb * 1e6));
-  resample::requireStores(stores, frames);  // every store any frame needs, before any work
-  for (const auto& f : frames) render.checkOutputs(outPattern.empty() ? "" : expandFramePattern(outPattern, f.frame), f.frame);
+  std::vector<int64_t> numbers;
+  for (const auto& f : frames) numbers.push_back(f.frame);
+  checkSequence(stores, outPattern, numbers, frames, render, what);
   Progress progress(what, frames.size());
   double seconds = 0;
   for (const auto& f : frames) {
@@ -49,8 +65,7 @@ int renderSequence(const std::string& storePattern, const std::string& outPatter
     progress.advance();
   }
   progress.finish();
-  const std::string wrote = outPattern.empty() ? render.deep : render.deep.empty() ? outPattern : outPattern + " and " + render.deep;
-  note(cat("wrote ", frames.size(), " frame", frames.size() == 1 ? "" : "s", " (", wrote, ") in ", seconds, " s"));
+  noteWritten(outPattern, render, frames.size(), seconds);
   return 0;
 }
 
@@ -79,10 +94,16 @@ struct FieldsCommand {
     if (output.empty() && render.deep.empty()) fail("fields", "nothing to write: give -o OUT.####.exr, --deep DEEP.####.exr or both");
     if (!twoPass) return renderSequence(input, output, resample::fieldFrames(list, fields()), render, "fields");
     // The reference semantics: two full progressive renders, rows interlaced afterwards.
-    for (int64_t f : list) render.checkOutputs(output.empty() ? "" : expandFramePattern(output, f), f);
-    store::ShotStores stores(input, size_t(render.cacheMb * 1e6));
-    Progress progress("fields (two-pass)", list.size());
     const resample::FieldShutter fs = fields();
+    std::vector<OutputFrame> passes;
+    for (int64_t f : list) {
+      auto [first, second] = resample::fieldPassShutters(f, fs);
+      passes.push_back({f, std::move(first)}), passes.push_back({f, std::move(second)});
+    }
+    store::ShotStores stores(input, size_t(render.cacheMb * 1e6));
+    checkSequence(stores, output, list, passes, render, "fields");
+    Progress progress("fields (two-pass)", list.size());
+    double seconds = 0;
     for (int64_t f : list) {
       const auto passes = resample::fieldPassShutters(f, fs);
       RenderResult field[2];
@@ -93,6 +114,7 @@ struct FieldsCommand {
         spec.progress = false;
         field[k++] = resample::render(spec);
       }
+      seconds += field[0].stats.wallSeconds + field[1].stats.wallSeconds;
       RenderResult& out = field[0];
       resample::interlaceFields(out, field[1], fs.firstFieldParity);
       out.provenance.frame = f;
@@ -102,6 +124,8 @@ struct FieldsCommand {
                     field[1].stats.report().c_str());
       progress.advance();
     }
+    progress.finish();
+    noteWritten(output, render, list.size(), seconds);
     return 0;
   }
 };

@@ -737,12 +737,14 @@ TEST(RetimeCli, MissingStoresAreReportedAllAtOnceBeforeAnyWork) {
   ScratchDir dir;
   Motion m;
   for (int64_t f : {1, 2, 4, 6}) frameStore(m, f, dir.path("shot.000" + std::to_string(f) + ".mps"));
-  CommandResult r = runReshutter("fields " + dir.path("shot.####.mps") + " --frames 1-6 --spp 1 -o " + dir.path("out.####.exr"));
-  EXPECT_NE(r.exitCode, 0);
-  EXPECT_NE(r.err.find("2 stores are missing"), std::string::npos) << r.err;
-  EXPECT_NE(r.err.find("shot.0003.mps"), std::string::npos) << r.err;
-  EXPECT_NE(r.err.find("shot.0005.mps"), std::string::npos) << r.err;
-  EXPECT_FALSE(std::filesystem::exists(dir.path("out.0001.exr"))) << "no work may start before the check";
+  for (const std::string twoPass : {"", " --two-pass"}) {
+    CommandResult r = runReshutter("fields " + dir.path("shot.####.mps") + " --frames 1-6 --spp 1" + twoPass + " -o " + dir.path("out.####.exr"));
+    EXPECT_NE(r.exitCode, 0) << twoPass;
+    EXPECT_NE(r.err.find("2 stores are missing"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("shot.0003.mps"), std::string::npos) << r.err;
+    EXPECT_NE(r.err.find("shot.0005.mps"), std::string::npos) << r.err;
+    EXPECT_FALSE(std::filesystem::exists(dir.path("out.0001.exr"))) << twoPass << ": no work may start before the check";
+  }
 }
 
 // A sequence's outputs are all checked before its first frame renders: a deep pattern into a
@@ -770,7 +772,8 @@ TEST(RetimeCli, BadShutterArgumentsGiveOneLineAndNoOutput) {
   for (const std::string& args :
        {"fields " + shot + " --frames 1 --field-shutter 0.5:0.1 -o " + out, "fields " + shot + " --frames 1 --field-shutter x -o " + out,
         "fields " + shot + " --frames 1", "retime " + shot + " --to-fps 30 --frames 1 --shutter 1:0 -o " + out,
-        "retime " + shot + " --to-fps 0/0 --frames 1 -o " + out, "fields " + shot + " --frames 1-2 -o " + dir.path("same.exr")}) {
+        "retime " + shot + " --to-fps 0/0 --frames 1 -o " + out, "fields " + shot + " --frames 1-2 -o " + dir.path("same.exr"),
+        "fields " + shot + " --frames 1-2 --two-pass -o " + dir.path("same.exr")}) {
     CommandResult r = runReshutter(args);
     EXPECT_NE(r.exitCode, 0) << args;
     EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << args << ": " << r.err;
