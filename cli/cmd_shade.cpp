@@ -77,13 +77,21 @@ void addShadeCommand(CLI::App& app, Registry& registry) {
   auto* sub = app.add_subcommand("shade", "Shade a RIB scene once (every motion knot kept) into a micropolygon store per frame");
   sub->add_option("scene", cmd->scene, "RIB scene (ASCII, binary or gzipped)")->required();
   sub->add_option("-o,--output", cmd->output, "Output store; several frames need a pattern such as shot.####.mps")->required();
-  sub->add_option("--shade-at", cmd->shadeAt, "Shade every point at this time (frames, default: shutter open)");
+  // NaN stands for "not given" in the command's fields, so a given value must be a finite number.
+  const CLI::Validator finite(
+      [](std::string& text) {
+        double v = 0;
+        return CLI::detail::lexical_cast(text, v) && std::isfinite(v) ? std::string() : "expected a finite number, got '" + text + "'";
+      },
+      "NUMBER");
+  sub->add_option("--shade-at", cmd->shadeAt, "Shade every point at this time (frames, default: shutter open)")->check(finite);
   sub->add_option("--interval", cmd->interval,
                   "Restrict the store to OPEN:CLOSE (frames) instead of the scene's Shutter: positions are interpolated at its ends\n"
                   "(reference mode, e.g. each field of an interlaced frame shaded on its own)");
   sub->add_option("--frame-range", cmd->frames, "Only these frames (FrameBegin numbers), e.g. 1-10 or 3,5,7");
   sub->add_option("--fps", cmd->fps, "Frame rate recorded in the store")->capture_default_str();
-  sub->add_option("--motion-factor", cmd->motionFactor, "Override GeometricApproximation \"motionfactor\": shading rate x (1 + F x motion in pixels / 16)");
+  sub->add_option("--motion-factor", cmd->motionFactor, "Override GeometricApproximation \"motionfactor\": shading rate x (1 + F x motion in pixels / 16)")
+      ->check(finite);
   sub->add_option("--rate-scale", cmd->rateScale, "Multiply every ShadingRate (quality knob)")->capture_default_str();
   sub->add_option("--grid-size", cmd->gridSize, "Largest grid, in micropolygons per side")->capture_default_str();
   sub->add_option("--overscan", cmd->overscan, "Keep geometry this far beyond the screen edges (fraction of the resolution), for re-framing and other cameras")

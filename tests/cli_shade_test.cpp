@@ -93,6 +93,20 @@ TEST(CliShade, BadSceneOneLineErrorNoOutput) {
   EXPECT_NE(missing.err.find("nope.rib"), std::string::npos) << missing.err;
 }
 
+// NaN is how the command marks an option not given: given as a value, it is a usage error (exit
+// 2, one line, nothing written), not silently "shade at shutter open".
+TEST(CliShade, NonFiniteTimesAreUsageErrors) {
+  ScratchDir dir;
+  const std::string rib = reshutter::test::sharedDir() + "/data/rib/aqsis_mb_deformation.rib";
+  for (const std::string option : {"--shade-at nan", "--shade-at inf", "--motion-factor nan"}) {
+    auto r = runReshutter("shade " + rib + " " + option + " -o " + dir.path("x.mps"));
+    EXPECT_EQ(r.exitCode, 2) << option << ": " << r.err;
+    EXPECT_NE(r.err.find("finite"), std::string::npos) << r.err;
+    EXPECT_FALSE(std::filesystem::exists(dir.path("x.mps"))) << option;
+  }
+  EXPECT_EQ(runReshutter("shade " + rib + " --shade-at 0.5 -o " + dir.path("ok.mps")).exitCode, 0);  // a finite time is taken
+}
+
 TEST(CliShade, DemoWritesItsStore) {
   ScratchDir dir;
   auto r = runReshutter("demo --res 320 180 -o " + dir.path("demo"));
