@@ -115,7 +115,9 @@ bool parseRational(const std::string& s, Rational& out) {
       if (used != s.size() || !(v > 0) || v > 1e6) return false;
       int64_t den = 1;
       while (std::abs(v * den - std::round(v * den)) > 1e-9 && den < 1000000) den *= 10;
-      out = {int64_t(std::llround(v * den)), den};
+      const int64_t num = int64_t(std::llround(v * den));
+      if (num <= 0) return false;  // below a millionth: it would be the rate 0/N
+      out = {num, den};
       return true;
     }
     int64_t num = std::stoll(s.substr(0, slash), &used);

@@ -300,3 +300,21 @@ TEST(StoreRoundTrip, VisitFindsExactlyThePartsWhoseBoundsTouchTheRectangle) {
   EXPECT_FALSE(expected.empty());
   EXPECT_LT(expected.size(), reader.entries().size());
 }
+
+// Frame rates as pipelines write them: broadcast decimals map to their exact NTSC rationals,
+// fractions and integers are taken as written, and anything that is not a positive rate (zero,
+// negative, below a millionth - which would round to 0/N - or not a number) is refused.
+TEST(StoreRational, RatesParseExactlyAndNonRatesAreRefused) {
+  const std::pair<const char*, Rational> good[] = {{"24", {24, 1}},     {"29.97", {30000, 1001}},   {"23.976", {24000, 1001}}, {"30000/1001", {30000, 1001}},
+                                                   {"12.5", {125, 10}}, {"0.000001", {1, 1000000}}, {"59.94", {60000, 1001}}};
+  for (const auto& [text, want] : good) {
+    Rational r{0, 0};
+    EXPECT_TRUE(parseRational(text, r)) << text;
+    EXPECT_EQ(r, want) << text;
+  }
+  for (const char* text : {"0", "0.0000001", "-24", "0/1", "24/0", "x", "24fps", "", "nan", "1e7"}) {
+    Rational r{7, 3};
+    EXPECT_FALSE(parseRational(text, r)) << text;
+    EXPECT_GT(r.num, 0) << text << ": a refused rate must not be left as 0/N";
+  }
+}
