@@ -271,7 +271,7 @@ TokenType Lexer::asciiNumber() {
     bool neg = s[0] == '-';
     int64_t v = 0;
     for (const char* p = s + ((s[0] == '-' || s[0] == '+') ? 1 : 0); p < e; ++p) v = v * 10 + (*p - '0');
-    number_ = double(neg ? -v : v);
+    number_ = neg && v == 0 ? -0.0 : double(neg ? -v : v);  // "-0" keeps its sign, as a float would
   } else {
     const char* b = s[0] == '+' ? s + 1 : s;
     double d = 0;

@@ -91,14 +91,13 @@ OwnedGrid randomGrid(std::mt19937& rng, uint32_t numVertices, uint32_t numPolygo
   return g;
 }
 
-/// `read` (doubles from the reader) holds exactly the floats `written`, bit for bit - except the
-/// sign of zero: the writer writes -0.0f as "-0", which the reader takes as the integer 0.
+/// `read` (doubles from the reader) holds exactly the floats `written`, bit for bit, the sign of
+/// zero included (the writer writes -0.0f as "-0").
 void expectSameFloats(const std::vector<float>& written, const std::vector<double>& read, const std::string& what) {
   ASSERT_EQ(written.size(), read.size()) << what;
   for (size_t i = 0; i < written.size(); ++i) {
     const float r = float(read[i]);
-    if (written[i] == 0.0f) EXPECT_EQ(r, 0.0f) << what << "[" << i << "]";
-    else EXPECT_EQ(std::memcmp(&r, &written[i], 4), 0) << what << "[" << i << "]: wrote " << written[i] << ", read " << r;
+    EXPECT_EQ(std::memcmp(&r, &written[i], 4), 0) << what << "[" << i << "]: wrote " << written[i] << ", read " << r;
   }
 }
 
