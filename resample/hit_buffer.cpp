@@ -25,27 +25,15 @@ void attrAt(const store::TilePart& part, const store::Schema& schema, int ai, ui
 }  // namespace
 
 HitBuffer::HitBuffer(const std::vector<AovChannel>& a, const RasterOptions& options, float far, RasterStats& stats)
-    : aovs(a), opacityThreshold(options.opacityThreshold), surfaceIds(options.surfaceIds), farClip(far), counters(stats) {
-  for (const auto& ch : aovs) {
-    if (ch.isUInt) {
-      aovUIntBase.push_back(aovUIntCount);
-      aovFloatBase.push_back(-1);
-      aovUIntCount += 1;
-    } else {
-      aovFloatBase.push_back(aovFloatCount);
-      aovUIntBase.push_back(-1);
-      aovFloatCount += ch.components;
-    }
-  }
-}
+    : aovs(a), opacityThreshold(options.opacityThreshold), surfaceIds(options.surfaceIds), farClip(far), counters(stats), aovLayout(a) {}
 
 void HitBuffer::reset(size_t slots) {
   hitSlots = slots;
   zbuf.assign(slots + kPad, INFINITY);  // the gathers' early depth test reads up to 7 past a row's end
   colour.resize(slots);
   if (surfaceIds) objectOf.assign(slots, 0), gridOf.assign(slots, 0);
-  zAov.assign(slots * size_t(aovFloatCount), 0.f);
-  zAovU.assign(slots * size_t(aovUIntCount), 0u);
+  zAov.assign(slots * size_t(aovLayout.floatCount), 0.f);
+  zAovU.assign(slots * size_t(aovLayout.uintCount), 0u);
   fragHead.assign(slots, -1);
   frags.clear(), fragAov.clear(), fragAovU.clear();
   fragSeq = 0;
@@ -54,7 +42,7 @@ void HitBuffer::reset(size_t slots) {
 
 HitBuffer::HitContext HitBuffer::hitContext(const store::StoreMeta& meta, const store::TileEntry& entry, const store::TilePart& part) const {
   HitContext hc{&part, &meta.schema, meta.schema.ci(), meta.schema.oi(), (entry.effects & store::kEffectTransparent) != 0};
-  if (!hc.transparentPart && !aovFloatCount && !aovUIntCount && hc.ci >= 0) {
+  if (!hc.transparentPart && !aovLayout.floatCount && !aovLayout.uintCount && hc.ci >= 0) {
     const auto& decl = meta.schema.attrs[size_t(hc.ci)];
     const auto& arr = part.attrs[size_t(hc.ci)].f;
     if (decl.rate == store::AttrRate::Vertex && store::componentCount(decl.type) == 3 && !arr.empty()) hc.opaqueFast = true, hc.colour = arr.data();
@@ -76,12 +64,12 @@ void HitBuffer::recordAnyHit(const HitContext& hc, uint32_t sample, uint32_t m, 
     zbuf[sample] = z;
     colour[sample] = {c[0], c[1], c[2], uint32_t(matte)};
     if (surfaceIds) objectOf[sample] = part.objectId[m], gridOf[sample] = part.gridId[m];
-    if (aovFloatCount || aovUIntCount) {
+    if (aovLayout.floatCount || aovLayout.uintCount) {
       float fv[64];
       uint32_t uv[16];
       aovValues(part, *hc.schema, m, v, b, z, fv, uv);
-      for (int c2 = 0; c2 < aovFloatCount; ++c2) zAov[size_t(c2) * hitSlots + sample] = fv[c2];
-      for (int c2 = 0; c2 < aovUIntCount; ++c2) zAovU[size_t(c2) * hitSlots + sample] = uv[c2];
+      for (int c2 = 0; c2 < aovLayout.floatCount; ++c2) zAov[size_t(c2) * hitSlots + sample] = fv[c2];
+      for (int c2 = 0; c2 < aovLayout.uintCount; ++c2) zAovU[size_t(c2) * hitSlots + sample] = uv[c2];
     }
     return;
   }
@@ -98,12 +86,12 @@ void HitBuffer::recordAnyHit(const HitContext& hc, uint32_t sample, uint32_t m, 
   f.next = fragHead[sample];
   f.aovOffset = uint32_t(fragAov.size());
   f.aovUOffset = uint32_t(fragAovU.size());
-  if (aovFloatCount || aovUIntCount) {
+  if (aovLayout.floatCount || aovLayout.uintCount) {
     float fv[64];
     uint32_t uv[16];
     aovValues(part, *hc.schema, m, v, b, z, fv, uv);
-    fragAov.insert(fragAov.end(), fv, fv + aovFloatCount);
-    fragAovU.insert(fragAovU.end(), uv, uv + aovUIntCount);
+    fragAov.insert(fragAov.end(), fv, fv + aovLayout.floatCount);
+    fragAovU.insert(fragAovU.end(), uv, uv + aovLayout.uintCount);
   }
   fragHead[sample] = int32_t(frags.size());
   frags.push_back(f);
@@ -123,11 +111,11 @@ void HitBuffer::aovValues(const store::TilePart& part, const store::Schema& sche
         if (schema.attrs[size_t(ch.schemaIndex)].rate == store::AttrRate::Micropolygon) val = arr[m];
         else val = arr[v[b[1] > b[0] ? (b[2] > b[1] ? 2 : 1) : (b[2] > b[0] ? 2 : 0)]];  // nearest vertex
       }
-      u[aovUIntBase[a]] = val;
+      u[aovLayout.uintBase[a]] = val;
     } else if (ch.builtin == AovChannel::Builtin::Depth) {
-      f[aovFloatBase[a]] = z;
+      f[aovLayout.floatBase[a]] = z;
     } else {
-      attrAt(part, schema, ch.schemaIndex, m, v, b, f + aovFloatBase[a]);
+      attrAt(part, schema, ch.schemaIndex, m, v, b, f + aovLayout.floatBase[a]);
     }
   }
 }
@@ -138,11 +126,11 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
   const size_t slots = size_t(P) * N;
   out.x0 = samples.x0, out.y0 = samples.y0, out.width = samples.w, out.height = samples.h, out.spp = N;
   out.r.resize(slots), out.g.resize(slots), out.b.resize(slots), out.a.resize(slots), out.z.resize(slots);
-  out.aov.resize(size_t(aovFloatCount));
+  out.aov.resize(size_t(aovLayout.floatCount));
   for (auto& v : out.aov) v.assign(slots, 0.f);
-  out.aovU.resize(size_t(aovUIntCount));
+  out.aovU.resize(size_t(aovLayout.uintCount));
   for (auto& v : out.aovU) v.assign(slots, 0u);
-  const bool anyAovs = aovFloatCount || aovUIntCount;
+  const bool anyAovs = aovLayout.floatCount || aovLayout.uintCount;
   // The depths the single-closest filters compare: only when there are output variables.
   if (anyAovs) out.aovZ.assign(slots, INFINITY);
   const float far = farClip;
@@ -179,8 +167,8 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
       out.z[slot] = (s & kHitOpaque) ? zo : far;
       if ((s & kHitOpaque) && anyAovs) {
         out.aovZ[slot] = zo;
-        for (int c = 0; c < aovFloatCount; ++c) out.aov[size_t(c)][slot] = zAov[size_t(c) * hitSlots + k];
-        for (int c = 0; c < aovUIntCount; ++c) out.aovU[size_t(c)][slot] = zAovU[size_t(c) * hitSlots + k];
+        for (int c = 0; c < aovLayout.floatCount; ++c) out.aov[size_t(c)][slot] = zAov[size_t(c) * hitSlots + k];
+        for (int c = 0; c < aovLayout.uintCount; ++c) out.aovU[size_t(c)][slot] = zAovU[size_t(c) * hitSlots + k];
       }
       // Composited AOVs of a matte surface are zero like its colour.
       if ((s & kHitMatte)) zeroCompositedAovs(slot);
@@ -201,9 +189,9 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
       closestZ = z;
       if (anyAovs) out.aovZ[slot] = z;
       for (size_t a = 0; a < aovs.size(); ++a) {
-        if (aovs[a].isUInt) out.aovU[size_t(aovUIntBase[a])][slot] = uv[aovUIntBase[a]];
+        if (aovs[a].isUInt) out.aovU[size_t(aovLayout.uintBase[a])][slot] = uv[aovLayout.uintBase[a]];
         else if (!aovs[a].composited())
-          for (int c = 0; c < aovs[a].components; ++c) out.aov[size_t(aovFloatBase[a] + c)][slot] = fv[aovFloatBase[a] + c];
+          for (int c = 0; c < aovs[a].components; ++c) out.aov[size_t(aovLayout.floatBase[a] + c)][slot] = fv[aovLayout.floatBase[a] + c];
       }
     };
     for (const Fragment* f : list) {
@@ -215,7 +203,7 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
         for (int c = 0; c < 3; ++c) C[c] += T[c] * f->c[c], A[c] += T[c] * f->o[c];
         for (size_t a = 0; a < aovs.size(); ++a)
           if (!aovs[a].isUInt && aovs[a].composited())
-            for (int c = 0; c < aovs[a].components; ++c) aovAcc[aovFloatBase[a] + c] += tAvg * oAvg * fv[aovFloatBase[a] + c];
+            for (int c = 0; c < aovs[a].components; ++c) aovAcc[aovLayout.floatBase[a] + c] += tAvg * oAvg * fv[aovLayout.floatBase[a] + c];
       }
       if (!closestChosen && oAvg >= opacityThreshold) takeSingle(fv, uv, f->z);
       for (int c = 0; c < 3; ++c) T[c] *= 1.f - f->o[c];
@@ -231,13 +219,13 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
         for (int c = 0; c < 3; ++c) A[c] += T[c];
         for (size_t a = 0; a < aovs.size(); ++a)
           if (!aovs[a].isUInt && aovs[a].composited())
-            for (int c = 0; c < aovs[a].components; ++c) aovAcc[aovFloatBase[a] + c] += tAvg * zAov[size_t(aovFloatBase[a] + c) * hitSlots + k];
+            for (int c = 0; c < aovs[a].components; ++c) aovAcc[aovLayout.floatBase[a] + c] += tAvg * zAov[size_t(aovLayout.floatBase[a] + c) * hitSlots + k];
       }
       if (!closestChosen) {
         float fv[64];
         uint32_t uv[16];
-        for (int c = 0; c < aovFloatCount; ++c) fv[c] = zAov[size_t(c) * hitSlots + k];
-        for (int c = 0; c < aovUIntCount; ++c) uv[c] = zAovU[size_t(c) * hitSlots + k];
+        for (int c = 0; c < aovLayout.floatCount; ++c) fv[c] = zAov[size_t(c) * hitSlots + k];
+        for (int c = 0; c < aovLayout.uintCount; ++c) uv[c] = zAovU[size_t(c) * hitSlots + k];
         takeSingle(fv, uv, zo);
       }
     }
@@ -246,7 +234,7 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
     out.z[slot] = closestChosen ? closestZ : far;
     for (size_t a = 0; a < aovs.size(); ++a)
       if (!aovs[a].isUInt && aovs[a].composited())
-        for (int c = 0; c < aovs[a].components; ++c) out.aov[size_t(aovFloatBase[a] + c)][slot] = aovAcc[aovFloatBase[a] + c];
+        for (int c = 0; c < aovs[a].components; ++c) out.aov[size_t(aovLayout.floatBase[a] + c)][slot] = aovAcc[aovLayout.floatBase[a] + c];
   }
   return out;
 }
@@ -259,8 +247,8 @@ void HitBuffer::visitFragments(const BucketSamples& samples, const std::function
   const float stopT = 1.f - opacityThreshold;
   std::vector<const Fragment*> list;
   std::vector<SampleFragment> outList;
-  std::vector<float> opaqueAov(static_cast<size_t>(aovFloatCount));
-  std::vector<uint32_t> opaqueAovU(static_cast<size_t>(aovUIntCount));
+  std::vector<float> opaqueAov(static_cast<size_t>(aovLayout.floatCount));
+  std::vector<uint32_t> opaqueAovU(static_cast<size_t>(aovLayout.uintCount));
   for (size_t slot = 0; slot < slots; ++slot) {
     const size_t k = idxOf[slot];  // the rasterizer keeps samples stratum-major
     const float zo = zbuf[k];
@@ -294,8 +282,8 @@ void HitBuffer::visitFragments(const BucketSamples& samples, const std::function
       const bool matte = s & kHitMatte;
       sf.c[0] = matte ? 0.f : nh.r, sf.c[1] = matte ? 0.f : nh.g, sf.c[2] = matte ? 0.f : nh.b;
       sf.objectId = objectOf[k], sf.gridId = gridOf[k], sf.matte = matte;
-      for (int c = 0; c < aovFloatCount; ++c) opaqueAov[size_t(c)] = zAov[size_t(c) * hitSlots + k];
-      for (int c = 0; c < aovUIntCount; ++c) opaqueAovU[size_t(c)] = zAovU[size_t(c) * hitSlots + k];
+      for (int c = 0; c < aovLayout.floatCount; ++c) opaqueAov[size_t(c)] = zAov[size_t(c) * hitSlots + k];
+      for (int c = 0; c < aovLayout.uintCount; ++c) opaqueAovU[size_t(c)] = zAovU[size_t(c) * hitSlots + k];
       sf.aov = opaqueAov.data(), sf.aovU = opaqueAovU.data();
       outList.push_back(sf);
     }
@@ -306,7 +294,7 @@ void HitBuffer::visitFragments(const BucketSamples& samples, const std::function
 void HitBuffer::zeroCompositedAovs(size_t slot) {
   for (size_t a = 0; a < aovs.size(); ++a)
     if (!aovs[a].isUInt && aovs[a].composited())
-      for (int c = 0; c < aovs[a].components; ++c) out.aov[size_t(aovFloatBase[a] + c)][slot] = 0.f;
+      for (int c = 0; c < aovs[a].components; ++c) out.aov[size_t(aovLayout.floatBase[a] + c)][slot] = 0.f;
 }
 
 }  // namespace reshutter::resample

@@ -63,8 +63,7 @@ struct HitBuffer {
   const bool surfaceIds;
   const float farClip;
   RasterStats& counters;  // hits, fragments
-  int aovFloatCount = 0, aovUIntCount = 0;
-  std::vector<int> aovFloatBase, aovUIntBase;  // per AOV channel: first component slot
+  const AovLayout aovLayout;
 
   size_t hitSlots = 0;  // the length of every per-sample array
   SkewedArray<float> zbuf{24};

@@ -134,12 +134,19 @@ void BucketRasterizer::Impl::rasterizeChunk(const Source& src, const TileEntry& 
   }
 }
 
+AovLayout::AovLayout(const std::vector<AovChannel>& aovs) {
+  for (const auto& ch : aovs) {
+    floatBase.push_back(ch.isUInt ? -1 : floatCount);
+    uintBase.push_back(ch.isUInt ? uintCount : -1);
+    (ch.isUInt ? uintCount : floatCount) += ch.isUInt ? 1 : ch.components;
+  }
+}
+
 BucketRasterizer::BucketRasterizer(const SamplePattern& pattern, const ShutterModel& shutter, const View& view, const std::vector<AovChannel>& aovs,
                                    const RasterOptions& options)
     : impl_(std::make_unique<Impl>(pattern, shutter, view, aovs, options)) {
-  int floats = 0, uints = 0;
-  for (const auto& a : aovs) (a.isUInt ? uints : floats) += a.isUInt ? 1 : a.components;
-  if (floats > 64 || uints > 16) fail("--aov", "too many output variables (at most 64 float components and 16 ids)");
+  const AovLayout layout(aovs);
+  if (layout.floatCount > 64 || layout.uintCount > 16) fail("--aov", "too many output variables (at most 64 float components and 16 ids)");
 }
 BucketRasterizer::~BucketRasterizer() = default;
 void BucketRasterizer::begin(int x0, int y0, int w, int h) { impl_->begin(x0, y0, w, h); }

@@ -67,6 +67,15 @@ struct AovChannel {
   bool composited() const { return !filter.special(); }
 };
 
+/// Where each output variable's values lie among ResolvedSamples::aov (the float components of
+/// every non-uint variable, in request order) and aovU (one per uint variable): the one layout the
+/// rasterizer writes and the filters and deep output read.
+struct AovLayout {
+  explicit AovLayout(const std::vector<AovChannel>& aovs);
+  std::vector<int> floatBase, uintBase;  // per variable: its first slot (-1 in the other kind's)
+  int floatCount = 0, uintCount = 0;
+};
+
 struct RasterOptions {
   float opacityThreshold = 0.996f;  // a sample stops once every channel's opacity reaches this
   bool backfaceCull = false;        // knock out back-facing micropolygons unless two-sided

@@ -278,13 +278,6 @@ struct Plan {
     // Samples beyond the bucket: as many pixels as the widest filter reaches.
     margin = mainTable.margin();
     for (const auto& t : aovTables) margin = std::max(margin, t->margin());
-    // Where each output variable's values start among the resolved samples' arrays.
-    int floatBase = 0, uintBase = 0;
-    for (const auto& a : aovs) {
-      aovFloatBase.push_back(floatBase), aovUIntBase.push_back(uintBase);
-      if (a.isUInt) ++uintBase;
-      else floatBase += a.components;
-    }
     rasterOptions = spec.raster;
     rasterOptions.surfaceIds = spec.deep;  // only deep output reads them back
   }
@@ -303,7 +296,7 @@ struct Plan {
   const std::vector<std::unique_ptr<FilterTable>> aovTables;  // per output variable
   const std::vector<Bucket> buckets;
   int margin = 0;
-  std::vector<int> aovFloatBase, aovUIntBase;  // per output variable: its first ResolvedSamples::aov / aovU array
+  const AovLayout aovLayout{aovs};  // where each output variable lies among ResolvedSamples::aov / aovU
   RasterOptions rasterOptions;
 };
 
@@ -433,7 +426,7 @@ class BucketFilter {
     for (size_t a = 0; a < aovs.size(); ++a)
       if (!aovs[a].isUInt && !aovs[a].filter.special())
         for (int c = 0; c < aovs[a].components; ++c) {
-          aovIn_[a].push_back(&rs.aov[size_t(plan.aovFloatBase[a] + c)]);
+          aovIn_[a].push_back(&rs.aov[size_t(plan.aovLayout.floatBase[a] + c)]);
           aovOut_[a].push_back(img.channels[size_t(aovImageChannel[a][size_t(c)])].f.data());
         }
   }
@@ -457,11 +450,11 @@ class BucketFilter {
           const AovChannel& ch = aovs[a];
           if (ch.isUInt) {
             img_.channels[size_t(aovImageChannel_[a][0])].u[o] =
-                specialFilterU(ch.filter.kind, rs_.aovU[size_t(plan_.aovUIntBase[a])].data() + q * N, rs_.aovZ.data() + q * N, N);
+                specialFilterU(ch.filter.kind, rs_.aovU[size_t(plan_.aovLayout.uintBase[a])].data() + q * N, rs_.aovZ.data() + q * N, N);
           } else if (ch.filter.special()) {
             for (int c = 0; c < ch.components; ++c)
               img_.channels[size_t(aovImageChannel_[a][size_t(c)])].f[o] =
-                  specialFilter(ch.filter.kind, rs_.aov[size_t(plan_.aovFloatBase[a] + c)].data() + q * N, rs_.aovZ.data() + q * N, N, 0.f);
+                  specialFilter(ch.filter.kind, rs_.aov[size_t(plan_.aovLayout.floatBase[a] + c)].data() + q * N, rs_.aovZ.data() + q * N, N, 0.f);
           } else {
             filterPixel(*plan_.aovTables[a], aovIn_[a], aovOut_[a], px, py);
           }

@@ -72,7 +72,9 @@ TEST(ResampleAnalytic, MovingSquareCoverageConvergesWithoutBias) {
         if (n == 16) bias += e.mean / seeds;
         // No pixel is far off either: at 256 samples the worst pixel is off by 0.025-0.052
         // (measured); an edge displaced by a tenth of a pixel would put its pixels 0.1 off.
-        if (n == 16) EXPECT_LT(e.max, 0.1) << "interval " << a << ":" << b << " seed " << seed;
+        if (n == 16) {
+          EXPECT_LT(e.max, 0.1) << "interval " << a << ":" << b << " seed " << seed;
+        }
       }
       rms.push_back(std::sqrt(sum / seeds));
     }
