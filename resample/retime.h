@@ -63,7 +63,7 @@ std::vector<OutputFrame> fieldFrames(const std::vector<int64_t>& frames, const F
 /// Two-pass: each field as a progressive shutter for a full frame, field 1 first.
 std::pair<ShutterModel, ShutterModel> fieldPassShutters(int64_t frame, const FieldShutter& fields);
 /// Whether raster row y (absolute, not data-window relative) belongs to field 2.
-inline bool secondFieldRow(int y, int firstFieldParity) { return ((y - firstFieldParity) % 2 + 2) % 2 != 0; }
+inline bool secondFieldRow(int y, int firstFieldParity) { return ShutterModel::fieldOfRow(y, firstFieldParity) == 1; }
 
 /// Interlaces two full-frame renders of one frame's fields: `first` keeps its field-1 rows and
 /// takes `second`'s field-2 rows, in every flat channel and, when both carry one, in the deep

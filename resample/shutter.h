@@ -64,7 +64,9 @@ class ShutterModel {
   static ShutterModel fields(ShutterGroup first, ShutterGroup second, int firstFieldParity);
 
   const std::vector<ShutterGroup>& groups() const { return groups_; }
-  int groupOfRow(int row) const { return groups_.size() == 1 ? 0 : ((row - parity_) % 2 + 2) % 2; }
+  int groupOfRow(int row) const { return groups_.size() == 1 ? 0 : fieldOfRow(row, parity_); }
+  /// Interlaced: 0 for a row of the first field (row % 2 == firstFieldParity), 1 for the second.
+  static int fieldOfRow(int row, int firstFieldParity) { return ((row - firstFieldParity) % 2 + 2) % 2; }
   void setRolling(RollingShutter r) { rolling_ = r; }
   const RollingShutter& rolling() const { return rolling_; }
 
