@@ -5,6 +5,7 @@
 #include "resample/resampler.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <map>
@@ -348,7 +349,7 @@ using Clock = std::chrono::steady_clock;
 
 double secondsBetween(Clock::time_point a, Clock::time_point b) { return std::chrono::duration<double>(b - a).count(); }
 
-/// The pixels a bucket rasterizes: the bucket and the filter margin around it.
+/// Pixels of the image: a bucket and the filter margin around it.
 struct Region {
   int x0, y0, w, h;
 };
@@ -368,14 +369,19 @@ struct ThreadState {
   }
 };
 
-/// Lists, into `parts`, every part whose bound over the region's time range touches the region.
-void gatherParts(const Plan& plan, const BucketRasterizer& r, const Region& rg, std::vector<std::pair<size_t, size_t>>& parts) {
+/// The samples a bucket rasterizes: the bucket and the filter margin around it.
+Region regionOf(const Plan& plan, const Bucket& bk) {
+  return {bk.x0 - plan.margin, bk.y0 - plan.margin, bk.x1 - bk.x0 + 2 * plan.margin, bk.y1 - bk.y0 + 2 * plan.margin};
+}
+
+/// Lists, into `parts`, every part whose bound over [tMin, tMax] touches the region.
+void gatherParts(const Plan& plan, double tMin, double tMax, const Region& rg, std::vector<std::pair<size_t, size_t>>& parts) {
   parts.clear();
   for (size_t si = 0; si < plan.sources.size(); ++si) {
     const Source& src = plan.sources[si];
     const auto& m = src.store->meta();
-    const double lo = std::max(r.earliestTime() - double(src.frame), m.shutterOpen);
-    const double hi = std::min(r.latestTime() - double(src.frame), m.shutterClose);
+    const double lo = std::max(tMin - double(src.frame), m.shutterOpen);
+    const double hi = std::min(tMax - double(src.frame), m.shutterClose);
     if (lo > hi) continue;
     const auto& sc = m.cameras[0];
     const float fx = float(sc.width) / float(plan.win.W), fy = float(sc.height) / float(plan.win.H);
@@ -383,6 +389,55 @@ void gatherParts(const Plan& plan, const BucketRasterizer& r, const Region& rg, 
     src.store->visit(rect, lo, hi, [&](size_t e) { parts.push_back({si, e}); });
   }
 }
+
+/// How many buckets are still to fetch each part, so that the last one can release it from its
+/// store's cache (StoreReader::release). Without this the cache holds every part until its LRU
+/// budget is full, and on a large frame each decode then touches fresh pages (page faults cost
+/// more than the decode, measured in bench/RESULTS.md) instead of reusing a released part's.
+/// A bucket is counted over the shutter's times for its rows, which hold its samples' times: a
+/// count can only be too high (the part then stays until the LRU drops it), never too low.
+class PartUses {
+ public:
+  explicit PartUses(const Plan& plan) : storeOf_(plan.sources.size()) {
+    std::map<const store::StoreReader*, size_t> stores;
+    for (size_t si = 0; si < plan.sources.size(); ++si) {
+      const store::StoreReader* st = plan.sources[si].store.get();
+      auto [it, fresh] = stores.emplace(st, stores.size());
+      if (fresh) left_.emplace_back(st->entries().size());
+      storeOf_[si] = it->second;
+    }
+    std::vector<std::pair<size_t, size_t>> parts;
+    for (const Bucket& bk : plan.buckets) {
+      const Region rg = regionOf(plan, bk);
+      double tMin = INFINITY, tMax = -INFINITY;
+      for (int g = 0; g < int(plan.shutter.groups().size()); ++g) {
+        double lo, hi;
+        plan.shutter.timeRange(g, double(rg.y0), double(rg.y0 + rg.h), 0.0, 1.0, lo, hi);
+        tMin = std::min(tMin, lo), tMax = std::max(tMax, hi);
+      }
+      // The samples' times are stored as floats relative to the frame: allow for their rounding.
+      const double slack = 1e-5 * std::max(1.0, std::max(std::abs(tMin), std::abs(tMax)));
+      gatherParts(plan, tMin - slack, tMax + slack, rg, parts);
+      for (auto [si, e] : parts) left_[storeOf_[si]][e].fetch_add(1, std::memory_order_relaxed);
+    }
+  }
+
+  /// A bucket is done with `parts`.
+  void done(const Plan& plan, const std::vector<std::pair<size_t, size_t>>& parts) {
+    for (auto [si, e] : parts) {
+      std::atomic<uint32_t>& left = left_[storeOf_[si]][e];
+      // A part fetched but not counted (cannot happen, by the superset above) is left to the LRU.
+      uint32_t n = left.load(std::memory_order_relaxed);
+      while (n > 0 && !left.compare_exchange_weak(n, n - 1, std::memory_order_acq_rel)) {
+      }
+      if (n == 1) plan.sources[si].store->release(e);
+    }
+  }
+
+ private:
+  std::vector<size_t> storeOf_;                          // per source, its store's index in left_
+  std::vector<std::vector<std::atomic<uint32_t>>> left_;  // per store, per entry
+};
 
 /// Fetches (decodes) the gathered parts and rasterizes them; returns the seconds spent fetching.
 double rasterizeParts(const Plan& plan, BucketRasterizer& r, ThreadState& ts) {
@@ -523,15 +578,17 @@ class BucketFilter {
 };
 
 /// One bucket, start to end: its pixels of the flat (and deep) image, its figures in ts.stats.
-void renderBucket(const Plan& plan, const std::vector<std::vector<int>>& aovImageChannel, size_t b, ThreadState& ts, FlatImage& img, DeepFormer* deepFormer) {
+void renderBucket(const Plan& plan, const std::vector<std::vector<int>>& aovImageChannel, size_t b, ThreadState& ts, PartUses& uses, FlatImage& img,
+                  DeepFormer* deepFormer) {
   const Bucket& bk = plan.buckets[b];
   BucketRasterizer& r = ts.rasterizer(plan);
-  const Region rg{bk.x0 - plan.margin, bk.y0 - plan.margin, bk.x1 - bk.x0 + 2 * plan.margin, bk.y1 - bk.y0 + 2 * plan.margin};
+  const Region rg = regionOf(plan, bk);
   const auto t0 = Clock::now();
   r.begin(rg.x0, rg.y0, rg.w, rg.h);
-  gatherParts(plan, r, rg, ts.parts);
+  gatherParts(plan, r.earliestTime(), r.latestTime(), rg, ts.parts);
   const auto t1 = Clock::now();
   const double fetch = rasterizeParts(plan, r, ts);
+  uses.done(plan, ts.parts);
   const auto t2 = Clock::now();
   const ResolvedSamples& rs = r.resolve();
   const auto t3 = Clock::now();
@@ -625,9 +682,10 @@ RenderResult render(const RenderSpec& spec) {
   tbb::enumerable_thread_specific<ThreadState> threads;
   Progress progress("resample", plan.buckets.size());
   const CacheCounts cacheBefore = cacheCounts(spec.sources);
+  PartUses uses(plan);
   tbb::parallel_for(tbb::blocked_range<size_t>(0, plan.buckets.size(), 1), [&](const tbb::blocked_range<size_t>& range) {
     for (size_t b = range.begin(); b != range.end(); ++b) {
-      renderBucket(plan, aovImageChannel, b, threads.local(), result.image, deepFormer.get());
+      renderBucket(plan, aovImageChannel, b, threads.local(), uses, result.image, deepFormer.get());
       if (spec.progress) progress.advance();
     }
   });

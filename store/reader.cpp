@@ -159,6 +159,18 @@ struct StoreReader::Impl {
     return part;
   }
 
+  void release(size_t i) const {
+    std::shared_future<std::shared_ptr<const TilePart>> doomed;  // freed after the lock is let go
+    std::lock_guard lock(cacheMutex);
+    auto it = slots.find(i);
+    if (it == slots.end() || !it->second.ready) return;
+    doomed = std::move(it->second.future);
+    stats.bytes -= it->second.bytes;
+    lru.erase(it->second.lru);
+    slots.erase(it);
+    ++stats.releases;
+  }
+
   std::shared_ptr<const TilePart> cachedPart(size_t i) const {
     if (options.cacheBytes == 0) {
       std::lock_guard lock(cacheMutex);
@@ -225,6 +237,8 @@ uint64_t StoreReader::fileBytes() const { return impl_->size; }
 uint64_t StoreReader::micropolygonCount() const { return impl_->micropolygons; }
 std::string StoreReader::where(size_t entry) const { return impl_->where(entry); }
 TilePart StoreReader::decode(size_t entry) const { return impl_->decode(entry); }
+
+void StoreReader::release(size_t entry) const { impl_->release(entry); }
 
 std::shared_ptr<const TilePart> StoreReader::part(size_t entry) const {
   auto p = impl_->cachedPart(entry);

@@ -26,6 +26,7 @@ struct ReaderOptions {
 
 struct CacheStats {
   uint64_t hits = 0, misses = 0, evictions = 0;
+  uint64_t releases = 0;  // parts dropped because their caller said it was done with them (release)
   uint64_t waits = 0;  // hits on a part another thread was still decoding (the caller waited)
   size_t bytes = 0, peakBytes = 0;
 };
@@ -53,6 +54,10 @@ class StoreReader {
   TilePart decode(size_t entry) const;
   /// Cached decode. A part another thread is decoding is waited for.
   std::shared_ptr<const TilePart> part(size_t entry) const;
+  /// The caller needs this part no more: drop it from the cache now rather than when the LRU
+  /// budget would, so that the memory it holds is reused by the next decode instead of new pages
+  /// being touched. Holders of the part keep it; a part not cached or still decoding is left alone.
+  void release(size_t entry) const;
   CacheStats cacheStats() const;
 
   /// Bound of a part over [t0, t1] in the primary camera's raster.

@@ -380,6 +380,35 @@ TEST(ResampleDeterminism, BitIdenticalForAnyThreadCountAndBucketSize) {
   }
 }
 
+// A decoded part stays in the store's cache only until the last bucket that needs it is done
+// with it: each part is decoded once, and the cache's peak is the buckets' wavefront, not the
+// whole decoded store (which a plain LRU cache with room for it would hold to the end).
+TEST(ResampleMemory, EachPartDecodedOnceAndReleasedAfterItsLastBucket) {
+  ScratchDir dir;
+  const std::string path = dir.path("gen.mps");
+  CommandResult gen = runReshutter("generate -n 60000 --width 640 --height 480 --motion 20 -o " + path);
+  ASSERT_EQ(gen.exitCode, 0) << gen.err;
+  auto reader = std::make_shared<const store::StoreReader>(path);
+  size_t decodedBytes = 0;
+  for (size_t e = 0; e < reader->entries().size(); ++e) decodedBytes += reader->decode(e).memoryBytes();
+  for (const char* shutter : {"box", "rolling"}) {
+    SCOPED_TRACE(shutter);
+    auto fresh = std::make_shared<const store::StoreReader>(path);  // its cache starts empty
+    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, 2);
+    const bool rolling = std::string(shutter) == "rolling";
+    RenderSpec spec = specFor(fresh, 0.0, rolling ? 0.5 : 1.0, 2, 2, 7);
+    spec.bucketSize = 16;
+    if (rolling) spec.shutter.setRolling({0.5, false, 1});  // rows read out over [0, 0.5] more
+    const RenderResult r = render(spec);
+    const store::CacheStats cs = fresh->cacheStats();
+    EXPECT_GT(r.stats.partsFetched, 2 * r.stats.partsDecoded);  // parts are shared by buckets...
+    EXPECT_LE(r.stats.partsDecoded, fresh->entries().size());   // ...and decoded once each
+    EXPECT_EQ(cs.evictions, 0u);
+    EXPECT_GT(cs.releases, r.stats.partsDecoded * 9 / 10);
+    EXPECT_LT(cs.peakBytes, decodedBytes / 2) << "of " << decodedBytes;
+  }
+}
+
 // The motion path with (almost) no motion draws what the static path draws. Two equal knots would
 // not do: the store writer stores such a grid static, and both renders would take the static
 // path. So the moving scene's second knot moves one corner of each quad by one float ulp - a
