@@ -112,12 +112,17 @@ Point measure(const std::string& study, const std::string& curve, double knob, c
   p.study = study, p.curve = curve, p.knob = knob;
   std::vector<Img> imgs;
   double best = 1e30, sumSq = 0, sumMax = 0, sumLum = 0;
+  // Every timed render finds the parts decoded (RenderSpec::keepDecoded): the curves time the knob.
+  auto keepingParts = [](RenderSpec spec) {
+    for (const Source& src : spec.sources) spec.keepDecoded.push_back(src.store.get());
+    return spec;
+  };
   {  // warm-up (store open, part cache): cheap settings would otherwise time it
-    RenderSpec spec = specFor(1);
+    RenderSpec spec = keepingParts(specFor(1));
     if (spec.samplesX * spec.samplesY <= 16) render(spec);
   }
   for (int s = 0; s < seeds; ++s) {
-    RenderSpec spec = specFor(uint64_t(s) * 7919 + 1);
+    RenderSpec spec = keepingParts(specFor(uint64_t(s) * 7919 + 1));
     p.spp = spec.samplesX * spec.samplesY;
     RenderResult r;
     for (int rep = 0; rep < (seeds == 1 ? 3 : 1); ++rep) {  // one seed: best of 3 renders

@@ -24,6 +24,7 @@ namespace {
 RenderResult run(const std::shared_ptr<const store::StoreReader>& store, const std::string& filter, int spp, bool deep, float tolerance) {
   RenderSpec spec;
   spec.sources = {Source{store, store->meta().frame}};
+  spec.keepDecoded = {store.get()};  // renders after the first find the parts decoded, as before parts were released
   const double f = double(store->meta().frame);
   spec.shutter = ShutterModel::progressive(f + store->meta().shutterOpen, f + store->meta().shutterClose, ShutterShape::parse("box", "bench"));
   SamplePattern::factor(spp, spec.samplesX, spec.samplesY);

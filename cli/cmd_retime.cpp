@@ -43,6 +43,14 @@ void noteWritten(const std::string& outPattern, const RenderOptions& render, siz
   note(cat("wrote ", frames, " frame", frames == 1 ? "" : "s", " (", wrote, ") in ", seconds, " s"));
 }
 
+/// The stores a render over `shutter` reads: RenderSpec::keepDecoded of the render before it,
+/// whose decoded parts it would otherwise decode again.
+std::vector<const store::StoreReader*> storesRead(store::ShotStores& stores, const resample::ShutterModel& shutter) {
+  std::vector<const store::StoreReader*> read;
+  for (const auto& src : resample::frameSpec(stores, shutter).sources) read.push_back(src.store.get());
+  return read;
+}
+
 /// Renders a sequence: checks every store and output name first, then renders frame by frame
 /// with a progress bar over frames.
 int renderSequence(const std::string& storePattern, const std::string& outPattern, const std::vector<OutputFrame>& frames, const RenderOptions& render,
@@ -53,10 +61,12 @@ int renderSequence(const std::string& storePattern, const std::string& outPatter
   checkSequence(stores, outPattern, numbers, frames, render, what);
   Progress progress(what, frames.size());
   double seconds = 0;
-  for (const auto& f : frames) {
+  for (size_t i = 0; i < frames.size(); ++i) {
+    const OutputFrame& f = frames[i];
     RenderSpec spec = resample::frameSpec(stores, f.shutter);
     render.applyTo(spec);
     spec.progress = frames.size() == 1;
+    if (i + 1 < frames.size()) spec.keepDecoded = storesRead(stores, frames[i + 1].shutter);
     RenderResult result = resample::render(spec);
     result.provenance.frame = f.frame;
     render.writeOutputs(result, outPattern.empty() ? "" : expandFramePattern(outPattern, f.frame), f.frame);
@@ -104,15 +114,17 @@ struct FieldsCommand {
     checkSequence(stores, output, list, passes, render, "fields");
     Progress progress("fields (two-pass)", list.size());
     double seconds = 0;
-    for (int64_t f : list) {
+    for (size_t i = 0; i < list.size(); ++i) {
+      const int64_t f = list[i];
       const auto passes = resample::fieldPassShutters(f, fs);
       RenderResult field[2];
-      int k = 0;
-      for (const resample::ShutterModel* pass : {&passes.first, &passes.second}) {
-        RenderSpec spec = resample::frameSpec(stores, *pass);
+      for (int k = 0; k < 2; ++k) {
+        RenderSpec spec = resample::frameSpec(stores, k == 0 ? passes.first : passes.second);
         render.applyTo(spec);
         spec.progress = false;
-        field[k++] = resample::render(spec);
+        if (k == 0) spec.keepDecoded = storesRead(stores, passes.second);
+        else if (i + 1 < list.size()) spec.keepDecoded = storesRead(stores, resample::fieldPassShutters(list[i + 1], fs).first);
+        field[k] = resample::render(spec);
       }
       seconds += field[0].stats.wallSeconds + field[1].stats.wallSeconds;
       RenderResult& out = field[0];

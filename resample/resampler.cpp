@@ -402,6 +402,11 @@ class PartUses {
     std::map<const store::StoreReader*, size_t> stores;
     for (size_t si = 0; si < plan.sources.size(); ++si) {
       const store::StoreReader* st = plan.sources[si].store.get();
+      const auto& keep = plan.spec.keepDecoded;
+      if (std::find(keep.begin(), keep.end(), st) != keep.end()) {
+        storeOf_[si] = kKept;
+        continue;
+      }
       auto [it, fresh] = stores.emplace(st, stores.size());
       if (fresh) left_.emplace_back(st->entries().size());
       storeOf_[si] = it->second;
@@ -418,13 +423,15 @@ class PartUses {
       // The samples' times are stored as floats relative to the frame: allow for their rounding.
       const double slack = 1e-5 * std::max(1.0, std::max(std::abs(tMin), std::abs(tMax)));
       gatherParts(plan, tMin - slack, tMax + slack, rg, parts);
-      for (auto [si, e] : parts) left_[storeOf_[si]][e].fetch_add(1, std::memory_order_relaxed);
+      for (auto [si, e] : parts)
+        if (storeOf_[si] != kKept) left_[storeOf_[si]][e].fetch_add(1, std::memory_order_relaxed);
     }
   }
 
   /// A bucket is done with `parts`.
   void done(const Plan& plan, const std::vector<std::pair<size_t, size_t>>& parts) {
     for (auto [si, e] : parts) {
+      if (storeOf_[si] == kKept) continue;
       std::atomic<uint32_t>& left = left_[storeOf_[si]][e];
       // A part fetched but not counted (cannot happen, by the superset above) is left to the LRU.
       uint32_t n = left.load(std::memory_order_relaxed);
@@ -435,7 +442,8 @@ class PartUses {
   }
 
  private:
-  std::vector<size_t> storeOf_;                          // per source, its store's index in left_
+  static constexpr size_t kKept = ~size_t(0);             // a store in RenderSpec::keepDecoded
+  std::vector<size_t> storeOf_;                          // per source, its store's index in left_ (or kKept)
   std::vector<std::vector<std::atomic<uint32_t>>> left_;  // per store, per entry
 };
 

@@ -45,6 +45,11 @@ struct RenderSpec {
   RasterOptions raster;
   int bucketSize = kDefaultBucketSize;
   size_t cacheBytes = size_t(256) << 20;  // decoded-part cache per store
+  /// A decoded part leaves its store's cache once the last bucket that needs it is done with it
+  /// (StoreReader::release), so that memory is reused rather than grown to the cache budget.
+  /// Stores listed here are left to their LRU instead: those the caller renders from again next
+  /// (the next frame of a sequence, a two-pass frame's second field, a benchmark's rounds).
+  std::vector<const store::StoreReader*> keepDecoded;
   bool progress = true;
   bool halfColor = false;  // write R G B A as half
   /// Deep output (resample/deep.h): formed alongside the flat image when set.

@@ -407,6 +407,18 @@ TEST(ResampleMemory, EachPartDecodedOnceAndReleasedAfterItsLastBucket) {
     EXPECT_GT(cs.releases, r.stats.partsDecoded * 9 / 10);
     EXPECT_LT(cs.peakBytes, decodedBytes / 2) << "of " << decodedBytes;
   }
+  // A store the caller renders from again (RenderSpec::keepDecoded) is left to its LRU cache:
+  // nothing released, and the next render decodes nothing.
+  auto kept = std::make_shared<const store::StoreReader>(path);
+  RenderSpec spec = specFor(kept, 0.0, 1.0, 2, 2, 7);
+  spec.bucketSize = 16;
+  spec.keepDecoded = {kept.get()};
+  const RenderResult first = render(spec);
+  EXPECT_GT(first.stats.partsDecoded, 0u);
+  EXPECT_EQ(kept->cacheStats().releases, 0u);
+  const RenderResult again = render(spec);
+  EXPECT_GT(again.stats.partsFetched, 0u);
+  EXPECT_EQ(again.stats.partsDecoded, 0u);
 }
 
 // The motion path with (almost) no motion draws what the static path draws. Two equal knots would

@@ -581,6 +581,30 @@ TEST(RetimeSources, FramesReachTheStoresTheirShuttersNeed) {
   EXPECT_EQ(shot.openFrames(), open) << "the check opens nothing";
 }
 
+// Decoded parts are released after their last bucket (RenderSpec::keepDecoded) except from the
+// stores the next render reads: a two-pass frame's second field decodes nothing the first field
+// decoded, and the next frame's first field decodes its own store's parts.
+TEST(RetimeCli, TwoPassFieldsDecodeEachStoreOnce) {
+  ScratchDir dir;
+  Motion m;
+  for (int64_t f = 1; f <= 2; ++f) frameStore(m, f, dir.path("shot.000" + std::to_string(f) + ".mps"));
+  const std::string shot = dir.path("shot.####.mps");
+  CommandResult r = runReshutter("fields " + shot + " --frames 1-2 --spp 4 --two-pass --stats -o " + dir.path("t.####.exr"));
+  ASSERT_EQ(r.exitCode, 0) << r.err;
+  // Each pass's report: "frame F, field K" then "parts N fetched, M decoded, ...".
+  std::vector<std::pair<long, long>> fetchedDecoded;
+  for (size_t at = r.out.find("parts "); at != std::string::npos; at = r.out.find("parts ", at + 1)) {
+    long fetched = -1, decoded = -1;
+    if (std::sscanf(r.out.c_str() + at, "parts %ld fetched, %ld decoded", &fetched, &decoded) == 2) fetchedDecoded.push_back({fetched, decoded});
+  }
+  ASSERT_EQ(fetchedDecoded.size(), 4u) << r.out;
+  EXPECT_GT(fetchedDecoded[0].second, 0) << "frame 1, field 1";
+  EXPECT_GT(fetchedDecoded[1].first, 0) << "frame 1, field 2";
+  EXPECT_EQ(fetchedDecoded[1].second, 0) << "frame 1, field 2: its parts were kept from field 1";
+  EXPECT_GT(fetchedDecoded[2].second, 0) << "frame 2, field 1: another store";
+  EXPECT_EQ(fetchedDecoded[3].second, 0) << "frame 2, field 2";
+}
+
 TEST(RetimeCli, FieldsAndRetimeWriteSequencesThatOpenElsewhere) {
   ScratchDir dir;
   Motion m;
