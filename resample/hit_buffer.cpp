@@ -34,10 +34,10 @@ void HitBuffer::reset(size_t slots) {
   if (surfaceIds) objectOf.assign(slots, 0), gridOf.assign(slots, 0);
   zAov.assign(slots * size_t(aovLayout.floatCount), 0.f);
   zAovU.assign(slots * size_t(aovLayout.uintCount), 0u);
-  fragHead.assign(slots, -1);
   frags.clear(), fragAov.clear(), fragAovU.clear();
   fragSeq = 0;
   anyFragments = false;
+  fragmentsGrouped = false;
 }
 
 HitBuffer::HitContext HitBuffer::hitContext(const store::StoreMeta& meta, const store::TileEntry& entry, const store::TilePart& part) const {
@@ -47,11 +47,21 @@ HitBuffer::HitContext HitBuffer::hitContext(const store::StoreMeta& meta, const 
     const auto& arr = part.attrs[size_t(hc.ci)].f;
     if (decl.rate == store::AttrRate::Vertex && store::componentCount(decl.type) == 3 && !arr.empty()) hc.opaqueFast = true, hc.colour = arr.data();
   }
+  if (hc.transparentPart && !aovLayout.floatCount && !aovLayout.uintCount && hc.ci >= 0 && hc.oi >= 0) {
+    auto perVertexColour = [&](int ai) {
+      const auto& decl = meta.schema.attrs[size_t(ai)];
+      const auto& arr = part.attrs[size_t(ai)].f;
+      return decl.rate == store::AttrRate::Vertex && store::componentCount(decl.type) == 3 && !arr.empty() ? arr.data() : nullptr;
+    };
+    hc.colour = perVertexColour(hc.ci), hc.opacity = perVertexColour(hc.oi);
+    hc.transparentFast = hc.colour && hc.opacity;
+  }
   return hc;
 }
 
 void HitBuffer::recordAnyHit(const HitContext& hc, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float z) {
   ++counters.hits;
+  ++counters.generalHits;
   const store::TilePart& part = *hc.part;
   const bool matte = part.flags[m] & store::kMatte;
   float o[3] = {1.f, 1.f, 1.f};
@@ -74,18 +84,9 @@ void HitBuffer::recordAnyHit(const HitContext& hc, uint32_t sample, uint32_t m, 
     return;
   }
   if (!(z < zbuf[sample])) return;  // hidden behind an opaque surface already found
-  for (float& x : o) x = std::clamp(x, 0.f, 1.f);
-  Fragment f;
-  f.z = z;
-  attrAt(part, *hc.schema, hc.ci, m, v, b, f.c);
-  std::copy(o, o + 3, f.o);
-  f.objectId = part.objectId[m];
-  f.gridId = part.gridId[m];
-  f.seq = fragSeq++;
-  f.matte = matte;
-  f.next = fragHead[sample];
-  f.aovOffset = uint32_t(fragAov.size());
-  f.aovUOffset = uint32_t(fragAovU.size());
+  float c[3];
+  attrAt(part, *hc.schema, hc.ci, m, v, b, c);
+  addFragment(sample, z, c, o, part.objectId[m], part.gridId[m], matte);
   if (aovLayout.floatCount || aovLayout.uintCount) {
     float fv[64];
     uint32_t uv[16];
@@ -93,10 +94,59 @@ void HitBuffer::recordAnyHit(const HitContext& hc, uint32_t sample, uint32_t m, 
     fragAov.insert(fragAov.end(), fv, fv + aovLayout.floatCount);
     fragAovU.insert(fragAovU.end(), uv, uv + aovLayout.uintCount);
   }
-  fragHead[sample] = int32_t(frags.size());
-  frags.push_back(f);
+}
+
+void HitBuffer::addFragment(uint32_t sample, float z, const float c[3], const float o[3], uint32_t objectId, uint32_t gridId, bool matte) {
+  Fragment f;
+  f.z = z;
+  for (int k = 0; k < 3; ++k) f.c[k] = c[k], f.o[k] = std::clamp(o[k], 0.f, 1.f);
+  f.objectId = objectId, f.gridId = gridId;
+  f.seq = fragSeq++;
+  f.matte = matte;
+  f.sample = sample;
+  frags.push_back(f);  // its output variables, if any, are appended next by the caller (at seq)
   anyFragments = true;
   ++counters.fragments;
+}
+
+void HitBuffer::groupFragments(const BucketSamples& samples) {
+  if (fragmentsGrouped) return;
+  fragmentsGrouped = true;
+  if (!anyFragments) return;
+  const auto& idxOf = samples.idxOf;
+  const size_t slots = size_t(samples.P) * samples.N;
+  // Counted here rather than as each is recorded: these independent increments overlap their
+  // cache misses, where a hit would wait on its own.
+  fragCount.assign(hitSlots, 0);
+  for (const Fragment& f : frags) ++fragCount[f.sample];
+  // Each sample's run starts where the runs of the samples resolved before it end.
+  fragEnd.resize(hitSlots);
+  uint32_t at = 0;
+  for (size_t slot = 0; slot < slots; ++slot) {
+    const size_t k = idxOf[slot];
+    fragEnd[k] = at;  // its start, while it is being filled
+    at += fragCount[k];
+  }
+  fragScratch.resize(frags.size());
+  for (const Fragment& f : frags) fragScratch[fragEnd[f.sample]++] = f;
+  frags.swap(fragScratch);
+}
+
+void HitBuffer::nearerFragments(size_t k, float zo, std::vector<const Fragment*>& list) const {
+  list.clear();
+  const uint32_t n = fragCount[k];
+  if (!n) return;
+  const Fragment* run = frags.data() + (fragEnd[k] - n);
+  for (uint32_t i = 0; i < n; ++i)
+    if (run[i].z < zo) list.push_back(&run[i]);
+  // Front to back; seq (draw order) breaks depth ties. The lists are short: insertion sort.
+  auto before = [](const Fragment* a, const Fragment* b) { return a->z != b->z ? a->z < b->z : a->seq < b->seq; };
+  for (size_t i = 1; i < list.size(); ++i) {
+    const Fragment* f = list[i];
+    size_t j = i;
+    for (; j > 0 && before(f, list[j - 1]); --j) list[j] = list[j - 1];
+    list[j] = f;
+  }
 }
 
 void HitBuffer::aovValues(const store::TilePart& part, const store::Schema& schema, uint32_t m, const uint32_t v[3], const float b[3], float z, float* f,
@@ -138,6 +188,7 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
     // Opaque surfaces only, no output variables (the common case): each sample is its nearest
     // surface's colour or empty, as the general loop below computes it, without its branches.
     for (size_t slot = 0; slot < slots; ++slot) {
+      prefetchSample(idxOf, slot + kPrefetchAhead, slots);
       const size_t k = idxOf[slot];
       const float zo = zbuf[k];
       const SurfaceColour& nh = colour[k];
@@ -151,13 +202,15 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
     return out;
   }
   const float stopT = 1.f - opacityThreshold;
+  groupFragments(samples);
   std::vector<const Fragment*> list;
   for (size_t slot = 0; slot < slots; ++slot) {
+    prefetchSample(idxOf, slot + kPrefetchAhead, slots);
     const size_t k = idxOf[slot];  // the rasterizer keeps samples stratum-major
     const float zo = zbuf[k];
     const SurfaceColour& nh = colour[k];
     const uint8_t s = hitState(k);
-    if (!anyFragments || fragHead[k] < 0) {
+    if (!anyFragments || !fragCount[k]) {
       const bool visible = (s & kHitOpaque) && !(s & kHitMatte);
       out.r[slot] = visible ? nh.r : 0.f;
       out.g[slot] = visible ? nh.g : 0.f;
@@ -175,14 +228,12 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
       continue;
     }
     // Transparent surfaces in front of the nearest opaque one, front to back.
-    list.clear();
-    for (int32_t f = fragHead[k]; f >= 0; f = frags[size_t(f)].next)
-      if (frags[size_t(f)].z < zo) list.push_back(&frags[size_t(f)]);
-    std::sort(list.begin(), list.end(), [](const Fragment* a, const Fragment* b) { return a->z != b->z ? a->z < b->z : a->seq < b->seq; });
+    nearerFragments(k, zo, list);
     float T[3] = {1.f, 1.f, 1.f}, C[3] = {0.f, 0.f, 0.f}, A[3] = {0.f, 0.f, 0.f};
     float closestZ = INFINITY;
     bool closestChosen = false;
-    float aovAcc[64] = {};
+    float aovAcc[64];
+    std::fill_n(aovAcc, aovLayout.floatCount, 0.f);
     bool opaqueReached = false;
     auto takeSingle = [&](const float* fv, const uint32_t* uv, float z) {
       closestChosen = true;
@@ -197,8 +248,8 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
     for (const Fragment* f : list) {
       const float oAvg = (f->o[0] + f->o[1] + f->o[2]) / 3.f;
       const float tAvg = (T[0] + T[1] + T[2]) / 3.f;
-      const float* fv = fragAov.data() + f->aovOffset;
-      const uint32_t* uv = fragAovU.data() + f->aovUOffset;
+      const float* fv = fragAov.data() + size_t(f->seq) * aovLayout.floatCount;
+      const uint32_t* uv = fragAovU.data() + size_t(f->seq) * aovLayout.uintCount;
       if (!f->matte) {
         for (int c = 0; c < 3; ++c) C[c] += T[c] * f->c[c], A[c] += T[c] * f->o[c];
         for (size_t a = 0; a < aovs.size(); ++a)
@@ -249,17 +300,15 @@ void HitBuffer::visitFragments(const BucketSamples& samples, const std::function
   std::vector<SampleFragment> outList;
   std::vector<float> opaqueAov(static_cast<size_t>(aovLayout.floatCount));
   std::vector<uint32_t> opaqueAovU(static_cast<size_t>(aovLayout.uintCount));
+  groupFragments(samples);
   for (size_t slot = 0; slot < slots; ++slot) {
     const size_t k = idxOf[slot];  // the rasterizer keeps samples stratum-major
     const float zo = zbuf[k];
     const SurfaceColour& nh = colour[k];
     const uint8_t s = hitState(k);
-    list.clear();
     outList.clear();
-    if (anyFragments)
-      for (int32_t f = fragHead[k]; f >= 0; f = frags[size_t(f)].next)
-        if (frags[size_t(f)].z < zo) list.push_back(&frags[size_t(f)]);
-    std::sort(list.begin(), list.end(), [](const Fragment* a, const Fragment* b) { return a->z != b->z ? a->z < b->z : a->seq < b->seq; });
+    if (anyFragments) nearerFragments(k, zo, list);
+    else list.clear();
     float T[3] = {1.f, 1.f, 1.f};
     bool opaqueReached = false;
     for (const Fragment* f : list) {
@@ -267,8 +316,8 @@ void HitBuffer::visitFragments(const BucketSamples& samples, const std::function
       sf.z = f->z;
       for (int c = 0; c < 3; ++c) sf.c[c] = f->matte ? 0.f : f->c[c], sf.o[c] = f->o[c];
       sf.objectId = f->objectId, sf.gridId = f->gridId, sf.matte = f->matte;
-      sf.aov = fragAov.data() + f->aovOffset;
-      sf.aovU = fragAovU.data() + f->aovUOffset;
+      sf.aov = fragAov.data() + size_t(f->seq) * aovLayout.floatCount;
+      sf.aovU = fragAovU.data() + size_t(f->seq) * aovLayout.uintCount;
       outList.push_back(sf);
       for (int c = 0; c < 3; ++c) T[c] *= 1.f - f->o[c];
       if (T[0] <= stopT && T[1] <= stopT && T[2] <= stopT) {

@@ -39,10 +39,12 @@ struct HitBuffer {
     const store::Schema* schema;
     int ci, oi;
     bool transparentPart;
-    // The common case - an opaque part, per-vertex colour, no output variables - takes
-    // recordOpaqueHit() with the colour array at hand instead of the general attribute lookup.
-    bool opaqueFast = false;
+    // The common cases - per-vertex colour (and, in a transparent part, per-vertex opacity), no
+    // output variables - take recordOpaqueHit() / recordColourHit() with the arrays at hand
+    // instead of the general attribute lookup.
+    bool opaqueFast = false, transparentFast = false;
     const float* colour = nullptr;
+    const float* opacity = nullptr;
   };
   HitContext hitContext(const store::StoreMeta& meta, const store::TileEntry& entry, const store::TilePart& part) const;
 
@@ -50,6 +52,7 @@ struct HitBuffer {
   /// vertices v, barycentrics b, camera depth z.
   void recordHit(const HitContext& hc, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float z) {
     if (hc.opaqueFast) recordOpaqueHit(hc, sample, m, v, b, z);
+    else if (hc.transparentFast) recordColourHit(hc, sample, m, v, b, z);
     else recordAnyHit(hc, sample, m, v, b, z);
   }
 
@@ -80,9 +83,8 @@ struct HitBuffer {
     float c[3];
     float o[3];
     uint32_t objectId, gridId;
-    uint32_t seq;
-    int32_t next;
-    uint32_t aovOffset, aovUOffset;
+    uint32_t seq;     // draw order; also where its output variables lie in fragAov / fragAovU (seq × count)
+    uint32_t sample;  // stratum-major index
     uint8_t matte;
   };
   static constexpr uint8_t kHitOpaque = 1, kHitMatte = 2;  // what resolve() finds at a sample
@@ -103,7 +105,32 @@ struct HitBuffer {
     *(nearer ? &colour[sample] : &discard) = c;
     if (surfaceIds && nearer) objectOf[sample] = part.objectId[m], gridOf[sample] = part.gridId[m];
   }
+  // A hit of a transparent part with per-vertex colour and opacity and no output variables: the
+  // values recordAnyHit() gives it (attrAt's arithmetic, in its order), without its lookups.
+  void recordColourHit(const HitContext& hc, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float z) {
+    ++counters.hits;
+    if (!(z < zbuf[sample])) return;  // hidden; ties keep the surface drawn first (rasterizeQueued)
+    const store::TilePart& part = *hc.part;
+    const float *o0 = hc.opacity + size_t(v[0]) * 3, *o1 = hc.opacity + size_t(v[1]) * 3, *o2 = hc.opacity + size_t(v[2]) * 3;
+    const float *c0 = hc.colour + size_t(v[0]) * 3, *c1 = hc.colour + size_t(v[1]) * 3, *c2 = hc.colour + size_t(v[2]) * 3;
+    float o[3], c[3];
+    for (int k = 0; k < 3; ++k) o[k] = b[0] * o0[k] + b[1] * o1[k] + b[2] * o2[k], c[k] = b[0] * c0[k] + b[1] * c1[k] + b[2] * c2[k];
+    const bool matte = part.flags[m] & store::kMatte;
+    if (o[0] >= 1.f && o[1] >= 1.f && o[2] >= 1.f) {
+      zbuf[sample] = z;
+      colour[sample] = {c[0], c[1], c[2], uint32_t(matte)};
+      if (surfaceIds) objectOf[sample] = part.objectId[m], gridOf[sample] = part.gridId[m];
+      return;
+    }
+    addFragment(sample, z, c, o, part.objectId[m], part.gridId[m], matte);
+  }
+  void addFragment(uint32_t sample, float z, const float c[3], const float o[3], uint32_t objectId, uint32_t gridId, bool matte);
   void recordAnyHit(const HitContext& hc, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float z);
+  // Puts each sample's fragments next to each other, in the order resolve() visits the samples
+  // (a counting sort by sample): the lists are then read sequentially, not chased through memory.
+  void groupFragments(const BucketSamples& samples);
+  // Sample slot's fragments nearer than its opaque depth zo, front to back into `list`.
+  void nearerFragments(size_t k, float zo, std::vector<const Fragment*>& list) const;
   void aovValues(const store::TilePart& part, const store::Schema& schema, uint32_t m, const uint32_t v[3], const float b[3], float z, float* f,
                  uint32_t* u) const;
   uint8_t hitState(size_t k) const {
@@ -111,9 +138,20 @@ struct HitBuffer {
     return kHitOpaque | (colour[k].matte ? kHitMatte : 0);
   }
   void zeroCompositedAovs(size_t slot);
+  // Resolving visits the samples pixel by pixel, which is across the stratum-major arrays: a
+  // sample's depth and colour are fetched ahead, as no hardware prefetcher follows that order.
+  static constexpr size_t kPrefetchAhead = 16;
+  void prefetchSample(const std::vector<uint32_t>& idxOf, size_t slot, size_t slots) const {
+    if (slot >= slots) return;
+    const size_t k = idxOf[slot];
+    __builtin_prefetch(&zbuf[k]);
+    __builtin_prefetch(&colour[k]);
+  }
 
-  SkewedArray<int32_t> fragHead{12};
-  std::vector<Fragment> frags;
+  SkewedArray<uint32_t> fragCount{12};  // per sample, after groupFragments(): its fragments
+  std::vector<uint32_t> fragEnd;        // per sample, after groupFragments(): the end of its run in frags
+  std::vector<Fragment> frags, fragScratch;
+  bool fragmentsGrouped = false;
   std::vector<float> fragAov;
   std::vector<uint32_t> fragAovU;
   uint32_t fragSeq = 0;

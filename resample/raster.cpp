@@ -19,6 +19,7 @@ void RasterStats::add(const RasterStats& o) {
   micropolygons += o.micropolygons;
   parts += o.parts;
   fragments += o.fragments;
+  generalHits += o.generalHits;
   staticMicropolygons += o.staticMicropolygons;
   linearMicropolygons += o.linearMicropolygons;
   chunkCulledMicropolygons += o.chunkCulledMicropolygons;

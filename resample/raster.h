@@ -107,6 +107,7 @@ struct RasterStats {
   uint64_t linearMicropolygons = 0;         // moving ones bounded from their interval ends (one knot segment)
   uint64_t chunkCulledMicropolygons = 0;    // moving ones skipped with their whole chunk (its path misses the region)
   uint64_t chunkGatheredMicropolygons = 0;  // linear-path ones whose candidates came from their chunk's one gather
+  uint64_t generalHits = 0;                 // hits through the general attribute lookup (output variables, other attribute layouts)
   void add(const RasterStats& o);
 };
 

@@ -219,6 +219,32 @@ TEST(ResampleCompositing, TransparentLayersOverAnOpaqueOne) {
   EXPECT_NEAR(channel(r, "A").f[8 * 16 + 8], alpha, 1e-6);
   // Z follows RenderMan's zthreshold: the nearest surface opaque beyond the threshold.
   EXPECT_NEAR(channel(r, "Z").f[8 * 16 + 8], 20.0, 1e-4);
+  EXPECT_GT(r.stats.raster.fragments, 0u);
+  EXPECT_EQ(r.stats.raster.generalHits, 0u);  // per-vertex colour and opacity: the direct path
+}
+
+// Transparent parts with per-vertex colour and opacity and no output variables take the direct
+// hit path (HitBuffer::recordColourHit); an output variable sends every hit through the general
+// attribute lookup. Both composite the same surfaces: R G B A Z are the same to the bit.
+TEST(ResampleCompositing, DirectAndGeneralHitPathsAgree) {
+  ScratchDir dir;
+  const std::string path = dir.path("gen.mps");
+  CommandResult gen = runReshutter("generate -n 30000 --width 160 --height 120 --transparent 0.5 --motion 15 -o " + path);
+  ASSERT_EQ(gen.exitCode, 0) << gen.err;
+  auto reader = std::make_shared<const store::StoreReader>(path);
+  RenderSpec spec = specFor(reader, 0.1, 0.8, 3, 3, 5);
+  const RenderResult direct = render(spec);
+  spec.aovs = {AovRequest::parse("id", "t")};
+  const RenderResult general = render(spec);
+  EXPECT_GT(direct.stats.raster.fragments, 1000u);
+  EXPECT_EQ(direct.stats.raster.generalHits, 0u);
+  EXPECT_EQ(general.stats.raster.generalHits, general.stats.raster.hits);
+  EXPECT_EQ(direct.stats.raster.fragments, general.stats.raster.fragments);
+  for (const char* c : {"R", "G", "B", "A", "Z"}) {
+    const auto &a = channel(direct, c).f, &b = channel(general, c).f;
+    ASSERT_EQ(a.size(), b.size());
+    EXPECT_EQ(std::memcmp(a.data(), b.data(), a.size() * sizeof(float)), 0) << c;
+  }
 }
 
 namespace {
