@@ -53,6 +53,13 @@ ErrorStats alphaError(const RenderResult& r, const MovingSquare& sq, double a, d
   return e;
 }
 
+/// A synthetic store (`reshutter generate ARGS`) written to path, opened.
+std::shared_ptr<const store::StoreReader> generatedStore(const std::string& path, const std::string& args) {
+  const CommandResult gen = runReshutter("generate " + args + " -o " + path);
+  if (gen.exitCode != 0) ADD_FAILURE() << gen.err;
+  return std::make_shared<const store::StoreReader>(path);
+}
+
 }  // namespace
 
 TEST(ResampleAnalytic, MovingSquareCoverageConvergesWithoutBias) {
@@ -228,10 +235,7 @@ TEST(ResampleCompositing, TransparentLayersOverAnOpaqueOne) {
 // attribute lookup. Both composite the same surfaces: R G B A Z are the same to the bit.
 TEST(ResampleCompositing, DirectAndGeneralHitPathsAgree) {
   ScratchDir dir;
-  const std::string path = dir.path("gen.mps");
-  CommandResult gen = runReshutter("generate -n 30000 --width 160 --height 120 --transparent 0.5 --motion 15 -o " + path);
-  ASSERT_EQ(gen.exitCode, 0) << gen.err;
-  auto reader = std::make_shared<const store::StoreReader>(path);
+  auto reader = generatedStore(dir.path("gen.mps"), "-n 30000 --width 160 --height 120 --transparent 0.5 --motion 15");
   RenderSpec spec = specFor(reader, 0.1, 0.8, 3, 3, 5);
   const RenderResult direct = render(spec);
   spec.aovs = {AovRequest::parse("id", "t")};
@@ -381,10 +385,7 @@ TEST(ResampleReference, AgreesWithABruteForceRayCaster) {
 
 TEST(ResampleDeterminism, BitIdenticalForAnyThreadCountAndBucketSize) {
   ScratchDir dir;
-  const std::string path = dir.path("gen.mps");
-  CommandResult gen = runReshutter("generate -n 60000 --width 160 --height 120 --transparent 0.3 --motion 20 --knots 3 -o " + path);
-  ASSERT_EQ(gen.exitCode, 0) << gen.err;
-  auto reader = std::make_shared<const store::StoreReader>(path);
+  auto reader = generatedStore(dir.path("gen.mps"), "-n 60000 --width 160 --height 120 --transparent 0.3 --motion 20 --knots 3");
   std::vector<std::vector<float>> images;
   for (auto [threads, bucket] : {std::pair{1, 32}, std::pair{2, 16}, std::pair{2, 57}, std::pair{1, 8}}) {
     tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(threads));
@@ -412,9 +413,7 @@ TEST(ResampleDeterminism, BitIdenticalForAnyThreadCountAndBucketSize) {
 TEST(ResampleMemory, EachPartDecodedOnceAndReleasedAfterItsLastBucket) {
   ScratchDir dir;
   const std::string path = dir.path("gen.mps");
-  CommandResult gen = runReshutter("generate -n 60000 --width 640 --height 480 --motion 20 -o " + path);
-  ASSERT_EQ(gen.exitCode, 0) << gen.err;
-  auto reader = std::make_shared<const store::StoreReader>(path);
+  auto reader = generatedStore(path, "-n 60000 --width 640 --height 480 --motion 20");
   size_t decodedBytes = 0;
   for (size_t e = 0; e < reader->entries().size(); ++e) decodedBytes += reader->decode(e).memoryBytes();
   for (const char* shutter : {"box", "rolling"}) {
