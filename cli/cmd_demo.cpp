@@ -41,7 +41,8 @@ struct DemoCommand {
     auto reader = std::make_shared<const store::StoreReader>(storePath);
     const auto& meta = reader->meta();
     const double F = double(meta.frame);
-    auto renderWith = [&](resample::ShutterModel shutter, const std::string& filter, const std::string& name, bool deep) {
+    // readAgain: the next render reads this store too, so its decoded parts stay cached.
+    auto renderWith = [&](resample::ShutterModel shutter, const std::string& filter, const std::string& name, bool deep, bool readAgain) {
       RenderOptions o;
       o.spp = "16";
       o.filter = filter;
@@ -51,15 +52,16 @@ struct DemoCommand {
       spec.sources = {resample::Source{reader, meta.frame}};
       spec.shutter = std::move(shutter);
       o.applyTo(spec);
+      if (readAgain) spec.keepDecoded = {reader.get()};
       resample::RenderResult result = resample::render(spec);
       o.writeOutputs(result, outDir + "/" + name + ".exr", meta.frame);
       return result.stats.wallSeconds;
     };
     const double progressive =
-        renderWith(resample::ShutterModel::progressive(F + meta.shutterOpen, F + meta.shutterClose), "gaussian:2x2", "progressive", true);
+        renderWith(resample::ShutterModel::progressive(F + meta.shutterOpen, F + meta.shutterClose), "gaussian:2x2", "progressive", true, true);
     // The reference workflow's fields: Shutter 0 0.25 and 0.5 0.75 of the frame, rows alternating.
     const double interlaced = renderWith(resample::ShutterModel::fields(resample::ShutterGroup{F, F + 0.25}, resample::ShutterGroup{F + 0.5, F + 0.75}, 0),
-                                         "gaussian:2x1", "interlaced", false);
+                                         "gaussian:2x1", "interlaced", false, false);
     std::printf("  resample  progressive frame [%g, %g]: %.2f s -> %s/progressive.exr, progressive_deep.exr, progressive.png\n", meta.shutterOpen,
                 meta.shutterClose, progressive, outDir.c_str());
     std::printf("            interlaced frame, fields [0, 0.25] + [0.5, 0.75], one pass: %.2f s -> %s/interlaced.exr, interlaced.png\n", interlaced,
