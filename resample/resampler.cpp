@@ -411,9 +411,11 @@ class PartUses {
       if (fresh) left_.emplace_back(st->entries().size());
       storeOf_[si] = it->second;
     }
-    std::vector<std::pair<size_t, size_t>> parts;
-    for (const Bucket& bk : plan.buckets) {
-      const Region rg = regionOf(plan, bk);
+    // In parallel: with small buckets the count is as many index walks as the render makes.
+    tbb::enumerable_thread_specific<std::vector<std::pair<size_t, size_t>>> partLists;
+    tbb::parallel_for(size_t(0), plan.buckets.size(), [&](size_t b) {
+      std::vector<std::pair<size_t, size_t>>& parts = partLists.local();
+      const Region rg = regionOf(plan, plan.buckets[b]);
       double tMin = INFINITY, tMax = -INFINITY;
       for (int g = 0; g < int(plan.shutter.groups().size()); ++g) {
         double lo, hi;
@@ -425,7 +427,7 @@ class PartUses {
       gatherParts(plan, tMin - slack, tMax + slack, rg, parts);
       for (auto [si, e] : parts)
         if (storeOf_[si] != kKept) left_[storeOf_[si]][e].fetch_add(1, std::memory_order_relaxed);
-    }
+    });
   }
 
   /// A bucket is done with `parts`.
