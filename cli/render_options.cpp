@@ -46,7 +46,7 @@ void RenderOptions::addTo(CLI::App* app) {
       ->group("Compositing");
   app->add_flag("--backface-cull", backfaceCull, "Knock out micropolygons facing away (unless two-sided)")->group("Compositing");
   app->add_option("--bucket", bucket, "Bucket size in pixels")->capture_default_str()->group("Performance");
-  app->add_option("--cache-mb", cacheMb, "Decoded tile cache per store, MB")->capture_default_str()->group("Performance");
+  app->add_option("--cache-mb", cacheMb, "Decoded tile cache per store, MB (parts leave it after their last bucket; the budget bounds what a sequence keeps for its next frame)")->capture_default_str()->group("Performance");
   app->add_option("--simd", simd,
                   "Instruction set of the rasterizer's inner loops: auto (the widest this CPU runs), avx512, avx2 or none\n"
                   "(scalar); every choice gives the same image, bit for bit")
