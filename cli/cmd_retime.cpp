@@ -43,12 +43,14 @@ void noteWritten(const std::string& outPattern, const RenderOptions& render, siz
   note(cat("wrote ", frames, " frame", frames == 1 ? "" : "s", " (", wrote, ") in ", seconds, " s"));
 }
 
-/// The stores a render over `shutter` reads: RenderSpec::keepDecoded of the render before it,
-/// whose decoded parts it would otherwise decode again.
-std::vector<const store::StoreReader*> storesRead(store::ShotStores& stores, const resample::ShutterModel& shutter) {
-  std::vector<const store::StoreReader*> read;
-  for (const auto& src : resample::frameSpec(stores, shutter).sources) read.push_back(src.store.get());
-  return read;
+/// The render of frames[i]: its shutter's stores and the command's options, with the stores
+/// frames[i + 1] reads kept decoded for it (RenderSpec::keepDecoded).
+RenderSpec specOf(store::ShotStores& stores, const std::vector<OutputFrame>& frames, size_t i, const RenderOptions& render) {
+  RenderSpec spec = resample::frameSpec(stores, frames[i].shutter);
+  render.applyTo(spec);
+  if (i + 1 < frames.size())
+    for (const auto& src : resample::frameSpec(stores, frames[i + 1].shutter).sources) spec.keepDecoded.push_back(src.store.get());
+  return spec;
 }
 
 /// Renders a sequence: checks every store and output name first, then renders frame by frame
@@ -63,10 +65,8 @@ int renderSequence(const std::string& storePattern, const std::string& outPatter
   double seconds = 0;
   for (size_t i = 0; i < frames.size(); ++i) {
     const OutputFrame& f = frames[i];
-    RenderSpec spec = resample::frameSpec(stores, f.shutter);
-    render.applyTo(spec);
+    RenderSpec spec = specOf(stores, frames, i, render);
     spec.progress = frames.size() == 1;
-    if (i + 1 < frames.size()) spec.keepDecoded = storesRead(stores, frames[i + 1].shutter);
     RenderResult result = resample::render(spec);
     result.provenance.frame = f.frame;
     render.writeOutputs(result, outPattern.empty() ? "" : expandFramePattern(outPattern, f.frame), f.frame);
@@ -116,14 +116,10 @@ struct FieldsCommand {
     double seconds = 0;
     for (size_t i = 0; i < list.size(); ++i) {
       const int64_t f = list[i];
-      const auto passes = resample::fieldPassShutters(f, fs);
       RenderResult field[2];
-      for (int k = 0; k < 2; ++k) {
-        RenderSpec spec = resample::frameSpec(stores, k == 0 ? passes.first : passes.second);
-        render.applyTo(spec);
+      for (size_t k = 0; k < 2; ++k) {
+        RenderSpec spec = specOf(stores, passes, 2 * i + k, render);
         spec.progress = false;
-        if (k == 0) spec.keepDecoded = storesRead(stores, passes.second);
-        else if (i + 1 < list.size()) spec.keepDecoded = storesRead(stores, resample::fieldPassShutters(list[i + 1], fs).first);
         field[k] = resample::render(spec);
       }
       seconds += field[0].stats.wallSeconds + field[1].stats.wallSeconds;

@@ -71,9 +71,7 @@ void HitBuffer::recordAnyHit(const HitContext& hc, uint32_t sample, uint32_t m, 
     if (!(z < zbuf[sample])) return;  // ties keep the surface drawn first (rasterizeQueued)
     float c[3];
     attrAt(part, *hc.schema, hc.ci, m, v, b, c);
-    zbuf[sample] = z;
-    colour[sample] = {c[0], c[1], c[2], uint32_t(matte)};
-    if (surfaceIds) objectOf[sample] = part.objectId[m], gridOf[sample] = part.gridId[m];
+    setNearestOpaque(sample, z, c, matte, part, m);
     if (aovLayout.floatCount || aovLayout.uintCount) {
       float fv[64];
       uint32_t uv[16];

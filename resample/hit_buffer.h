@@ -92,10 +92,10 @@ struct HitBuffer {
   // Same values as recordAnyHit() gives an opaque surface (attrAt's arithmetic, in its order).
   void recordOpaqueHit(const HitContext& hc, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float z) {
     ++counters.hits;
-    const float *c0 = hc.colour + size_t(v[0]) * 3, *c1 = hc.colour + size_t(v[1]) * 3, *c2 = hc.colour + size_t(v[2]) * 3;
     const store::TilePart& part = *hc.part;
-    const SurfaceColour c{b[0] * c0[0] + b[1] * c1[0] + b[2] * c2[0], b[0] * c0[1] + b[1] * c1[1] + b[2] * c2[1], b[0] * c0[2] + b[1] * c1[2] + b[2] * c2[2],
-                          uint32_t(part.flags[m] & store::kMatte)};
+    float rgb[3];
+    interpolate3(hc.colour, v, b, rgb);
+    const SurfaceColour c{rgb[0], rgb[1], rgb[2], uint32_t(part.flags[m] & store::kMatte)};
     // No branch: whether a surface is nearer is a coin toss that the predictor loses, so the
     // depth is a min and the colour goes to the sample or, when hidden, to a scratch record.
     // Ties keep the surface drawn first: deterministic by draw order (rasterizeQueued).
@@ -111,18 +111,23 @@ struct HitBuffer {
     ++counters.hits;
     if (!(z < zbuf[sample])) return;  // hidden; ties keep the surface drawn first (rasterizeQueued)
     const store::TilePart& part = *hc.part;
-    const float *o0 = hc.opacity + size_t(v[0]) * 3, *o1 = hc.opacity + size_t(v[1]) * 3, *o2 = hc.opacity + size_t(v[2]) * 3;
-    const float *c0 = hc.colour + size_t(v[0]) * 3, *c1 = hc.colour + size_t(v[1]) * 3, *c2 = hc.colour + size_t(v[2]) * 3;
     float o[3], c[3];
-    for (int k = 0; k < 3; ++k) o[k] = b[0] * o0[k] + b[1] * o1[k] + b[2] * o2[k], c[k] = b[0] * c0[k] + b[1] * c1[k] + b[2] * c2[k];
+    interpolate3(hc.opacity, v, b, o);
+    interpolate3(hc.colour, v, b, c);
     const bool matte = part.flags[m] & store::kMatte;
-    if (o[0] >= 1.f && o[1] >= 1.f && o[2] >= 1.f) {
-      zbuf[sample] = z;
-      colour[sample] = {c[0], c[1], c[2], uint32_t(matte)};
-      if (surfaceIds) objectOf[sample] = part.objectId[m], gridOf[sample] = part.gridId[m];
-      return;
-    }
-    addFragment(sample, z, c, o, part.objectId[m], part.gridId[m], matte);
+    if (o[0] >= 1.f && o[1] >= 1.f && o[2] >= 1.f) setNearestOpaque(sample, z, c, matte, part, m);
+    else addFragment(sample, z, c, o, part.objectId[m], part.gridId[m], matte);
+  }
+  // A per-vertex colour3 array at barycentrics b over triangle v (attrAt's arithmetic, in its order).
+  static void interpolate3(const float* values, const uint32_t v[3], const float b[3], float out[3]) {
+    const float *a0 = values + size_t(v[0]) * 3, *a1 = values + size_t(v[1]) * 3, *a2 = values + size_t(v[2]) * 3;
+    for (int k = 0; k < 3; ++k) out[k] = b[0] * a0[k] + b[1] * a1[k] + b[2] * a2[k];
+  }
+  // The sample's nearest opaque surface is now micropolygon m of `part` at depth z.
+  void setNearestOpaque(uint32_t sample, float z, const float c[3], bool matte, const store::TilePart& part, uint32_t m) {
+    zbuf[sample] = z;
+    colour[sample] = {c[0], c[1], c[2], uint32_t(matte)};
+    if (surfaceIds) objectOf[sample] = part.objectId[m], gridOf[sample] = part.gridId[m];
   }
   void addFragment(uint32_t sample, float z, const float c[3], const float o[3], uint32_t objectId, uint32_t gridId, bool matte);
   void recordAnyHit(const HitContext& hc, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float z);

@@ -15,6 +15,7 @@
 #include <tbb/enumerable_thread_specific.h>
 #include <tbb/parallel_for.h>
 
+#include "common/check.h"
 #include "common/error.h"
 #include "common/progress.h"
 
@@ -434,12 +435,9 @@ class PartUses {
   void done(const Plan& plan, const std::vector<std::pair<size_t, size_t>>& parts) {
     for (auto [si, e] : parts) {
       if (storeOf_[si] == kKept) continue;
-      std::atomic<uint32_t>& left = left_[storeOf_[si]][e];
-      // A part fetched but not counted (cannot happen, by the superset above) is left to the LRU.
-      uint32_t n = left.load(std::memory_order_relaxed);
-      while (n > 0 && !left.compare_exchange_weak(n, n - 1, std::memory_order_acq_rel)) {
-      }
-      if (n == 1) plan.sources[si].store->release(e);
+      const uint32_t before = left_[storeOf_[si]][e].fetch_sub(1, std::memory_order_acq_rel);
+      DCHECK(before > 0, "part ", e, " fetched by more buckets than counted");
+      if (before == 1) plan.sources[si].store->release(e);
     }
   }
 

@@ -159,15 +159,22 @@ struct StoreReader::Impl {
     return part;
   }
 
+  // Drops a ready slot from the cache (the caller holds cacheMutex); returns its part, for the
+  // caller to free after letting go of the lock.
+  std::shared_future<std::shared_ptr<const TilePart>> forget(std::unordered_map<size_t, Slot>::iterator it) const {
+    auto part = std::move(it->second.future);
+    stats.bytes -= it->second.bytes;
+    lru.erase(it->second.lru);
+    slots.erase(it);
+    return part;
+  }
+
   void release(size_t i) const {
     std::shared_future<std::shared_ptr<const TilePart>> doomed;  // freed after the lock is let go
     std::lock_guard lock(cacheMutex);
     auto it = slots.find(i);
     if (it == slots.end() || !it->second.ready) return;
-    doomed = std::move(it->second.future);
-    stats.bytes -= it->second.bytes;
-    lru.erase(it->second.lru);
-    slots.erase(it);
+    doomed = forget(it);
     ++stats.releases;
   }
 
@@ -212,10 +219,7 @@ struct StoreReader::Impl {
     slot.lru = lru.begin();
     stats.bytes += slot.bytes;
     while (stats.bytes > options.cacheBytes && lru.size() > 1) {
-      size_t victim = lru.back();
-      lru.pop_back();
-      stats.bytes -= slots.at(victim).bytes;
-      slots.erase(victim);
+      forget(slots.find(lru.back()));
       ++stats.evictions;
     }
     stats.peakBytes = std::max(stats.peakBytes, stats.bytes);

@@ -592,17 +592,20 @@ TEST(RetimeCli, TwoPassFieldsDecodeEachStoreOnce) {
   CommandResult r = runReshutter("fields " + shot + " --frames 1-2 --spp 4 --two-pass --stats -o " + dir.path("t.####.exr"));
   ASSERT_EQ(r.exitCode, 0) << r.err;
   // Each pass's report: "frame F, field K" then "parts N fetched, M decoded, ...".
-  std::vector<std::pair<long, long>> fetchedDecoded;
-  for (size_t at = r.out.find("parts "); at != std::string::npos; at = r.out.find("parts ", at + 1)) {
+  struct PartCounts {
     long fetched = -1, decoded = -1;
-    if (std::sscanf(r.out.c_str() + at, "parts %ld fetched, %ld decoded", &fetched, &decoded) == 2) fetchedDecoded.push_back({fetched, decoded});
+  };
+  std::vector<PartCounts> pass;
+  for (size_t at = r.out.find("parts "); at != std::string::npos; at = r.out.find("parts ", at + 1)) {
+    PartCounts p;
+    if (std::sscanf(r.out.c_str() + at, "parts %ld fetched, %ld decoded", &p.fetched, &p.decoded) == 2) pass.push_back(p);
   }
-  ASSERT_EQ(fetchedDecoded.size(), 4u) << r.out;
-  EXPECT_GT(fetchedDecoded[0].second, 0) << "frame 1, field 1";
-  EXPECT_GT(fetchedDecoded[1].first, 0) << "frame 1, field 2";
-  EXPECT_EQ(fetchedDecoded[1].second, 0) << "frame 1, field 2: its parts were kept from field 1";
-  EXPECT_GT(fetchedDecoded[2].second, 0) << "frame 2, field 1: another store";
-  EXPECT_EQ(fetchedDecoded[3].second, 0) << "frame 2, field 2";
+  ASSERT_EQ(pass.size(), 4u) << r.out;
+  EXPECT_GT(pass[0].decoded, 0) << "frame 1, field 1";
+  EXPECT_GT(pass[1].fetched, 0) << "frame 1, field 2";
+  EXPECT_EQ(pass[1].decoded, 0) << "frame 1, field 2: its parts were kept from field 1";
+  EXPECT_GT(pass[2].decoded, 0) << "frame 2, field 1: another store";
+  EXPECT_EQ(pass[3].decoded, 0) << "frame 2, field 2";
 }
 
 TEST(RetimeCli, FieldsAndRetimeWriteSequencesThatOpenElsewhere) {
