@@ -213,9 +213,22 @@ void Lexer::binaryBytes(size_t n, std::string& out, const char* what) {
   }
 }
 
+// A definition's name is read here, never through next(): next() would take a further
+// definition as part of this one and recurse once per 0xCC/0xCD byte (a file of them overflowed
+// the stack). Only a string token is accepted; anything else is the error it is.
 bool Lexer::stringToken(const char* what) {
-  TokenType t = next();
-  if (t != TokenType::String) fail(cat(what, " must be followed by a string"), true);
+  skipSpace();
+  const int c = peek();
+  if (c == '"') {
+    ++pos_;
+    asciiString();
+    return true;
+  }
+  const bool binaryString = (c >= 0x90 && c <= 0xa3) || c == 0xcf || c == 0xd0;
+  if (!binaryString) fail(cat(what, " must be followed by a string"), true);
+  ++pos_;
+  TokenType t;
+  binaryToken(uint8_t(c), t);
   return true;
 }
 

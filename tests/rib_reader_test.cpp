@@ -619,6 +619,27 @@ TEST(RibReaderHardTest, ParameterListErrorsNameTheParameter) {
   }
 }
 
+TEST(RibReaderHardTest, LongRunsOfDefinitionsNeitherRecurseNorCrash) {
+  // A definition's name must be a string; a definition where the name should be is an error,
+  // found at the second byte, whatever follows (2 MB of 0xCC overflowed the stack when each
+  // definition read its name through the full tokenizer).
+  for (char code : {'\xcc', '\xcd'}) {
+    auto [where, problem] = parseError(std::string(4 << 20, code));
+    EXPECT_NE(problem.find("must be followed by a string"), std::string::npos) << problem;
+    EXPECT_NE(where.find("bad.rib: byte"), std::string::npos) << where;
+  }
+  // Valid definitions, many in a row, still parse: each names a string directly.
+  std::string defs;
+  for (int i = 0; i < 100000; ++i) defs += "\xcd\x01\x92" "ab";
+  defs += "\xcc\x07\x9a" "WorldBegin \xa6\x07";
+  struct H : RequestHandler {
+    int worldBegins = 0;
+    bool handle(const Request& r, const Args&) override { return worldBegins += r.name == "WorldBegin", true; }
+  } h;
+  Reader().parseBuffer(defs, "defs.rib", h);
+  EXPECT_EQ(h.worldBegins, 1);
+}
+
 TEST(RibReaderHardTest, FuzzCorpusNeverCrashes) {
   // Inputs the fuzzer found interesting (tests/corpus/rib/): each parses or throws Error.
   const std::filesystem::path corpus = test::sourceDir() + "/tests/corpus/rib";
