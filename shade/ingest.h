@@ -28,9 +28,13 @@
 //   become one attribute per element, "st[0]" "st[1]"; integers are stored as floats;
 //   string, matrix, bool and hpoint variables are skipped with a warning. Point, vector and
 //   normal variables are transformed to camera space (normals by the inverse transpose).
-// - Orientation: corners are stored in the order that is front-facing for Orientation "outside"
-//   in camera space; "inside", ReverseOrientation, and "lh"/"rh" against a mirroring transform
-//   reverse the ring. Sides 2 sets the two-sided flag; Matte 1 the matte flag.
+// - Graphics state: options, camera, transforms, attributes and motion blocks of transforms are
+//   read by the same interpreter as `shade` (shade/rib_state.h), so a dump and a scene with the
+//   same header get the same camera (named "world", the options at the first WorldBegin).
+// - Orientation: corners are stored in the order that is front-facing in camera space for the
+//   orientation in force, as RenderMan defines it: a ring is reversed when the orientation differs
+//   from the handedness of the primitive's transform ("inside", ReverseOrientation, or a mirroring
+//   transform after the orientation was set). Sides 2 sets the two-sided flag; Matte 1 the matte flag.
 // - Frames: with several FrameBegin blocks, --frame N picks block N (default: the first).
 #pragma once
 

@@ -16,7 +16,7 @@ using rib::StorageClass;
 namespace {
 
 /// The primitive's and its transform's times, clipped to the shutter [open, close].
-std::vector<double> knotsOf(const Prim& p, const Motion& ctm, double open, double close) {
+std::vector<double> knotsOf(const Prim& p, const MotionXform& ctm, double open, double close) {
   std::vector<double> knots;
   std::set<double> ts(p.times.begin(), p.times.end());
   ts.insert(ctm.times.begin(), ctm.times.end());
@@ -42,7 +42,7 @@ struct GridVertices {
 
 /// Positions at every knot, knot-major: the geometry at t (linear between copies, exact at the
 /// copies' times), then the CTM at t.
-void positionsAtKnots(const GridVertices& gv, const Motion& ctm, const std::vector<double>& knots, std::vector<glm::vec3>& out) {
+void positionsAtKnots(const GridVertices& gv, const MotionXform& ctm, const std::vector<double>& knots, std::vector<glm::vec3>& out) {
   const Prim& p = gv.p;
   const uint32_t nV = gv.count;
   out.resize(knots.size() * nV);
@@ -147,7 +147,7 @@ void DumpHandler::emitPrim(const Prim& p) {
   g.positions = positions_;
   g.corners = corners_;
   g.gridId = gridId_++;
-  g.flags = uint8_t((s.sides == 2 ? kTwoSided : 0) | (s.matte ? kMatte : 0));
+  g.flags = uint8_t((s.twoSided ? kTwoSided : 0) | (s.matte ? kMatte : 0));
   sink_->addGrid(g);
   if (stats_) {
     const size_t nMp = p.mpFace.size();

@@ -24,39 +24,21 @@
 
 #include "rib/rib.h"
 #include "shade/ingest.h"
+#include "shade/scene.h"
 #include "store/model.h"
 
 namespace reshutter::shade::ingest {
 
 // ---------------------------------------------------------------------------------------------
-// Moving transforms
-
-struct Motion {
-  std::vector<double> times;                    // empty: static
-  std::vector<glm::dmat4> mats{glm::dmat4(1)};  // one per time, or one
-  bool moving() const { return mats.size() > 1; }
-  glm::dmat4 at(double t) const {
-    if (mats.size() == 1 || t <= times.front()) return mats.front();
-    if (t >= times.back()) return mats.back();
-    size_t i = size_t(std::upper_bound(times.begin(), times.end(), t) - times.begin()) - 1;
-    double u = (t - times[i]) / (times[i + 1] - times[i]);
-    return mats[i] * (1 - u) + mats[i + 1] * u;
-  }
-};
-
-/// a · b (b applies first), at the union of their times.
-Motion concat(const Motion& a, const Motion& b);
+// The state a primitive is ingested under (from the shared graphics state, shade/rib_state.h)
 
 inline bool isIdentity(const glm::dmat4& m) { return m == glm::dmat4(1.0); }
 
-enum class Orient : uint8_t { Outside, Inside, LH, RH };
-
 struct Attrs {
-  Motion ctm;  // object → camera
-  Orient orient = Orient::Outside;
-  int sides = 2;
-  bool matte = false;
-  glm::vec3 color{1.f}, opacity{1.f};
+  MotionXform ctm;       // object → camera
+  bool reverse = false;  // ring order reversed (orientation against the transform's handedness)
+  bool twoSided = true, matte = false;
+  glm::vec3 color{1.f}, opacity{1.f};  // the first knot's
 };
 
 // ---------------------------------------------------------------------------------------------
@@ -133,9 +115,7 @@ class DumpHandler final : public rib::RequestHandler {
         opt_(opt),
         meta_(meta),
         sink_(sink),
-        stats_(stats) {
-    attrs_.emplace_back();
-  }
+        stats_(stats) {}
   /// Optimistic mode: opens the sink once the schema is known.
   std::function<store::GridSink*(const store::StoreMeta&)> openSink;
   bool sinkOpen() const { return sink_ != nullptr; }
@@ -145,37 +125,22 @@ class DumpHandler final : public rib::RequestHandler {
   store::StoreMeta scannedMeta(const std::string& file) const;
 
  private:
-  // Options
-  int width_ = 640, height_ = 480;
-  double pixelAspect_ = 1, frameAspect_ = 0;
-  double screen_[4] = {0, 0, 0, 0};
-  bool perspective_ = false;  // RenderMan's default projection is orthographic
-  double fov_ = 90;
-  double near_ = 1e-4, far_ = 1e30;
-  double open_ = 0, close_ = 0;
+  // The graphics state: options, camera, transforms, attributes, motion blocks of transforms.
+  Scene scene_{nullptr};
   bool haveCamera_ = false;
   store::Camera camera_;
   double cameraOpen_ = 0, cameraClose_ = 0;
   std::optional<int64_t> frameNumber_;
 
   // Frames
-  bool sawFrame_ = false, inFrame_ = false, skipping_ = false, done_ = false, frameFound_ = false;
+  bool sawFrame_ = false, skipping_ = false, done_ = false, frameFound_ = false;
   std::vector<int64_t> framesSeen_;
 
-  // Graphics state
-  std::vector<Attrs> attrs_;
-  std::vector<Motion> xformStack_;
-  std::map<std::string, Motion> coordSys_;
-  Motion worldToCamera_;
-  bool inWorld_ = false;
-
-  // Motion blocks
+  // Motion blocks of primitives: copies of one request, one per knot
   bool inMotion_ = false;
   std::vector<double> motionTimes_;
   std::string motionRequest_;
   size_t motionCount_ = 0;
-  std::vector<glm::dmat4> motionMats_;
-  bool motionAbsolute_ = false;
   Prim prim_;
 
   // Schema (pass 1)
@@ -197,20 +162,15 @@ class DumpHandler final : public rib::RequestHandler {
   std::vector<uint32_t> corners_;
   std::vector<std::vector<float>> attrData_;
 
-  Attrs& cur() { return attrs_.back(); }
+  /// The state a primitive declared now is ingested under.
+  Attrs cur() const;
 
   // ingest_requests.cpp: each takes its requests and returns false for any other.
-  void beginFrame(const rib::Args& a);
-  void endFrame();
-  bool cameraOption(std::string_view n, const rib::Args& a);
-  void setProjection(const rib::Args& a);
+  void beginFrame(const rib::Request& r, const rib::Args& a);
+  void endFrame(const rib::Request& r, const rib::Args& a);
   void beginWorld();
-  bool transform(std::string_view n, const rib::Args& a);
-  void applyTransform(const rib::Args& a, const glm::dmat4& m, bool absolute);
-  bool attribute(const rib::Request& r, const rib::Args& a);
-  void setColorOrOpacity(const rib::Request& r, const rib::Args& a);
-  void beginMotion(const rib::Args& a);
-  void endMotion(const rib::Args& a);
+  void beginMotion(const rib::Request& r, const rib::Args& a);
+  void endMotion(const rib::Request& r, const rib::Args& a);
   bool ignored(std::string_view n);
 
   // ingest_polygons.cpp

@@ -283,7 +283,7 @@ void DumpHandler::readPolygons(const Request& r, const Args& a, Prim& p, bool fi
   if (p.nP == 0) a.fail("has no vertices");
   buildFaces(a, counts, p);
   p.P.push_back(std::move(pos));
-  if (const rib::Param* blurP = findParam(params, "blurP")) readBlurP(a, *blurP, inMotion_, open_, close_, p);
+  if (const rib::Param* blurP = findParam(params, "blurP")) readBlurP(a, *blurP, inMotion_, scene_.options().shutterOpen, scene_.options().shutterClose, p);
   readVariables(r, a, params, p);
   if (!first) return;
   split(a, p);
@@ -328,10 +328,8 @@ void DumpHandler::readVariables(const Request& r, const Args& a, const std::vect
 /// polygons fanned into quads, the others ear-clipped into triangles.
 void DumpHandler::split(const Args& a, Prim& p) {
   const Attrs& s = cur();
-  // Ring order: front-facing for Orientation "outside" in camera space (see ingest.h).
-  const double det = glm::determinant(s.ctm.at(s.ctm.moving() ? s.ctm.times.front() : 0.0));
-  const bool mirrored = det < 0;
-  const bool reverse = s.orient == Orient::Inside || (s.orient == Orient::LH && mirrored) || (s.orient == Orient::RH && !mirrored);
+  // Ring order: front-facing in camera space for the orientation in force (see ingest.h).
+  const bool reverse = s.reverse;
   auto add = [&](uint32_t f, std::initializer_list<uint32_t> fc) {
     uint32_t c[4] = {kNoCorner, kNoCorner, kNoCorner, kNoCorner};
     size_t i = 0;

@@ -1,12 +1,14 @@
 // RIB requests → Scene builder calls (the subset and its policy are in rib_scene.h).
 #include "shade/rib_scene.h"
 
+#include <algorithm>
 #include <cmath>
 
 #include <glm/gtc/type_ptr.hpp>
 
 #include "common/error.h"
 #include "common/log.h"
+#include "shade/rib_state.h"
 
 namespace reshutter::shade {
 
@@ -83,29 +85,6 @@ Geometry geometry(const Args& args, size_t first) {
   return g;
 }
 
-glm::dvec3 colorArg(const Args& args) {
-  if (args.count() >= 3) return {args.number(0), args.number(1), args.number(2)};
-  const auto& v = args.numbers(0);
-  if (v.size() == 1) return glm::dvec3(v[0]);
-  if (v.size() < 3) args.fail("expects a colour of 3 numbers");
-  return {v[0], v[1], v[2]};
-}
-
-glm::dmat4 matrixArg(const Args& args) {
-  std::vector<double> v;
-  if (args.count() >= 16) {
-    for (size_t i = 0; i < 16; ++i) v.push_back(args.number(i));
-  } else {
-    v = args.numbers(0);
-  }
-  if (v.size() != 16) args.fail(cat("expects a 4x4 matrix (16 numbers), has ", v.size()));
-  for (double x : v)
-    if (!std::isfinite(x)) args.fail("matrix element is not finite");
-  // RIB matrices are row-major for row vectors: read column-major they are the column-vector
-  // matrix glm wants.
-  return glm::make_mat4(v.data());
-}
-
 std::string handleArg(const rib::Request& r, size_t i) {
   if (i >= r.values.size()) return {};
   const Value& v = r.values[i];
@@ -116,51 +95,20 @@ std::string handleArg(const rib::Request& r, size_t i) {
   return {};
 }
 
-std::vector<int> intArray(const Args& args, size_t i) {
-  std::vector<int> out;
-  for (double d : args.numbers(i)) {
-    if (d != std::floor(d) || std::abs(d) > 2e9) args.fail(cat("expects integers, got ", d));
-    out.push_back(int(d));
-  }
-  return out;
-}
-
 }  // namespace
 
 bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
   Scene& s = scene_;
   const std::string_view n = r.name;
-  s.where = cat(r.where.str(), " (", n, ")");
 
-  // Options
-  if (n == "Format") return s.format(int(a.number(0)), int(a.number(1)), a.count() > 2 ? a.number(2) : 1.0), true;
-  if (n == "FrameAspectRatio") return s.frameAspectRatio(a.number(0)), true;
-  if (n == "ScreenWindow") {
-    if (a.count() == 1) {
-      const auto& v = a.numbers(0);
-      if (v.size() != 4) a.fail("expects 4 numbers");
-      return s.screenWindow(v[0], v[1], v[2], v[3]), true;
-    }
-    return s.screenWindow(a.number(0), a.number(1), a.number(2), a.number(3)), true;
+  if (applyStateRequest(s, r, a)) return true;
+
+  // Options and attributes of the shading pass
+  if (n == "PixelSamples") {
+    // RtFloats; the shading pass only needs a rough rate, so they are rounded and bounded.
+    auto count = [&](size_t i) { return int(std::clamp(std::isfinite(a.number(i)) ? std::round(a.number(i)) : 1.0, 1.0, 4096.0)); };
+    return s.pixelSamples(count(0), count(1)), true;
   }
-  if (n == "Projection") {
-    const std::string& type = a.string(0);
-    if (type == "orthographic") return s.orthographic(), true;
-    if (type == "perspective") {
-      double fov = 90;
-      for (const Param& p : a.params(1))
-        if (p.decl.name == "fov") {
-          if (p.value->kind == Value::Kind::Number) fov = p.value->number;
-          else if (numbersOf(p) && !numbersOf(p)->empty()) fov = numbersOf(p)->front();
-        }
-      return s.perspective(fov), true;
-    }
-    warnOnce(cat("projection:", type), cat(s.where, ": projection '", type, "' is not supported; using perspective"));
-    return s.perspective(90), true;
-  }
-  if (n == "Clipping") return s.clipping(a.number(0), a.number(1)), true;
-  if (n == "Shutter") return s.shutter(a.number(0), a.number(1)), true;
-  if (n == "PixelSamples") return s.pixelSamples(int(a.number(0)), int(a.number(1))), true;
   if (n == "PixelFilter") return true;  // a re-sampling choice: `reshutter resample --filter`
   if (n == "ShadingRate") return s.shadingRate(a.number(0)), true;
   if (n == "Display") {
@@ -168,37 +116,12 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
     return true;
   }
   if (n == "DisplayChannel") return true;  // declarations only; Display's mode selects variables
-  if (n == "Camera") return s.camera(a.string(0)), true;
-  if (n == "FrameBegin") return s.frameBegin(a.count() ? int64_t(a.number(0)) : 1), true;
-  if (n == "FrameEnd") return s.frameEnd(), true;
-  if (n == "WorldBegin") return s.worldBegin(), true;
-  if (n == "WorldEnd") return s.worldEnd(), true;
-
-  // Attributes and transforms
-  if (n == "AttributeBegin") return s.attributeBegin(), true;
-  if (n == "AttributeEnd") return s.attributeEnd(), true;
-  if (n == "TransformBegin") return s.transformBegin(), true;
-  if (n == "TransformEnd") return s.transformEnd(), true;
-  if (n == "Identity") return s.identity(), true;
-  if (n == "Transform") return s.transform(matrixArg(a)), true;
-  if (n == "ConcatTransform") return s.concatTransform(matrixArg(a)), true;
-  if (n == "Translate") return s.translate(a.number(0), a.number(1), a.number(2)), true;
-  if (n == "Rotate") return s.rotate(a.number(0), a.number(1), a.number(2), a.number(3)), true;
-  if (n == "Scale") return s.scale(a.number(0), a.number(1), a.number(2)), true;
-  if (n == "CoordinateSystem") return s.coordinateSystem(a.string(0)), true;
-  if (n == "CoordSysTransform") return s.coordSysTransform(a.string(0)), true;
-  if (n == "Orientation") return s.orientation(a.string(0)), true;
-  if (n == "ReverseOrientation") return s.reverseOrientation(), true;
-  if (n == "Sides") return s.sides(int(a.number(0))), true;
-  if (n == "Color") return s.color(colorArg(a)), true;
-  if (n == "Opacity") return s.opacity(colorArg(a)), true;
   if (n == "Surface") return s.surface(a.string(0), numericParams(a.params(1))), true;
   if (n == "LightSource") {
     // The handle is a number (RI 3.2) or a string (3.3+); the parameter list follows it.
     return s.lightSource(a.string(0), handleArg(r, 1), numericParams(a.params(2))), true;
   }
   if (n == "Illuminate") return s.illuminate(handleArg(r, 0), a.number(1) != 0), true;
-  if (n == "Matte") return s.matte(a.number(0) != 0), true;
   if (n == "GeometricApproximation") {
     const std::string& type = a.string(0);
     if (type == "motionfactor") return s.motionFactor(a.number(1)), true;
@@ -218,13 +141,6 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
     warnOnce(cat("attribute:", cls), cat(s.where, ": Attribute \"", cls, "\" has no effect on the shading pass; ignored"));
     return true;
   }
-  if (n == "MotionBegin") {
-    if (a.count() == 1) return s.motionBegin(a.numbers(0)), true;
-    std::vector<double> t;
-    for (size_t i = 0; i < a.count(); ++i) t.push_back(a.number(i));
-    return s.motionBegin(t), true;
-  }
-  if (n == "MotionEnd") return s.motionEnd(), true;
   if (n == "SolidBegin" || n == "SolidEnd") {
     warnOnce("rib-csg", cat(s.where, ": solid modelling (CSG) is not supported; the solids' primitives are shaded as a union"));
     return true;

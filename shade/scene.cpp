@@ -266,7 +266,10 @@ void Scene::display(const std::string& name, const std::string& mode) {
 
 void Scene::camera(const std::string& name) {
   if (inWorld_) error("Camera is an option: it must come before WorldBegin");
-  if (name == "world" || name == "frame") error(cat("camera name '", name, "' is reserved"));
+  // RIS-era exporters name the main camera "world": it is the one WorldBegin freezes, so the
+  // request declares nothing more.
+  if (name == "world") return;
+  if (name == "frame") error(cat("camera name '", name, "' is reserved"));
   store::Camera c = options_.camera;
   c.name = name;
   c.worldToCamera = cur_.ctm.at(options_.shutterOpen);
@@ -327,7 +330,6 @@ void Scene::worldBegin() {
   frame_.worldToCamera = cur_.ctm;
   push(Block::World);
   coordSystems_["world"] = cur_.ctm;
-  coordSystems_["camera"] = MotionXform();
   inWorld_ = true;
 }
 
@@ -382,6 +384,11 @@ void Scene::rotate(double deg, double x, double y, double z) {
 void Scene::scale(double x, double y, double z) { applyTransform(glm::scale(glm::dmat4(1.0), glm::dvec3(x, y, z)), false); }
 void Scene::coordinateSystem(const std::string& name) { coordSystems_[name] = cur_.ctm; }
 void Scene::coordSysTransform(const std::string& name) {
+  if (name == "camera") {
+    cur_.ctm = MotionXform();
+    ctmShared_.reset();
+    return;
+  }
   auto it = coordSystems_.find(name);
   if (it == coordSystems_.end()) error(cat("unknown coordinate system '", name, "'"));
   cur_.ctm = it->second;
@@ -521,6 +528,8 @@ void Scene::motionEnd() {
   }
 }
 
+bool Scene::orientationFlipped() const { return cur_.attrs->orientationRH != csIsRightHanded(cur_.ctm); }
+
 Primitive Scene::basePrim(PrimKind kind) {
   // Primitives declared under one transform share it.
   if (!ctmShared_) ctmShared_ = std::make_shared<const MotionXform>(cur_.ctm);
@@ -528,7 +537,7 @@ Primitive Scene::basePrim(PrimKind kind) {
   p.kind = kind;
   p.attrs = cur_.attrs;
   p.xform = ctmShared_;
-  p.flipNormals = cur_.attrs->orientationRH != csIsRightHanded(cur_.ctm);
+  p.flipNormals = orientationFlipped();
   return p;
 }
 

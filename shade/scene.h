@@ -245,6 +245,15 @@ class Scene {
   void polygon(const std::vector<glm::dvec3>& P, const VertexData& vd = {});
 
   const FrameOptions& options() const { return options_; }
+  /// The world block being read: its options and camera as WorldBegin froze them.
+  const FrameScene& world() const { return frame_; }
+  bool inWorld() const { return inWorld_; }
+  /// The state a primitive declared now would carry.
+  const MotionXform& currentTransform() const { return cur_.ctm; }
+  const Attributes& currentAttributes() const { return *cur_.attrs; }
+  /// True when the current orientation is opposite to the handedness of the current transform
+  /// (a primitive's normals and ring order are then reversed).
+  bool orientationFlipped() const;
   int framesShaded() const { return framesDone_; }
 
  private:

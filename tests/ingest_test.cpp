@@ -14,6 +14,7 @@
 #include "common/log.h"
 #include "shade/dump_writer.h"
 #include "shade/ingest.h"
+#include "shade/rib_scene.h"
 #include "store/reader.h"
 #include "store/synthetic.h"
 #include "tests/test_util.h"
@@ -397,10 +398,41 @@ TEST(IngestTest, OrientationSidesAndMatte) {
   EXPECT_EQ(ring("Orientation \"lh\"\n").first, asGiven);
   EXPECT_EQ(ring("Orientation \"rh\"\n").first, reversed);
   EXPECT_EQ(ring("Scale -1 1 1\nOrientation \"lh\"\n").first, reversed);
-  EXPECT_EQ(ring("Scale -1 1 1\n").first, asGiven);  // "outside" follows the mirrored space
+  // A mirror changes the coordinate system's handedness, not the orientation (RenderMan: a
+  // negative scale needs a ReverseOrientation to keep its front faces).
+  EXPECT_EQ(ring("Scale -1 1 1\n").first, reversed);
+  EXPECT_EQ(ring("Scale -1 1 1\nReverseOrientation\n").first, asGiven);
+  EXPECT_EQ(ring("Scale -1 1 1\nOrientation \"outside\"\n").first, asGiven);
+  EXPECT_EQ(ring("Orientation \"outside\"\nScale -1 1 1\n").first, reversed);
   EXPECT_EQ(ring("Sides 1\n").second, 0);
   EXPECT_EQ(ring("Matte 1\n").second, kTwoSided | kMatte);
   EXPECT_EQ(ring("AttributeBegin\nSides 1\nAttributeEnd\n").second, kTwoSided);
+}
+
+TEST(IngestTest, CameraIsTheOneTheShadingPassReads) {
+  // One interpreter: a dump and a scene with the same options give the same camera and shutter,
+  // including the forms the two readers once disagreed on (a one-array ScreenWindow, a RIS
+  // projection, FrameAspectRatio, a moving camera, Camera "world").
+  const std::vector<std::string> heads = {
+      "Format 64 48 1\nProjection \"perspective\" \"fov\" [60]\nShutter 0 1\n",
+      "Format 320 240 2\nScreenWindow [-2 2 -1 1]\nProjection \"orthographic\"\nClipping 0.5 500\nShutter 0.25 0.75\n",
+      "Format 100 100 1\nFrameAspectRatio 0.5\nProjection \"PxrCamera\" \"float fov\" [35]\nTranslate 0 0 5\nRotate 30 0 1 0\nCamera \"world\"\n",
+      "Format 64 64 1\nProjection \"perspective\"\nShutter 0 1\nMotionBegin [0 1]\nTranslate 0 0 1\nTranslate 0 0 2\nMotionEnd\n",
+  };
+  for (const std::string& head : heads) {
+    test::ScratchDir dir;
+    const std::string path = dir.path("scene.rib");
+    writeFile(path, head + "WorldBegin\nPolygon " + kSquare + "\nWorldEnd\n");
+    const StoreMeta dump = shade::scanDump(path);
+    std::vector<shade::FrameOptions> frames;
+    shade::Scene scene([&](shade::FrameScene& f) { frames.push_back(f.options); });
+    shade::readRibScene(path, scene);
+    ASSERT_EQ(frames.size(), 1u) << head;
+    ASSERT_EQ(dump.cameras.size(), 1u);
+    EXPECT_TRUE(dump.cameras[0] == frames[0].camera) << head;
+    EXPECT_EQ(dump.shutterOpen, frames[0].shutterOpen) << head;
+    EXPECT_EQ(dump.shutterClose, frames[0].shutterClose) << head;
+  }
 }
 
 TEST(IngestTest, AppearanceChangingPerKnotKeepsTheFirstWithAWarning) {
@@ -489,7 +521,8 @@ TEST(IngestHardTest, BadDumpsGiveOneClearError) {
       {kHeader + "MotionBegin [1 0]\n", "dump.rib:5 (MotionBegin)", "must increase"},
       {kHeader + "MotionBegin [0 1]\nPolygon " + kSquare + "\nPolygon " + kSquare + "\n", "dump.rib", "inside a motion block"},
       {"Polygon " + kSquare + "\n", "dump.rib", "no WorldBegin"},
-      {"Projection \"fisheye\"\n", "dump.rib:1 (Projection)", "not supported"},
+      {"Projection \"perspective\" \"fov\" [200]\n", "dump.rib:1 (Projection)", "not in (0, 180)"},
+      {"Format 640 480 1\nClipping 10 1\n", "dump.rib:2 (Clipping)", "invalid"},
       {"Projection \"perspective\" \"fov\" []\n", "dump.rib:1 (Projection)", "takes one number"},
       {"Format 1e300 480 1\n", "dump.rib:1 (Format)", "must be an integer"},
       {"FrameBegin 1.5\n", "dump.rib:1 (FrameBegin)", "must be an integer"},
