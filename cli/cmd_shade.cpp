@@ -50,13 +50,18 @@ struct ShadeCommand {
       if (!wanted.empty() && std::find(wanted.begin(), wanted.end(), n) == wanted.end()) return;
       if (written > 0 && !hasFramePlaceholder(output)) fail("-o", "the scene has several frames: name the outputs with a frame pattern such as shot.####.mps");
       frame.source = scene;
+      std::string skipped;
+      for (const auto& [request, count] : frame.skipped) skipped += cat(skipped.empty() ? "" : ", ", grouped(count), " ", request);
+      if (frame.prims.empty() && !skipped.empty())
+        fail(scene, "frame ", n, ": every primitive was skipped (", skipped, "); nothing to shade");
       const std::string path = expandFramePattern(output, n);
       shade::StoreResult r = shade::shadeToStore(frame, opt, path);
       ++written;
-      std::printf("frame %lld: %s micropolygons in %s grids (%s moving), shaded at t=%g in %.2f s -> %s (%s, %.1f bytes/micropolygon)\n", (long long)n,
+      std::printf("frame %lld: %s micropolygons in %s grids (%s moving), shaded at t=%g in %.2f s -> %s (%s, %.1f bytes/micropolygon)%s\n", (long long)n,
                   grouped(r.shade.micropolygons).c_str(), grouped(r.shade.grids).c_str(), grouped(r.shade.movingGrids).c_str(), r.shade.shadeAt,
                   r.shade.seconds, path.c_str(), humanBytes(double(r.write.fileBytes)).c_str(),
-                  r.shade.micropolygons ? double(r.write.fileBytes) / double(r.shade.micropolygons) : 0.0);
+                  r.shade.micropolygons ? double(r.write.fileBytes) / double(r.shade.micropolygons) : 0.0,
+                  skipped.empty() ? "" : cat("; skipped primitives: ", skipped).c_str());
       std::fflush(stdout);
       if (verbosity() == Verbosity::Verbose)
         note(cat("frame ", n, ": ", r.shade.primitives, " primitives, ", r.shade.culledPieces,

@@ -7,6 +7,7 @@
 
 #include "common/error.h"
 #include "common/log.h"
+#include "rib/conditional.h"
 #include "rib/lexer.h"
 
 namespace reshutter::rib {
@@ -264,8 +265,14 @@ std::vector<Param> Args::params(size_t first) const {
     if (j + 1 >= n) fail(cat("parameter '", token, "' has no value"));
     Param p;
     if (!reader_.lookup(token, p.decl)) {
-      if (hasSpace(token)) fail(cat("malformed inline declaration '", token, "'"));
-      fail(cat("unknown parameter '", token, "' (not declared; use Declare or an inline declaration)"));
+      // Exporters write parameters a reader cannot know (a shader's own, RIS connections such as
+      // "reference color"): the scene goes on without them, with one warning per (request, name).
+      const std::string_view bare = hasSpace(token) ? std::string_view(token).substr(token.find_last_of(" \t\n") + 1) : std::string_view(token);
+      warnOnce(cat("rib-param:", r_.name, ":", bare),
+               cat(r_.where.str(), " (", r_.name, "): parameter '", token, "' ",
+                   hasSpace(token) ? "has a declaration this reader does not understand" : "is not declared (Declare or an inline declaration names its type)",
+                   "; skipped"));
+      continue;
     }
     p.value = &r_.values[j + 1];
     const bool isString = p.decl.type == ParamType::String;
@@ -292,7 +299,15 @@ struct Reader::Impl {
   std::vector<const Lexer*> active;        // open lexers (ReadArchive nests)
   std::vector<std::vector<double>> spare;  // recycled array storage
 
+  Conditionals conditions;
+
   void parse(Lexer& lx, RequestHandler& handler, Reader& self, int depth);
+  /// IfBegin/ElseIf/Else/IfEnd; false for any other request.
+  bool conditional(const Request& req, const Args& args);
+  void recordUserOptions(const Args& args);
+  void checkClosed(const std::string& file) const {
+    if (conditions.open()) fail(file, "ends inside an IfBegin block (IfEnd missing)");
+  }
   void dispatch(const Request& req, RequestHandler& handler, Reader& self, const std::string& file, int depth);
 };
 
@@ -331,11 +346,50 @@ void Reader::declare(const std::string& name, const std::string& declaration) {
 void Reader::parseFile(const std::string& path, RequestHandler& handler) {
   Lexer lx(openFileSource(path), path);
   impl_->parse(lx, handler, *this, 0);
+  impl_->checkClosed(path);
 }
 
 void Reader::parseBuffer(std::string_view bytes, const std::string& name, RequestHandler& handler) {
   Lexer lx(memorySource(bytes, name), name);
   impl_->parse(lx, handler, *this, 0);
+  impl_->checkClosed(name);
+}
+
+bool Reader::Impl::conditional(const Request& req, const Args& args) {
+  const std::string_view n = req.name;
+  auto evaluate = [&]() {
+    if (args.count() != 1) args.fail(cat("expects one condition string, has ", args.count(), " arguments"));
+    try {
+      return conditions.evaluate(args.string(0));
+    } catch (const std::invalid_argument& e) {
+      args.fail(cat("cannot read the condition '", args.string(0), "': ", e.what()));
+    }
+  };
+  if (n == "IfBegin") return conditions.ifBegin(conditions.active() && evaluate()), true;
+  if (n == "ElseIf") {
+    const bool value = conditions.elseIfWanted() && evaluate();
+    if (!conditions.elseIf(value)) args.fail("ElseIf without IfBegin (or after Else)");
+    return true;
+  }
+  if (n == "Else") {
+    if (!conditions.elseBranch()) args.fail("Else without IfBegin (or a second Else)");
+    return true;
+  }
+  if (n == "IfEnd") {
+    if (!conditions.ifEnd()) args.fail("IfEnd without IfBegin");
+    return true;
+  }
+  return false;
+}
+
+void Reader::Impl::recordUserOptions(const Args& args) {
+  for (const Param& p : args.params(1)) {
+    const Value& v = *p.value;
+    if (v.kind == Value::Kind::String) conditions.setUser(p.decl.name, v.string, false, 0);
+    else if (v.kind == Value::Kind::StringArray && !v.strings.empty()) conditions.setUser(p.decl.name, v.strings[0], false, 0);
+    else if (v.kind == Value::Kind::Number) conditions.setUser(p.decl.name, cat(v.number), true, v.number);
+    else if (v.kind == Value::Kind::NumberArray && !v.numbers.empty()) conditions.setUser(p.decl.name, cat(v.numbers[0]), true, v.numbers[0]);
+  }
 }
 
 void Reader::Impl::parse(Lexer& lx, RequestHandler& handler, Reader& self, int depth) {
@@ -442,7 +496,9 @@ void Reader::Impl::parse(Lexer& lx, RequestHandler& handler, Reader& self, int d
 void Reader::Impl::dispatch(const Request& req, RequestHandler& handler, Reader& self, const std::string& file, int depth) {
   Args args(req, self);
   const std::string_view n = req.name;
+  if (conditional(req, args) || !conditions.active()) return;
   if (n == "version") return;
+  if (n == "Option" && args.count() >= 1 && req.values[0].isString() && req.values[0].string == "user") recordUserOptions(args);
   if (n == "Declare") {
     if (args.count() != 2) args.fail(cat("expects a name and a declaration, has ", args.count(), " arguments"));
     const std::string& name = args.string(0);

@@ -2,8 +2,9 @@
 // 3.2 appendix C, mixed; gzip-compressed, detected by content) into requests, one at a time, with
 // memory independent of file size. The reader resolves `ReadArchive` (paths relative to the
 // including file) and `version`, tracks `Declare`d and inline parameter declarations (a Declare
-// is applied, then shown to the handler, whose answer is ignored), and hands every other
-// request to a RequestHandler. Requests a handler does not take are warned about once per kind and
+// is applied, then shown to the handler, whose answer is ignored), evaluates conditional RIB
+// (IfBegin/ElseIf/Else/IfEnd on Option "user" values: rib/conditional.h; a branch not taken is
+// never handed on) and hands every other request to a RequestHandler. Requests a handler does not take are warned about once per kind and
 // skipped. Errors are reshutter::Error naming file:line (or file:byte N inside binary data) and
 // the request.
 #pragma once
@@ -77,7 +78,9 @@ class Args {
   const std::string& string(size_t i) const;
   const std::vector<double>& numbers(size_t i) const;  // a number array (a single number is not one)
   /// The parameter list starting at value `first`: name/value pairs, names resolved through
-  /// Declare and inline declarations; unknown names are an error naming the parameter.
+  /// Declare and inline declarations; an undeclared name or a declaration this reader does not
+  /// understand is skipped with one warning per (request, name). Values that do not match their
+  /// declaration are an error naming the parameter.
   std::vector<Param> params(size_t first) const;
   [[noreturn]] void fail(const std::string& problem) const;  // "file:line (Request): problem"
 

@@ -95,6 +95,28 @@ std::string handleArg(const rib::Request& r, size_t i) {
   return {};
 }
 
+RisNode risNode(const rib::Request& r, const Args& a, size_t first) {
+  RisNode node;
+  node.request = std::string(r.name);
+  node.type = a.string(0);
+  if (first > 1) node.handle = handleArg(r, 1);
+  node.numbers = numericParams(a.params(first));
+  for (const Param& p : a.params(first)) {
+    if (!p.value) continue;
+    if (p.value->kind == Value::Kind::String) node.strings[p.decl.name] = {p.value->string};
+    else if (p.value->kind == Value::Kind::StringArray) node.strings[p.decl.name] = p.value->strings;
+  }
+  return node;
+}
+
+/// The RenderMan Interface's geometric primitives: a frame counts those it could not make.
+bool isPrimitiveRequest(std::string_view n) {
+  static const char* const kinds[] = {"Polygon", "GeneralPolygon", "PointsPolygons", "PointsGeneralPolygons", "Patch", "PatchMesh", "NuPatch",
+                                      "SubdivisionMesh", "HierarchicalSubdivisionMesh", "Sphere", "Cone", "Cylinder", "Hyperboloid", "Paraboloid",
+                                      "Disk", "Torus", "Points", "Curves", "Blobby", "Procedural", "Geometry", "ObjectInstance", "Volume"};
+  return std::find(std::begin(kinds), std::end(kinds), n) != std::end(kinds);
+}
+
 }  // namespace
 
 bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
@@ -141,6 +163,18 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
     warnOnce(cat("attribute:", cls), cat(s.where, ": Attribute \"", cls, "\" has no effect on the shading pass; ignored"));
     return true;
   }
+  if (n == "Bxdf" || n == "Light" || n == "Pattern" || n == "Integrator" || n == "DisplayFilter" || n == "SampleFilter" || n == "Hider") {
+    // RIS requests are kept for the shading pass, never a reason to stop (Hider: the
+    // re-sampler is the hider; its type and settings are kept with the options).
+    const size_t first = n == "Hider" ? 1 : 2;
+    s.ris(risNode(r, a, first));
+    if (n == "Bxdf" || n == "Light" || n == "Pattern")
+      warnOnce(cat("ris:", n), cat(s.where, ": RIS ", n, " \"", a.string(0), "\" is kept with the scene, but the built-in shading does not evaluate RIS ",
+                                   n == "Light" ? "lights yet (the frame is lit by LightSource lights only)" : "materials yet (the current Surface shades)"));
+    return true;
+  }
+  if (n == "Option") return true;  // renderer settings (searchpath, limits, user: the reader's conditions)
+  if (n == "ShadingInterpolation") return true;  // grids are shaded per vertex and interpolated ("smooth")
   if (n == "SolidBegin" || n == "SolidEnd") {
     warnOnce("rib-csg", cat(s.where, ": solid modelling (CSG) is not supported; the solids' primitives are shaded as a union"));
     return true;
@@ -156,6 +190,7 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
     const std::string& type = a.string(0);
     if (type != "bilinear") {
       warnOnce(cat("patch:", type), cat(s.where, ": Patch \"", type, "\" is not supported; skipped"));
+      s.skippedPrimitive("Patch");
       return true;
     }
     Geometry g = geometry(a, 1);
@@ -172,6 +207,7 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
     Geometry g = geometry(a, 2);
     return s.pointsPolygons(nverts, verts, g.P, g.vd), true;
   }
+  if (isPrimitiveRequest(n)) s.skippedPrimitive(n);
   return false;
 }
 

@@ -459,6 +459,23 @@ void Scene::motionFactor(double f) {
   mutableAttrs().motionFactor = f;
 }
 void Scene::matte(bool on) { mutableAttrs().matte = on; }
+void Scene::ris(RisNode node) {
+  if (!inWorld_) {
+    options_.risOptions.erase(std::remove_if(options_.risOptions.begin(), options_.risOptions.end(),
+                                             [&](const RisNode& o) { return o.request == node.request && o.request != "DisplayFilter" && o.request != "SampleFilter"; }),
+                              options_.risOptions.end());
+    options_.risOptions.push_back(std::move(node));
+    return;
+  }
+  const bool bxdf = node.request == "Bxdf";
+  frame_.risNodes.push_back(std::move(node));
+  if (bxdf) mutableAttrs().bxdf = uint32_t(frame_.risNodes.size());
+}
+
+void Scene::skippedPrimitive(std::string_view request) {
+  if (inWorld_) ++frame_.skipped[std::string(request)];
+}
+
 void Scene::identifier(const std::string& name) {
   auto [it, fresh] = objectIds_.try_emplace(name, uint32_t(frame_.objectNames.size() + 1));
   if (fresh) frame_.objectNames.push_back(name);

@@ -17,6 +17,7 @@
 #include <map>
 #include <memory>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include <glm/mat4x4.hpp>
@@ -82,6 +83,14 @@ struct Light {
 
 /// Numeric shader/light parameters by bare name ("Kd", "intensity", "from", "lightcolor").
 using ParamMap = std::map<std::string, std::vector<double>>;
+
+/// A RIS request (Bxdf, Light, Pattern, Integrator, DisplayFilter, SampleFilter) as the scene
+/// gave it: kept for the shading pass, whose built-in models are what evaluates it.
+struct RisNode {
+  std::string request, type, handle;
+  ParamMap numbers;
+  std::map<std::string, std::vector<std::string>> strings;
+};
 void applyParams(SurfaceShader& s, const ParamMap& params);
 void applyParams(Light& l, const ParamMap& params);
 
@@ -95,6 +104,7 @@ struct Attributes {
   bool matte = false, twoSided = true;
   bool orientationRH = false;  // Orientation: "lh" (RenderMan's default, "outside") or "rh"
   uint32_t objectId = 0;       // 0: unnamed; otherwise 1 + index into FrameScene::objectNames
+  uint32_t bxdf = 0;           // 0: none; otherwise 1 + index into FrameScene::risNodes
 };
 
 enum class PrimKind : uint8_t { Sphere, Cylinder, Cone, Disk, Torus, Patch };
@@ -158,6 +168,7 @@ struct FrameOptions {
   std::vector<store::Camera> namedCameras;
   std::vector<std::string> outputs;  // requested output variables, in request order, unique
   int pixelSamples[2] = {1, 1};
+  std::vector<RisNode> risOptions;  // Integrator, DisplayFilter, SampleFilter, Hider
 };
 
 /// Everything WorldEnd hands to the shading pass.
@@ -167,6 +178,9 @@ struct FrameScene {
   std::vector<Light> lights;
   std::vector<Primitive> prims;
   std::vector<std::string> objectNames;
+  std::vector<RisNode> risNodes;  // Bxdf, Light, Pattern of the world block
+  /// Primitives the scene gave that the shading pass cannot make, by request ("Curves": 3).
+  std::map<std::string, uint64_t> skipped;
   std::string source;  // "scene.rib", "built-in demo"
 };
 
@@ -222,6 +236,10 @@ class Scene {
   void motionFactor(double f);
   void matte(bool on);
   void identifier(const std::string& name);
+  /// A RIS request: options before WorldBegin, nodes inside (a Bxdf binds to the attributes).
+  void ris(RisNode node);
+  /// Counts a primitive request the shading pass cannot make (reported per frame).
+  void skippedPrimitive(std::string_view request);
 
   // Motion
   void motionBegin(const std::vector<double>& times);

@@ -95,6 +95,22 @@ TEST(CliShade, BadSceneOneLineErrorNoOutput) {
 
 // NaN is how the command marks an option not given: given as a value, it is a usage error (exit
 // 2, one line, nothing written), not silently "shade at shutter open".
+TEST(CliShade, SkippedPrimitivesAreCountedAndAFrameOfOnlyThoseFails) {
+  ScratchDir dir;
+  const std::string head = "Format 32 24 1\nProjection \"perspective\"\nWorldBegin\nTranslate 0 0 5\n";
+  const std::string blob = "Blobby 1 [1001 0] [1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1] [\"\"]\n";
+  std::ofstream(dir.path("some.rib")) << head << blob << blob << "Sphere 1 -1 1 360\nWorldEnd\n";
+  auto r = runReshutter("-q shade " + dir.path("some.rib") + " -o " + dir.path("some.mps"));
+  ASSERT_EQ(r.exitCode, 0) << r.err;
+  EXPECT_NE(r.out.find("skipped primitives: 2 Blobby"), std::string::npos) << r.out;  // even under -q
+
+  std::ofstream(dir.path("none.rib")) << head << blob << "WorldEnd\n";
+  r = runReshutter("shade " + dir.path("none.rib") + " -o " + dir.path("none.mps"));
+  EXPECT_EQ(r.exitCode, 1);
+  EXPECT_NE(r.err.find("every primitive was skipped (1 Blobby)"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(dir.path("none.mps")));
+}
+
 TEST(CliShade, NonFiniteTimesAreUsageErrors) {
   ScratchDir dir;
   const std::string rib = reshutter::test::sharedDir() + "/data/rib/aqsis_mb_deformation.rib";

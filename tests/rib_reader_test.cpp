@@ -603,11 +603,9 @@ TEST(RibReaderHardTest, ParameterListErrorsNameTheParameter) {
   };
   const std::vector<Case> cases = {
       {"\n\nPolygon \"P\" [0 0 0 1 0 0 1 1]\n", "'P' has 8 numbers, not a multiple of 3"},
-      {"\n\nPolygon \"P\" [0 0 0] \"bogus\" [1]\n", "unknown parameter 'bogus'"},
       {"\n\nPolygon \"P\"\n", "'P' has no value"},
       {"\n\nPolygon \"P\" [\"a\" \"b\" \"c\"]\n", "'P' must be given numbers"},
       {"\n\nPolygon 3 [0 0 0]\n", "must be a parameter name"},
-      {"\n\nPolygon \"varying flot x\" [1]\n", "malformed inline declaration"},
       {"\n\nPolygon \"uniform float[2] x\" [1 2 3]\n", "not a multiple of 2"},
       {"\n\nSurface \"texturename\" [1]\n", "must be given strings"},
   };
@@ -638,6 +636,101 @@ TEST(RibReaderHardTest, LongRunsOfDefinitionsNeitherRecurseNorCrash) {
   } h;
   Reader().parseBuffer(defs, "defs.rib", h);
   EXPECT_EQ(h.worldBegins, 1);
+}
+
+TEST(RibReaderTest, UnknownParametersWarnOncePerRequestAndNameAndAreSkipped) {
+  // What exporters write that no reader can know: a shader's undeclared parameter, an attribute
+  // of another renderer, a RIS connection. The request goes on with the parameters it knows.
+  struct H : RequestHandler {
+    std::vector<std::vector<std::string>> names;
+    bool handle(const Request& r, const Args& a) override {
+      std::vector<std::string> n;
+      for (const Param& p : a.params(r.name == "Bxdf" ? 2 : a.count() % 2)) n.push_back(p.decl.name);
+      names.push_back(n);
+      return true;
+    }
+  } h;
+  const size_t before = warningCount();
+  Reader().parseBuffer(
+      "Surface \"paintedplastic\" \"mapname\" [\"a.tx\"] \"Kd\" [0.5]\n"
+      "Surface \"paintedplastic\" \"mapname\" [\"b.tx\"] \"Ks\" [0.1]\n"
+      "Attribute \"identifier\" \"shadinggroup\" [\"g1\"] \"name\" [\"n\"]\n"
+      "Bxdf \"PxrDiffuse\" \"d\" \"reference color diffuseColor\" [\"tex:resultRGB\"] \"color diffuseColor\" [1 0 0]\n"
+      "Polygon \"P\" [0 0 0 1 0 0 1 1 0] \"varying flot x\" [1 2 3]\n",
+      "exporter.rib", h);
+  ASSERT_EQ(h.names.size(), 5u);
+  EXPECT_EQ(h.names[0], (std::vector<std::string>{"Kd"}));
+  EXPECT_EQ(h.names[1], (std::vector<std::string>{"Ks"}));
+  EXPECT_EQ(h.names[2], (std::vector<std::string>{"name"}));
+  EXPECT_EQ(h.names[3], (std::vector<std::string>{"diffuseColor"}));
+  EXPECT_EQ(h.names[4], (std::vector<std::string>{"P"}));
+  // One per skipped parameter (warnOnce prints a repeated (request, name) once and counts it).
+  EXPECT_EQ(warningCount() - before, 5u);
+}
+
+namespace {
+/// The names of the requests a conditional RIB text hands on (Option requests left out).
+std::string takenRequests(const std::string& text) {
+  Recorder rec;
+  Reader().parseBuffer(text, "cond.rib", rec);
+  std::string out;
+  for (const auto& r : rec.requests)
+    if (r.name != "Option") out += (out.empty() ? "" : " ") + r.name;
+  return out;
+}
+}  // namespace
+
+TEST(RibReaderTest, ConditionalBlocksFollowUserOptions) {
+  const std::string passes =
+      "IfBegin \"$user:pass == 'beauty'\"\n Sphere 1 -1 1 360\n"
+      "ElseIf \"${user:pass} == 'shadow'\"\n Cone 1 1 360\n"
+      "Else\n Disk 0 1 360\nIfEnd\nWorldEnd\n";
+  EXPECT_EQ(takenRequests("Option \"user\" \"string pass\" [\"beauty\"]\n" + passes), "Sphere WorldEnd");
+  EXPECT_EQ(takenRequests("Option \"user\" \"string pass\" [\"shadow\"]\n" + passes), "Cone WorldEnd");
+  EXPECT_EQ(takenRequests("Option \"user\" \"string pass\" [\"matte\"]\n" + passes), "Disk WorldEnd");
+  EXPECT_EQ(takenRequests(passes), "Disk WorldEnd");  // undefined: the empty string
+  // Only the first true branch is taken; nested blocks inside a skipped branch stay skipped.
+  EXPECT_EQ(takenRequests("Option \"user\" \"float lod\" [2]\n"
+                          "IfBegin \"$lod >= 2\"\n A\n IfBegin \"$lod == 3\"\n B\n Else\n C\n IfEnd\n"
+                          "ElseIf \"$lod > 1\"\n D\n"
+                          "Else\n IfBegin \"1\"\n E\n IfEnd\nIfEnd\n"),
+            "A C");
+  // Operators and functions.
+  const std::string opts = "Option \"user\" \"string pass\" [\"shadow_key\"] \"integer frame\" [12]\n";
+  auto truth = [&](const std::string& cond) { return takenRequests(opts + "IfBegin \"" + cond + "\"\n Yes\nIfEnd\n") == "Yes"; };
+  EXPECT_TRUE(truth("defined(user:pass) && !defined(user:nothing)"));
+  EXPECT_TRUE(truth("$user:pass =~ '^shadow'"));
+  EXPECT_FALSE(truth("$user:pass =~ '^key'"));
+  EXPECT_TRUE(truth("match('_key$', $user:pass)"));
+  EXPECT_TRUE(truth("$frame > 9 && ($frame < 11 || $frame == 12)"));  // numeric, not by string
+  EXPECT_TRUE(truth("concat($pass, '!') == 'shadow_key!'"));
+  EXPECT_FALSE(truth("$frame != 12 || 0"));
+  // A branch not taken never reads its archives.
+  EXPECT_EQ(takenRequests("IfBegin \"0\"\n ReadArchive \"does/not/exist.rib\"\nIfEnd\nWorldEnd\n"), "WorldEnd");
+}
+
+TEST(RibReaderHardTest, MalformedConditionalsAreOneLineErrors) {
+  struct Case {
+    std::string src, where, problemPart;
+  };
+  const std::vector<Case> cases = {
+      {"IfEnd\n", "bad.rib:1 (IfEnd)", "without IfBegin"},
+      {"Else\n", "bad.rib:1 (Else)", "without IfBegin"},
+      {"IfBegin \"1\"\nElse\nElse\n", "bad.rib:3 (Else)", "second Else"},
+      {"IfBegin \"1\"\nElse\nElseIf \"1\"\n", "bad.rib:3 (ElseIf)", "after Else"},
+      {"\nIfBegin \"$pass == \"\n", "bad.rib:2 (IfBegin)", "ends early"},
+      {"IfBegin \"(1\"\n", "bad.rib:1 (IfBegin)", "')' was expected"},
+      {"IfBegin \"pass == 1\"\n", "bad.rib:1 (IfBegin)", "unknown word 'pass'"},
+      {"IfBegin \"$a =~ '('\"\n", "bad.rib:1 (IfBegin)", "bad regular expression"},
+      {"IfBegin \"" + std::string(200, '(') + "\"\n", "bad.rib:1 (IfBegin)", "nested deeper"},
+      {"IfBegin 1\n", "bad.rib:1 (IfBegin)", "must be a string"},
+      {"IfBegin \"1\"\nSphere 1 -1 1 360\n", "bad.rib", "IfEnd missing"},
+  };
+  for (const auto& c : cases) {
+    auto [where, problem] = parseError(c.src);
+    EXPECT_NE(where.find(c.where), std::string::npos) << "where '" << where << "' for " << c.src;
+    EXPECT_NE(problem.find(c.problemPart), std::string::npos) << "problem '" << problem << "' for " << c.src;
+  }
 }
 
 TEST(RibReaderHardTest, FuzzCorpusNeverCrashes) {

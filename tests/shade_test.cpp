@@ -804,6 +804,59 @@ FrameEnd
   EXPECT_GT(sink.mps(), 0u);
 }
 
+TEST(ShadeRib, WhatExportersWriteIsKeptNotFatal) {
+  // A RIS-era exporter's scene: Camera "world", a RIS projection, RIS materials, lights and
+  // options, parameters nobody declared, conditional passes, and a primitive the pass cannot
+  // make. The frame comes through; RIS requests are kept; the skipped primitive is counted.
+  test::ScratchDir dir;
+  const std::string path = dir.path("ris.rib");
+  std::ofstream(path) << R"(
+Option "user" "string pass" ["beauty"]
+Format 64 48 1
+Projection "PxrCamera" "float fov" [45]
+Hider "raytrace" "int maxsamples" [64]
+Integrator "PxrPathTracer" "main" "int maxPathLength" [4]
+DisplayFilter "PxrBackgroundDisplayFilter" "bg" "color backgroundColor" [0 0 0]
+Translate 0 0 5
+Camera "world" "float[2] shutteropening" [0 1]
+WorldBegin
+  Light "PxrDistantLight" "key" "float intensity" [2]
+  Attribute "identifier" "shadinggroup" ["g1"] "name" ["ball"]
+  Pattern "PxrTexture" "tex" "string filename" ["wood.tx"]
+  Bxdf "PxrDiffuse" "mat" "reference color diffuseColor" ["tex:resultRGB"] "color diffuseColor" [0.8 0.2 0.1]
+  Surface "paintedplastic" "mapname" ["grid.tx"] "Kd" [0.7]
+  IfBegin "$user:pass == 'beauty'"
+    Sphere 1 -1 1 360
+  Else
+    Cone 1 1 360
+  IfEnd
+  Curves "cubic" [4] "nonperiodic" "P" [0 0 0 1 0 0 1 1 0 0 1 0] "constantwidth" [0.1]
+WorldEnd
+)";
+  FrameScene got;
+  int frames = 0;
+  Scene scene([&](FrameScene& f) { got = std::move(f), ++frames; });
+  readRibScene(path, scene);
+  ASSERT_EQ(frames, 1);
+  EXPECT_EQ(got.options.camera.fovDegrees, 45);
+  EXPECT_EQ(got.options.camera.worldToCamera[3][2], 5);  // the transform before Camera "world"
+  ASSERT_EQ(got.prims.size(), 1u);
+  EXPECT_EQ(got.prims[0].kind, PrimKind::Sphere);  // the beauty branch
+  EXPECT_EQ(got.prims[0].attrs->surface.values[0].Kd, double(0.7f));  // RIB numbers are RtFloats
+  ASSERT_EQ(got.risNodes.size(), 3u);
+  EXPECT_EQ(got.risNodes[0].type, "PxrDistantLight");
+  EXPECT_EQ(got.risNodes[0].numbers.at("intensity"), std::vector<double>{2});
+  EXPECT_EQ(got.risNodes[1].strings.at("filename"), std::vector<std::string>{"wood.tx"});
+  ASSERT_EQ(got.prims[0].attrs->bxdf, 3u);
+  EXPECT_EQ(got.risNodes[2].handle, "mat");
+  EXPECT_EQ(got.risNodes[2].numbers.at("diffuseColor"), (std::vector<double>{0.8f, 0.2f, 0.1f}));
+  ASSERT_EQ(got.options.risOptions.size(), 3u);
+  EXPECT_EQ(got.options.risOptions[0].request, "Hider");
+  EXPECT_EQ(got.options.risOptions[1].type, "PxrPathTracer");
+  EXPECT_EQ(got.skipped, (std::map<std::string, uint64_t>{{"Curves", 1}}));
+  EXPECT_EQ(got.objectNames, std::vector<std::string>{"ball"});
+}
+
 TEST(ShadeRib, BadInputNamesFileAndLine) {
   test::ScratchDir dir;
   const std::string path = dir.path("bad.rib");
