@@ -30,11 +30,41 @@ SphereAngles sphereAngles(const std::array<double, 5>& q, double u, double v) {
 glm::dvec3 bilinear(const std::array<glm::dvec3, 4>& c, double u, double v) {
   return (1 - u) * (1 - v) * c[0] + u * (1 - v) * c[1] + (1 - u) * v * c[2] + u * v * c[3];
 }
+
+const std::array<CubicBasis, 2>& basesOf(const Primitive& p) {
+  static const std::array<CubicBasis, 2> bezier{};
+  return p.basis ? *p.basis : bezier;
+}
+
+// A bicubic patch (or a derivative along u or v) at (u, v): rows of control points weighted
+// along u, then the rows along v, always in index order, so a weight of exactly 0 drops a term
+// exactly and two patches sharing control points agree bit for bit on their shared edge.
+glm::dvec3 bicubic(const Primitive& p, const Shape& s, double u, double v, bool dU, bool dV) {
+  const auto& b = basesOf(p);
+  double wu[4], wv[4];
+  dU ? b[0].derivatives(u, wu) : b[0].weights(u, wu);
+  dV ? b[1].derivatives(v, wv) : b[1].weights(v, wv);
+  glm::dvec3 sum(0.0);
+  for (size_t l = 0; l < 4; ++l) {
+    glm::dvec3 row(0.0);
+    for (size_t k = 0; k < 4; ++k) row += wu[k] * s.cv[l * 4 + k];
+    sum += wv[l] * row;
+  }
+  return sum;
+}
 }  // namespace
 
-glm::dvec3 evalP(PrimKind kind, const Shape& s, double u, double v) {
+void CubicBasis::weights(double u, double w[4]) const {
+  for (size_t k = 0; k < 4; ++k) w[k] = scale * (((m[k] * u + m[4 + k]) * u + m[8 + k]) * u + m[12 + k]);
+}
+
+void CubicBasis::derivatives(double u, double d[4]) const {
+  for (size_t k = 0; k < 4; ++k) d[k] = scale * ((3 * m[k] * u + 2 * m[4 + k]) * u + m[8 + k]);
+}
+
+glm::dvec3 evalP(const Primitive& p, const Shape& s, double u, double v) {
   const auto& q = s.q;
-  switch (kind) {
+  switch (p.kind) {
     case PrimKind::Sphere: {
       const double r = q[0];
       const auto [phi, lat, lat0, lat1] = sphereAngles(q, u, v);
@@ -58,13 +88,15 @@ glm::dvec3 evalP(PrimKind kind, const Shape& s, double u, double v) {
       return {ring * std::cos(theta), ring * std::sin(theta), q[1] * std::sin(phi)};
     }
     case PrimKind::Patch: return bilinear(s.P, u, v);
+    case PrimKind::Bicubic: return bicubic(p, s, u, v, false, false);
   }
   return glm::dvec3(0.0);
 }
 
-glm::dvec3 evalNg(PrimKind kind, const Shape& s, double u, double v, bool triangle) {
+glm::dvec3 evalNg(const Primitive& p, const Shape& s, double u, double v) {
   const auto& q = s.q;
-  switch (kind) {
+  const bool triangle = p.triangle;
+  switch (p.kind) {
     case PrimKind::Sphere: {
       const auto [phi, lat, lat0, lat1] = sphereAngles(q, u, v);
       const double k = sgn(q[3]) * sgn(lat1 - lat0);
@@ -94,6 +126,17 @@ glm::dvec3 evalNg(PrimKind kind, const Shape& s, double u, double v, bool triang
       if (glm::length(n) <= 1e-12 * scale * scale) n = glm::cross(P[3] - P[0], P[2] - P[1]);  // collapsed corner
       return n;
     }
+    case PrimKind::Bicubic: {
+      glm::dvec3 n = glm::cross(bicubic(p, s, u, v, true, false), bicubic(p, s, u, v, false, true));
+      // A collapsed edge (the pole of a teapot's lid) has no tangent along it: the normal is
+      // the limit from inside the patch, taken a little way in.
+      for (double step = 1e-4; glm::dot(n, n) == 0 || !std::isfinite(glm::dot(n, n)); step *= 10) {
+        if (step > 0.1) break;
+        const double ui = u + (0.5 - u) * step, vi = v + (0.5 - v) * step;
+        n = glm::cross(bicubic(p, s, ui, vi, true, false), bicubic(p, s, ui, vi, false, true));
+      }
+      return n;
+    }
   }
   return glm::dvec3(0, 0, 1);
 }
@@ -112,7 +155,7 @@ std::vector<double> clipKnots(const Primitive& p, double open, double close) {
   for (double t : out) {
     if (p.xform->at(t) != m0) return out;
     const Shape s = p.shapeAt(t);
-    if (s.q != s0.q || s.P != s0.P) return out;
+    if (s.q != s0.q || s.P != s0.P || s.cv != s0.cv) return out;
   }
   return {open};
 }
@@ -158,7 +201,7 @@ class Splitter {
       for (int j = 0; j < kTest; ++j)
         for (int i = 0; i < kTest; ++i) {
           const double u = u0 + (u1 - u0) * i / (kTest - 1), v = v0 + (v1 - v0) * j / (kTest - 1);
-          c[j][i] = glm::dvec3(mats_[k] * glm::dvec4(evalP(p_.kind, shapes_[k], u, v), 1.0));
+          c[j][i] = glm::dvec3(mats_[k] * glm::dvec4(evalP(p_, shapes_[k], u, v), 1.0));
           fr[j][i] = !proj_.perspective || c[j][i].z >= proj_.nearClip;
           if (c[j][i].z <= cam_.farClip) e.beyondFar = false;
           r[j][i] = glm::dvec2(0.0);
@@ -278,7 +321,7 @@ void diceLeaf(const Primitive& p, const Leaf& leaf, const std::vector<double>& k
     const glm::dmat4 m = p.xform->at(knots[k]);
     glm::vec3* out = g.positions.data() + k * nV;
     for (int j = 0; j <= nv; ++j)
-      for (int i = 0; i <= nu; ++i) out[j * row + i] = glm::vec3(m * glm::dvec4(evalP(p.kind, s, us[size_t(i)], vs[size_t(j)]), 1.0));
+      for (int i = 0; i <= nu; ++i) out[j * row + i] = glm::vec3(m * glm::dvec4(evalP(p, s, us[size_t(i)], vs[size_t(j)]), 1.0));
   }
 
   // Geometry at the shading time.
@@ -295,8 +338,8 @@ void diceLeaf(const Primitive& p, const Leaf& leaf, const std::vector<double>& k
     for (int i = 0; i <= nu; ++i) {
       const size_t idx = size_t(j * row + i);
       const double u = us[size_t(i)], v = vs[size_t(j)];
-      g.P[idx] = glm::dvec3(m * glm::dvec4(evalP(p.kind, s, u, v), 1.0));
-      glm::dvec3 ng = nm * evalNg(p.kind, s, u, v, p.triangle);
+      g.P[idx] = glm::dvec3(m * glm::dvec4(evalP(p, s, u, v), 1.0));
+      glm::dvec3 ng = nm * evalNg(p, s, u, v);
       double len = glm::length(ng);
       ng = len > 0 ? flip * ng / len : glm::dvec3(0, 0, -1);
       g.Ng[idx] = ng;

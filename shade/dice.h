@@ -35,11 +35,11 @@ struct DiceOptions {
   int maxSplitDepth = 30;
 };
 
-/// Object-space position at (u, v) of a shape.
-glm::dvec3 evalP(PrimKind kind, const Shape& s, double u, double v);
+/// Object-space position at (u, v) of one shape of `p`.
+glm::dvec3 evalP(const Primitive& p, const Shape& s, double u, double v);
 /// Object-space surface normal at (u, v), along dPdu × dPdv (outward for quadrics with the
-/// usual parameter signs); unnormalised. `triangle` patches use their face normal.
-glm::dvec3 evalNg(PrimKind kind, const Shape& s, double u, double v, bool triangle);
+/// usual parameter signs); unnormalised. Triangle patches use their face normal.
+glm::dvec3 evalNg(const Primitive& p, const Shape& s, double u, double v);
 
 /// A piece of a primitive's (u, v) square and its dicing rate.
 struct Leaf {

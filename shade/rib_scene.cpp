@@ -188,14 +188,68 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
   if (n == "Torus") return s.torus(a.number(0), a.number(1), a.number(2), a.number(3), a.number(4)), true;
   if (n == "Patch") {
     const std::string& type = a.string(0);
-    if (type != "bilinear") {
-      warnOnce(cat("patch:", type), cat(s.where, ": Patch \"", type, "\" is not supported; skipped"));
-      s.skippedPrimitive("Patch");
-      return true;
+    if (type == "bicubic") {
+      Geometry g = geometry(a, 1);
+      if (g.P.size() != 16) a.fail(cat("bicubic patch needs 16 points, has ", g.P.size()));
+      return s.patchMesh(true, 4, false, 4, false, g.P, g.vd), true;
     }
+    if (type != "bilinear") a.fail(cat("patch type '", type, "' (bilinear or bicubic)"));
     Geometry g = geometry(a, 1);
     if (g.P.size() != 4) a.fail(cat("bilinear patch needs 4 points, has ", g.P.size()));
     return s.patch({g.P[0], g.P[1], g.P[2], g.P[3]}, g.vd), true;
+  }
+  if (n == "Basis") {
+    auto basisAt = [&](size_t i) {
+      CubicBasis b;
+      if (i >= r.values.size()) a.fail("expects a u basis, a u step, a v basis and a v step");
+      const Value& v = r.values[i];
+      if (v.kind == Value::Kind::String || v.kind == Value::Kind::StringArray) {
+        if (!CubicBasis::named(a.string(i), b)) a.fail(cat("unknown basis '", a.string(i), "' (bezier, b-spline, catmull-rom, hermite, power or 16 numbers)"));
+      } else {
+        const auto& m = a.numbers(i);
+        if (m.size() != 16) a.fail(cat("a basis matrix has 16 numbers, not ", m.size()));
+        std::copy(m.begin(), m.end(), b.m.begin());
+      }
+      b.step = int(integerArg(a, i + 1, 1, 64));
+      return b;
+    };
+    return s.basis(basisAt(0), basisAt(2)), true;
+  }
+  if (n == "PatchMesh") {
+    const std::string& type = a.string(0);
+    if (type != "bilinear" && type != "bicubic") a.fail(cat("patch type '", type, "' (bilinear or bicubic)"));
+    auto wrap = [&](size_t i) {
+      const std::string& w = a.string(i);
+      if (w != "periodic" && w != "nonperiodic") a.fail(cat("wrap mode '", w, "' (periodic or nonperiodic)"));
+      return w == "periodic";
+    };
+    const int nu = int(integerArg(a, 1, 1, 1 << 24)), nv = int(integerArg(a, 3, 1, 1 << 24));
+    const bool uPeriodic = wrap(2), vPeriodic = wrap(4);
+    Geometry g = geometry(a, 5);
+    return s.patchMesh(type == "bicubic", nu, uPeriodic, nv, vPeriodic, g.P, g.vd), true;
+  }
+  if (n == "ObjectBegin") return s.objectBegin(handleArg(r, 0)), true;
+  if (n == "ObjectEnd") return s.objectEnd(), true;
+  if (n == "ObjectInstance") return s.objectInstance(handleArg(r, 0)), true;
+  if (n == "GeneralPolygon" || n == "PointsGeneralPolygons") {
+    // One loop per polygon is a plain polygon; holes need a triangulator the shading pass does
+    // not have yet, so such a request is counted as skipped.
+    const bool points = n == "PointsGeneralPolygons";
+    const auto loops = intArray(a, 0, 1, 1 << 24);  // loops per polygon, or a GeneralPolygon's loop sizes
+    if (points ? std::any_of(loops.begin(), loops.end(), [](int l) { return l != 1; }) : loops.size() != 1) {
+      warnOnce(cat("holes:", n), cat(s.where, ": ", n, " with holes is not supported yet; skipped"));
+      s.skippedPrimitive(n);
+      return true;
+    }
+    if (!points) {
+      Geometry g = geometry(a, 1);
+      return s.polygon(g.P, g.vd), true;
+    }
+    const auto nverts = intArray(a, 1);
+    const auto verts = intArray(a, 2);
+    if (nverts.size() != loops.size()) a.fail(cat(loops.size(), " polygons but ", nverts.size(), " loop vertex counts"));
+    Geometry g = geometry(a, 3);
+    return s.pointsPolygons(nverts, verts, g.P, g.vd), true;
   }
   if (n == "Polygon") {
     Geometry g = geometry(a, 0);

@@ -106,6 +106,23 @@ SurfaceShader SurfaceShader::lerp(const SurfaceShader& b, double w) const {
   return r;
 }
 
+bool CubicBasis::named(const std::string& name, CubicBasis& b) {
+  b = CubicBasis{};
+  if (name == "bezier") return true;
+  if (name == "b-spline" || name == "bspline") {
+    b.m = {-1, 3, -3, 1, 3, -6, 3, 0, -3, 0, 3, 0, 1, 4, 1, 0}, b.scale = 1.0 / 6.0, b.step = 1;
+  } else if (name == "catmull-rom" || name == "catmullrom") {
+    b.m = {-1, 3, -3, 1, 2, -5, 4, -1, -1, 0, 1, 0, 0, 2, 0, 0}, b.scale = 0.5, b.step = 1;
+  } else if (name == "hermite") {
+    b.m = {2, 1, -2, 1, -3, -2, 3, -1, 0, 1, 0, 0, 1, 0, 0, 0}, b.step = 2;
+  } else if (name == "power") {
+    b.m = {1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1}, b.step = 4;
+  } else {
+    return false;
+  }
+  return true;
+}
+
 bool Light::named(const std::string& name, Light& l) {
   l = Light{};
   if (name == "ambientlight") l.kind = LightKind::Ambient;
@@ -158,6 +175,8 @@ Shape Primitive::shapeAt(double t) const {
   Shape s;
   for (size_t k = 0; k < s.q.size(); ++k) s.q[k] = keys[i].q[k] + (keys[i + 1].q[k] - keys[i].q[k]) * w;
   for (size_t k = 0; k < 4; ++k) s.P[k] = keys[i].P[k] + (keys[i + 1].P[k] - keys[i].P[k]) * w;
+  s.cv.resize(keys[i].cv.size());
+  for (size_t k = 0; k < s.cv.size(); ++k) s.cv[k] = keys[i].cv[k] + (keys[i + 1].cv[k] - keys[i].cv[k]) * w;
   return s;
 }
 
@@ -473,7 +492,8 @@ void Scene::ris(RisNode node) {
 }
 
 void Scene::skippedPrimitive(std::string_view request) {
-  if (inWorld_) ++frame_.skipped[std::string(request)];
+  if (recording_) ++recording_->skipped[std::string(request)];
+  else if (inWorld_) ++frame_.skipped[std::string(request)];
 }
 
 void Scene::identifier(const std::string& name) {
@@ -532,7 +552,7 @@ void Scene::motionEnd() {
       for (size_t k = 1; k < m.prims.size(); ++k) {
         if (m.prims[k].size() != out.size()) error("deformation keys of a motion block differ in topology");
         for (size_t i = 0; i < out.size(); ++i) {
-          if (m.prims[k][i].kind != out[i].kind || m.prims[k][i].triangle != out[i].triangle)
+          if (m.prims[k][i].kind != out[i].kind || m.prims[k][i].triangle != out[i].triangle || m.prims[k][i].keys[0].cv.size() != out[i].keys[0].cv.size())
             error("deformation keys of a motion block are different primitives");
           out[i].keys.push_back(m.prims[k][i].keys[0]);
         }
@@ -558,7 +578,49 @@ Primitive Scene::basePrim(PrimKind kind) {
   return p;
 }
 
+void Scene::objectBegin(const std::string& handle) {
+  if (recording_) error("ObjectBegin inside an object definition");
+  if (motion_.active) error("ObjectBegin inside a motion block");
+  push(Block::Object);
+  cur_.ctm = MotionXform();  // the object's own space
+  ctmShared_.reset();
+  ObjectDefinition& d = objects_[handle];
+  d = ObjectDefinition{};
+  d.attrsAtBegin = cur_.attrs;
+  recording_ = &d;
+}
+
+void Scene::objectEnd() {
+  if (!recording_) error("ObjectEnd without ObjectBegin");
+  recording_ = nullptr;
+  cur_ = pop(Block::Object, "ObjectEnd");
+}
+
+void Scene::objectInstance(const std::string& handle) {
+  auto it = objects_.find(handle);
+  if (it == objects_.end()) error(cat("ObjectInstance of undefined object '", handle, "'"));
+  if (recording_ == &it->second) error(cat("object '", handle, "' instances itself"));
+  for (const auto& [request, count] : it->second.skipped) {
+    if (recording_) recording_->skipped[request] += count;
+    else if (inWorld_) frame_.skipped[request] += count;
+  }
+  std::vector<Primitive> out = it->second.prims;
+  std::map<const MotionXform*, std::shared_ptr<const MotionXform>> placed;  // prims sharing a transform share its instance
+  for (Primitive& p : out) {
+    if (p.attrs == it->second.attrsAtBegin) p.attrs = cur_.attrs;
+    auto& x = placed[p.xform.get()];
+    if (!x) x = std::make_shared<const MotionXform>(cur_.ctm.then(*p.xform));
+    p.xform = x;
+    p.flipNormals = p.attrs->orientationRH != csIsRightHanded(*p.xform);
+  }
+  addPrims(std::move(out));
+}
+
 void Scene::addPrims(std::vector<Primitive> prims) {
+  if (recording_ && !motion_.active) {
+    recording_->prims.insert(recording_->prims.end(), std::make_move_iterator(prims.begin()), std::make_move_iterator(prims.end()));
+    return;
+  }
   if (!inWorld_) {
     warnOnce("prim-outside-world", cat(where, ": geometry outside WorldBegin/WorldEnd; skipped"));
     return;
@@ -608,6 +670,78 @@ void Scene::patch(const std::array<glm::dvec3, 4>& P, const VertexData& vd) {
     p.meshPoint = {0, 1, 2, 3};
   }
   addPrims({std::move(p)});
+}
+
+void Scene::basis(const CubicBasis& u, const CubicBasis& v) {
+  for (const CubicBasis* b : {&u, &v}) {
+    for (double x : b->m)
+      if (!std::isfinite(x)) error("basis matrix element is not finite");
+    if (b->step < 1 || b->step > 64) error(cat("basis step ", b->step, " must be 1 to 64"));
+  }
+  mutableAttrs().basis = std::make_shared<const std::array<CubicBasis, 2>>(std::array<CubicBasis, 2>{u, v});
+}
+
+namespace {
+/// Patches along one direction of a patch mesh, or 0 when the count does not fit the step.
+int patchCount(bool bicubic, int n, bool periodic, int step) {
+  if (!bicubic) return periodic ? n : n - 1;
+  if (periodic) return n % step == 0 ? n / step : 0;
+  return n >= 4 && (n - 4) % step == 0 ? (n - 4) / step + 1 : 0;
+}
+}  // namespace
+
+void Scene::patchMesh(bool bicubic, int nu, bool uPeriodic, int nv, bool vPeriodic, const std::vector<glm::dvec3>& P, const VertexData& vd) {
+  static const std::array<CubicBasis, 2> bezier{};
+  const auto& bases = cur_.attrs->basis ? *cur_.attrs->basis : bezier;
+  if (nu < 1 || nv < 1 || size_t(nu) * size_t(nv) != P.size())
+    error(cat("a ", nu, " x ", nv, " patch mesh needs ", int64_t(nu) * nv, " control points, has ", P.size()));
+  for (const auto& c : P) checkFinite(*this, {c.x, c.y, c.z});
+  const int su = bicubic ? bases[0].step : 1, sv = bicubic ? bases[1].step : 1;
+  const int npu = patchCount(bicubic, nu, uPeriodic, su), npv = patchCount(bicubic, nv, vPeriodic, sv);
+  if (npu < 1) error(cat("nu = ", nu, " does not make whole ", uPeriodic ? "periodic " : "", bicubic ? "bicubic" : "bilinear", " patches with a u step of ", su));
+  if (npv < 1) error(cat("nv = ", nv, " does not make whole ", vPeriodic ? "periodic " : "", bicubic ? "bicubic" : "bilinear", " patches with a v step of ", sv));
+  // Varying values sit at patch corners, uniform ones on patches.
+  const int nvu = uPeriodic ? npu : npu + 1, nvv = vPeriodic ? npv : npv + 1;
+  const size_t varying = size_t(nvu) * size_t(nvv), uniform = size_t(npu) * size_t(npv);
+  std::shared_ptr<const MeshData> mesh;
+  {
+    auto m = std::make_shared<MeshData>();
+    m->points = varying, m->faces = uniform;
+    auto take = [&](const auto& in, auto& out, const char* name) {
+      if (in.empty()) return;
+      if (in.size() == varying || in.size() == uniform) out = in;
+      else warnOnce(cat("patchmesh-var:", name), cat(where, ": \"", name, "\" has ", in.size(), " values; a patch mesh takes ", varying, " (varying) or ", uniform, " (uniform); ignored"));
+    };
+    take(vd.N, m->N, "N"), take(vd.Cs, m->Cs, "Cs"), take(vd.Os, m->Os, "Os");
+    if (!vd.st.empty() && vd.st.size() == varying) m->st = vd.st;
+    else if (!vd.st.empty()) warnOnce("patchmesh-var:st", cat(where, ": texture coordinates of a patch mesh are varying (", varying, " values); ignored"));
+    if (!m->N.empty() || !m->Cs.empty() || !m->Os.empty() || !m->st.empty()) mesh = std::move(m);
+  }
+  std::vector<Primitive> out;
+  out.reserve(uniform);
+  for (int pv = 0; pv < npv; ++pv)
+    for (int pu = 0; pu < npu; ++pu) {
+      Primitive p = basePrim(bicubic ? PrimKind::Bicubic : PrimKind::Patch);
+      Shape s;
+      auto point = [&](int i, int j) { return P[size_t((j % nv) * nu + (i % nu))]; };
+      if (bicubic) {
+        p.basis = cur_.attrs->basis;
+        s.cv.resize(16);
+        for (int l = 0; l < 4; ++l)
+          for (int k = 0; k < 4; ++k) s.cv[size_t(l * 4 + k)] = point(pu * su + k, pv * sv + l);
+      } else {
+        s.P = {point(pu, pv), point(pu + 1, pv), point(pu, pv + 1), point(pu + 1, pv + 1)};
+      }
+      p.keys = {s};
+      if (mesh) {
+        p.mesh = mesh;
+        auto corner = [&](int i, int j) { return uint32_t((j % nvv) * nvu + (i % nvu)); };
+        p.meshPoint = {corner(pu, pv), corner(pu + 1, pv), corner(pu, pv + 1), corner(pu + 1, pv + 1)};
+        p.meshFace = uint32_t(pv * npu + pu);
+      }
+      out.push_back(std::move(p));
+    }
+  addPrims(std::move(out));
 }
 
 void Scene::emitFaces(const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P, const VertexData& vd,

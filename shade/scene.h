@@ -94,6 +94,22 @@ struct RisNode {
 void applyParams(SurfaceShader& s, const ParamMap& params);
 void applyParams(Light& l, const ParamMap& params);
 
+/// A cubic basis as RenderMan's Basis gives it: P(u) = [u³ u² u 1] · M · G over four control
+/// points G, with `m` row-major (row i: the coefficients of u^(3-i)) and M = scale · m. The
+/// built-in bases keep integer `m` and the fraction in `scale`, so the weights at u = 0 and 1 are
+/// exact and neighbouring patches of a mesh evaluate bit-identical points on their shared edge.
+struct CubicBasis {
+  std::array<double, 16> m{-1, 3, -3, 1, 3, -6, 3, 0, -3, 3, 0, 0, 1, 0, 0, 0};  // bezier
+  double scale = 1;
+  int step = 3;  // control points between the patches of a mesh
+  /// RenderMan's named bases ("bezier", "b-spline", "catmull-rom", "hermite", "power") with
+  /// their default steps; false for another name.
+  static bool named(const std::string& name, CubicBasis& out);
+  /// Weights of the four control points at u, and their derivatives.
+  void weights(double u, double w[4]) const;
+  void derivatives(double u, double d[4]) const;
+};
+
 /// Attributes captured by each primitive when it is declared.
 struct Attributes {
   Animated<glm::dvec3> color{glm::dvec3(1.0)}, opacity{glm::dvec3(1.0)};
@@ -105,9 +121,10 @@ struct Attributes {
   bool orientationRH = false;  // Orientation: "lh" (RenderMan's default, "outside") or "rh"
   uint32_t objectId = 0;       // 0: unnamed; otherwise 1 + index into FrameScene::objectNames
   uint32_t bxdf = 0;           // 0: none; otherwise 1 + index into FrameScene::risNodes
+  std::shared_ptr<const std::array<CubicBasis, 2>> basis;  // Basis (u, v); null: bezier, bezier
 };
 
-enum class PrimKind : uint8_t { Sphere, Cylinder, Cone, Disk, Torus, Patch };
+enum class PrimKind : uint8_t { Sphere, Cylinder, Cone, Disk, Torus, Patch, Bicubic };
 
 /// One deformation key of a primitive's shape.
 struct Shape {
@@ -117,6 +134,8 @@ struct Shape {
   std::array<double, 5> q{};
   /// Bilinear patch corners P00 P10 P01 P11 (RIB order); a triangle repeats P01 as P11.
   std::array<glm::dvec3, 4> P{};
+  /// Bicubic patch: its 16 control points, u fastest, in the basis of Primitive::basis.
+  std::vector<glm::dvec3> cv;
 };
 
 /// Vertex data of a polygon mesh or patch (N in object space), shared by all the patches its
@@ -140,6 +159,7 @@ struct Primitive {
   uint32_t meshFace = 0;
   std::shared_ptr<const MotionXform> xform;  // object → camera
   std::shared_ptr<const Attributes> attrs;
+  std::shared_ptr<const std::array<CubicBasis, 2>> basis;  // Bicubic: the (u, v) bases
   bool flipNormals = false;  // orientation differs from the coordinate system's handedness
 
   Shape shapeAt(double t) const;
@@ -236,6 +256,12 @@ class Scene {
   void motionFactor(double f);
   void matte(bool on);
   void identifier(const std::string& name);
+  /// Retained geometry: primitives between objectBegin and objectEnd are kept under `handle`
+  /// (relative to the object's own space) instead of drawn; objectInstance draws them under the
+  /// current transform, with the current attributes wherever the definition set none of its own.
+  void objectBegin(const std::string& handle);
+  void objectEnd();
+  void objectInstance(const std::string& handle);
   /// A RIS request: options before WorldBegin, nodes inside (a Bxdf binds to the attributes).
   void ris(RisNode node);
   /// Counts a primitive request the shading pass cannot make (reported per frame).
@@ -258,6 +284,11 @@ class Scene {
     std::vector<glm::dvec2> st;
   };
   void patch(const std::array<glm::dvec3, 4>& P, const VertexData& vd = {});
+  /// Patch meshes (Patch "bicubic" is a 4 × 4 one): nu × nv control points, u fastest, split
+  /// into patches by the current Basis steps (bicubic) or one per cell (bilinear). Vertex data
+  /// is varying (one value per patch corner) or uniform (one per patch).
+  void patchMesh(bool bicubic, int nu, bool uPeriodic, int nv, bool vPeriodic, const std::vector<glm::dvec3>& P, const VertexData& vd = {});
+  void basis(const CubicBasis& u, const CubicBasis& v);
   /// General polygons: `nverts` per face, `verts` indices into P (and the vertex data).
   void pointsPolygons(const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P, const VertexData& vd = {});
   void polygon(const std::vector<glm::dvec3>& P, const VertexData& vd = {});
@@ -285,7 +316,12 @@ class Scene {
     std::vector<SurfaceShader> surfaces;
     std::vector<std::vector<Primitive>> prims;  // per key: the primitives one call made
   };
-  enum class Block : uint8_t { Attribute, Transform, Frame, World };
+  enum class Block : uint8_t { Attribute, Transform, Frame, World, Object };
+  struct ObjectDefinition {
+    std::shared_ptr<const Attributes> attrsAtBegin;  // prims still carrying these take the instance's
+    std::vector<Primitive> prims;
+    std::map<std::string, uint64_t> skipped;  // primitives the definition could not make
+  };
   struct State {
     std::shared_ptr<Attributes> attrs;
     MotionXform ctm;
@@ -316,6 +352,8 @@ class Scene {
   std::map<std::string, uint32_t> objectIds_;
   FrameScene frame_;
   Motion motion_;
+  std::map<std::string, ObjectDefinition> objects_;
+  ObjectDefinition* recording_ = nullptr;  // the object being defined
   int framesDone_ = 0;
 };
 

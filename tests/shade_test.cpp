@@ -755,6 +755,32 @@ TEST(ShadeRib, EverySharedSceneShades) {
   EXPECT_GE(files, 6);
 }
 
+TEST(ShadeRib, EveryProductionSceneShadesOrSaysWhatItSkipped) {
+  // ../shared/data/rib-production: no frame may come out empty in silence - it shades
+  // micropolygons, or it names the primitives it could not make.
+  const std::string dir = test::sharedDir() + "/data/rib-production";
+  ASSERT_TRUE(std::filesystem::is_directory(dir)) << dir;
+  int files = 0, shaded = 0;
+  for (const auto& e : std::filesystem::recursive_directory_iterator(dir)) {
+    if (e.path().extension() != ".rib" || e.path().filename() == "teapot.rib") continue;  // teapot.rib is fig12.7's archive
+    ++files;
+    int frames = 0;
+    Scene scene([&](FrameScene& f) {
+      ShadeOptions o;
+      o.dice.shadingRateScale = 4;
+      CaptureSink sink;
+      shadeFrame(f, o, sink);
+      EXPECT_TRUE(sink.mps() > 0 || !f.skipped.empty()) << e.path();
+      shaded += sink.mps() > 0;
+      ++frames;
+    });
+    ASSERT_NO_THROW(readRibScene(e.path().string(), scene)) << e.path();
+    EXPECT_GE(frames, 1) << e.path();
+  }
+  EXPECT_GE(files, 6);
+  EXPECT_GE(shaded, 3);  // the bicubic teapot, object instances, the depth-of-field cube scene
+}
+
 TEST(ShadeRib, RequestsMapToSceneState) {
   test::ScratchDir dir;
   const std::string path = dir.path("scene.rib");
@@ -855,6 +881,59 @@ WorldEnd
   EXPECT_EQ(got.options.risOptions[1].type, "PxrPathTracer");
   EXPECT_EQ(got.skipped, (std::map<std::string, uint64_t>{{"Curves", 1}}));
   EXPECT_EQ(got.objectNames, std::vector<std::string>{"ball"});
+}
+
+TEST(ShadeRib, ObjectInstancesPlaceTheirDefinitionUnderTheCurrentState) {
+  // Two primitives retained (one sets its own Color), instanced twice under other transforms
+  // and colours; a polygon with holes inside the definition is counted as skipped per instance.
+  test::ScratchDir dir;
+  const std::string path = dir.path("objects.rib");
+  std::ofstream(path) << R"(
+ObjectBegin "pair"
+  Translate 1 0 0
+  Sphere 1 -1 1 360
+  AttributeBegin
+    Color [0 0 1]
+    GeneralPolygon [3] "P" [0 0 0 1 0 0 0 1 0]
+  AttributeEnd
+  PointsGeneralPolygons [2] [4 3] [0 1 2 3 4 5 6] "P" [0 0 0 4 0 0 4 4 0 0 4 0 1 1 0 2 1 0 2 2 0]
+ObjectEnd
+WorldBegin
+  Translate 0 0 5
+  Color [1 0 0]
+  ObjectInstance "pair"
+  Translate 0 2 0
+  Color [0 1 0]
+  ObjectInstance "pair"
+WorldEnd
+)";
+  FrameScene got;
+  Scene scene([&](FrameScene& f) { got = std::move(f); });
+  readRibScene(path, scene);
+  ASSERT_EQ(got.prims.size(), 4u);
+  const dvec3 origin(0.0);
+  auto placed = [&](size_t i) { return dvec3(got.prims[i].xform->at(0) * glm::dvec4(origin, 1.0)); };
+  EXPECT_EQ(placed(0), dvec3(1, 0, 5));  // the definition's Translate, then the instance's
+  EXPECT_EQ(placed(2), dvec3(1, 2, 5));
+  EXPECT_EQ(got.prims[0].kind, PrimKind::Sphere);
+  EXPECT_TRUE(got.prims[1].triangle);
+  EXPECT_EQ(got.prims[0].attrs->color.values[0], dvec3(1, 0, 0));  // the instance's colour
+  EXPECT_EQ(got.prims[2].attrs->color.values[0], dvec3(0, 1, 0));
+  EXPECT_EQ(got.prims[1].attrs->color.values[0], dvec3(0, 0, 1));  // set inside the definition
+  EXPECT_EQ(got.prims[3].attrs->color.values[0], dvec3(0, 0, 1));
+  EXPECT_EQ(got.skipped, (std::map<std::string, uint64_t>{{"PointsGeneralPolygons", 2}}));
+  auto error = [&](const std::string& text) {
+    std::ofstream(path) << text;
+    Scene s([](FrameScene&) {});
+    try {
+      readRibScene(path, s);
+    } catch (const Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(error("WorldBegin\nObjectInstance 7\nWorldEnd\n").find("objects.rib:2 (ObjectInstance): ObjectInstance of undefined object '7'"), std::string::npos);
+  EXPECT_NE(error("ObjectEnd\n").find("ObjectEnd without ObjectBegin"), std::string::npos);
 }
 
 TEST(ShadeRib, BadInputNamesFileAndLine) {

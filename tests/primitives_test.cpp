@@ -1,0 +1,210 @@
+// Production primitives against independent truths: bicubic patches against de Casteljau and the
+// textbook basis functions, shared mesh edges bit for bit, patch-mesh silhouettes against their
+// exact coverage pixel by pixel.
+#include <cmath>
+#include <fstream>
+#include <random>
+
+#include <gtest/gtest.h>
+
+#include "common/error.h"
+#include "shade/dice.h"
+#include "shade/scene.h"
+#include "tests/exr_test_util.h"
+#include "tests/test_util.h"
+
+namespace reshutter::shade {
+namespace {
+
+using glm::dvec3;
+
+// The primitives one builder call makes (in a world block, identity transform).
+std::vector<Primitive> primsOf(const std::function<void(Scene&)>& build) {
+  std::vector<Primitive> out;
+  Scene scene([&](FrameScene& f) { out = std::move(f.prims); });
+  scene.worldBegin();
+  build(scene);
+  scene.worldEnd();
+  return out;
+}
+
+// A bicubic bezier patch at (u, v) by de Casteljau: the definition, not the basis matrix.
+dvec3 deCasteljau(const std::vector<dvec3>& cv, double u, double v) {
+  auto curve = [](std::array<dvec3, 4> p, double t) {
+    for (int r = 3; r > 0; --r)
+      for (int i = 0; i < r; ++i) p[size_t(i)] = (1 - t) * p[size_t(i)] + t * p[size_t(i + 1)];
+    return p[0];
+  };
+  std::array<dvec3, 4> rows;
+  for (size_t l = 0; l < 4; ++l) rows[l] = curve({cv[l * 4], cv[l * 4 + 1], cv[l * 4 + 2], cv[l * 4 + 3]}, u);
+  return curve(rows, v);
+}
+
+std::vector<dvec3> randomPoints(size_t n, uint32_t seed) {
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> d(-3, 3);
+  std::vector<dvec3> p(n);
+  for (auto& x : p) x = dvec3(d(rng), d(rng), d(rng));
+  return p;
+}
+
+TEST(PrimBicubic, BezierPatchIsDeCasteljau) {
+  const auto cv = randomPoints(16, 7);
+  const auto prims = primsOf([&](Scene& s) { s.patchMesh(true, 4, false, 4, false, cv); });
+  ASSERT_EQ(prims.size(), 1u);
+  ASSERT_EQ(prims[0].kind, PrimKind::Bicubic);
+  for (double u : {0.0, 0.13, 0.5, 0.77, 1.0})
+    for (double v : {0.0, 0.31, 0.6, 1.0}) {
+      const dvec3 got = evalP(prims[0], prims[0].keys[0], u, v), want = deCasteljau(cv, u, v);
+      EXPECT_LT(glm::length(got - want), 1e-12) << u << " " << v;
+    }
+  // The normal is along dP/du x dP/dv, by central differences of de Casteljau.
+  const double h = 1e-6, u = 0.4, v = 0.7;
+  const dvec3 du = (deCasteljau(cv, u + h, v) - deCasteljau(cv, u - h, v)) / (2 * h);
+  const dvec3 dv = (deCasteljau(cv, u, v + h) - deCasteljau(cv, u, v - h)) / (2 * h);
+  const dvec3 n = glm::normalize(evalNg(prims[0], prims[0].keys[0], u, v));
+  EXPECT_GT(glm::dot(n, glm::normalize(glm::cross(du, dv))), 1 - 1e-8);
+}
+
+TEST(PrimBicubic, EveryBasisIsItsTextbookDefinition) {
+  // Uniform cubic B-spline, Catmull-Rom, Hermite (P0 T0 P1 T1) and power basis functions as
+  // written in the literature, against the mesh's evaluation.
+  using Fn = std::function<std::array<double, 4>(double)>;
+  const std::vector<std::pair<std::string, Fn>> bases = {
+      {"b-spline", [](double t) { return std::array<double, 4>{std::pow(1 - t, 3) / 6, (3 * t * t * t - 6 * t * t + 4) / 6, (-3 * t * t * t + 3 * t * t + 3 * t + 1) / 6, t * t * t / 6}; }},
+      {"catmull-rom", [](double t) { return std::array<double, 4>{0.5 * (-t * t * t + 2 * t * t - t), 0.5 * (3 * t * t * t - 5 * t * t + 2), 0.5 * (-3 * t * t * t + 4 * t * t + t), 0.5 * (t * t * t - t * t)}; }},
+      {"hermite", [](double t) { return std::array<double, 4>{2 * t * t * t - 3 * t * t + 1, t * t * t - 2 * t * t + t, -2 * t * t * t + 3 * t * t, t * t * t - t * t}; }},
+      {"power", [](double t) { return std::array<double, 4>{t * t * t, t * t, t, 1}; }},
+  };
+  for (const auto& [name, fn] : bases) {
+    CubicBasis b;
+    ASSERT_TRUE(CubicBasis::named(name, b)) << name;
+    const auto cv = randomPoints(16, 11);
+    const auto prims = primsOf([&](Scene& s) {
+      s.basis(b, b);
+      s.patchMesh(true, 4, false, 4, false, cv);
+    });
+    ASSERT_EQ(prims.size(), 1u) << name;
+    for (double u : {0.0, 0.25, 0.6, 1.0})
+      for (double v : {0.0, 0.45, 1.0}) {
+        const auto wu = fn(u), wv = fn(v);
+        dvec3 want(0.0);
+        for (size_t l = 0; l < 4; ++l)
+          for (size_t k = 0; k < 4; ++k) want += wu[k] * wv[l] * cv[l * 4 + k];
+        EXPECT_LT(glm::length(evalP(prims[0], prims[0].keys[0], u, v) - want), 1e-12) << name << " " << u << " " << v;
+      }
+  }
+}
+
+TEST(PrimBicubic, MeshPatchesShareTheirEdgesBitForBit) {
+  // Neighbouring patches of a B-spline and a Catmull-Rom mesh (windows overlapping by three
+  // control points) and of a bezier mesh (sharing one) evaluate identical points on their shared
+  // edges: no crack can open between their grids there.
+  for (const std::string name : {"b-spline", "catmull-rom", "bezier"}) {
+    CubicBasis b;
+    ASSERT_TRUE(CubicBasis::named(name, b));
+    const int n = name == "bezier" ? 7 : 6;
+    const auto cv = randomPoints(size_t(n * n), 3);
+    const auto prims = primsOf([&](Scene& s) {
+      s.basis(b, b);
+      s.patchMesh(true, n, false, n, false, cv);
+    });
+    const int np = name == "bezier" ? 2 : 3;
+    ASSERT_EQ(prims.size(), size_t(np * np)) << name;
+    for (int pv = 0; pv < np; ++pv)
+      for (int pu = 0; pu + 1 < np; ++pu) {
+        const Primitive& a = prims[size_t(pv * np + pu)];
+        const Primitive& c = prims[size_t(pv * np + pu + 1)];
+        const Primitive& below = prims[size_t(pu * np + pv)];
+        const Primitive& above = prims[size_t((pu + 1) * np + pv)];
+        for (double t : {0.0, 0.1, 0.37, 0.5, 0.9, 1.0}) {
+          EXPECT_EQ(evalP(a, a.keys[0], 1.0, t), evalP(c, c.keys[0], 0.0, t)) << name;
+          EXPECT_EQ(evalP(below, below.keys[0], t, 1.0), evalP(above, above.keys[0], t, 0.0)) << name;
+        }
+      }
+  }
+}
+
+TEST(PrimBicubic, PeriodicMeshesWrapAndBadCountsAreErrors) {
+  CubicBasis bspline;
+  ASSERT_TRUE(CubicBasis::named("b-spline", bspline));
+  const auto cv = randomPoints(8 * 5, 5);
+  const auto prims = primsOf([&](Scene& s) {
+    s.basis(bspline, bspline);
+    s.patchMesh(true, 8, true, 5, false, cv);  // 8 patches around, 2 along v
+  });
+  ASSERT_EQ(prims.size(), 16u);
+  EXPECT_EQ(evalP(prims[7], prims[7].keys[0], 1.0, 0.3), evalP(prims[0], prims[0].keys[0], 0.0, 0.3));  // closes on itself
+  auto error = [&](const std::function<void(Scene&)>& build) {
+    try {
+      primsOf(build);
+    } catch (const Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(error([&](Scene& s) { s.patchMesh(true, 5, false, 4, false, randomPoints(20, 1)); }).find("nu = 5 does not make whole bicubic patches"),
+            std::string::npos);
+  EXPECT_NE(error([&](Scene& s) { s.patchMesh(true, 4, false, 4, false, randomPoints(15, 1)); }).find("needs 16 control points, has 15"), std::string::npos);
+  CubicBasis bad;
+  bad.step = 0;
+  EXPECT_NE(error([&](Scene& s) { s.basis(bad, bad); }).find("step 0"), std::string::npos);
+}
+
+// ---------------------------------------------------------------------------------------------
+// Rendered through the CLI: coverage against exact areas, and cracks.
+
+struct Rendered {
+  resample::FlatImage image;
+  const std::vector<float>& alpha() const { return image.find("A")->f; }
+};
+
+Rendered render(const test::ScratchDir& dir, const std::string& name, const std::string& rib, const std::string& resampleArgs) {
+  const std::string path = dir.path(name + ".rib");
+  std::ofstream(path) << rib;
+  auto r = test::runReshutter("-q shade " + path + " -o " + dir.path(name + ".mps"));
+  EXPECT_EQ(r.exitCode, 0) << r.err;
+  r = test::runReshutter("-q resample " + dir.path(name + ".mps") + " -o " + dir.path(name + ".exr") + " " + resampleArgs);
+  EXPECT_EQ(r.exitCode, 0) << r.err;
+  return Rendered{test::readFlatExr(dir.path(name + ".exr"))};
+}
+
+TEST(PrimBicubic, PlanarMeshesCoverExactlyTheirKnownArea) {
+  // A regular planar grid of control points, 1 unit = 1 pixel (orthographic). A B-spline mesh
+  // reproduces linear functions, so it covers exactly the rectangle of its inner control points;
+  // a bezier mesh interpolates its rim, so it covers its whole hull. Each pixel's alpha (box
+  // filter, 16x16 stratified samples) is checked against the exact overlap area.
+  test::ScratchDir dir;
+  const int n = 7;
+  const double x0 = -9.3, y0 = -7.85, h = 2.55;
+  std::string P;
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) P += cat(x0 + h * i, " ", y0 + h * j, " 5 ");
+  for (const std::string basis : {"b-spline", "bezier"}) {
+    const std::string rib = cat("Format 32 32 1\nProjection \"orthographic\"\nScreenWindow -16 16 -16 16\nWorldBegin\nSurface \"constant\"\nBasis \"", basis, "\" ",
+                                basis == "bezier" ? 3 : 1, " \"", basis, "\" ", basis == "bezier" ? 3 : 1, "\nPatchMesh \"bicubic\" ", n, " \"nonperiodic\" ", n,
+                                " \"nonperiodic\" \"P\" [", P, "]\nWorldEnd\n");
+    const Rendered img = render(dir, basis, rib, "--samples 16x16 --filter box:1x1");
+    const double lo = basis == "bezier" ? 0 : 1, hi = basis == "bezier" ? n - 1 : n - 2;
+    // Screen (x, y) → raster (x + 16, 16 - y).
+    const double rx0 = x0 + h * lo + 16, rx1 = x0 + h * hi + 16, ry0 = 16 - (y0 + h * hi), ry1 = 16 - (y0 + h * lo);
+    int full = 0;
+    for (int y = 0; y < 32; ++y)
+      for (int x = 0; x < 32; ++x) {
+        const double cx = std::max(0.0, std::min(x + 1.0, rx1) - std::max(double(x), rx0));
+        const double cy = std::max(0.0, std::min(y + 1.0, ry1) - std::max(double(y), ry0));
+        const double a = img.alpha()[size_t(y * 32 + x)];
+        EXPECT_NEAR(a, cx * cy, 2.0 / 16 + 1e-6) << basis << " pixel " << x << "," << y;
+        if (cx * cy == 1) {
+          EXPECT_EQ(a, 1.0f) << basis << " pixel " << x << "," << y;
+        } else if (cx * cy == 0) {
+          EXPECT_EQ(a, 0.0f) << basis << " pixel " << x << "," << y;
+        }
+        full += cx * cy == 1;
+      }
+    EXPECT_GT(full, 64) << basis;
+  }
+}
+
+}  // namespace
+}  // namespace reshutter::shade
