@@ -4,6 +4,7 @@ set -euo pipefail
 packages=(
   build-essential cmake ninja-build pkg-config clang
   libopenexr-dev libtbb-dev libglm-dev libzstd-dev libxxhash-dev libcli11-dev zlib1g-dev libpng-dev libtiff-dev
+  libosd-dev
   libgtest-dev libbenchmark-dev
   openimageio-tools gnuplot-nox jq time
 )

@@ -87,8 +87,23 @@ glm::dvec3 evalP(const Primitive& p, const Shape& s, double u, double v) {
       const double ring = q[0] + q[1] * std::cos(phi);
       return {ring * std::cos(theta), ring * std::sin(theta), q[1] * std::sin(phi)};
     }
+    case PrimKind::Hyperboloid: {
+      const double phi = u * q[0] * kDeg;
+      const glm::dvec3 l = s.P[0] + v * (s.P[1] - s.P[0]);
+      return {l.x * std::cos(phi) - l.y * std::sin(phi), l.x * std::sin(phi) + l.y * std::cos(phi), l.z};
+    }
+    case PrimKind::Paraboloid: {
+      const double phi = u * q[3] * kDeg, z = q[1] + v * (q[2] - q[1]), r = q[0] * std::sqrt(std::max(0.0, z / q[2]));
+      return {r * std::cos(phi), r * std::sin(phi), z};
+    }
     case PrimKind::Patch: return bilinear(s.P, u, v);
     case PrimKind::Bicubic: return bicubic(p, s, u, v, false, false);
+    case PrimKind::Subdiv: {
+      glm::dvec3 P;
+      if (p.triangle) u *= 1 - v;  // the square's last row collapses onto the triangle's apex
+      p.subdiv->evaluate(p.ptexFace, u, v, s.key, P, nullptr, nullptr);
+      return P;
+    }
   }
   return glm::dvec3(0.0);
 }
@@ -126,6 +141,43 @@ glm::dvec3 evalNg(const Primitive& p, const Shape& s, double u, double v) {
       if (glm::length(n) <= 1e-12 * scale * scale) n = glm::cross(P[3] - P[0], P[2] - P[1]);  // collapsed corner
       return n;
     }
+    case PrimKind::Hyperboloid:
+    case PrimKind::Paraboloid: {
+      // Surfaces of revolution: dP/du x dP/dv, by the tangent of the profile (outward when
+      // thetamax > 0 and the profile rises, as for the other quadrics); at an apex where the
+      // profile's slope is infinite, the limit from a little way in.
+      const double theta = (p.kind == PrimKind::Hyperboloid ? q[0] : q[3]) * kDeg;
+      auto normal = [&](double uu, double vv) {
+        const double phi = uu * theta, c = std::cos(phi), sn = std::sin(phi);
+        glm::dvec3 prof, dprof;  // the profile point (before rotation) and its v derivative
+        if (p.kind == PrimKind::Hyperboloid) {
+          prof = s.P[0] + vv * (s.P[1] - s.P[0]), dprof = s.P[1] - s.P[0];
+        } else {
+          const double z = q[1] + vv * (q[2] - q[1]), zr = std::max(0.0, z / q[2]), r = q[0] * std::sqrt(zr);
+          prof = glm::dvec3(r, 0, z);
+          dprof = glm::dvec3(zr > 0 ? q[0] * (q[2] - q[1]) / (2 * q[2] * std::sqrt(zr)) : INFINITY, 0, q[2] - q[1]);
+        }
+        const glm::dvec3 dPdu = theta * glm::dvec3(-prof.x * sn - prof.y * c, prof.x * c - prof.y * sn, 0.0);
+        const glm::dvec3 dPdv(dprof.x * c - dprof.y * sn, dprof.x * sn + dprof.y * c, dprof.z);
+        return glm::cross(dPdu, dPdv);
+      };
+      glm::dvec3 n = normal(u, v);
+      for (double step = 1e-4; (glm::dot(n, n) == 0 || !std::isfinite(glm::dot(n, n))) && step <= 0.1; step *= 10)
+        n = normal(u + (0.5 - u) * step, v + (0.5 - v) * step);
+      return n;
+    }
+    case PrimKind::Subdiv: {
+      auto normal = [&](double uu, double vv) {
+        glm::dvec3 P, du, dv;
+        if (p.triangle) uu *= 1 - vv;
+        p.subdiv->evaluate(p.ptexFace, uu, vv, s.key, P, &du, &dv);
+        return glm::cross(du, dv);
+      };
+      glm::dvec3 n = normal(u, v);
+      for (double step = 1e-4; (glm::dot(n, n) == 0 || !std::isfinite(glm::dot(n, n))) && step <= 0.1; step *= 10)
+        n = normal(u + (0.5 - u) * step, v + (0.5 - v) * step);
+      return n;
+    }
     case PrimKind::Bicubic: {
       glm::dvec3 n = glm::cross(bicubic(p, s, u, v, true, false), bicubic(p, s, u, v, false, true));
       // A collapsed edge (the pole of a teapot's lid) has no tangent along it: the normal is
@@ -155,7 +207,7 @@ std::vector<double> clipKnots(const Primitive& p, double open, double close) {
   for (double t : out) {
     if (p.xform->at(t) != m0) return out;
     const Shape s = p.shapeAt(t);
-    if (s.q != s0.q || s.P != s0.P || s.cv != s0.cv) return out;
+    if (s.q != s0.q || s.P != s0.P || s.cv != s0.cv || s.key != s0.key) return out;
   }
   return {open};
 }
@@ -369,7 +421,7 @@ void diceLeaf(const Primitive& p, const Leaf& leaf, const std::vector<double>& k
     for (int i = 0; i < nu; ++i) {
       const uint32_t p0 = uint32_t(j * row + i), p1 = p0 + 1, p2 = p0 + 1 + uint32_t(row), p3 = p0 + uint32_t(row);
       uint32_t c[4];
-      const bool tri = p.triangle && j == nv - 1;  // the collapsed last row of a triangle
+      const bool tri = p.triangle && j == nv - 1 && leaf.v1 == 1.0;  // the collapsed last row of a triangle
       if (tri) {
         c[0] = p0, c[1] = reverse ? p3 : p1, c[2] = reverse ? p1 : p2, c[3] = store::kNoCorner;
       } else if (reverse) {

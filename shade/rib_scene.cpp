@@ -109,6 +109,59 @@ RisNode risNode(const rib::Request& r, const Args& a, size_t first) {
   return node;
 }
 
+/// SubdivisionMesh scheme nvertices vertices [tags nargs intargs floatargs] parameters...
+void subdivisionMesh(Scene& s, const rib::Request& r, const Args& a) {
+  const std::string& name = a.string(0);
+  SubdivScheme scheme;
+  if (name == "catmull-clark") scheme = SubdivScheme::CatmullClark;
+  else if (name == "loop") scheme = SubdivScheme::Loop;
+  else if (name == "bilinear") scheme = SubdivScheme::Bilinear;
+  else a.fail(cat("subdivision scheme '", name, "' (catmull-clark, loop or bilinear)"));
+  const auto nverts = intArray(a, 1, 0, 1 << 20);
+  const auto verts = intArray(a, 2, 0, 2e9);
+  SubdivTags tags;
+  size_t first = 3;
+  // The tag arrays are optional: a parameter name (a plain string) may follow the vertices.
+  if (r.values.size() > 3 && r.values[3].kind != Value::Kind::String) {
+    if (r.values.size() < 7) a.fail("expects tags, their argument counts, integer and float arguments");
+    std::vector<std::string> names;
+    if (r.values[3].kind == Value::Kind::StringArray) names = r.values[3].strings;
+    else if (!a.numbers(3).empty()) a.fail("argument 4 must be the tag names");
+    const auto nargs = intArray(a, 4, 0, 1 << 24);
+    const auto ints = intArray(a, 5);
+    const auto& floats = a.numbers(6);
+    if (nargs.size() != 2 * names.size()) a.fail(cat(names.size(), " tags need ", 2 * names.size(), " argument counts, have ", nargs.size()));
+    size_t ii = 0, fi = 0;
+    for (size_t t = 0; t < names.size(); ++t) {
+      const size_t ni = size_t(nargs[2 * t]), nf = size_t(nargs[2 * t + 1]);
+      if (ii + ni > ints.size() || fi + nf > floats.size()) a.fail(cat("tag '", names[t], "' needs more arguments than given"));
+      const std::vector<int> iv(ints.begin() + std::ptrdiff_t(ii), ints.begin() + std::ptrdiff_t(ii + ni));
+      const std::vector<double> fv(floats.begin() + std::ptrdiff_t(fi), floats.begin() + std::ptrdiff_t(fi + nf));
+      ii += ni, fi += nf;
+      const std::string& tag = names[t];
+      if (tag == "crease") {
+        if (iv.size() < 2 || fv.empty()) a.fail("a crease needs at least two vertices and a sharpness");
+        tags.creases.emplace_back(iv, fv[0]);
+      } else if (tag == "corner") {
+        if (fv.empty()) a.fail("a corner needs a sharpness");
+        for (size_t k = 0; k < iv.size(); ++k) tags.corners.emplace_back(iv[k], fv[std::min(k, fv.size() - 1)]);
+      } else if (tag == "hole") {
+        tags.holes.insert(tags.holes.end(), iv.begin(), iv.end());
+      } else if (tag == "interpolateboundary") {
+        tags.interpolateBoundary = iv.empty() ? 1 : iv[0];
+        if (tags.interpolateBoundary < 0 || tags.interpolateBoundary > 2) a.fail(cat("interpolateboundary ", tags.interpolateBoundary, " (0, 1 or 2)"));
+      } else if (tag == "facevaryinginterpolateboundary" || tag == "facevaryingpropagatecorners" || tag == "creasemethod") {
+        // Face-varying data is interpolated linearly here; Chaikin creases are OpenSubdiv's default.
+      } else {
+        warnOnce(cat("subdiv-tag:", tag), cat(s.where, ": subdivision tag '", tag, "' is not supported; ignored"));
+      }
+    }
+    first = 7;
+  }
+  Geometry g = geometry(a, first);
+  s.subdivisionMesh(scheme, nverts, verts, tags, g.P, g.vd);
+}
+
 /// The RenderMan Interface's geometric primitives: a frame counts those it could not make.
 bool isPrimitiveRequest(std::string_view n) {
   static const char* const kinds[] = {"Polygon", "GeneralPolygon", "PointsPolygons", "PointsGeneralPolygons", "Patch", "PatchMesh", "NuPatch",
@@ -185,6 +238,14 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
   if (n == "Cylinder") return s.cylinder(a.number(0), a.number(1), a.number(2), a.number(3)), true;
   if (n == "Cone") return s.cone(a.number(0), a.number(1), a.number(2)), true;
   if (n == "Disk") return s.disk(a.number(0), a.number(1), a.number(2)), true;
+  if (n == "Hyperboloid") {
+    if (a.count() == 7) return s.hyperboloid({a.number(0), a.number(1), a.number(2)}, {a.number(3), a.number(4), a.number(5)}, a.number(6)), true;
+    const auto& p1 = a.numbers(0);
+    const auto& p2 = a.numbers(1);
+    if (p1.size() != 3 || p2.size() != 3) a.fail("expects two points and thetamax");
+    return s.hyperboloid({p1[0], p1[1], p1[2]}, {p2[0], p2[1], p2[2]}, a.number(2)), true;
+  }
+  if (n == "Paraboloid") return s.paraboloid(a.number(0), a.number(1), a.number(2), a.number(3)), true;
   if (n == "Torus") return s.torus(a.number(0), a.number(1), a.number(2), a.number(3), a.number(4)), true;
   if (n == "Patch") {
     const std::string& type = a.string(0);
@@ -251,6 +312,7 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
     Geometry g = geometry(a, 3);
     return s.pointsPolygons(nverts, verts, g.P, g.vd), true;
   }
+  if (n == "SubdivisionMesh") return subdivisionMesh(s, r, a), true;
   if (n == "Polygon") {
     Geometry g = geometry(a, 0);
     return s.polygon(g.P, g.vd), true;

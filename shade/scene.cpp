@@ -175,6 +175,7 @@ Shape Primitive::shapeAt(double t) const {
   Shape s;
   for (size_t k = 0; k < s.q.size(); ++k) s.q[k] = keys[i].q[k] + (keys[i + 1].q[k] - keys[i].q[k]) * w;
   for (size_t k = 0; k < 4; ++k) s.P[k] = keys[i].P[k] + (keys[i + 1].P[k] - keys[i].P[k]) * w;
+  s.key = keys[i].key + (keys[i + 1].key - keys[i].key) * w;
   s.cv.resize(keys[i].cv.size());
   for (size_t k = 0; k < s.cv.size(); ++k) s.cv[k] = keys[i].cv[k] + (keys[i + 1].cv[k] - keys[i].cv[k]) * w;
   return s;
@@ -549,14 +550,28 @@ void Scene::motionEnd() {
     }
     case Pending::Prim: {
       std::vector<Primitive> out = std::move(m.prims[0]);
+      // A subdivision mesh's keys are its surface's: one surface gets every copy's points.
+      std::map<const SubdivSurface*, std::shared_ptr<const SubdivSurface>> merged;
+      for (size_t i = 0; i < out.size(); ++i) {
+        if (out[i].kind != PrimKind::Subdiv || merged.count(out[i].subdiv.get())) continue;
+        std::vector<std::vector<glm::dvec3>> more;
+        for (size_t k = 1; k < m.prims.size(); ++k) {
+          if (m.prims[k].size() != out.size() || m.prims[k][i].kind != PrimKind::Subdiv) error("deformation keys of a motion block are different primitives");
+          more.push_back(m.prims[k][i].subdiv->basePoints(0));
+        }
+        merged[out[i].subdiv.get()] = out[i].subdiv->withKeys(more);
+      }
       for (size_t k = 1; k < m.prims.size(); ++k) {
         if (m.prims[k].size() != out.size()) error("deformation keys of a motion block differ in topology");
         for (size_t i = 0; i < out.size(); ++i) {
           if (m.prims[k][i].kind != out[i].kind || m.prims[k][i].triangle != out[i].triangle || m.prims[k][i].keys[0].cv.size() != out[i].keys[0].cv.size())
             error("deformation keys of a motion block are different primitives");
           out[i].keys.push_back(m.prims[k][i].keys[0]);
+          if (out[i].kind == PrimKind::Subdiv) out[i].keys.back().key = double(k);
         }
       }
+      for (auto& p : out)
+        if (p.kind == PrimKind::Subdiv) p.subdiv = merged.at(p.subdiv.get());
       for (auto& p : out) p.times = times;
       frame_.prims.insert(frame_.prims.end(), std::make_move_iterator(out.begin()), std::make_move_iterator(out.end()));
       break;
@@ -656,6 +671,20 @@ void Scene::torus(double rmajor, double rminor, double phimin, double phimax, do
   quadric(PrimKind::Torus, {rmajor, rminor, phimin, phimax, thetamax}, 5);
 }
 
+void Scene::hyperboloid(const glm::dvec3& point1, const glm::dvec3& point2, double thetamax) {
+  checkFinite(*this, {point1.x, point1.y, point1.z, point2.x, point2.y, point2.z, thetamax});
+  Primitive p = basePrim(PrimKind::Hyperboloid);
+  Shape s;
+  s.q[0] = thetamax;
+  s.P[0] = point1, s.P[1] = point2;
+  p.keys = {s};
+  addPrims({std::move(p)});
+}
+void Scene::paraboloid(double rmax, double zmin, double zmax, double thetamax) {
+  if (!(zmax != 0)) error("a paraboloid needs zmax != 0");
+  quadric(PrimKind::Paraboloid, {rmax, zmin, zmax, thetamax, 0}, 4);
+}
+
 void Scene::patch(const std::array<glm::dvec3, 4>& P, const VertexData& vd) {
   for (const auto& c : P) checkFinite(*this, {c.x, c.y, c.z});
   Primitive p = basePrim(PrimKind::Patch);
@@ -741,6 +770,64 @@ void Scene::patchMesh(bool bicubic, int nu, bool uPeriodic, int nv, bool vPeriod
       }
       out.push_back(std::move(p));
     }
+  addPrims(std::move(out));
+}
+
+void Scene::subdivisionMesh(SubdivScheme scheme, const std::vector<int>& nverts, const std::vector<int>& verts, const SubdivTags& tags,
+                            const std::vector<glm::dvec3>& P, const VertexData& vd) {
+  auto surface = std::make_shared<const SubdivSurface>(scheme, nverts, verts, tags, std::vector<std::vector<glm::dvec3>>{P}, where);
+  const int n = surface->ptexFaces();
+  std::vector<size_t> firstVertex(nverts.size() + 1, 0);
+  for (size_t f = 0; f < nverts.size(); ++f) firstVertex[f + 1] = firstVertex[f] + size_t(nverts[f]);
+  // Varying data as corner values per ptex face: a quad's own, an n-gon sub-face's (its vertex,
+  // the two edge midpoints, the centroid), a triangle's with its apex repeated.
+  auto cornersOf = [&](int ptex, const auto& data, auto zero) {
+    const auto [f, corner] = surface->baseFace(ptex);
+    const size_t first = firstVertex[size_t(f)], nv = size_t(nverts[size_t(f)]);
+    auto at = [&](size_t i) { return data[size_t(verts[first + (i % nv)])]; };
+    if (nv == 3 && scheme == SubdivScheme::Loop) return std::array<decltype(zero), 4>{at(0), at(1), at(2), at(2)};
+    if (nv == 4) return std::array<decltype(zero), 4>{at(0), at(1), at(3), at(2)};
+    auto centroid = zero;
+    for (size_t i = 0; i < nv; ++i) centroid += at(i);
+    centroid /= double(nv);
+    const size_t c = size_t(corner);
+    return std::array<decltype(zero), 4>{at(c), (at(c) + at(c + 1)) * 0.5, (at(c) + at(c + nv - 1)) * 0.5, centroid};
+  };
+  std::shared_ptr<MeshData> mesh;
+  if (!vd.N.empty() || !vd.Cs.empty() || !vd.Os.empty() || !vd.st.empty()) {
+    mesh = std::make_shared<MeshData>();
+    mesh->points = size_t(n) * 4, mesh->faces = size_t(n);
+    auto expand = [&](const std::vector<glm::dvec3>& in, std::vector<glm::dvec3>& out, const char* name) {
+      if (in.empty()) return;
+      if (in.size() == P.size()) {
+        for (int i = 0; i < n; ++i)
+          for (const auto& c : cornersOf(i, in, glm::dvec3(0.0))) out.push_back(c);
+      } else if (in.size() == nverts.size()) {
+        for (int i = 0; i < n; ++i) out.push_back(in[size_t(surface->baseFace(i).first)]);
+      } else {
+        warnOnce(cat("subdiv-var:", name), cat(where, ": \"", name, "\" has ", in.size(), " values; a subdivision mesh takes ", P.size(), " or ", nverts.size(), "; ignored"));
+      }
+    };
+    expand(vd.Cs, mesh->Cs, "Cs"), expand(vd.Os, mesh->Os, "Os");
+    if (vd.st.size() == P.size())
+      for (int i = 0; i < n; ++i)
+        for (const auto& c : cornersOf(i, vd.st, glm::dvec2(0.0))) mesh->st.push_back(c);
+  }
+  std::vector<Primitive> out;
+  for (int i = 0; i < n; ++i) {
+    if (!surface->hasSurface(i)) continue;
+    Primitive p = basePrim(PrimKind::Subdiv);
+    p.subdiv = surface;
+    p.ptexFace = i;
+    p.triangle = scheme == SubdivScheme::Loop;
+    p.keys = {Shape{}};
+    if (mesh) {
+      p.mesh = mesh;
+      p.meshPoint = {uint32_t(4 * i), uint32_t(4 * i + 1), uint32_t(4 * i + 2), uint32_t(4 * i + 3)};
+      p.meshFace = uint32_t(i);
+    }
+    out.push_back(std::move(p));
+  }
   addPrims(std::move(out));
 }
 

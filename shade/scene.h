@@ -24,6 +24,7 @@
 #include <glm/vec2.hpp>
 #include <glm/vec3.hpp>
 
+#include "shade/subdivision.h"
 #include "store/model.h"
 
 namespace reshutter::shade {
@@ -124,18 +125,21 @@ struct Attributes {
   std::shared_ptr<const std::array<CubicBasis, 2>> basis;  // Basis (u, v); null: bezier, bezier
 };
 
-enum class PrimKind : uint8_t { Sphere, Cylinder, Cone, Disk, Torus, Patch, Bicubic };
+enum class PrimKind : uint8_t { Sphere, Cylinder, Cone, Disk, Torus, Hyperboloid, Paraboloid, Patch, Bicubic, Subdiv };
 
 /// One deformation key of a primitive's shape.
 struct Shape {
   /// Quadric parameters in RenderMan argument order (Sphere: radius zmin zmax thetamax;
   /// Cylinder: radius zmin zmax thetamax; Cone: height radius thetamax; Disk: height radius
-  /// thetamax; Torus: rmajor rminor phimin phimax thetamax). Angles in degrees.
+  /// thetamax; Torus: rmajor rminor phimin phimax thetamax; Hyperboloid: thetamax, its line from
+  /// P[0] to P[1]; Paraboloid: rmax zmin zmax thetamax). Angles in degrees.
   std::array<double, 5> q{};
   /// Bilinear patch corners P00 P10 P01 P11 (RIB order); a triangle repeats P01 as P11.
   std::array<glm::dvec3, 4> P{};
   /// Bicubic patch: its 16 control points, u fastest, in the basis of Primitive::basis.
   std::vector<glm::dvec3> cv;
+  /// Subdivision face: the deformation key of Primitive::subdiv (fractional between keys).
+  double key = 0;
 };
 
 /// Vertex data of a polygon mesh or patch (N in object space), shared by all the patches its
@@ -160,6 +164,8 @@ struct Primitive {
   std::shared_ptr<const MotionXform> xform;  // object → camera
   std::shared_ptr<const Attributes> attrs;
   std::shared_ptr<const std::array<CubicBasis, 2>> basis;  // Bicubic: the (u, v) bases
+  std::shared_ptr<const SubdivSurface> subdiv;             // Subdiv: the limit surface
+  int ptexFace = 0;                                        // Subdiv: which of its faces
   bool flipNormals = false;  // orientation differs from the coordinate system's handedness
 
   Shape shapeAt(double t) const;
@@ -278,6 +284,8 @@ class Scene {
   void cone(double height, double radius, double thetamax);
   void disk(double height, double radius, double thetamax);
   void torus(double rmajor, double rminor, double phimin, double phimax, double thetamax);
+  void hyperboloid(const glm::dvec3& point1, const glm::dvec3& point2, double thetamax);
+  void paraboloid(double rmax, double zmin, double zmax, double thetamax);
   /// Bilinear patch, corners in RIB order P00 P10 P01 P11; optional per-corner Cs/Os/N.
   struct VertexData {
     std::vector<glm::dvec3> N, Cs, Os;
@@ -289,6 +297,10 @@ class Scene {
   /// is varying (one value per patch corner) or uniform (one per patch).
   void patchMesh(bool bicubic, int nu, bool uPeriodic, int nv, bool vPeriodic, const std::vector<glm::dvec3>& P, const VertexData& vd = {});
   void basis(const CubicBasis& u, const CubicBasis& v);
+  /// A subdivision mesh: one primitive per ptex face with a limit surface (subdivision.h);
+  /// vertex data per point (varying, interpolated linearly) or per face (uniform).
+  void subdivisionMesh(SubdivScheme scheme, const std::vector<int>& nverts, const std::vector<int>& verts, const SubdivTags& tags,
+                       const std::vector<glm::dvec3>& P, const VertexData& vd = {});
   /// General polygons: `nverts` per face, `verts` indices into P (and the vertex data).
   void pointsPolygons(const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P, const VertexData& vd = {});
   void polygon(const std::vector<glm::dvec3>& P, const VertexData& vd = {});

@@ -152,6 +152,166 @@ TEST(PrimBicubic, PeriodicMeshesWrapAndBadCountsAreErrors) {
 }
 
 // ---------------------------------------------------------------------------------------------
+// Subdivision surfaces (OpenSubdiv)
+
+// A regular n x n grid of points with random heights, as quads (u fastest).
+struct GridMesh {
+  std::vector<int> nverts, verts;
+  std::vector<dvec3> P;
+};
+GridMesh gridMesh(int n, uint32_t seed) {
+  GridMesh m;
+  std::mt19937 rng(seed);
+  std::uniform_real_distribution<double> h(-0.5, 0.5);
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) m.P.emplace_back(i, j, h(rng));
+  for (int j = 0; j + 1 < n; ++j)
+    for (int i = 0; i + 1 < n; ++i) {
+      m.nverts.push_back(4);
+      for (int v : {j * n + i, j * n + i + 1, (j + 1) * n + i + 1, (j + 1) * n + i}) m.verts.push_back(v);
+    }
+  return m;
+}
+
+TEST(PrimSubdiv, RegularFacesAreUniformBSplinePatchesAndBoundariesFollowTheTag) {
+  // Away from extraordinary vertices and boundaries, Catmull-Clark's limit surface is the
+  // uniform bicubic B-spline of the face's 4 x 4 neighbourhood.
+  const int n = 6;
+  const GridMesh m = gridMesh(n, 9);
+  CubicBasis bspline;
+  ASSERT_TRUE(CubicBasis::named("b-spline", bspline));
+  for (int boundary : {0, 1, 2}) {
+    SubdivTags tags;
+    tags.interpolateBoundary = boundary;
+    const auto prims = primsOf([&](Scene& s) { s.subdivisionMesh(SubdivScheme::CatmullClark, m.nverts, m.verts, tags, m.P); });
+    // Without the tag only the faces clear of the boundary have a surface (RenderMan and
+    // OpenSubdiv agree); with it, every face.
+    ASSERT_EQ(prims.size(), boundary ? 25u : 9u) << boundary;
+    const Primitive* centre = nullptr;
+    for (const auto& p : prims)
+      if (p.ptexFace == 12) centre = &p;
+    ASSERT_NE(centre, nullptr);
+    std::vector<dvec3> window;
+    for (int l = 0; l < 4; ++l)
+      for (int k = 0; k < 4; ++k) window.push_back(m.P[size_t((1 + l) * n + 1 + k)]);
+    for (double u : {0.0, 0.3, 0.5, 1.0})
+      for (double v : {0.0, 0.7, 1.0}) {
+        double wu[4], wv[4];
+        bspline.weights(u, wu), bspline.weights(v, wv);
+        dvec3 want(0.0);
+        for (size_t l = 0; l < 4; ++l)
+          for (size_t k = 0; k < 4; ++k) want += wu[k] * wv[l] * window[l * 4 + k];
+        EXPECT_LT(glm::length(evalP(*centre, centre->keys[0], u, v) - want), 1e-9) << u << " " << v;
+      }
+  }
+}
+
+TEST(PrimSubdiv, SharpCornersCreasesHolesAndKeys) {
+  // A cube: an infinitely sharp corner's limit point is the vertex itself; a hole removes its
+  // face's ptex face; a motion block makes one surface with a key per copy, evaluated linearly
+  // between them.
+  const std::vector<int> nverts(6, 4);
+  const std::vector<int> verts = {0, 1, 3, 2, 2, 3, 5, 4, 4, 5, 7, 6, 6, 7, 1, 0, 1, 7, 5, 3, 6, 0, 2, 4};
+  const std::vector<dvec3> P = {{-1, -1, 1}, {1, -1, 1}, {-1, 1, 1}, {1, 1, 1}, {-1, 1, -1}, {1, 1, -1}, {-1, -1, -1}, {1, -1, -1}};
+  SubdivTags smooth, sharp, holed;
+  sharp.corners = {{0, 10.0}};
+  holed.holes = {2};
+  auto limitOfVertex0 = [&](const std::vector<Primitive>& prims) {
+    for (const auto& p : prims)
+      if (p.ptexFace == 0) return evalP(p, p.keys[0], 0, 0);  // face 0's first corner is vertex 0
+    return dvec3(NAN);
+  };
+  const auto soft = primsOf([&](Scene& s) { s.subdivisionMesh(SubdivScheme::CatmullClark, nverts, verts, smooth, P); });
+  const auto hard = primsOf([&](Scene& s) { s.subdivisionMesh(SubdivScheme::CatmullClark, nverts, verts, sharp, P); });
+  ASSERT_EQ(soft.size(), 6u);
+  EXPECT_GT(glm::length(limitOfVertex0(soft) - P[0]), 0.3);  // smooth: pulled far inside
+  EXPECT_LT(glm::length(limitOfVertex0(hard) - P[0]), 1e-9);
+  // The smooth cube's corner limit, by the Catmull-Clark limit rule for valence 3:
+  // (n^2 v + 4 sum(edge neighbours) + sum(face-opposite vertices)) / (n (n + 5)).
+  const dvec3 want = (9.0 * P[0] + 4.0 * (P[1] + P[2] + P[6]) + (P[3] + P[4] + P[7])) / 24.0;
+  EXPECT_LT(glm::length(limitOfVertex0(soft) - want), 1e-9);
+  EXPECT_EQ(primsOf([&](Scene& s) { s.subdivisionMesh(SubdivScheme::CatmullClark, nverts, verts, holed, P); }).size(), 5u);
+
+  std::vector<dvec3> moved = P;
+  for (auto& p : moved) p += dvec3(2, 0, 0);
+  const auto keyed = primsOf([&](Scene& s) {
+    s.motionBegin({0, 1});
+    s.subdivisionMesh(SubdivScheme::CatmullClark, nverts, verts, smooth, P);
+    s.subdivisionMesh(SubdivScheme::CatmullClark, nverts, verts, smooth, moved);
+    s.motionEnd();
+  });
+  ASSERT_EQ(keyed.size(), 6u);
+  ASSERT_EQ(keyed[0].keys.size(), 2u);
+  EXPECT_EQ(keyed[0].subdiv->numKeys(), 2u);
+  const dvec3 a = evalP(keyed[0], keyed[0].shapeAt(0), 0.3, 0.6), b = evalP(keyed[0], keyed[0].shapeAt(1), 0.3, 0.6);
+  EXPECT_LT(glm::length(b - a - dvec3(2, 0, 0)), 1e-9);
+  EXPECT_LT(glm::length(evalP(keyed[0], keyed[0].shapeAt(0.25), 0.3, 0.6) - (a + dvec3(0.5, 0, 0))), 1e-9);
+}
+
+TEST(PrimSubdiv, LoopMeshesAreTrianglesAndBadMeshesAreOneLineErrors) {
+  // An octahedron under Loop: eight triangular faces, each a collapsed-row primitive whose
+  // apex row evaluates to one point.
+  const std::vector<int> nverts(8, 3);
+  const std::vector<int> verts = {0, 1, 2, 0, 2, 3, 0, 3, 4, 0, 4, 1, 5, 2, 1, 5, 3, 2, 5, 4, 3, 5, 1, 4};
+  const std::vector<dvec3> P = {{0, 0, 1}, {1, 0, 0}, {0, 1, 0}, {-1, 0, 0}, {0, -1, 0}, {0, 0, -1}};
+  const auto prims = primsOf([&](Scene& s) { s.subdivisionMesh(SubdivScheme::Loop, nverts, verts, {}, P); });
+  ASSERT_EQ(prims.size(), 8u);
+  for (const auto& p : prims) {
+    EXPECT_TRUE(p.triangle);
+    EXPECT_EQ(evalP(p, p.keys[0], 0.0, 1.0), evalP(p, p.keys[0], 1.0, 1.0));
+    const dvec3 c = evalP(p, p.keys[0], 0.3, 0.3);
+    EXPECT_GT(glm::length(c), 0.4);  // on the smooth limit, inside the octahedron's hull
+    EXPECT_LT(glm::length(c), 1.0);
+    EXPECT_GT(glm::dot(glm::normalize(evalNg(p, p.keys[0], 0.3, 0.3)), glm::normalize(c)), 0.5);  // outward
+  }
+  auto error = [&](const std::function<void(Scene&)>& build) {
+    try {
+      primsOf(build);
+    } catch (const Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(error([&](Scene& s) { s.subdivisionMesh(SubdivScheme::Loop, {4}, {0, 1, 2, 3}, {}, P); }).find("a loop mesh is made of triangles"), std::string::npos);
+  EXPECT_NE(error([&](Scene& s) { s.subdivisionMesh(SubdivScheme::CatmullClark, {3}, {0, 1, 9}, {}, P); }).find("vertex index 9 out of range"), std::string::npos);
+  EXPECT_NE(error([&](Scene& s) { s.subdivisionMesh(SubdivScheme::CatmullClark, {4}, {0, 1, 2}, {}, P); }).find("add up to 4"), std::string::npos);
+  SubdivTags badHole;
+  badHole.holes = {3};
+  EXPECT_NE(error([&](Scene& s) { s.subdivisionMesh(SubdivScheme::CatmullClark, {3}, {0, 1, 2}, badHole, P); }).find("hole face 3 out of range"), std::string::npos);
+}
+
+// ---------------------------------------------------------------------------------------------
+// The other quadrics
+
+TEST(PrimQuadric, HyperboloidAndParaboloidAreTheirDefinitions) {
+  const auto prims = primsOf([&](Scene& s) {
+    s.hyperboloid(dvec3(1, 0, -1), dvec3(0, 1, 1), 360);
+    s.hyperboloid(dvec3(0.7, 0, -0.5), dvec3(0.7, 0, 0.5), 270);
+    s.cylinder(0.7, -0.5, 0.5, 270);
+    s.paraboloid(2, 0.5, 3, 300);
+  });
+  ASSERT_EQ(prims.size(), 4u);
+  // The line from point1 to point2 swept about z.
+  const dvec3 h = evalP(prims[0], prims[0].keys[0], 0.25, 0.5);  // the line's midpoint turned 90 degrees
+  EXPECT_LT(glm::length(h - dvec3(-0.5, 0.5, 0.0)), 1e-12);
+  // A hyperboloid of a vertical line is the cylinder: same points, same normals.
+  for (double u : {0.0, 0.4, 1.0})
+    for (double v : {0.0, 0.6, 1.0}) {
+      EXPECT_LT(glm::length(evalP(prims[1], prims[1].keys[0], u, v) - evalP(prims[2], prims[2].keys[0], u, v)), 1e-12);
+      EXPECT_GT(glm::dot(glm::normalize(evalNg(prims[1], prims[1].keys[0], u, v)), glm::normalize(evalNg(prims[2], prims[2].keys[0], u, v))), 1 - 1e-12);
+    }
+  // z = zmax (r / rmax)^2, with the normal along the outward gradient (x, y, -rmax^2 / (2 zmax)).
+  for (double u : {0.1, 0.5, 0.9})
+    for (double v : {0.0, 0.5, 1.0}) {
+      const dvec3 p = evalP(prims[3], prims[3].keys[0], u, v);
+      EXPECT_NEAR(p.z, 3 * (p.x * p.x + p.y * p.y) / 4, 1e-12);
+      EXPECT_NEAR(std::atan2(p.y, p.x), (u * 300 > 180 ? u * 300 - 360 : u * 300) * M_PI / 180, 1e-9);
+      const dvec3 g = glm::normalize(dvec3(p.x, p.y, -4.0 / (2 * 3)));
+      EXPECT_GT(glm::dot(glm::normalize(evalNg(prims[3], prims[3].keys[0], u, v)), g), 1 - 1e-9);
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
 // Rendered through the CLI: coverage against exact areas, and cracks.
 
 struct Rendered {

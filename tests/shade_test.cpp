@@ -804,7 +804,7 @@ WorldBegin
     MotionEnd
     Surface "plastic" "roughness" [0.2]
     Polygon "P" [-1 -1 0  1 -1 0  1 1 0  -1 1 0] "Cs" [1 0 0  0 1 0  0 0 1  1 1 1]
-    Hyperboloid 0 0.5 -0.25 0.5 0 0.25 360
+    Blobby 1 [1001 0] [1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1] [""]
   AttributeEnd
 WorldEnd
 FrameEnd
@@ -813,7 +813,8 @@ FrameEnd
   Scene scene([&](FrameScene& f) { got = std::move(f); });
   const size_t warnings = warningCount();
   readRibScene(path, scene);
-  EXPECT_GT(warningCount(), warnings);  // the Hyperboloid
+  EXPECT_GT(warningCount(), warnings);  // the Blobby
+  EXPECT_EQ(got.skipped, (std::map<std::string, uint64_t>{{"Blobby", 1}}));
   EXPECT_EQ(got.options.frame, 7);
   EXPECT_EQ(got.options.camera.width, 200);
   EXPECT_EQ(got.options.outputs, (std::vector<std::string>{"N", "specular"}));
