@@ -366,5 +366,25 @@ TEST(PrimBicubic, PlanarMeshesCoverExactlyTheirKnownArea) {
   }
 }
 
+TEST(PrimPolygon, SplitTrianglesKeepEveryPiece) {
+  // A triangle big enough to be split into many grids: every pixel well inside it is covered.
+  // (Each piece used to drop half of its last row as if it were the triangle's apex.)
+  test::ScratchDir dir;
+  const Rendered img = render(dir, "tri",
+                              "Format 32 32 1\nProjection \"orthographic\"\nScreenWindow -16 16 -16 16\nShadingRate 0.25\nWorldBegin\nSurface \"constant\"\n"
+                              "Polygon \"P\" [-15 -15 5  15 -15 5  -15 15 5]\nWorldEnd\n",
+                              "--samples 4x4 --filter box:1x1");
+  int inside = 0;
+  for (int y = 0; y < 32; ++y)
+    for (int x = 0; x < 32; ++x) {
+      // Screen (sx, sy) of the pixel's corners; inside with a pixel of margin from every edge.
+      const double sx0 = x - 16, sx1 = x - 15, sy0 = 16 - (y + 1), sy1 = 16 - y;
+      if (sx0 < -14 || sy0 < -14 || sx1 + sy1 > -1) continue;
+      EXPECT_EQ(img.alpha()[size_t(y * 32 + x)], 1.0f) << x << "," << y;
+      ++inside;
+    }
+  EXPECT_GT(inside, 300);
+}
+
 }  // namespace
 }  // namespace reshutter::shade
