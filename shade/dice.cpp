@@ -52,6 +52,48 @@ glm::dvec3 bicubic(const Primitive& p, const Shape& s, double u, double v, bool 
   }
   return sum;
 }
+// A unit vector perpendicular to d (any, for a degenerate frame).
+glm::dvec3 perpendicular(const glm::dvec3& d) {
+  const glm::dvec3 a = std::abs(d.x) < 0.9 * glm::length(d) ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0);
+  const glm::dvec3 c = glm::cross(d, a);
+  const double l = glm::length(c);
+  return l > 0 ? c / l : glm::dvec3(1, 0, 0);
+}
+
+// From the camera-facing shape's eye to `at`: the direction of view.
+glm::dvec3 viewAt(const Shape& s, const glm::dvec3& at) { return s.eye.w != 0 ? at - glm::dvec3(s.eye) / s.eye.w : glm::dvec3(s.eye); }
+
+// A curve segment at v: centre, tangent, width and the unit vector across the ribbon.
+struct CurveFrame {
+  glm::dvec3 C, T, side;
+  double width;
+};
+CurveFrame curveAt(const Primitive& p, const Shape& s, double v) {
+  CurveFrame f;
+  if (s.cv.size() == 2) {
+    f.C = s.cv[0] + v * (s.cv[1] - s.cv[0]), f.T = s.cv[1] - s.cv[0];
+  } else {
+    const CubicBasis& b = basesOf(p)[1];
+    double w[4], d[4];
+    b.weights(v, w), b.derivatives(v, d);
+    f.C = f.T = glm::dvec3(0.0);
+    for (size_t k = 0; k < 4; ++k) f.C += w[k] * s.cv[k], f.T += d[k] * s.cv[k];
+  }
+  f.width = s.q[0] + v * (s.q[1] - s.q[0]);
+  // Across the ribbon: perpendicular to the tangent and to the view (or to the given normal).
+  glm::dvec3 side = glm::cross(f.T, s.q[2] != 0 ? s.P[0] + v * (s.P[1] - s.P[0]) : viewAt(s, f.C));
+  const double l = glm::length(side);
+  f.side = l > 1e-300 && std::isfinite(l) ? side / l : perpendicular(glm::dot(f.T, f.T) > 0 ? f.T : viewAt(s, f.C));
+  return f;
+}
+
+// A camera-facing disc's two in-plane axes.
+void discAxes(const Shape& s, glm::dvec3& a, glm::dvec3& b) {
+  const glm::dvec3 view = viewAt(s, s.P[0]);
+  a = perpendicular(glm::dot(view, view) > 0 ? view : glm::dvec3(0, 0, 1));
+  b = glm::normalize(glm::cross(view, a));
+  if (!std::isfinite(b.x)) b = glm::normalize(glm::cross(glm::dvec3(0, 0, 1), a));
+}
 }  // namespace
 
 void CubicBasis::weights(double u, double w[4]) const {
@@ -95,6 +137,16 @@ glm::dvec3 evalP(const Primitive& p, const Shape& s, double u, double v) {
     case PrimKind::Paraboloid: {
       const double phi = u * q[3] * kDeg, z = q[1] + v * (q[2] - q[1]), r = q[0] * std::sqrt(std::max(0.0, z / q[2]));
       return {r * std::cos(phi), r * std::sin(phi), z};
+    }
+    case PrimKind::Curve: {
+      const CurveFrame f = curveAt(p, s, v);
+      return f.C + (u - 0.5) * f.width * f.side;
+    }
+    case PrimKind::Point: {
+      glm::dvec3 a, b;
+      discAxes(s, a, b);
+      const double angle = 2 * M_PI * u, r = 0.5 * q[0] * (1 - v);
+      return s.P[0] + r * (std::cos(angle) * a + std::sin(angle) * b);
     }
     case PrimKind::Patch: return bilinear(s.P, u, v);
     case PrimKind::Bicubic: return bicubic(p, s, u, v, false, false);
@@ -141,6 +193,15 @@ glm::dvec3 evalNg(const Primitive& p, const Shape& s, double u, double v) {
       if (glm::length(n) <= 1e-12 * scale * scale) n = glm::cross(P[3] - P[0], P[2] - P[1]);  // collapsed corner
       return n;
     }
+    case PrimKind::Curve: {
+      // Facing the camera (or along the given normals).
+      const CurveFrame f = curveAt(p, s, v);
+      if (s.q[2] != 0) return s.P[0] + v * (s.P[1] - s.P[0]);
+      glm::dvec3 n = glm::cross(f.side, f.T);
+      if (glm::dot(n, n) == 0) n = -viewAt(s, f.C);
+      return glm::dot(n, viewAt(s, f.C)) > 0 ? -n : n;
+    }
+    case PrimKind::Point: return -viewAt(s, s.P[0]);
     case PrimKind::Hyperboloid:
     case PrimKind::Paraboloid: {
       // Surfaces of revolution: dP/du x dP/dv, by the tangent of the profile (outward when
@@ -332,7 +393,9 @@ class Splitter {
       }
       return;
     }
-    Leaf leaf{u0, u1, v0, v1, int(std::min(nu, G)), int(std::min(nv, G))};
+    // A disc needs a few steps around to have an area at all.
+    const double minU = p_.kind == PrimKind::Point ? 8 : 1;
+    Leaf leaf{u0, u1, v0, v1, int(std::min(std::max(nu, minU), G)), int(std::min(nv, G))};
     out_.push_back(leaf);
     ++stats_.leaves;
   }

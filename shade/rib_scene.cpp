@@ -62,11 +62,12 @@ struct Geometry {
   Scene::VertexData vd;
 };
 
-Geometry geometry(const Args& args, size_t first) {
+Geometry geometry(const Args& args, size_t first, std::initializer_list<std::string_view> own = {}) {
   Geometry g;
   std::vector<double> s, t;
   for (const Param& p : args.params(first)) {
     const std::string& n = p.decl.name;
+    if (std::find(own.begin(), own.end(), n) != own.end()) continue;  // the request reads it itself
     if (n == "P" || n == "Pw") g.P = triples(args, p);
     else if (n == "N") g.vd.N = triples(args, p);
     else if (n == "Cs") g.vd.Cs = triples(args, p);
@@ -313,6 +314,35 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
     return s.pointsPolygons(nverts, verts, g.P, g.vd), true;
   }
   if (n == "SubdivisionMesh") return subdivisionMesh(s, r, a), true;
+  if (n == "Curves" || n == "Points") {
+    const bool curves = n == "Curves";
+    size_t first = 0;
+    bool cubic = false, periodic = false;
+    std::vector<int> nvertices;
+    if (curves) {
+      const std::string& type = a.string(0);
+      if (type != "linear" && type != "cubic") a.fail(cat("curve type '", type, "' (linear or cubic)"));
+      cubic = type == "cubic";
+      nvertices = intArray(a, 1, 1, 1 << 24);
+      const std::string& wrap = a.string(2);
+      if (wrap != "periodic" && wrap != "nonperiodic") a.fail(cat("wrap mode '", wrap, "' (periodic or nonperiodic)"));
+      periodic = wrap == "periodic";
+      first = 3;
+    }
+    // Widths and ribbon normals are the curves' own; the rest is the usual vertex data.
+    std::vector<double> width{1.0};
+    std::vector<glm::dvec3> N;
+    for (const Param& p : a.params(first)) {
+      if ((p.decl.name == "width" || p.decl.name == "constantwidth") && p.value) {
+        if (p.value->kind == Value::Kind::Number) width = {p.value->number};
+        else if (numbersOf(p)) width = *numbersOf(p);
+      }
+      if (p.decl.name == "N" && curves) N = triples(a, p);
+    }
+    Geometry g = geometry(a, first, {"width", "constantwidth"});
+    if (curves) return s.curves(cubic, nvertices, periodic, g.P, width, N, g.vd), true;
+    return s.points(g.P, width, g.vd), true;
+  }
   if (n == "Polygon") {
     Geometry g = geometry(a, 0);
     return s.polygon(g.P, g.vd), true;

@@ -168,6 +168,15 @@ void applyParams(Light& l, const ParamMap& p) {
 }
 
 Shape Primitive::shapeAt(double t) const {
+  Shape s = keyAt(t);
+  if (kind == PrimKind::Curve || kind == PrimKind::Point) {
+    const glm::dmat4 toObject = glm::inverse(xform->at(t));
+    s.eye = orthographicView ? toObject * glm::dvec4(0, 0, 1, 0) : toObject * glm::dvec4(0, 0, 0, 1);
+  }
+  return s;
+}
+
+Shape Primitive::keyAt(double t) const {
   if (keys.size() == 1) return keys[0];
   size_t i;
   double w;
@@ -824,6 +833,99 @@ void Scene::subdivisionMesh(SubdivScheme scheme, const std::vector<int>& nverts,
     if (mesh) {
       p.mesh = mesh;
       p.meshPoint = {uint32_t(4 * i), uint32_t(4 * i + 1), uint32_t(4 * i + 2), uint32_t(4 * i + 3)};
+      p.meshFace = uint32_t(i);
+    }
+    out.push_back(std::move(p));
+  }
+  addPrims(std::move(out));
+}
+
+void Scene::curves(bool cubic, const std::vector<int>& nvertices, bool periodic, const std::vector<glm::dvec3>& P, const std::vector<double>& width,
+                   const std::vector<glm::dvec3>& N, const VertexData& vd) {
+  static const std::array<CubicBasis, 2> bezier{};
+  const CubicBasis& basis = (cur_.attrs->basis ? *cur_.attrs->basis : bezier)[1];
+  const int step = cubic ? basis.step : 1;
+  for (const auto& c : P) checkFinite(*this, {c.x, c.y, c.z});
+  // Segments and varying values per curve.
+  std::vector<int> segments;
+  size_t totalVertices = 0, totalVarying = 0;
+  for (size_t c = 0; c < nvertices.size(); ++c) {
+    const int n = nvertices[c];
+    const int seg = patchCount(cubic, n, periodic, step);
+    if (n < (cubic ? 4 : 2) || seg < 1) error(cat("curve ", c, " has ", n, " vertices: not whole ", periodic ? "periodic " : "", cubic ? "cubic" : "linear", " segments with a step of ", step));
+    segments.push_back(seg);
+    totalVertices += size_t(n);
+    totalVarying += size_t(periodic ? seg : seg + 1);
+  }
+  if (totalVertices != P.size()) error(cat("curves name ", totalVertices, " vertices, \"P\" has ", P.size()));
+  if (!(width.size() == 1 || width.size() == totalVarying)) error(cat("\"width\" has ", width.size(), " values; the curves take 1 or ", totalVarying, " (varying)"));
+  for (double w : width)
+    if (!(w >= 0) || !std::isfinite(w)) error(cat("curve width ", w, " must be a finite non-negative number"));
+  if (!N.empty() && N.size() != totalVarying) error(cat("\"N\" has ", N.size(), " values; the curves take ", totalVarying, " (varying)"));
+  std::shared_ptr<MeshData> mesh;
+  if (!vd.Cs.empty() || !vd.Os.empty() || !vd.st.empty()) {
+    mesh = std::make_shared<MeshData>();
+    mesh->points = totalVarying, mesh->faces = nvertices.size();
+    auto take = [&](const auto& in, auto& out, const char* name) {
+      if (in.empty()) return;
+      if (in.size() == totalVarying || in.size() == nvertices.size()) out = in;
+      else warnOnce(cat("curves-var:", name), cat(where, ": \"", name, "\" has ", in.size(), " values; curves take ", totalVarying, " (varying) or ", nvertices.size(), " (uniform); ignored"));
+    };
+    take(vd.Cs, mesh->Cs, "Cs"), take(vd.Os, mesh->Os, "Os"), take(vd.st, mesh->st, "st");
+  }
+  const bool ortho = options_.camera.projection == store::Projection::Orthographic;
+  std::vector<Primitive> out;
+  size_t firstVertex = 0, firstVarying = 0;
+  for (size_t c = 0; c < nvertices.size(); ++c) {
+    const int n = nvertices[c], seg = segments[c], nVarying = periodic ? seg : seg + 1;
+    for (int k = 0; k < seg; ++k) {
+      Primitive p = basePrim(PrimKind::Curve);
+      p.orthographicView = ortho;
+      if (cubic) p.basis = cur_.attrs->basis;
+      Shape s;
+      for (int i = 0; i < (cubic ? 4 : 2); ++i) s.cv.push_back(P[firstVertex + size_t((k * step + i) % n)]);
+      const size_t v0 = firstVarying + size_t(k), v1 = firstVarying + size_t((k + 1) % nVarying);
+      s.q[0] = width.size() == 1 ? width[0] : width[v0];
+      s.q[1] = width.size() == 1 ? width[0] : width[v1];
+      if (!N.empty()) s.q[2] = 1, s.P[0] = N[v0], s.P[1] = N[v1];
+      p.keys = {s};
+      if (mesh) {
+        p.mesh = mesh;
+        p.meshPoint = {uint32_t(v0), uint32_t(v0), uint32_t(v1), uint32_t(v1)};  // colour varies along v
+        p.meshFace = uint32_t(c);
+      }
+      out.push_back(std::move(p));
+    }
+    firstVertex += size_t(n), firstVarying += size_t(nVarying);
+  }
+  addPrims(std::move(out));
+}
+
+void Scene::points(const std::vector<glm::dvec3>& P, const std::vector<double>& width, const VertexData& vd) {
+  for (const auto& c : P) checkFinite(*this, {c.x, c.y, c.z});
+  if (!(width.size() == 1 || width.size() == P.size())) error(cat("\"width\" has ", width.size(), " values; the points take 1 or ", P.size()));
+  for (double w : width)
+    if (!(w >= 0) || !std::isfinite(w)) error(cat("point width ", w, " must be a finite non-negative number"));
+  std::shared_ptr<MeshData> mesh;
+  if (!vd.Cs.empty() || !vd.Os.empty()) {
+    mesh = std::make_shared<MeshData>();
+    mesh->points = P.size(), mesh->faces = P.size();
+    if (vd.Cs.size() == P.size()) mesh->Cs = vd.Cs;
+    if (vd.Os.size() == P.size()) mesh->Os = vd.Os;
+  }
+  const bool ortho = options_.camera.projection == store::Projection::Orthographic;
+  std::vector<Primitive> out;
+  out.reserve(P.size());
+  for (size_t i = 0; i < P.size(); ++i) {
+    Primitive p = basePrim(PrimKind::Point);
+    p.orthographicView = ortho;
+    Shape s;
+    s.P[0] = P[i];
+    s.q[0] = width.size() == 1 ? width[0] : width[i];
+    p.keys = {s};
+    if (mesh) {
+      p.mesh = mesh;
+      p.meshPoint = {uint32_t(i), uint32_t(i), uint32_t(i), uint32_t(i)};
       p.meshFace = uint32_t(i);
     }
     out.push_back(std::move(p));

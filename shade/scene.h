@@ -125,7 +125,7 @@ struct Attributes {
   std::shared_ptr<const std::array<CubicBasis, 2>> basis;  // Basis (u, v); null: bezier, bezier
 };
 
-enum class PrimKind : uint8_t { Sphere, Cylinder, Cone, Disk, Torus, Hyperboloid, Paraboloid, Patch, Bicubic, Subdiv };
+enum class PrimKind : uint8_t { Sphere, Cylinder, Cone, Disk, Torus, Hyperboloid, Paraboloid, Patch, Bicubic, Subdiv, Curve, Point };
 
 /// One deformation key of a primitive's shape.
 struct Shape {
@@ -140,6 +140,12 @@ struct Shape {
   std::vector<glm::dvec3> cv;
   /// Subdivision face: the deformation key of Primitive::subdiv (fractional between keys).
   double key = 0;
+  /// Curve segment: its control points in `cv` (2 linear, 4 cubic in the v basis), widths at
+  /// its ends in q[0], q[1], and (q[2] = 1) ribbon normals at its ends in P[0], P[1].
+  /// Point: its centre in P[0], its width in q[0].
+  /// Both face the camera: `eye` is the camera in object space (w = 1) or, orthographic, the
+  /// direction of view (w = 0), set by Primitive::shapeAt.
+  glm::dvec4 eye{0.0, 0.0, 0.0, 1.0};
 };
 
 /// Vertex data of a polygon mesh or patch (N in object space), shared by all the patches its
@@ -166,9 +172,13 @@ struct Primitive {
   std::shared_ptr<const std::array<CubicBasis, 2>> basis;  // Bicubic: the (u, v) bases
   std::shared_ptr<const SubdivSurface> subdiv;             // Subdiv: the limit surface
   int ptexFace = 0;                                        // Subdiv: which of its faces
+  bool orthographicView = false;                           // Curve, Point: how they face the camera
   bool flipNormals = false;  // orientation differs from the coordinate system's handedness
 
+  /// The shape at time t: keys interpolated; camera-facing kinds get the eye at t.
   Shape shapeAt(double t) const;
+  /// The keys interpolated at t, nothing more.
+  Shape keyAt(double t) const;
   /// The corner values of one of `mesh`'s arrays (N, Cs, Os); false when it is absent.
   bool corners(const std::vector<glm::dvec3>& data, std::array<glm::dvec3, 4>& out) const;
   bool cornerST(std::array<glm::dvec2, 4>& out) const;
@@ -297,6 +307,14 @@ class Scene {
   /// is varying (one value per patch corner) or uniform (one per patch).
   void patchMesh(bool bicubic, int nu, bool uPeriodic, int nv, bool vPeriodic, const std::vector<glm::dvec3>& P, const VertexData& vd = {});
   void basis(const CubicBasis& u, const CubicBasis& v);
+  /// Curves: one ribbon primitive per segment, `width` wide, facing the camera unless `N` (one
+  /// per varying value) orients it; cubic ones use the current v basis and step. `width` holds
+  /// one value per varying value (per segment end) or one for all; vertex data is varying or
+  /// uniform (per curve).
+  void curves(bool cubic, const std::vector<int>& nvertices, bool periodic, const std::vector<glm::dvec3>& P, const std::vector<double>& width,
+              const std::vector<glm::dvec3>& N, const VertexData& vd = {});
+  /// Points: camera-facing discs, `width` across (one per point or one for all).
+  void points(const std::vector<glm::dvec3>& P, const std::vector<double>& width, const VertexData& vd = {});
   /// A subdivision mesh: one primitive per ptex face with a limit surface (subdivision.h);
   /// vertex data per point (varying, interpolated linearly) or per face (uniform).
   void subdivisionMesh(SubdivScheme scheme, const std::vector<int>& nverts, const std::vector<int>& verts, const SubdivTags& tags,

@@ -366,6 +366,72 @@ TEST(PrimBicubic, PlanarMeshesCoverExactlyTheirKnownArea) {
   }
 }
 
+TEST(PrimCurves, RibbonsFollowTheirCurveAndFaceTheCamera) {
+  // A cubic bezier curve with a tapering width and a linear one; orthographic view along +z.
+  const std::vector<dvec3> cv = {{0, 0, 5}, {1, 2, 5}, {3, 2, 6}, {4, 0, 5}};
+  const auto prims = primsOf([&](Scene& s) {
+    s.curves(true, {4}, false, cv, {0.4, 0.1}, {});
+    s.curves(false, {3}, false, {{0, 0, 5}, {2, 0, 5}, {2, 2, 5}}, {0.5}, {});
+  });
+  ASSERT_EQ(prims.size(), 3u);  // one cubic segment, two linear ones
+  const Primitive& c = prims[0];
+  for (double v : {0.0, 0.3, 0.8, 1.0}) {
+    const Shape s = c.shapeAt(0);
+    const dvec3 mid = evalP(c, s, 0.5, v), left = evalP(c, s, 0.0, v), right = evalP(c, s, 1.0, v);
+    EXPECT_LT(glm::length(mid - deCasteljau({cv[0], cv[1], cv[2], cv[3], cv[0], cv[1], cv[2], cv[3], cv[0], cv[1], cv[2], cv[3], cv[0], cv[1], cv[2], cv[3]}, v, 0)), 1e-12);
+    EXPECT_NEAR(glm::length(right - left), 0.4 + v * (0.1 - 0.4), 1e-12);  // the width, interpolated
+    EXPECT_NEAR((right - left).z, 0.0, 1e-12);                              // across the view, not along it
+    EXPECT_LT(evalNg(c, s, 0.5, v).z, 0.0);                                 // facing the camera
+  }
+  // The linear curve's second segment starts where the first ends.
+  EXPECT_EQ(evalP(prims[1], prims[1].keys[0], 0.5, 1.0), evalP(prims[2], prims[2].keys[0], 0.5, 0.0));
+  auto error = [&](const std::function<void(Scene&)>& build) {
+    try {
+      primsOf(build);
+    } catch (const Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  EXPECT_NE(error([&](Scene& s) { s.curves(true, {5}, false, std::vector<dvec3>(5), {1}, {}); }).find("not whole cubic segments"), std::string::npos);
+  EXPECT_NE(error([&](Scene& s) { s.curves(false, {3}, false, std::vector<dvec3>(4), {1}, {}); }).find("\"P\" has 4"), std::string::npos);
+  EXPECT_NE(error([&](Scene& s) { s.curves(false, {3}, false, std::vector<dvec3>(3), {1, 2}, {}); }).find("1 or 3 (varying)"), std::string::npos);
+  EXPECT_NE(error([&](Scene& s) { s.points(std::vector<dvec3>(3), {1, 2}); }).find("1 or 3"), std::string::npos);
+  EXPECT_NE(error([&](Scene& s) { s.points(std::vector<dvec3>(1), {-1}); }).find("non-negative"), std::string::npos);
+}
+
+TEST(PrimCurves, RibbonsAndDiscsCoverTheirArea) {
+  // Orthographic, 1 unit = 1 pixel: a linear curve of constant width is a rectangle (exact
+  // coverage pixel by pixel); a point is a disc of its width (interior full, exterior empty,
+  // total area within the polygon's approximation).
+  test::ScratchDir dir;
+  const Rendered img = render(dir, "curves",
+                              "Format 32 32 1\nProjection \"orthographic\"\nScreenWindow -16 16 -16 16\nWorldBegin\nSurface \"constant\"\n"
+                              "Curves \"linear\" [2] \"nonperiodic\" \"P\" [-12.3 5.6 5  9.7 5.6 5] \"constantwidth\" [3.5]\n"
+                              "Points \"P\" [0 -7 5] \"constantwidth\" [12]\nWorldEnd\n",
+                              "--samples 16x16 --filter box:1x1");
+  const double rx0 = -12.3 + 16, rx1 = 9.7 + 16, ry0 = 16 - (5.6 + 1.75), ry1 = 16 - (5.6 - 1.75);
+  double discArea = 0;
+  for (int y = 0; y < 32; ++y)
+    for (int x = 0; x < 32; ++x) {
+      const double a = img.alpha()[size_t(y * 32 + x)];
+      if (y < 16) {
+        const double cx = std::max(0.0, std::min(x + 1.0, rx1) - std::max(double(x), rx0));
+        const double cy = std::max(0.0, std::min(y + 1.0, ry1) - std::max(double(y), ry0));
+        EXPECT_NEAR(a, cx * cy, 2.0 / 16 + 1e-6) << "ribbon pixel " << x << "," << y;
+        continue;
+      }
+      discArea += a;
+      const double d = std::hypot(x + 0.5 - 16, y + 0.5 - 23);  // disc centre (0, -7) → raster (16, 23)
+      if (d < 6 - 1.5) {
+        EXPECT_EQ(a, 1.0f) << "disc pixel " << x << "," << y;
+      } else if (d > 6 + 1.5) {
+        EXPECT_EQ(a, 0.0f) << "disc pixel " << x << "," << y;
+      }
+    }
+  EXPECT_NEAR(discArea, M_PI * 36, 0.04 * M_PI * 36);
+}
+
 TEST(PrimPolygon, SplitTrianglesKeepEveryPiece) {
   // A triangle big enough to be split into many grids: every pixel well inside it is covered.
   // (Each piece used to drop half of its last row as if it were the triangle's apex.)

@@ -778,7 +778,7 @@ TEST(ShadeRib, EveryProductionSceneShadesOrSaysWhatItSkipped) {
     EXPECT_GE(frames, 1) << e.path();
   }
   EXPECT_GE(files, 6);
-  EXPECT_GE(shaded, 3);  // the bicubic teapot, object instances, the depth-of-field cube scene
+  EXPECT_GE(shaded, 5);  // the bicubic teapot, object instances, the depth-of-field cubes, subdivision creases, bezier grass
 }
 
 TEST(ShadeRib, RequestsMapToSceneState) {
@@ -857,7 +857,7 @@ WorldBegin
   Else
     Cone 1 1 360
   IfEnd
-  Curves "cubic" [4] "nonperiodic" "P" [0 0 0 1 0 0 1 1 0 0 1 0] "constantwidth" [0.1]
+  Blobby 1 [1001 0] [1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1] [""]
 WorldEnd
 )";
   FrameScene got;
@@ -880,7 +880,7 @@ WorldEnd
   ASSERT_EQ(got.options.risOptions.size(), 3u);
   EXPECT_EQ(got.options.risOptions[0].request, "Hider");
   EXPECT_EQ(got.options.risOptions[1].type, "PxrPathTracer");
-  EXPECT_EQ(got.skipped, (std::map<std::string, uint64_t>{{"Curves", 1}}));
+  EXPECT_EQ(got.skipped, (std::map<std::string, uint64_t>{{"Blobby", 1}}));
   EXPECT_EQ(got.objectNames, std::vector<std::string>{"ball"});
 }
 
