@@ -52,6 +52,44 @@ glm::dvec3 bicubic(const Primitive& p, const Shape& s, double u, double v, bool 
   }
   return sum;
 }
+// Cox-de Boor (The NURBS Book, A2.2): the `order` B-spline basis functions that are non-zero on
+// the span [t[order-1], t[order]) of the local knots t, at x.
+void nurbsBasis(const std::vector<double>& t, int order, double x, double* N) {
+  const int deg = order - 1;
+  double left[33], right[33];
+  N[0] = 1;
+  for (int j = 1; j <= deg; ++j) {
+    left[j] = x - t[size_t(deg + 1 - j)];
+    right[j] = t[size_t(deg + j)] - x;
+    double saved = 0;
+    for (int r = 0; r < j; ++r) {
+      const double denom = right[r + 1] + left[j - r];
+      const double temp = denom != 0 ? N[r] / denom : 0;
+      N[r] = saved + right[r + 1] * temp;
+      saved = left[j - r] * temp;
+    }
+    N[j] = saved;
+  }
+}
+
+// A NURBS span at the primitive's (u, v): the rational combination of its control points.
+glm::dvec3 nurbsAt(const Primitive& p, const Shape& s, double u, double v) {
+  const NurbsSpan& n = *p.nurbs;
+  double Nu[32], Nv[32];
+  nurbsBasis(n.knotsU, n.orderU, n.u0 + u * (n.u1 - n.u0), Nu);
+  nurbsBasis(n.knotsV, n.orderV, n.v0 + v * (n.v1 - n.v0), Nv);
+  glm::dvec3 sum(0.0);
+  double w = 0;
+  for (int l = 0; l < n.orderV; ++l)
+    for (int k = 0; k < n.orderU; ++k) {
+      const double b = Nu[k] * Nv[l];
+      const size_t i = size_t(l * n.orderU + k);
+      sum += b * s.cv[i];
+      w += b * s.cw[i];
+    }
+  return sum / w;
+}
+
 // A unit vector perpendicular to d (any, for a degenerate frame).
 glm::dvec3 perpendicular(const glm::dvec3& d) {
   const glm::dvec3 a = std::abs(d.x) < 0.9 * glm::length(d) ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0);
@@ -148,6 +186,7 @@ glm::dvec3 evalP(const Primitive& p, const Shape& s, double u, double v) {
       const double angle = 2 * M_PI * u, r = 0.5 * q[0] * (1 - v);
       return s.P[0] + r * (std::cos(angle) * a + std::sin(angle) * b);
     }
+    case PrimKind::Nurbs: return nurbsAt(p, s, u, v);
     case PrimKind::Patch: return bilinear(s.P, u, v);
     case PrimKind::Bicubic: return bicubic(p, s, u, v, false, false);
     case PrimKind::Subdiv: {
@@ -202,6 +241,20 @@ glm::dvec3 evalNg(const Primitive& p, const Shape& s, double u, double v) {
       return glm::dot(n, viewAt(s, f.C)) > 0 ? -n : n;
     }
     case PrimKind::Point: return -viewAt(s, s.P[0]);
+    case PrimKind::Nurbs: {
+      // Central differences inside the span (one-sided at its edges).
+      auto normal = [&](double uu, double vv) {
+        const double h = 1e-5;
+        const double ua = std::max(0.0, uu - h), ub = std::min(1.0, uu + h), va = std::max(0.0, vv - h), vb = std::min(1.0, vv + h);
+        const glm::dvec3 du = (nurbsAt(p, s, ub, vv) - nurbsAt(p, s, ua, vv)) / (ub - ua);
+        const glm::dvec3 dv = (nurbsAt(p, s, uu, vb) - nurbsAt(p, s, uu, va)) / (vb - va);
+        return glm::cross(du, dv);
+      };
+      glm::dvec3 n = normal(u, v);
+      for (double step = 1e-3; (glm::dot(n, n) == 0 || !std::isfinite(glm::dot(n, n))) && step <= 0.1; step *= 10)
+        n = normal(u + (0.5 - u) * step, v + (0.5 - v) * step);
+      return n;
+    }
     case PrimKind::Hyperboloid:
     case PrimKind::Paraboloid: {
       // Surfaces of revolution: dP/du x dP/dv, by the tangent of the profile (outward when
@@ -268,7 +321,7 @@ std::vector<double> clipKnots(const Primitive& p, double open, double close) {
   for (double t : out) {
     if (p.xform->at(t) != m0) return out;
     const Shape s = p.shapeAt(t);
-    if (s.q != s0.q || s.P != s0.P || s.cv != s0.cv || s.key != s0.key) return out;
+    if (s.q != s0.q || s.P != s0.P || s.cv != s0.cv || s.cw != s0.cw || s.key != s0.key) return out;
   }
   return {open};
 }

@@ -82,7 +82,7 @@ Geometry geometry(const Args& args, size_t first, std::initializer_list<std::str
   }
   if (g.vd.st.empty() && !s.empty() && s.size() == t.size())
     for (size_t i = 0; i < s.size(); ++i) g.vd.st.emplace_back(s[i], t[i]);
-  if (g.P.empty()) args.fail("primitive has no \"P\"");
+  if (g.P.empty() && std::find(own.begin(), own.end(), "P") == own.end()) args.fail("primitive has no \"P\"");
   return g;
 }
 
@@ -314,6 +314,27 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
     return s.pointsPolygons(nverts, verts, g.P, g.vd), true;
   }
   if (n == "SubdivisionMesh") return subdivisionMesh(s, r, a), true;
+  if (n == "NuPatch") {
+    const int nu = int(integerArg(a, 0, 1, 1 << 20)), uorder = int(integerArg(a, 1, 1, 32));
+    const int nv = int(integerArg(a, 5, 1, 1 << 20)), vorder = int(integerArg(a, 6, 1, 32));
+    // The control points as given: "Pw" homogeneous, "P" with w = 1.
+    std::vector<glm::dvec4> Pw;
+    for (const Param& p : a.params(10)) {
+      const auto* v = numbersOf(p);
+      if (!v || (p.decl.name != "P" && p.decl.name != "Pw")) continue;
+      const size_t c = p.decl.name == "Pw" ? 4 : 3;
+      if (v->size() % c) a.fail(cat("\"", p.decl.name, "\" has ", v->size(), " numbers, not a multiple of ", c));
+      Pw.clear();
+      for (size_t i = 0; i + c <= v->size(); i += c) Pw.emplace_back((*v)[i], (*v)[i + 1], (*v)[i + 2], c == 4 ? (*v)[i + 3] : 1.0);
+    }
+    if (Pw.empty()) a.fail("NuPatch has no \"P\" or \"Pw\"");
+    Geometry g = geometry(a, 10, {"P", "Pw"});
+    return s.nuPatch(nu, uorder, a.numbers(2), a.number(3), a.number(4), nv, vorder, a.numbers(7), a.number(8), a.number(9), Pw, g.vd), true;
+  }
+  if (n == "TrimCurve") {
+    warnOnce("trimcurve", cat(s.where, ": TrimCurve is not supported yet; NURBS surfaces are drawn untrimmed"));
+    return true;
+  }
   if (n == "Curves" || n == "Points") {
     const bool curves = n == "Curves";
     size_t first = 0;

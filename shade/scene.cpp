@@ -187,6 +187,8 @@ Shape Primitive::keyAt(double t) const {
   s.key = keys[i].key + (keys[i + 1].key - keys[i].key) * w;
   s.cv.resize(keys[i].cv.size());
   for (size_t k = 0; k < s.cv.size(); ++k) s.cv[k] = keys[i].cv[k] + (keys[i + 1].cv[k] - keys[i].cv[k]) * w;
+  s.cw.resize(keys[i].cw.size());
+  for (size_t k = 0; k < s.cw.size(); ++k) s.cw[k] = keys[i].cw[k] + (keys[i + 1].cw[k] - keys[i].cw[k]) * w;
   return s;
 }
 
@@ -573,7 +575,8 @@ void Scene::motionEnd() {
       for (size_t k = 1; k < m.prims.size(); ++k) {
         if (m.prims[k].size() != out.size()) error("deformation keys of a motion block differ in topology");
         for (size_t i = 0; i < out.size(); ++i) {
-          if (m.prims[k][i].kind != out[i].kind || m.prims[k][i].triangle != out[i].triangle || m.prims[k][i].keys[0].cv.size() != out[i].keys[0].cv.size())
+          if (m.prims[k][i].kind != out[i].kind || m.prims[k][i].triangle != out[i].triangle || m.prims[k][i].keys[0].cv.size() != out[i].keys[0].cv.size() ||
+              (out[i].nurbs && (m.prims[k][i].nurbs->knotsU != out[i].nurbs->knotsU || m.prims[k][i].nurbs->knotsV != out[i].nurbs->knotsV)))
             error("deformation keys of a motion block are different primitives");
           out[i].keys.push_back(m.prims[k][i].keys[0]);
           if (out[i].kind == PrimKind::Subdiv) out[i].keys.back().key = double(k);
@@ -898,6 +901,74 @@ void Scene::curves(bool cubic, const std::vector<int>& nvertices, bool periodic,
     }
     firstVertex += size_t(n), firstVarying += size_t(nVarying);
   }
+  addPrims(std::move(out));
+}
+
+void Scene::nuPatch(int nu, int uorder, const std::vector<double>& uknot, double umin, double umax, int nv, int vorder, const std::vector<double>& vknot,
+                    double vmin, double vmax, const std::vector<glm::dvec4>& Pw, const VertexData& vd) {
+  // The checks RenderMan's definition implies, each a one-line error.
+  auto direction = [&](const char* d, int n, int order, const std::vector<double>& knot, double lo, double hi) {
+    if (order < 1 || order > 32) error(cat(d, "order ", order, " (1 to 32)"));
+    if (n < order) error(cat(d, "order ", order, " is above its ", n, " control points"));
+    if (knot.size() != size_t(n + order)) error(cat(d, "knot vector has ", knot.size(), " values; ", n, " points of order ", order, " need ", n + order));
+    for (size_t i = 0; i < knot.size(); ++i) {
+      if (!std::isfinite(knot[i])) error(cat(d, "knot ", i, " is not finite"));
+      if (i && knot[i] < knot[i - 1]) error(cat(d, "knot vector decreases at knot ", i, " (", knot[i - 1], " then ", knot[i], ")"));
+    }
+    const double first = knot[size_t(order - 1)], last = knot[size_t(n)];
+    if (!(lo < hi) || lo < first || hi > last) error(cat(d, "parameter range [", lo, ", ", hi, "] is not inside [", first, ", ", last, "]"));
+  };
+  direction("u ", nu, uorder, uknot, umin, umax);
+  direction("v ", nv, vorder, vknot, vmin, vmax);
+  if (Pw.size() != size_t(nu) * size_t(nv)) error(cat("a ", nu, " x ", nv, " NuPatch needs ", int64_t(nu) * nv, " control points, has ", Pw.size()));
+  for (const auto& c : Pw) {
+    checkFinite(*this, {c.x, c.y, c.z, c.w});
+    if (!(c.w > 0)) error(cat("control point weight ", c.w, " must be positive"));
+  }
+  const int spansU = nu - uorder + 1, spansV = nv - vorder + 1;
+  const size_t varying = size_t(spansU + 1) * size_t(spansV + 1), uniform = size_t(spansU) * size_t(spansV);
+  std::shared_ptr<MeshData> mesh;
+  if (!vd.Cs.empty() || !vd.Os.empty() || !vd.st.empty()) {
+    mesh = std::make_shared<MeshData>();
+    mesh->points = varying, mesh->faces = uniform;
+    auto take = [&](const auto& in, auto& out, const char* name) {
+      if (in.empty()) return;
+      if (in.size() == varying || in.size() == uniform) out = in;
+      else warnOnce(cat("nupatch-var:", name), cat(where, ": \"", name, "\" has ", in.size(), " values; a NuPatch takes ", varying, " (varying) or ", uniform, " (uniform); ignored"));
+    };
+    take(vd.Cs, mesh->Cs, "Cs"), take(vd.Os, mesh->Os, "Os");
+    if (vd.st.size() == varying) mesh->st = vd.st;
+  }
+  std::vector<Primitive> out;
+  for (int sv = 0; sv < spansV; ++sv)
+    for (int su = 0; su < spansU; ++su) {
+      const int iu = su + uorder - 1, iv = sv + vorder - 1;  // the span [knot[i], knot[i+1]]
+      const double a = std::max(uknot[size_t(iu)], umin), b = std::min(uknot[size_t(iu + 1)], umax);
+      const double c = std::max(vknot[size_t(iv)], vmin), d = std::min(vknot[size_t(iv + 1)], vmax);
+      if (!(a < b) || !(c < d)) continue;  // an empty span, or outside the range drawn
+      auto span = std::make_shared<NurbsSpan>();
+      span->orderU = uorder, span->orderV = vorder;
+      span->knotsU.assign(uknot.begin() + (iu - uorder + 1), uknot.begin() + (iu + uorder + 1));
+      span->knotsV.assign(vknot.begin() + (iv - vorder + 1), vknot.begin() + (iv + vorder + 1));
+      span->u0 = a, span->u1 = b, span->v0 = c, span->v1 = d;
+      Primitive p = basePrim(PrimKind::Nurbs);
+      p.nurbs = std::move(span);
+      Shape s;
+      for (int l = 0; l < vorder; ++l)
+        for (int k = 0; k < uorder; ++k) {
+          const glm::dvec4& c4 = Pw[size_t((sv + l) * nu + su + k)];
+          s.cv.emplace_back(c4.x, c4.y, c4.z);
+          s.cw.push_back(c4.w);
+        }
+      p.keys = {s};
+      if (mesh) {
+        p.mesh = mesh;
+        auto corner = [&](int i, int j) { return uint32_t(j * (spansU + 1) + i); };
+        p.meshPoint = {corner(su, sv), corner(su + 1, sv), corner(su, sv + 1), corner(su + 1, sv + 1)};
+        p.meshFace = uint32_t(sv * spansU + su);
+      }
+      out.push_back(std::move(p));
+    }
   addPrims(std::move(out));
 }
 

@@ -125,7 +125,7 @@ struct Attributes {
   std::shared_ptr<const std::array<CubicBasis, 2>> basis;  // Basis (u, v); null: bezier, bezier
 };
 
-enum class PrimKind : uint8_t { Sphere, Cylinder, Cone, Disk, Torus, Hyperboloid, Paraboloid, Patch, Bicubic, Subdiv, Curve, Point };
+enum class PrimKind : uint8_t { Sphere, Cylinder, Cone, Disk, Torus, Hyperboloid, Paraboloid, Patch, Bicubic, Subdiv, Curve, Point, Nurbs };
 
 /// One deformation key of a primitive's shape.
 struct Shape {
@@ -146,6 +146,16 @@ struct Shape {
   /// Both face the camera: `eye` is the camera in object space (w = 1) or, orthographic, the
   /// direction of view (w = 0), set by Primitive::shapeAt.
   glm::dvec4 eye{0.0, 0.0, 0.0, 1.0};
+  /// NURBS span: the order_u x order_v homogeneous control points that shape it, u fastest, as
+  /// (x, y, z) in `cv` and w in `cw`.
+  std::vector<double> cw;
+};
+
+/// One span of a NuPatch: the knots around it and the part of its parameter range it covers.
+struct NurbsSpan {
+  int orderU = 4, orderV = 4;
+  std::vector<double> knotsU, knotsV;  // 2 · order knots each; the span is [knots[order-1], knots[order])
+  double u0 = 0, u1 = 1, v0 = 0, v1 = 1;  // the primitive's (0..1) maps onto [u0, u1] × [v0, v1]
 };
 
 /// Vertex data of a polygon mesh or patch (N in object space), shared by all the patches its
@@ -173,6 +183,7 @@ struct Primitive {
   std::shared_ptr<const SubdivSurface> subdiv;             // Subdiv: the limit surface
   int ptexFace = 0;                                        // Subdiv: which of its faces
   bool orthographicView = false;                           // Curve, Point: how they face the camera
+  std::shared_ptr<const NurbsSpan> nurbs;                  // Nurbs: its knots and range
   bool flipNormals = false;  // orientation differs from the coordinate system's handedness
 
   /// The shape at time t: keys interpolated; camera-facing kinds get the eye at t.
@@ -313,6 +324,11 @@ class Scene {
   /// uniform (per curve).
   void curves(bool cubic, const std::vector<int>& nvertices, bool periodic, const std::vector<glm::dvec3>& P, const std::vector<double>& width,
               const std::vector<glm::dvec3>& N, const VertexData& vd = {});
+  /// NuPatch: a non-uniform rational B-spline surface of any orders (RenderMan's arguments;
+  /// `Pw` homogeneous, w > 0), one primitive per non-empty knot span inside [umin, umax] ×
+  /// [vmin, vmax]; vertex data varying (per span corner) or uniform (per span).
+  void nuPatch(int nu, int uorder, const std::vector<double>& uknot, double umin, double umax, int nv, int vorder, const std::vector<double>& vknot,
+               double vmin, double vmax, const std::vector<glm::dvec4>& Pw, const VertexData& vd = {});
   /// Points: camera-facing discs, `width` across (one per point or one for all).
   void points(const std::vector<glm::dvec3>& P, const std::vector<double>& width, const VertexData& vd = {});
   /// A subdivision mesh: one primitive per ptex face with a limit surface (subdivision.h);

@@ -432,6 +432,103 @@ TEST(PrimCurves, RibbonsAndDiscsCoverTheirArea) {
   EXPECT_NEAR(discArea, M_PI * 36, 0.04 * M_PI * 36);
 }
 
+// ---------------------------------------------------------------------------------------------
+// NURBS
+
+// The textbook recursion (Cox-de Boor) over the whole knot vector: basis function i of `order`.
+double coxDeBoor(const std::vector<double>& t, int i, int order, double x) {
+  if (order == 1) {
+    // Half-open spans, and the last non-empty span closed at its end.
+    const bool last = x == t.back() && t[size_t(i)] < t[size_t(i + 1)] && t[size_t(i + 1)] == t.back();
+    return (t[size_t(i)] <= x && x < t[size_t(i + 1)]) || last ? 1.0 : 0.0;
+  }
+  double a = 0, b = 0;
+  const double d1 = t[size_t(i + order - 1)] - t[size_t(i)], d2 = t[size_t(i + order)] - t[size_t(i + 1)];
+  if (d1 > 0) a = (x - t[size_t(i)]) / d1 * coxDeBoor(t, i, order - 1, x);
+  if (d2 > 0) b = (t[size_t(i + order)] - x) / d2 * coxDeBoor(t, i + 1, order - 1, x);
+  return a + b;
+}
+
+// The primitive of `prims` whose span holds (x, y), evaluated there.
+dvec3 nurbsSurfaceAt(const std::vector<Primitive>& prims, double x, double y) {
+  for (const auto& p : prims) {
+    const NurbsSpan& n = *p.nurbs;
+    if (x >= n.u0 && x <= n.u1 && y >= n.v0 && y <= n.v1) return evalP(p, p.keys[0], (x - n.u0) / (n.u1 - n.u0), (y - n.v0) / (n.v1 - n.v0));
+  }
+  return dvec3(NAN);
+}
+
+TEST(PrimNurbs, SurfacesAreCoxDeBoorRationalCombinations) {
+  // A random rational surface of orders 3 x 4 over non-uniform knots with a double knot, against
+  // the textbook recursion over the whole knot vector.
+  const int nu = 6, nv = 5, ou = 3, ov = 4;
+  const std::vector<double> uk = {0, 0, 0, 0.3, 0.3, 0.7, 1, 1, 1}, vk = {-1, -1, -1, -1, 0.5, 2, 2, 2, 2};
+  std::mt19937 rng(4);
+  std::uniform_real_distribution<double> d(-2, 2), w(0.3, 3);
+  std::vector<glm::dvec4> Pw;
+  for (int i = 0; i < nu * nv; ++i) {
+    const double wi = w(rng);
+    Pw.emplace_back(d(rng) * wi, d(rng) * wi, d(rng) * wi, wi);  // homogeneous, as RIB's Pw
+  }
+  const auto prims = primsOf([&](Scene& s) { s.nuPatch(nu, ou, uk, 0, 1, nv, ov, vk, -1, 2, Pw); });
+  ASSERT_EQ(prims.size(), 3u * 2u);  // u spans [0,.3] [.3,.7] [.7,1] (the double knot's empty span skipped), v spans [-1,.5] [.5,2]
+  for (double x : {0.0, 0.1, 0.3, 0.55, 0.99, 1.0})
+    for (double y : {-1.0, 0.0, 0.5, 1.7, 2.0}) {
+      glm::dvec4 sum(0.0);
+      for (int j = 0; j < nv; ++j)
+        for (int i = 0; i < nu; ++i) sum += coxDeBoor(uk, i, ou, x) * coxDeBoor(vk, j, ov, y) * Pw[size_t(j * nu + i)];
+      const dvec3 want = dvec3(sum) / sum.w;
+      EXPECT_LT(glm::length(nurbsSurfaceAt(prims, x, y) - want), 1e-9) << x << " " << y;
+    }
+  // A Bezier-knotted NURBS with unit weights is the bezier patch.
+  const auto cv = randomPoints(16, 2);
+  std::vector<glm::dvec4> unit;
+  for (const auto& c : cv) unit.emplace_back(c, 1.0);
+  const auto bez = primsOf([&](Scene& s) { s.nuPatch(4, 4, {0, 0, 0, 0, 1, 1, 1, 1}, 0, 1, 4, 4, {0, 0, 0, 0, 1, 1, 1, 1}, 0, 1, unit); });
+  ASSERT_EQ(bez.size(), 1u);
+  EXPECT_LT(glm::length(evalP(bez[0], bez[0].keys[0], 0.37, 0.81) - deCasteljau(cv, 0.37, 0.81)), 1e-12);
+}
+
+TEST(PrimNurbs, RationalQuarterCircleIsExactAndRangesRestrict) {
+  // Order 3 with weights 1, sqrt(2)/2, 1: an exact quarter of the unit circle, extruded in v.
+  const double h = std::sqrt(0.5);
+  const std::vector<glm::dvec4> Pw = {{1, 0, 0, 1}, {h, h, 0, h}, {0, 1, 0, 1}, {1, 0, 1, 1}, {h, h, h, h}, {0, 1, 1, 1}};
+  const auto prims = primsOf([&](Scene& s) { s.nuPatch(3, 3, {0, 0, 0, 1, 1, 1}, 0.25, 1, 2, 2, {0, 0, 1, 1}, 0, 1, Pw); });
+  ASSERT_EQ(prims.size(), 1u);
+  for (double u : {0.0, 0.2, 0.5, 0.9, 1.0})
+    for (double v : {0.0, 0.5, 1.0}) {
+      const dvec3 p = evalP(prims[0], prims[0].keys[0], u, v);
+      EXPECT_NEAR(p.x * p.x + p.y * p.y, 1.0, 1e-12);
+      EXPECT_NEAR(p.z, v, 1e-12);
+    }
+  // umin = 0.25: the primitive starts a quarter of the way along, not at (1, 0).
+  EXPECT_GT(evalP(prims[0], prims[0].keys[0], 0, 0).y, 0.2);
+  const dvec3 n = glm::normalize(evalNg(prims[0], prims[0].keys[0], 0.5, 0.5));
+  const dvec3 p = evalP(prims[0], prims[0].keys[0], 0.5, 0.5);
+  EXPECT_GT(std::abs(glm::dot(n, glm::normalize(dvec3(p.x, p.y, 0)))), 1 - 1e-6);  // radial
+}
+
+TEST(PrimNurbs, BadPatchesAreOneLineErrors) {
+  auto error = [&](const std::function<void(Scene&)>& build) {
+    try {
+      primsOf(build);
+    } catch (const Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  const std::vector<glm::dvec4> four(4, glm::dvec4(0, 0, 0, 1));
+  const std::vector<double> k22 = {0, 0, 1, 1};
+  EXPECT_NE(error([&](Scene& s) { s.nuPatch(2, 2, {0, 1, 0.5, 1}, 0, 1, 2, 2, k22, 0, 1, four); }).find("u knot vector decreases at knot 2"), std::string::npos);
+  EXPECT_NE(error([&](Scene& s) { s.nuPatch(2, 3, {0, 0, 0, 1, 1}, 0, 1, 2, 2, k22, 0, 1, four); }).find("u order 3 is above its 2 control points"), std::string::npos);
+  EXPECT_NE(error([&](Scene& s) { s.nuPatch(2, 2, {0, 0, 1}, 0, 1, 2, 2, k22, 0, 1, four); }).find("need 4"), std::string::npos);
+  EXPECT_NE(error([&](Scene& s) { s.nuPatch(2, 2, k22, 0, 1, 2, 2, k22, 0, 1, {{0, 0, 0, 1}, {0, 0, 0, 0}, {0, 0, 0, 1}, {0, 0, 0, 1}}); }).find("weight 0 must be positive"),
+            std::string::npos);
+  EXPECT_NE(error([&](Scene& s) { s.nuPatch(2, 2, k22, 0, 2, 2, 2, k22, 0, 1, four); }).find("not inside [0, 1]"), std::string::npos);
+  EXPECT_NE(error([&](Scene& s) { s.nuPatch(2, 2, k22, 0, 1, 2, 2, k22, 0, 1, std::vector<glm::dvec4>(3, glm::dvec4(1))); }).find("needs 4 control points, has 3"),
+            std::string::npos);
+}
+
 TEST(PrimPolygon, SplitTrianglesKeepEveryPiece) {
   // A triangle big enough to be split into many grids: every pixel well inside it is covered.
   // (Each piece used to drop half of its last row as if it were the triangle's apex.)

@@ -778,7 +778,7 @@ TEST(ShadeRib, EveryProductionSceneShadesOrSaysWhatItSkipped) {
     EXPECT_GE(frames, 1) << e.path();
   }
   EXPECT_GE(files, 6);
-  EXPECT_GE(shaded, 5);  // the bicubic teapot, object instances, the depth-of-field cubes, subdivision creases, bezier grass
+  EXPECT_GE(shaded, 6);  // the bicubic teapot, object instances, the depth-of-field cubes, subdivision creases, bezier grass, NURBS
 }
 
 TEST(ShadeRib, RequestsMapToSceneState) {
