@@ -18,7 +18,7 @@ mkdir -p "$work/corpus" "build-fuzz/findings-$target"
 cp tests/corpus/$target/* "$work/corpus/" 2>/dev/null || true
 if [ "$target" = rib ]; then
   # Seeds: the real RIB files (read in place, never copied into the repository).
-  cp ../shared/data/rib/*.rib "$work/corpus/" 2>/dev/null || true
+  cp ../shared/data/rib/*.rib ../shared/data/rib-production/*.rib "$work/corpus/" 2>/dev/null || true
 fi
 if [ "$target" = store ]; then
   # Seeds: small valid stores of several shapes, each behind a mode byte (0x01 = repair checksums).
