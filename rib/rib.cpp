@@ -305,6 +305,9 @@ struct Reader::Impl {
   /// IfBegin/ElseIf/Else/IfEnd; false for any other request.
   bool conditional(const Request& req, const Args& args);
   void recordUserOptions(const Args& args);
+  /// The archive a Procedural "DelayedReadArchive" (or Procedural2 "DelayedReadArchive2") names;
+  /// empty for any other request.
+  std::string delayedArchive(const Request& req, const Args& args);
   void checkClosed(const std::string& file) const {
     if (conditions.open()) fail(file, "ends inside an IfBegin block (IfEnd missing)");
   }
@@ -380,6 +383,25 @@ bool Reader::Impl::conditional(const Request& req, const Args& args) {
     return true;
   }
   return false;
+}
+
+std::string Reader::Impl::delayedArchive(const Request& req, const Args& args) {
+  if ((req.name != "Procedural" && req.name != "Procedural2") || req.values.empty() || !req.values[0].isString()) return {};
+  const std::string& kind = req.values[0].string;
+  if (req.name == "Procedural" && kind == "DelayedReadArchive") {
+    if (req.values.size() < 2 || req.values[1].kind != Value::Kind::StringArray || req.values[1].strings.empty())
+      args.fail("DelayedReadArchive expects [\"archive.rib\"] and a bound");
+    return req.values[1].strings[0];
+  }
+  if (req.name == "Procedural2" && kind == "DelayedReadArchive2") {
+    for (const Param& p : args.params(2))
+      if (p.decl.name == "filename" && p.value) {
+        if (p.value->kind == Value::Kind::String) return p.value->string;
+        if (p.value->kind == Value::Kind::StringArray && !p.value->strings.empty()) return p.value->strings[0];
+      }
+    args.fail("DelayedReadArchive2 has no \"filename\"");
+  }
+  return {};
 }
 
 void Reader::Impl::recordUserOptions(const Args& args) {
@@ -512,8 +534,7 @@ void Reader::Impl::dispatch(const Request& req, RequestHandler& handler, Reader&
     handler.handle(req, args);  // handlers may want to see declarations; none has to
     return;
   }
-  if (n == "ReadArchive") {
-    const std::string& rel = args.string(0);
+  auto readArchive = [&](const std::string& rel) {
     if (depth + 1 > options.maxArchiveDepth) args.fail(cat("archives nested deeper than ", options.maxArchiveDepth, " (a cycle?)"));
     std::filesystem::path p(rel);
     if (p.is_relative()) p = std::filesystem::path(file).parent_path() / p;
@@ -521,6 +542,21 @@ void Reader::Impl::dispatch(const Request& req, RequestHandler& handler, Reader&
     if (!std::filesystem::is_regular_file(p, ec)) args.fail(cat("cannot open archive '", p.string(), "'"));
     Lexer inner(openFileSource(p.string()), p.string());
     parse(inner, handler, self, depth + 1);
+  };
+  if (n == "ReadArchive") return readArchive(args.string(0));
+  if (const std::string archive = delayedArchive(req, args); !archive.empty()) {
+    // A delayed archive is read where it stands, inside an attribute block of its own: what it
+    // sets does not leak past it, as with the renderer expanding the procedural. Its bound only
+    // saves a renderer work; every primitive is culled against the camera anyway.
+    auto bracket = [&](const char* name) {
+      Request r;
+      r.name = name;
+      r.where = req.where;
+      handler.handle(r, Args(r, self));
+    };
+    bracket("AttributeBegin");
+    readArchive(archive);
+    bracket("AttributeEnd");
     return;
   }
   if (!handler.handle(req, args) && options.warnUnsupported) {

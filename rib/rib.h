@@ -2,7 +2,9 @@
 // 3.2 appendix C, mixed; gzip-compressed, detected by content) into requests, one at a time, with
 // memory independent of file size. The reader resolves `ReadArchive` (paths relative to the
 // including file) and `version`, tracks `Declare`d and inline parameter declarations (a Declare
-// is applied, then shown to the handler, whose answer is ignored), evaluates conditional RIB
+// is applied, then shown to the handler, whose answer is ignored), reads `Procedural
+// "DelayedReadArchive"` archives in place (inside an AttributeBegin/End it hands the handler; other
+// procedurals are the handler's to refuse: no program is ever run), evaluates conditional RIB
 // (IfBegin/ElseIf/Else/IfEnd on Option "user" values: rib/conditional.h; a branch not taken is
 // never handed on) and hands every other request to a RequestHandler. Requests a handler does not take are warned about once per kind and
 // skipped. Errors are reshutter::Error naming file:line (or file:byte N inside binary data) and

@@ -331,6 +331,14 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
     Geometry g = geometry(a, 10, {"P", "Pw"});
     return s.nuPatch(nu, uorder, a.numbers(2), a.number(3), a.number(4), nv, vorder, a.numbers(7), a.number(8), a.number(9), Pw, g.vd), true;
   }
+  if (n == "Procedural" || n == "Procedural2") {
+    // DelayedReadArchive never gets here (the reader reads it in place); programs and plug-ins
+    // named by a scene file are never run.
+    const std::string kind = r.values.empty() || !r.values[0].isString() ? std::string("?") : r.values[0].string;
+    warnOnce(cat("procedural:", kind), cat(s.where, ": procedural '", kind, "' is not run from a scene file; skipped"));
+    s.skippedPrimitive(n);
+    return true;
+  }
   if (n == "TrimCurve") {
     warnOnce("trimcurve", cat(s.where, ": TrimCurve is not supported yet; NURBS surfaces are drawn untrimmed"));
     return true;

@@ -565,6 +565,9 @@ TEST(RibReaderHardTest, BadInputGivesOneClearErrorNamingFileLineAndRequest) {
       {"Declare \"x\" \"varying colour\"\n", "bad.rib:1 (Declare)", "unknown type"},
       {"Declare \"x\"\n", "bad.rib:1 (Declare)", "expects a name and a declaration"},
       {"ReadArchive \"does/not/exist.rib\"\n", "bad.rib:1 (ReadArchive)", "cannot open archive"},
+      {"Procedural \"DelayedReadArchive\" [\"does/not/exist.rib\"] [0 1 0 1 0 1]\n", "bad.rib:1 (Procedural)", "cannot open archive"},
+      {"Procedural \"DelayedReadArchive\" 3 [0 1 0 1 0 1]\n", "bad.rib:1 (Procedural)", "expects [\"archive.rib\"]"},
+      {"Procedural2 \"DelayedReadArchive2\" \"SimpleBound\"\n", "bad.rib:1 (Procedural2)", "no \"filename\""},
       {"Sphere 1 \x95"
        "ab",
        "(Sphere)", "truncated"},

@@ -937,6 +937,32 @@ WorldEnd
   EXPECT_NE(error("ObjectEnd\n").find("ObjectEnd without ObjectBegin"), std::string::npos);
 }
 
+TEST(ShadeRib, DelayedArchivesAreReadInPlaceAndProgramsNeverRun) {
+  test::ScratchDir dir;
+  std::ofstream(dir.path("sub.rib")) << "Color [0 0 1]\nSphere 1 -1 1 360\n";
+  const std::string path = dir.path("scene.rib");
+  std::ofstream(path) << R"(
+WorldBegin
+  Translate 0 0 5
+  Color [1 0 0]
+  Procedural "DelayedReadArchive" ["sub.rib"] [-1 1 -1 1 -1 1]
+  Procedural2 "DelayedReadArchive2" "SimpleBound" "string filename" ["sub.rib"] "float[6] bound" [-1 1 -1 1 -1 1]
+  Disk 0 1 360
+  Procedural "RunProgram" ["rm -rf /tmp/never" ""] [-1 1 -1 1 -1 1]
+  Procedural "DynamicLoad" ["plugin.so" ""] [-1 1 -1 1 -1 1]
+WorldEnd
+)";
+  FrameScene got;
+  Scene scene([&](FrameScene& f) { got = std::move(f); });
+  readRibScene(path, scene);
+  ASSERT_EQ(got.prims.size(), 3u);
+  EXPECT_EQ(got.prims[0].kind, PrimKind::Sphere);
+  EXPECT_EQ(got.prims[0].attrs->color.values[0], dvec3(0, 0, 1));  // the archive's colour inside it
+  EXPECT_EQ(got.prims[2].kind, PrimKind::Disk);
+  EXPECT_EQ(got.prims[2].attrs->color.values[0], dvec3(1, 0, 0));  // and not after it
+  EXPECT_EQ(got.skipped, (std::map<std::string, uint64_t>{{"Procedural", 2}}));
+}
+
 TEST(ShadeRib, BadInputNamesFileAndLine) {
   test::ScratchDir dir;
   const std::string path = dir.path("bad.rib");
