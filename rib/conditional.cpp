@@ -190,7 +190,7 @@ class ConditionParser {
       if (args.size() != 2) bad("match takes a pattern and a string");
       return Val::num(matches(args[0].text, args[1].text));
     }
-    bad(cat("unknown word '", fn.substr(5), "' (variables start with $)"));
+    bad(cat("unknown word '", fn.rfind("user:", 0) == 0 ? fn.substr(5) : fn, "' (variables start with $)"));
   }
 
   const Conditionals& c_;

@@ -724,6 +724,7 @@ TEST(RibReaderHardTest, MalformedConditionalsAreOneLineErrors) {
       {"\nIfBegin \"$pass == \"\n", "bad.rib:2 (IfBegin)", "ends early"},
       {"IfBegin \"(1\"\n", "bad.rib:1 (IfBegin)", "')' was expected"},
       {"IfBegin \"pass == 1\"\n", "bad.rib:1 (IfBegin)", "unknown word 'pass'"},
+      {"IfBegin \"a:b\"\n", "bad.rib:1 (IfBegin)", "unknown word 'a:b'"},  // found by the fuzzer: a class-qualified word
       {"IfBegin \"$a =~ '('\"\n", "bad.rib:1 (IfBegin)", "bad regular expression"},
       {"IfBegin \"" + std::string(200, '(') + "\"\n", "bad.rib:1 (IfBegin)", "nested deeper"},
       {"IfBegin 1\n", "bad.rib:1 (IfBegin)", "must be a string"},
