@@ -90,6 +90,16 @@ glm::dvec3 nurbsAt(const Primitive& p, const Shape& s, double u, double v) {
   return sum / w;
 }
 
+// normal(u, v), or where it vanishes (a pole, an apex, a collapsed edge) the limit from inside:
+// taken ever further towards the middle of the parameter square until it exists.
+template <class NormalAt>
+glm::dvec3 nudged(const NormalAt& normal, double u, double v, double firstStep) {
+  glm::dvec3 n = normal(u, v);
+  for (double step = firstStep; (glm::dot(n, n) == 0 || !std::isfinite(glm::dot(n, n))) && step <= 0.1; step *= 10)
+    n = normal(u + (0.5 - u) * step, v + (0.5 - v) * step);
+  return n;
+}
+
 // A unit vector perpendicular to d (any, for a degenerate frame).
 glm::dvec3 perpendicular(const glm::dvec3& d) {
   const glm::dvec3 a = std::abs(d.x) < 0.9 * glm::length(d) ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0);
@@ -250,10 +260,7 @@ glm::dvec3 evalNg(const Primitive& p, const Shape& s, double u, double v) {
         const glm::dvec3 dv = (nurbsAt(p, s, uu, vb) - nurbsAt(p, s, uu, va)) / (vb - va);
         return glm::cross(du, dv);
       };
-      glm::dvec3 n = normal(u, v);
-      for (double step = 1e-3; (glm::dot(n, n) == 0 || !std::isfinite(glm::dot(n, n))) && step <= 0.1; step *= 10)
-        n = normal(u + (0.5 - u) * step, v + (0.5 - v) * step);
-      return n;
+      return nudged(normal, u, v, 1e-3);
     }
     case PrimKind::Hyperboloid:
     case PrimKind::Paraboloid: {
@@ -275,10 +282,7 @@ glm::dvec3 evalNg(const Primitive& p, const Shape& s, double u, double v) {
         const glm::dvec3 dPdv(dprof.x * c - dprof.y * sn, dprof.x * sn + dprof.y * c, dprof.z);
         return glm::cross(dPdu, dPdv);
       };
-      glm::dvec3 n = normal(u, v);
-      for (double step = 1e-4; (glm::dot(n, n) == 0 || !std::isfinite(glm::dot(n, n))) && step <= 0.1; step *= 10)
-        n = normal(u + (0.5 - u) * step, v + (0.5 - v) * step);
-      return n;
+      return nudged(normal, u, v, 1e-4);
     }
     case PrimKind::Subdiv: {
       auto normal = [&](double uu, double vv) {
@@ -287,21 +291,12 @@ glm::dvec3 evalNg(const Primitive& p, const Shape& s, double u, double v) {
         p.subdiv->evaluate(p.ptexFace, uu, vv, s.key, P, &du, &dv);
         return glm::cross(du, dv);
       };
-      glm::dvec3 n = normal(u, v);
-      for (double step = 1e-4; (glm::dot(n, n) == 0 || !std::isfinite(glm::dot(n, n))) && step <= 0.1; step *= 10)
-        n = normal(u + (0.5 - u) * step, v + (0.5 - v) * step);
-      return n;
+      return nudged(normal, u, v, 1e-4);
     }
     case PrimKind::Bicubic: {
-      glm::dvec3 n = glm::cross(bicubic(p, s, u, v, true, false), bicubic(p, s, u, v, false, true));
       // A collapsed edge (the pole of a teapot's lid) has no tangent along it: the normal is
       // the limit from inside the patch, taken a little way in.
-      for (double step = 1e-4; glm::dot(n, n) == 0 || !std::isfinite(glm::dot(n, n)); step *= 10) {
-        if (step > 0.1) break;
-        const double ui = u + (0.5 - u) * step, vi = v + (0.5 - v) * step;
-        n = glm::cross(bicubic(p, s, ui, vi, true, false), bicubic(p, s, ui, vi, false, true));
-      }
-      return n;
+      return nudged([&](double uu, double vv) { return glm::cross(bicubic(p, s, uu, vv, true, false), bicubic(p, s, uu, vv, false, true)); }, u, v, 1e-4);
     }
   }
   return glm::dvec3(0, 0, 1);

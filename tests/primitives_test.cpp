@@ -28,6 +28,16 @@ std::vector<Primitive> primsOf(const std::function<void(Scene&)>& build) {
   return out;
 }
 
+// The message of the Error a builder call throws ("no error" when it throws none).
+std::string buildError(const std::function<void(Scene&)>& build) {
+  try {
+    primsOf(build);
+  } catch (const Error& e) {
+    return std::string(e.what());
+  }
+  return std::string("no error");
+}
+
 // A bicubic bezier patch at (u, v) by de Casteljau: the definition, not the basis matrix.
 dvec3 deCasteljau(const std::vector<dvec3>& cv, double u, double v) {
   auto curve = [](std::array<dvec3, 4> p, double t) {
@@ -135,20 +145,12 @@ TEST(PrimBicubic, PeriodicMeshesWrapAndBadCountsAreErrors) {
   });
   ASSERT_EQ(prims.size(), 16u);
   EXPECT_EQ(evalP(prims[7], prims[7].keys[0], 1.0, 0.3), evalP(prims[0], prims[0].keys[0], 0.0, 0.3));  // closes on itself
-  auto error = [&](const std::function<void(Scene&)>& build) {
-    try {
-      primsOf(build);
-    } catch (const Error& e) {
-      return std::string(e.what());
-    }
-    return std::string("no error");
-  };
-  EXPECT_NE(error([&](Scene& s) { s.patchMesh(true, 5, false, 4, false, randomPoints(20, 1)); }).find("nu = 5 does not make whole bicubic patches"),
+  EXPECT_NE(buildError([&](Scene& s) { s.patchMesh(true, 5, false, 4, false, randomPoints(20, 1)); }).find("nu = 5 does not make whole bicubic patches"),
             std::string::npos);
-  EXPECT_NE(error([&](Scene& s) { s.patchMesh(true, 4, false, 4, false, randomPoints(15, 1)); }).find("needs 16 control points, has 15"), std::string::npos);
+  EXPECT_NE(buildError([&](Scene& s) { s.patchMesh(true, 4, false, 4, false, randomPoints(15, 1)); }).find("needs 16 control points, has 15"), std::string::npos);
   CubicBasis bad;
   bad.step = 0;
-  EXPECT_NE(error([&](Scene& s) { s.basis(bad, bad); }).find("step 0"), std::string::npos);
+  EXPECT_NE(buildError([&](Scene& s) { s.basis(bad, bad); }).find("step 0"), std::string::npos);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -264,20 +266,12 @@ TEST(PrimSubdiv, LoopMeshesAreTrianglesAndBadMeshesAreOneLineErrors) {
     EXPECT_LT(glm::length(c), 1.0);
     EXPECT_GT(glm::dot(glm::normalize(evalNg(p, p.keys[0], 0.3, 0.3)), glm::normalize(c)), 0.5);  // outward
   }
-  auto error = [&](const std::function<void(Scene&)>& build) {
-    try {
-      primsOf(build);
-    } catch (const Error& e) {
-      return std::string(e.what());
-    }
-    return std::string("no error");
-  };
-  EXPECT_NE(error([&](Scene& s) { s.subdivisionMesh(SubdivScheme::Loop, {4}, {0, 1, 2, 3}, {}, P); }).find("a loop mesh is made of triangles"), std::string::npos);
-  EXPECT_NE(error([&](Scene& s) { s.subdivisionMesh(SubdivScheme::CatmullClark, {3}, {0, 1, 9}, {}, P); }).find("vertex index 9 out of range"), std::string::npos);
-  EXPECT_NE(error([&](Scene& s) { s.subdivisionMesh(SubdivScheme::CatmullClark, {4}, {0, 1, 2}, {}, P); }).find("add up to 4"), std::string::npos);
+  EXPECT_NE(buildError([&](Scene& s) { s.subdivisionMesh(SubdivScheme::Loop, {4}, {0, 1, 2, 3}, {}, P); }).find("a loop mesh is made of triangles"), std::string::npos);
+  EXPECT_NE(buildError([&](Scene& s) { s.subdivisionMesh(SubdivScheme::CatmullClark, {3}, {0, 1, 9}, {}, P); }).find("vertex index 9 out of range"), std::string::npos);
+  EXPECT_NE(buildError([&](Scene& s) { s.subdivisionMesh(SubdivScheme::CatmullClark, {4}, {0, 1, 2}, {}, P); }).find("add up to 4"), std::string::npos);
   SubdivTags badHole;
   badHole.holes = {3};
-  EXPECT_NE(error([&](Scene& s) { s.subdivisionMesh(SubdivScheme::CatmullClark, {3}, {0, 1, 2}, badHole, P); }).find("hole face 3 out of range"), std::string::npos);
+  EXPECT_NE(buildError([&](Scene& s) { s.subdivisionMesh(SubdivScheme::CatmullClark, {3}, {0, 1, 2}, badHole, P); }).find("hole face 3 out of range"), std::string::npos);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -385,19 +379,11 @@ TEST(PrimCurves, RibbonsFollowTheirCurveAndFaceTheCamera) {
   }
   // The linear curve's second segment starts where the first ends.
   EXPECT_EQ(evalP(prims[1], prims[1].keys[0], 0.5, 1.0), evalP(prims[2], prims[2].keys[0], 0.5, 0.0));
-  auto error = [&](const std::function<void(Scene&)>& build) {
-    try {
-      primsOf(build);
-    } catch (const Error& e) {
-      return std::string(e.what());
-    }
-    return std::string("no error");
-  };
-  EXPECT_NE(error([&](Scene& s) { s.curves(true, {5}, false, std::vector<dvec3>(5), {1}, {}); }).find("not whole cubic segments"), std::string::npos);
-  EXPECT_NE(error([&](Scene& s) { s.curves(false, {3}, false, std::vector<dvec3>(4), {1}, {}); }).find("\"P\" has 4"), std::string::npos);
-  EXPECT_NE(error([&](Scene& s) { s.curves(false, {3}, false, std::vector<dvec3>(3), {1, 2}, {}); }).find("1 or 3 (varying)"), std::string::npos);
-  EXPECT_NE(error([&](Scene& s) { s.points(std::vector<dvec3>(3), {1, 2}); }).find("1 or 3"), std::string::npos);
-  EXPECT_NE(error([&](Scene& s) { s.points(std::vector<dvec3>(1), {-1}); }).find("non-negative"), std::string::npos);
+  EXPECT_NE(buildError([&](Scene& s) { s.curves(true, {5}, false, std::vector<dvec3>(5), {1}, {}); }).find("not whole cubic segments"), std::string::npos);
+  EXPECT_NE(buildError([&](Scene& s) { s.curves(false, {3}, false, std::vector<dvec3>(4), {1}, {}); }).find("\"P\" has 4"), std::string::npos);
+  EXPECT_NE(buildError([&](Scene& s) { s.curves(false, {3}, false, std::vector<dvec3>(3), {1, 2}, {}); }).find("1 or 3 (varying)"), std::string::npos);
+  EXPECT_NE(buildError([&](Scene& s) { s.points(std::vector<dvec3>(3), {1, 2}); }).find("1 or 3"), std::string::npos);
+  EXPECT_NE(buildError([&](Scene& s) { s.points(std::vector<dvec3>(1), {-1}); }).find("non-negative"), std::string::npos);
 }
 
 TEST(PrimCurves, RibbonsAndDiscsCoverTheirArea) {
@@ -509,23 +495,15 @@ TEST(PrimNurbs, RationalQuarterCircleIsExactAndRangesRestrict) {
 }
 
 TEST(PrimNurbs, BadPatchesAreOneLineErrors) {
-  auto error = [&](const std::function<void(Scene&)>& build) {
-    try {
-      primsOf(build);
-    } catch (const Error& e) {
-      return std::string(e.what());
-    }
-    return std::string("no error");
-  };
   const std::vector<glm::dvec4> four(4, glm::dvec4(0, 0, 0, 1));
   const std::vector<double> k22 = {0, 0, 1, 1};
-  EXPECT_NE(error([&](Scene& s) { s.nuPatch(2, 2, {0, 1, 0.5, 1}, 0, 1, 2, 2, k22, 0, 1, four); }).find("u knot vector decreases at knot 2"), std::string::npos);
-  EXPECT_NE(error([&](Scene& s) { s.nuPatch(2, 3, {0, 0, 0, 1, 1}, 0, 1, 2, 2, k22, 0, 1, four); }).find("u order 3 is above its 2 control points"), std::string::npos);
-  EXPECT_NE(error([&](Scene& s) { s.nuPatch(2, 2, {0, 0, 1}, 0, 1, 2, 2, k22, 0, 1, four); }).find("need 4"), std::string::npos);
-  EXPECT_NE(error([&](Scene& s) { s.nuPatch(2, 2, k22, 0, 1, 2, 2, k22, 0, 1, {{0, 0, 0, 1}, {0, 0, 0, 0}, {0, 0, 0, 1}, {0, 0, 0, 1}}); }).find("weight 0 must be positive"),
+  EXPECT_NE(buildError([&](Scene& s) { s.nuPatch(2, 2, {0, 1, 0.5, 1}, 0, 1, 2, 2, k22, 0, 1, four); }).find("u knot vector decreases at knot 2"), std::string::npos);
+  EXPECT_NE(buildError([&](Scene& s) { s.nuPatch(2, 3, {0, 0, 0, 1, 1}, 0, 1, 2, 2, k22, 0, 1, four); }).find("u order 3 is above its 2 control points"), std::string::npos);
+  EXPECT_NE(buildError([&](Scene& s) { s.nuPatch(2, 2, {0, 0, 1}, 0, 1, 2, 2, k22, 0, 1, four); }).find("need 4"), std::string::npos);
+  EXPECT_NE(buildError([&](Scene& s) { s.nuPatch(2, 2, k22, 0, 1, 2, 2, k22, 0, 1, {{0, 0, 0, 1}, {0, 0, 0, 0}, {0, 0, 0, 1}, {0, 0, 0, 1}}); }).find("weight 0 must be positive"),
             std::string::npos);
-  EXPECT_NE(error([&](Scene& s) { s.nuPatch(2, 2, k22, 0, 2, 2, 2, k22, 0, 1, four); }).find("not inside [0, 1]"), std::string::npos);
-  EXPECT_NE(error([&](Scene& s) { s.nuPatch(2, 2, k22, 0, 1, 2, 2, k22, 0, 1, std::vector<glm::dvec4>(3, glm::dvec4(1))); }).find("needs 4 control points, has 3"),
+  EXPECT_NE(buildError([&](Scene& s) { s.nuPatch(2, 2, k22, 0, 2, 2, 2, k22, 0, 1, four); }).find("not inside [0, 1]"), std::string::npos);
+  EXPECT_NE(buildError([&](Scene& s) { s.nuPatch(2, 2, k22, 0, 1, 2, 2, k22, 0, 1, std::vector<glm::dvec4>(3, glm::dvec4(1))); }).find("needs 4 control points, has 3"),
             std::string::npos);
 }
 
