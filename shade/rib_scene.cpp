@@ -293,25 +293,19 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
   if (n == "ObjectBegin") return s.objectBegin(handleArg(r, 0)), true;
   if (n == "ObjectEnd") return s.objectEnd(), true;
   if (n == "ObjectInstance") return s.objectInstance(handleArg(r, 0)), true;
-  if (n == "GeneralPolygon" || n == "PointsGeneralPolygons") {
-    // One loop per polygon is a plain polygon; holes need a triangulator the shading pass does
-    // not have yet, so such a request is counted as skipped.
-    const bool points = n == "PointsGeneralPolygons";
-    const auto loops = intArray(a, 0, 1, 1 << 24);  // loops per polygon, or a GeneralPolygon's loop sizes
-    if (points ? std::any_of(loops.begin(), loops.end(), [](int l) { return l != 1; }) : loops.size() != 1) {
-      warnOnce(cat("holes:", n), cat(s.where, ": ", n, " with holes is not supported yet; skipped"));
-      s.skippedPrimitive(n);
-      return true;
-    }
-    if (!points) {
-      Geometry g = geometry(a, 1);
-      return s.polygon(g.P, g.vd), true;
-    }
-    const auto nverts = intArray(a, 1);
-    const auto verts = intArray(a, 2);
-    if (nverts.size() != loops.size()) a.fail(cat(loops.size(), " polygons but ", nverts.size(), " loop vertex counts"));
+  if (n == "GeneralPolygon") {
+    const auto nverts = intArray(a, 0, 0, 1 << 24);
+    Geometry g = geometry(a, 1);
+    std::vector<int> verts(g.P.size());
+    for (size_t i = 0; i < verts.size(); ++i) verts[i] = int(i);
+    return s.generalPolygons({int(nverts.size())}, nverts, verts, g.P, g.vd), true;
+  }
+  if (n == "PointsGeneralPolygons") {
+    const auto nloops = intArray(a, 0, 1, 1 << 24);
+    const auto nverts = intArray(a, 1, 0, 1 << 24);
+    const auto verts = intArray(a, 2, 0, 2e9);
     Geometry g = geometry(a, 3);
-    return s.pointsPolygons(nverts, verts, g.P, g.vd), true;
+    return s.generalPolygons(nloops, nverts, verts, g.P, g.vd), true;
   }
   if (n == "SubdivisionMesh") return subdivisionMesh(s, r, a), true;
   if (n == "NuPatch") {

@@ -338,6 +338,11 @@ class Scene {
   /// General polygons: `nverts` per face, `verts` indices into P (and the vertex data).
   void pointsPolygons(const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P, const VertexData& vd = {});
   void polygon(const std::vector<glm::dvec3>& P, const VertexData& vd = {});
+  /// PointsGeneralPolygons: `nloops` per polygon (the first loop its outline, the others holes),
+  /// `nverts` per loop, `verts` indices into P. Polygons with holes are triangulated
+  /// (triangulate.h); one-loop polygons are made as pointsPolygons makes them.
+  void generalPolygons(const std::vector<int>& nloops, const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P,
+                       const VertexData& vd = {});
 
   const FrameOptions& options() const { return options_; }
   /// The world block being read: its options and camera as WorldBegin froze them.

@@ -9,6 +9,7 @@
 #include "common/error.h"
 #include "common/log.h"
 #include "shade/scene.h"
+#include "shade/triangulate.h"
 
 namespace reshutter::shade {
 
@@ -412,6 +413,60 @@ void Scene::polygon(const std::vector<glm::dvec3>& P, const VertexData& vd) {
   std::vector<int> idx(P.size());
   for (size_t i = 0; i < P.size(); ++i) idx[i] = int(i);
   pointsPolygons({int(P.size())}, idx, P, vd);
+}
+
+void Scene::generalPolygons(const std::vector<int>& nloops, const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P,
+                            const VertexData& vd) {
+  size_t loopsTotal = 0, vertsTotal = 0;
+  for (int l : nloops) {
+    if (l < 1) error("a polygon needs at least one loop");
+    loopsTotal += size_t(l);
+  }
+  if (loopsTotal != nverts.size()) error(cat("polygons have ", loopsTotal, " loops; ", nverts.size(), " loop vertex counts given"));
+  for (int n : nverts) {
+    if (n < 0) error("negative vertex count");
+    vertsTotal += size_t(n);
+  }
+  if (vertsTotal != verts.size()) error(cat("loops name ", verts.size(), " vertex indices; their counts add up to ", vertsTotal));
+  for (int v : verts)
+    if (v < 0 || size_t(v) >= P.size()) error(cat("vertex index ", v, " out of range (", P.size(), " points)"));
+  // One face list for emitFaces: one-loop polygons as given, holed ones as their triangles.
+  std::vector<int> faceVerts, faceIndices;
+  std::vector<size_t> source;  // the polygon each face comes from (for uniform data)
+  size_t loop = 0, at = 0;
+  std::vector<std::array<int, 3>> tris;
+  for (size_t poly = 0; poly < nloops.size(); ++poly) {
+    std::vector<std::vector<int>> loops;
+    for (int l = 0; l < nloops[poly]; ++l, ++loop) {
+      loops.emplace_back(verts.begin() + std::ptrdiff_t(at), verts.begin() + std::ptrdiff_t(at + size_t(nverts[loop])));
+      at += size_t(nverts[loop]);
+    }
+    if (loops.size() == 1) {
+      faceVerts.push_back(int(loops[0].size()));
+      faceIndices.insert(faceIndices.end(), loops[0].begin(), loops[0].end());
+      source.push_back(poly);
+      continue;
+    }
+    tris.clear();
+    if (!triangulateLoops(P, loops, tris)) error(cat("polygon ", poly, " with holes cannot be triangulated (crossing edges, or a hole outside its outline)"));
+    for (const auto& t : tris) {
+      faceVerts.push_back(3);
+      faceIndices.insert(faceIndices.end(), t.begin(), t.end());
+      source.push_back(poly);
+    }
+  }
+  // Uniform (per polygon) data follows its polygon to every face made of it.
+  VertexData faces = vd;
+  auto perFace = [&](std::vector<glm::dvec3>& data) {
+    if (data.size() != nloops.size() || data.size() == P.size()) return;
+    std::vector<glm::dvec3> out;
+    for (size_t f : source) out.push_back(data[f]);
+    data = std::move(out);
+  };
+  perFace(faces.N), perFace(faces.Cs), perFace(faces.Os);
+  std::vector<Primitive> out;
+  emitFaces(faceVerts, faceIndices, P, faces, out);
+  addPrims(std::move(out));
 }
 
 }  // namespace reshutter::shade

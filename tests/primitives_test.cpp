@@ -507,6 +507,47 @@ TEST(PrimNurbs, BadPatchesAreOneLineErrors) {
             std::string::npos);
 }
 
+TEST(PrimPolygon, HolesAreCutOutExactly) {
+  // Orthographic, 1 unit = 1 pixel: a non-convex outline (an L) with two holes, one of them
+  // non-convex, as PointsGeneralPolygons and as GeneralPolygon (wound the other way). Every
+  // pixel's alpha is the exact area of the L minus the holes inside it.
+  test::ScratchDir dir;
+  // L: (-12,-12) (12,-12) (12,0) (0,0) (0,12) (-12,12); holes: a square (4..9, -9..-4) and a
+  // U shape inside the tall arm.
+  const std::string P =
+      "-12 -12 5  12 -12 5  12 0 5  0 0 5  0 12 5  -12 12 5  "
+      "4 -9 5  4 -4 5  9 -4 5  9 -9 5  "
+      "-9 2 5  -9 9 5  -7 9 5  -7 4 5  -4 4 5  -4 9 5  -2 9 5  -2 2 5";
+  const std::string head = "Format 32 32 1\nProjection \"orthographic\"\nScreenWindow -16 16 -16 16\nWorldBegin\nSurface \"constant\"\n";
+  auto insideL = [](double x, double y) {
+    const bool l = x >= -12 && x <= 12 && y >= -12 && y <= 12 && !(x > 0 && y > 0);
+    const bool square = x > 4 && x < 9 && y > -9 && y < -4;
+    const bool u = x > -9 && x < -2 && y > 2 && y < 9 && !(x > -7 && x < -4 && y > 4);
+    return l && !square && !u;
+  };
+  for (const std::string& request : {std::string("PointsGeneralPolygons [3] [6 4 8] [0 1 2 3 4 5  6 7 8 9  10 11 12 13 14 15 16 17] \"P\" [") + P + "]",
+                                     std::string("GeneralPolygon [6 4 8] \"P\" [") + P + "]"}) {
+    const Rendered img = render(dir, "holes", head + request + "\nWorldEnd\n", "--samples 16x16 --filter box:1x1");
+    int full = 0, empty = 0;
+    for (int y = 0; y < 32; ++y)
+      for (int x = 0; x < 32; ++x) {
+        // The exact area inside the pixel, on a 64 x 64 grid of cell centres (edges lie on
+        // integers, so each pixel is wholly in or out: the grid is exact here).
+        const double sx = x - 16 + 0.5, sy = 16 - y - 0.5;
+        const float want = insideL(sx, sy) ? 1.0f : 0.0f;
+        EXPECT_EQ(img.alpha()[size_t(y * 32 + x)], want) << request.substr(0, 22) << " pixel " << x << "," << y;
+        full += want == 1, empty += want == 0;
+      }
+    EXPECT_GT(full, 300);
+    EXPECT_GT(empty, 300);
+  }
+  // A hole outside its outline cannot be cut: a one-line error.
+  EXPECT_NE(buildError([&](Scene& s) {
+              s.generalPolygons({2}, {3, 3}, {0, 1, 2, 3, 4, 5}, {{0, 0, 0}, {1, 0, 0}, {0, 1, 0}, {5, 5, 0}, {6, 5, 0}, {5, 6, 0}});
+            }).find("polygon 0 with holes cannot be triangulated"),
+            std::string::npos);
+}
+
 TEST(PrimPolygon, SplitTrianglesKeepEveryPiece) {
   // A triangle big enough to be split into many grids: every pixel well inside it is covered.
   // (Each piece used to drop half of its last row as if it were the triangle's apex.)
