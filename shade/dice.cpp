@@ -31,10 +31,7 @@ glm::dvec3 bilinear(const std::array<glm::dvec3, 4>& c, double u, double v) {
   return (1 - u) * (1 - v) * c[0] + u * (1 - v) * c[1] + (1 - u) * v * c[2] + u * v * c[3];
 }
 
-const std::array<CubicBasis, 2>& basesOf(const Primitive& p) {
-  static const std::array<CubicBasis, 2> bezier{};
-  return p.basis ? *p.basis : bezier;
-}
+const std::array<CubicBasis, 2>& basesOf(const Primitive& p) { return cubicBases(p.basis); }
 
 // A bicubic patch (or a derivative along u or v) at (u, v): rows of control points weighted
 // along u, then the rows along v, always in index order, so a weight of exactly 0 drops a term

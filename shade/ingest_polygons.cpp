@@ -9,6 +9,7 @@
 #include "common/error.h"
 #include "common/log.h"
 #include "shade/ingest_handler.h"
+#include "shade/triangulate.h"
 
 namespace reshutter::shade::ingest {
 
@@ -45,9 +46,7 @@ namespace {
 // ---------------------------------------------------------------------------------------------
 // Polygon splitting
 
-struct Vec2 {
-  double x, y;
-};
+using Vec2 = glm::dvec2;
 
 double cross2(Vec2 o, Vec2 a, Vec2 b) { return (a.x - o.x) * (b.y - o.y) - (a.y - o.y) * (b.x - o.x); }
 
@@ -98,40 +97,6 @@ bool simple(const std::vector<Vec2>& q) {
       if (i == 0 && j == n - 1) continue;
       if (segmentsCross(q[i], q[(i + 1) % n], q[j], q[(j + 1) % n])) return false;
     }
-  return true;
-}
-
-/// Ear clipping; false if the polygon is not simple enough to clip.
-bool earClip(const std::vector<Vec2>& q, std::vector<std::array<uint32_t, 3>>& tris) {
-  const size_t n = q.size();
-  double area = 0;
-  for (size_t i = 0; i < n; ++i) area += q[i].x * q[(i + 1) % n].y - q[(i + 1) % n].x * q[i].y;
-  const double orient = area >= 0 ? 1 : -1;
-  std::vector<uint32_t> idx(n);
-  for (size_t i = 0; i < n; ++i) idx[i] = uint32_t(i);
-  size_t guard = 0;
-  while (idx.size() > 3) {
-    bool clipped = false;
-    for (size_t i = 0; i < idx.size(); ++i) {
-      uint32_t a = idx[(i + idx.size() - 1) % idx.size()], b = idx[i], c = idx[(i + 1) % idx.size()];
-      if (orient * cross2(q[a], q[b], q[c]) <= 0) continue;  // reflex or degenerate corner
-      bool inside = false;
-      for (uint32_t p : idx) {
-        if (p == a || p == b || p == c) continue;
-        if (orient * cross2(q[a], q[b], q[p]) >= 0 && orient * cross2(q[b], q[c], q[p]) >= 0 && orient * cross2(q[c], q[a], q[p]) >= 0) {
-          inside = true;
-          break;
-        }
-      }
-      if (inside) continue;
-      tris.push_back({a, b, c});
-      idx.erase(idx.begin() + long(i));
-      clipped = true;
-      break;
-    }
-    if (!clipped || ++guard > n) return false;
-  }
-  tris.push_back({idx[0], idx[1], idx[2]});
   return true;
 }
 
@@ -365,11 +330,13 @@ void DumpHandler::split(const Args& a, Prim& p) {
       if (i + 1 < n) add(f, {b, b + i, b + i + 1});
       if (stats_) ++stats_->fannedPolygons;
     } else {
-      std::vector<std::array<uint32_t, 3>> tris;
+      std::vector<std::array<int, 3>> tris;
       // Ear clipping is cubic in the worst case; dumps hold grids of small polygons.
       if (n > 4096) a.fail(cat("polygon ", f, " is not convex and has ", n, " vertices; ingest triangulates up to 4096"));
-      if (!simple(q) || !earClip(q, tris)) a.fail(cat("polygon ", f, " (", n, " vertices) is self-intersecting or degenerate; ingest cannot triangulate it"));
-      for (auto& t : tris) add(f, {b + t[0], b + t[1], b + t[2]});
+      std::vector<int> loop(q.size());
+      for (size_t i = 0; i < q.size(); ++i) loop[i] = int(i);
+      if (!simple(q) || !earClipLoop(q, loop, tris)) a.fail(cat("polygon ", f, " (", n, " vertices) is self-intersecting or degenerate; ingest cannot triangulate it"));
+      for (auto& t : tris) add(f, {b + uint32_t(t[0]), b + uint32_t(t[1]), b + uint32_t(t[2])});
       if (stats_) ++stats_->earClippedPolygons;
     }
   }

@@ -101,13 +101,21 @@ RisNode risNode(const rib::Request& r, const Args& a, size_t first) {
   node.request = std::string(r.name);
   node.type = a.string(0);
   if (first > 1) node.handle = handleArg(r, 1);
-  node.numbers = numericParams(a.params(first));
-  for (const Param& p : a.params(first)) {
+  const std::vector<Param> params = a.params(first);
+  node.numbers = numericParams(params);
+  for (const Param& p : params) {
     if (!p.value) continue;
     if (p.value->kind == Value::Kind::String) node.strings[p.decl.name] = {p.value->string};
     else if (p.value->kind == Value::Kind::StringArray) node.strings[p.decl.name] = p.value->strings;
   }
   return node;
+}
+
+/// A patch mesh's or curves' wrap mode: true for "periodic".
+bool periodicArg(const Args& a, size_t i) {
+  const std::string& w = a.string(i);
+  if (w != "periodic" && w != "nonperiodic") a.fail(cat("wrap mode '", w, "' (periodic or nonperiodic)"));
+  return w == "periodic";
 }
 
 /// SubdivisionMesh scheme nvertices vertices [tags nargs intargs floatargs] parameters...
@@ -280,13 +288,8 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
   if (n == "PatchMesh") {
     const std::string& type = a.string(0);
     if (type != "bilinear" && type != "bicubic") a.fail(cat("patch type '", type, "' (bilinear or bicubic)"));
-    auto wrap = [&](size_t i) {
-      const std::string& w = a.string(i);
-      if (w != "periodic" && w != "nonperiodic") a.fail(cat("wrap mode '", w, "' (periodic or nonperiodic)"));
-      return w == "periodic";
-    };
     const int nu = int(integerArg(a, 1, 1, 1 << 24)), nv = int(integerArg(a, 3, 1, 1 << 24));
-    const bool uPeriodic = wrap(2), vPeriodic = wrap(4);
+    const bool uPeriodic = periodicArg(a, 2), vPeriodic = periodicArg(a, 4);
     Geometry g = geometry(a, 5);
     return s.patchMesh(type == "bicubic", nu, uPeriodic, nv, vPeriodic, g.P, g.vd), true;
   }
@@ -347,9 +350,7 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
       if (type != "linear" && type != "cubic") a.fail(cat("curve type '", type, "' (linear or cubic)"));
       cubic = type == "cubic";
       nvertices = intArray(a, 1, 1, 1 << 24);
-      const std::string& wrap = a.string(2);
-      if (wrap != "periodic" && wrap != "nonperiodic") a.fail(cat("wrap mode '", wrap, "' (periodic or nonperiodic)"));
-      periodic = wrap == "periodic";
+      periodic = periodicArg(a, 2);
       first = 3;
     }
     // Widths and ribbon normals are the curves' own; the rest is the usual vertex data.
@@ -362,7 +363,8 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
       }
       if (p.decl.name == "N" && curves) N = triples(a, p);
     }
-    Geometry g = geometry(a, first, {"width", "constantwidth"});
+    // Curves read N themselves (it orients their ribbons); points have no use for it.
+    Geometry g = curves ? geometry(a, first, {"width", "constantwidth", "N"}) : geometry(a, first, {"width", "constantwidth"});
     if (curves) return s.curves(cubic, nvertices, periodic, g.P, width, N, g.vd), true;
     return s.points(g.P, width, g.vd), true;
   }

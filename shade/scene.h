@@ -111,6 +111,9 @@ struct CubicBasis {
   void derivatives(double u, double d[4]) const;
 };
 
+/// The bases a Basis attribute holds (null: RenderMan's default, bezier both ways).
+const std::array<CubicBasis, 2>& cubicBases(const std::shared_ptr<const std::array<CubicBasis, 2>>& basis);
+
 /// Attributes captured by each primitive when it is declared.
 struct Attributes {
   Animated<glm::dvec3> color{glm::dvec3(1.0)}, opacity{glm::dvec3(1.0)};
@@ -390,6 +393,10 @@ class Scene {
   /// Sphere, Cylinder, Cone, Disk and Torus: one keyframe of parameters, the first `used` checked finite.
   void quadric(PrimKind kind, const std::array<double, 5>& q, size_t used);
   bool motionTake(Pending kind);
+  /// Vertex data of a mesh whose values sit at `varying` corners or on `uniform` pieces: the
+  /// arrays of vd that fit (N only when `withN`; st varying only), one warning naming `what` for
+  /// each that does not; null when none fits.
+  std::shared_ptr<const MeshData> cornerData(const VertexData& vd, size_t varying, size_t uniform, const char* what, bool withN) const;
   [[noreturn]] void error(const std::string& what) const;
 
   FrameCallback onWorldEnd_;

@@ -76,6 +76,27 @@ void Scene::basis(const CubicBasis& u, const CubicBasis& v) {
   mutableAttrs().basis = std::make_shared<const std::array<CubicBasis, 2>>(std::array<CubicBasis, 2>{u, v});
 }
 
+const std::array<CubicBasis, 2>& cubicBases(const std::shared_ptr<const std::array<CubicBasis, 2>>& basis) {
+  static const std::array<CubicBasis, 2> bezier{};
+  return basis ? *basis : bezier;
+}
+
+std::shared_ptr<const MeshData> Scene::cornerData(const VertexData& vd, size_t varying, size_t uniform, const char* what, bool withN) const {
+  auto m = std::make_shared<MeshData>();
+  m->points = varying, m->faces = uniform;
+  auto take = [&](const auto& in, auto& out, const char* name, bool uniformToo) {
+    if (in.empty()) return;
+    if (in.size() == varying || (uniformToo && in.size() == uniform)) out = in;
+    else
+      warnOnce(cat(what, "-var:", name), cat(where, ": \"", name, "\" has ", in.size(), " values; a ", what, " takes ", varying, " (varying)",
+                                              uniformToo ? cat(" or ", uniform, " (uniform)") : std::string(), "; ignored"));
+  };
+  if (withN) take(vd.N, m->N, "N", true);
+  take(vd.Cs, m->Cs, "Cs", true), take(vd.Os, m->Os, "Os", true), take(vd.st, m->st, "st", false);
+  if (m->N.empty() && m->Cs.empty() && m->Os.empty() && m->st.empty()) return nullptr;
+  return m;
+}
+
 namespace {
 /// Patches along one direction of a patch mesh, or 0 when the count does not fit the step.
 int patchCount(bool bicubic, int n, bool periodic, int step) {
@@ -86,8 +107,7 @@ int patchCount(bool bicubic, int n, bool periodic, int step) {
 }  // namespace
 
 void Scene::patchMesh(bool bicubic, int nu, bool uPeriodic, int nv, bool vPeriodic, const std::vector<glm::dvec3>& P, const VertexData& vd) {
-  static const std::array<CubicBasis, 2> bezier{};
-  const auto& bases = cur_.attrs->basis ? *cur_.attrs->basis : bezier;
+  const auto& bases = cubicBases(cur_.attrs->basis);
   if (nu < 1 || nv < 1 || size_t(nu) * size_t(nv) != P.size())
     error(cat("a ", nu, " x ", nv, " patch mesh needs ", int64_t(nu) * nv, " control points, has ", P.size()));
   for (const auto& c : P) checkFinite(*this, {c.x, c.y, c.z});
@@ -98,20 +118,7 @@ void Scene::patchMesh(bool bicubic, int nu, bool uPeriodic, int nv, bool vPeriod
   // Varying values sit at patch corners, uniform ones on patches.
   const int nvu = uPeriodic ? npu : npu + 1, nvv = vPeriodic ? npv : npv + 1;
   const size_t varying = size_t(nvu) * size_t(nvv), uniform = size_t(npu) * size_t(npv);
-  std::shared_ptr<const MeshData> mesh;
-  {
-    auto m = std::make_shared<MeshData>();
-    m->points = varying, m->faces = uniform;
-    auto take = [&](const auto& in, auto& out, const char* name) {
-      if (in.empty()) return;
-      if (in.size() == varying || in.size() == uniform) out = in;
-      else warnOnce(cat("patchmesh-var:", name), cat(where, ": \"", name, "\" has ", in.size(), " values; a patch mesh takes ", varying, " (varying) or ", uniform, " (uniform); ignored"));
-    };
-    take(vd.N, m->N, "N"), take(vd.Cs, m->Cs, "Cs"), take(vd.Os, m->Os, "Os");
-    if (!vd.st.empty() && vd.st.size() == varying) m->st = vd.st;
-    else if (!vd.st.empty()) warnOnce("patchmesh-var:st", cat(where, ": texture coordinates of a patch mesh are varying (", varying, " values); ignored"));
-    if (!m->N.empty() || !m->Cs.empty() || !m->Os.empty() || !m->st.empty()) mesh = std::move(m);
-  }
+  const std::shared_ptr<const MeshData> mesh = cornerData(vd, varying, uniform, "patch mesh", true);
   std::vector<Primitive> out;
   out.reserve(uniform);
   for (int pv = 0; pv < npv; ++pv)
@@ -199,8 +206,7 @@ void Scene::subdivisionMesh(SubdivScheme scheme, const std::vector<int>& nverts,
 
 void Scene::curves(bool cubic, const std::vector<int>& nvertices, bool periodic, const std::vector<glm::dvec3>& P, const std::vector<double>& width,
                    const std::vector<glm::dvec3>& N, const VertexData& vd) {
-  static const std::array<CubicBasis, 2> bezier{};
-  const CubicBasis& basis = (cur_.attrs->basis ? *cur_.attrs->basis : bezier)[1];
+  const CubicBasis& basis = cubicBases(cur_.attrs->basis)[1];
   const int step = cubic ? basis.step : 1;
   for (const auto& c : P) checkFinite(*this, {c.x, c.y, c.z});
   // Segments and varying values per curve.
@@ -219,17 +225,7 @@ void Scene::curves(bool cubic, const std::vector<int>& nvertices, bool periodic,
   for (double w : width)
     if (!(w >= 0) || !std::isfinite(w)) error(cat("curve width ", w, " must be a finite non-negative number"));
   if (!N.empty() && N.size() != totalVarying) error(cat("\"N\" has ", N.size(), " values; the curves take ", totalVarying, " (varying)"));
-  std::shared_ptr<MeshData> mesh;
-  if (!vd.Cs.empty() || !vd.Os.empty() || !vd.st.empty()) {
-    mesh = std::make_shared<MeshData>();
-    mesh->points = totalVarying, mesh->faces = nvertices.size();
-    auto take = [&](const auto& in, auto& out, const char* name) {
-      if (in.empty()) return;
-      if (in.size() == totalVarying || in.size() == nvertices.size()) out = in;
-      else warnOnce(cat("curves-var:", name), cat(where, ": \"", name, "\" has ", in.size(), " values; curves take ", totalVarying, " (varying) or ", nvertices.size(), " (uniform); ignored"));
-    };
-    take(vd.Cs, mesh->Cs, "Cs"), take(vd.Os, mesh->Os, "Os"), take(vd.st, mesh->st, "st");
-  }
+  const std::shared_ptr<const MeshData> mesh = cornerData(vd, totalVarying, nvertices.size(), "curve", false);
   const bool ortho = options_.camera.projection == store::Projection::Orthographic;
   std::vector<Primitive> out;
   size_t firstVertex = 0, firstVarying = 0;
@@ -281,18 +277,7 @@ void Scene::nuPatch(int nu, int uorder, const std::vector<double>& uknot, double
   }
   const int spansU = nu - uorder + 1, spansV = nv - vorder + 1;
   const size_t varying = size_t(spansU + 1) * size_t(spansV + 1), uniform = size_t(spansU) * size_t(spansV);
-  std::shared_ptr<MeshData> mesh;
-  if (!vd.Cs.empty() || !vd.Os.empty() || !vd.st.empty()) {
-    mesh = std::make_shared<MeshData>();
-    mesh->points = varying, mesh->faces = uniform;
-    auto take = [&](const auto& in, auto& out, const char* name) {
-      if (in.empty()) return;
-      if (in.size() == varying || in.size() == uniform) out = in;
-      else warnOnce(cat("nupatch-var:", name), cat(where, ": \"", name, "\" has ", in.size(), " values; a NuPatch takes ", varying, " (varying) or ", uniform, " (uniform); ignored"));
-    };
-    take(vd.Cs, mesh->Cs, "Cs"), take(vd.Os, mesh->Os, "Os");
-    if (vd.st.size() == varying) mesh->st = vd.st;
-  }
+  const std::shared_ptr<const MeshData> mesh = cornerData(vd, varying, uniform, "NuPatch", false);
   std::vector<Primitive> out;
   for (int sv = 0; sv < spansV; ++sv)
     for (int su = 0; su < spansU; ++su) {

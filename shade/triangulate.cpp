@@ -69,6 +69,41 @@ bool bridge(const std::vector<Vec2>& q, std::vector<int>& outline, const std::ve
 
 }  // namespace
 
+bool earClipLoop(const std::vector<Vec2>& q, const std::vector<int>& loop, std::vector<std::array<int, 3>>& triangles) {
+  if (loop.size() < 3) return false;
+  const double orient = signedArea(q, loop) >= 0 ? 1 : -1;
+  const size_t first = triangles.size();
+  std::vector<int> idx = loop;
+  size_t guard = 0;
+  while (idx.size() > 3) {
+    bool clipped = false;
+    for (size_t i = 0; i < idx.size() && !clipped; ++i) {
+      const int a = idx[(i + idx.size() - 1) % idx.size()], b = idx[i], c = idx[(i + 1) % idx.size()];
+      const Vec2 &A = q[size_t(a)], &B = q[size_t(b)], &C = q[size_t(c)];
+      if (orient * cross2(A, B, C) <= 0) continue;  // reflex or degenerate corner
+      bool blocked = false;
+      for (int p : idx) {
+        const Vec2& X = q[size_t(p)];
+        if (p == a || p == b || p == c || X == A || X == B || X == C) continue;
+        if (orient * cross2(A, B, X) >= 0 && orient * cross2(B, C, X) >= 0 && orient * cross2(C, A, X) >= 0) {
+          blocked = true;
+          break;
+        }
+      }
+      if (blocked) continue;
+      triangles.push_back({a, b, c});
+      idx.erase(idx.begin() + std::ptrdiff_t(i));
+      clipped = true;
+    }
+    if (!clipped || ++guard > loop.size()) {
+      triangles.resize(first);
+      return false;
+    }
+  }
+  triangles.push_back({idx[0], idx[1], idx[2]});
+  return true;
+}
+
 bool triangulateLoops(const std::vector<glm::dvec3>& P, const std::vector<std::vector<int>>& loops, std::vector<std::array<int, 3>>& triangles) {
   if (loops.empty() || loops[0].size() < 3) return false;
   for (const auto& l : loops)
@@ -104,37 +139,10 @@ bool triangulateLoops(const std::vector<glm::dvec3>& P, const std::vector<std::v
   std::sort(holes.begin(), holes.end(), [&](const auto& a, const auto& b) { return rightmost(a) > rightmost(b); });
   for (const auto& h : holes)
     if (!bridge(q, outline, h)) return false;
-  // Ear clipping; bridge vertices appear twice, so a vertex at a corner's own position never
-  // blocks that corner's ear.
-  std::vector<int> idx = outline;
-  const size_t first = triangles.size();
-  size_t guard = 0;
-  while (idx.size() > 3) {
-    bool clipped = false;
-    for (size_t i = 0; i < idx.size() && !clipped; ++i) {
-      const int a = idx[(i + idx.size() - 1) % idx.size()], b = idx[i], c = idx[(i + 1) % idx.size()];
-      const Vec2 &A = q[size_t(a)], &B = q[size_t(b)], &C = q[size_t(c)];
-      if (cross2(A, B, C) <= 0) continue;  // reflex or degenerate corner
-      bool blocked = false;
-      for (int p : idx) {
-        const Vec2& X = q[size_t(p)];
-        if (X == A || X == B || X == C) continue;
-        if (inTriangle(A, B, C, X)) {
-          blocked = true;
-          break;
-        }
-      }
-      if (blocked) continue;
-      triangles.push_back(flipped ? std::array<int, 3>{a, c, b} : std::array<int, 3>{a, b, c});
-      idx.erase(idx.begin() + std::ptrdiff_t(i));
-      clipped = true;
-    }
-    if (!clipped || ++guard > 4 * outline.size()) {
-      triangles.resize(first);
-      return false;
-    }
-  }
-  triangles.push_back(flipped ? std::array<int, 3>{idx[0], idx[2], idx[1]} : std::array<int, 3>{idx[0], idx[1], idx[2]});
+  std::vector<std::array<int, 3>> clipped;
+  if (!earClipLoop(q, outline, clipped)) return false;
+  // The outline was turned counter-clockwise; the triangles take its given winding back.
+  for (auto& t : clipped) triangles.push_back(flipped ? std::array<int, 3>{t[0], t[2], t[1]} : t);
   return true;
 }
 
