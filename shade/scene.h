@@ -393,6 +393,8 @@ class Scene {
   /// Sphere, Cylinder, Cone, Disk and Torus: one keyframe of parameters, the first `used` checked finite.
   void quadric(PrimKind kind, const std::array<double, 5>& q, size_t used);
   bool motionTake(Pending kind);
+  /// Vertex counts that add up to the indices given, every index one of `points`; errors name `what`.
+  void checkIndices(const std::vector<int>& counts, const std::vector<int>& indices, size_t points, const char* what) const;
   /// Vertex data of a mesh whose values sit at `varying` corners or on `uniform` pieces: the
   /// arrays of vd that fit (N only when `withN`; st varying only), one warning naming `what` for
   /// each that does not; null when none fits.

@@ -343,16 +343,20 @@ void Scene::points(const std::vector<glm::dvec3>& P, const std::vector<double>& 
   addPrims(std::move(out));
 }
 
-void Scene::emitFaces(const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P, const VertexData& vd,
-                      std::vector<Primitive>& out) {
+void Scene::checkIndices(const std::vector<int>& counts, const std::vector<int>& indices, size_t points, const char* what) const {
   size_t total = 0;
-  for (int n : nverts) {
+  for (int n : counts) {
     if (n < 0) error("negative vertex count");
     total += size_t(n);
   }
-  if (total != verts.size()) error(cat("polygons name ", verts.size(), " vertex indices; their counts add up to ", total));
-  for (int v : verts)
-    if (v < 0 || size_t(v) >= P.size()) error(cat("vertex index ", v, " out of range (", P.size(), " points)"));
+  if (total != indices.size()) error(cat(what, " name ", indices.size(), " vertex indices; their counts add up to ", total));
+  for (int v : indices)
+    if (v < 0 || size_t(v) >= points) error(cat("vertex index ", v, " out of range (", points, " points)"));
+}
+
+void Scene::emitFaces(const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P, const VertexData& vd,
+                      std::vector<Primitive>& out) {
+  checkIndices(nverts, verts, P.size(), "polygons");
   for (const auto& c : P) checkFinite(*this, {c.x, c.y, c.z});
   const size_t nFaces = nverts.size();
   std::shared_ptr<const MeshData> mesh;
@@ -402,19 +406,13 @@ void Scene::polygon(const std::vector<glm::dvec3>& P, const VertexData& vd) {
 
 void Scene::generalPolygons(const std::vector<int>& nloops, const std::vector<int>& nverts, const std::vector<int>& verts, const std::vector<glm::dvec3>& P,
                             const VertexData& vd) {
-  size_t loopsTotal = 0, vertsTotal = 0;
+  size_t loopsTotal = 0;
   for (int l : nloops) {
     if (l < 1) error("a polygon needs at least one loop");
     loopsTotal += size_t(l);
   }
   if (loopsTotal != nverts.size()) error(cat("polygons have ", loopsTotal, " loops; ", nverts.size(), " loop vertex counts given"));
-  for (int n : nverts) {
-    if (n < 0) error("negative vertex count");
-    vertsTotal += size_t(n);
-  }
-  if (vertsTotal != verts.size()) error(cat("loops name ", verts.size(), " vertex indices; their counts add up to ", vertsTotal));
-  for (int v : verts)
-    if (v < 0 || size_t(v) >= P.size()) error(cat("vertex index ", v, " out of range (", P.size(), " points)"));
+  checkIndices(nverts, verts, P.size(), "loops");
   // One face list for emitFaces: one-loop polygons as given, holed ones as their triangles.
   std::vector<int> faceVerts, faceIndices;
   std::vector<size_t> source;  // the polygon each face comes from (for uniform data)

@@ -78,6 +78,18 @@ std::pair<std::string, std::string> parseError(std::string_view bytes, RequestHa
   return {};
 }
 
+/// Bad RIB, where its error must point and a part of what it must say.
+struct ErrorCase {
+  std::string src, where, problemPart;
+};
+void expectErrors(const std::vector<ErrorCase>& cases) {
+  for (const auto& c : cases) {
+    auto [where, problem] = parseError(c.src);
+    EXPECT_NE(where.find(c.where), std::string::npos) << "where '" << where << "' for " << c.src;
+    EXPECT_NE(problem.find(c.problemPart), std::string::npos) << "problem '" << problem << "' for " << c.src;
+  }
+}
+
 std::string gzipBytes(const std::string& s) {
   uLongf n = compressBound(uLong(s.size())) + 32;
   std::string out(n, '\0');
@@ -549,10 +561,7 @@ TEST(RibReaderTest, UnknownRequestsWarnOncePerKind) {
 }
 
 TEST(RibReaderHardTest, BadInputGivesOneClearErrorNamingFileLineAndRequest) {
-  struct Case {
-    std::string src, where, problemPart;
-  };
-  const std::vector<Case> cases = {
+  const std::vector<ErrorCase> cases = {
       {"WorldBegin\nSurface \"abc", "bad.rib:2 (Surface)", "unterminated string"},
       {"Polygon \"P\" [0 0 0 1 0 0", "(Polygon)", "unterminated array"},
       {"Polygon \"P\" [0 0 0\nWorldEnd\n", "bad.rib:2 (Polygon)", "unterminated array"},
@@ -583,11 +592,7 @@ TEST(RibReaderHardTest, BadInputGivesOneClearErrorNamingFileLineAndRequest) {
        "(Sphere)", "truncated"},
       {std::string("\x1f\x8b\x08\x00garbage", 12), "bad.rib", "gzip"},
   };
-  for (const auto& c : cases) {
-    auto [where, problem] = parseError(c.src);
-    EXPECT_NE(where.find(c.where), std::string::npos) << "where '" << where << "' for " << c.src;
-    EXPECT_NE(problem.find(c.problemPart), std::string::npos) << "problem '" << problem << "' for " << c.src;
-  }
+  expectErrors(cases);
   // A truncated gzip stream.
   const std::string gz = gzipBytes(std::string(5000, ' ') + "WorldBegin\n");
   auto [w, p] = parseError(std::string_view(gz).substr(0, gz.size() / 2));
@@ -713,10 +718,7 @@ TEST(RibReaderTest, ConditionalBlocksFollowUserOptions) {
 }
 
 TEST(RibReaderHardTest, MalformedConditionalsAreOneLineErrors) {
-  struct Case {
-    std::string src, where, problemPart;
-  };
-  const std::vector<Case> cases = {
+  const std::vector<ErrorCase> cases = {
       {"IfEnd\n", "bad.rib:1 (IfEnd)", "without IfBegin"},
       {"Else\n", "bad.rib:1 (Else)", "without IfBegin"},
       {"IfBegin \"1\"\nElse\nElse\n", "bad.rib:3 (Else)", "second Else"},
@@ -730,11 +732,7 @@ TEST(RibReaderHardTest, MalformedConditionalsAreOneLineErrors) {
       {"IfBegin 1\n", "bad.rib:1 (IfBegin)", "must be a string"},
       {"IfBegin \"1\"\nSphere 1 -1 1 360\n", "bad.rib", "IfEnd missing"},
   };
-  for (const auto& c : cases) {
-    auto [where, problem] = parseError(c.src);
-    EXPECT_NE(where.find(c.where), std::string::npos) << "where '" << where << "' for " << c.src;
-    EXPECT_NE(problem.find(c.problemPart), std::string::npos) << "problem '" << problem << "' for " << c.src;
-  }
+  expectErrors(cases);
 }
 
 TEST(RibReaderHardTest, FuzzCorpusNeverCrashes) {

@@ -730,6 +730,16 @@ TEST(ShadeDemo, WritesAValidStore) {
 // ---------------------------------------------------------------------------------------------
 // RIB scenes
 
+/// The one frame a RIB file makes (a test failure when it makes another number).
+FrameScene onlyFrameOf(const std::string& path) {
+  FrameScene got;
+  int frames = 0;
+  Scene scene([&](FrameScene& f) { got = std::move(f), ++frames; });
+  readRibScene(path, scene);
+  EXPECT_EQ(frames, 1) << path;
+  return got;
+}
+
 TEST(ShadeRib, EverySharedSceneShades) {
   const std::string dir = test::sharedDir() + "/data/rib";
   ASSERT_TRUE(std::filesystem::is_directory(dir)) << dir;
@@ -860,11 +870,7 @@ WorldBegin
   Blobby 1 [1001 0] [1 0 0 0 0 1 0 0 0 0 1 0 0 0 0 1] [""]
 WorldEnd
 )";
-  FrameScene got;
-  int frames = 0;
-  Scene scene([&](FrameScene& f) { got = std::move(f), ++frames; });
-  readRibScene(path, scene);
-  ASSERT_EQ(frames, 1);
+  const FrameScene got = onlyFrameOf(path);
   EXPECT_EQ(got.options.camera.fovDegrees, 45);
   EXPECT_EQ(got.options.camera.worldToCamera[3][2], 5);  // the transform before Camera "world"
   ASSERT_EQ(got.prims.size(), 1u);
@@ -908,9 +914,7 @@ WorldBegin
   ObjectInstance "pair"
 WorldEnd
 )";
-  FrameScene got;
-  Scene scene([&](FrameScene& f) { got = std::move(f); });
-  readRibScene(path, scene);
+  const FrameScene got = onlyFrameOf(path);
   ASSERT_EQ(got.prims.size(), 4u);
   const dvec3 origin(0.0);
   auto placed = [&](size_t i) { return dvec3(got.prims[i].xform->at(0) * glm::dvec4(origin, 1.0)); };
@@ -952,9 +956,7 @@ WorldBegin
   Procedural "DynamicLoad" ["plugin.so" ""] [-1 1 -1 1 -1 1]
 WorldEnd
 )";
-  FrameScene got;
-  Scene scene([&](FrameScene& f) { got = std::move(f); });
-  readRibScene(path, scene);
+  const FrameScene got = onlyFrameOf(path);
   ASSERT_EQ(got.prims.size(), 3u);
   EXPECT_EQ(got.prims[0].kind, PrimKind::Sphere);
   EXPECT_EQ(got.prims[0].attrs->color.values[0], dvec3(0, 0, 1));  // the archive's colour inside it
