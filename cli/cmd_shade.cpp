@@ -66,7 +66,8 @@ struct ShadeCommand {
       if (verbosity() == Verbosity::Verbose)
         note(cat("frame ", n, ": ", r.shade.primitives, " primitives, ", r.shade.culledPieces,
                  " pieces culled (off screen, behind the eye or beyond the far plane), ", r.shade.eyeSplits, " eye splits, ", r.shade.droppedMicropolygons,
-                 " micropolygons dropped at the near plane, ", r.shade.vertices, " vertices shaded"));
+                 " micropolygons dropped at the near plane, ", r.shade.forcedCuts, " sides left unfinished by the split depth limit, ", r.shade.vertices,
+                 " vertices shaded"));
     });
     shade::readRibScene(scene, sceneBuilder);
     if (sceneBuilder.framesShaded() == 0) fail(scene, "no WorldBegin/WorldEnd block: nothing to shade");

@@ -299,189 +299,82 @@ glm::dvec3 evalNg(const Primitive& p, const Shape& s, double u, double v) {
   return glm::dvec3(0, 0, 1);
 }
 
-std::vector<double> clipKnots(const Primitive& p, double open, double close) {
-  std::vector<double> all = p.knotTimes();
-  if (all.empty() || !(close > open)) return {open};
-  std::vector<double> out{open};
-  for (double t : all)
-    if (t > open && t < close) out.push_back(t);
-  out.push_back(close);
-  // Motion that stands still inside the interval (identical keys, or moving only outside it) is
-  // static: one knot, schedule 0, and no motion cost downstream.
-  const glm::dmat4 m0 = p.xform->at(open);
-  const Shape s0 = p.shapeAt(open);
-  for (double t : out) {
-    if (p.xform->at(t) != m0) return out;
-    const Shape s = p.shapeAt(t);
-    if (s.q != s0.q || s.P != s0.P || s.cv != s0.cv || s.cw != s0.cw || s.key != s0.key) return out;
-  }
-  return {open};
-}
-
 namespace {
 
-struct Estimate {
-  bool allBehind = true, straddle = false, offscreen = false, beyondFar = true;
-  double lu = 0, lv = 0, motion = 0;  // raster lengths in pixels
-  double cu = 0, cv = 0;              // camera-space lengths (for eye splits)
+// The vertices of a leaf's grid: the rim's from its sides' points (shared with the neighbours),
+// the interior's bilinear over the corners in (u, v). A collapsed side's points are all one
+// vertex (its first corner's), so a grid has one vertex per point in space.
+struct GridVertices {
+  std::vector<UV> uv;
+  std::vector<uint32_t> id;  // per grid position (i, j), row-major: index into uv
 };
 
-class Splitter {
- public:
-  Splitter(const Primitive& p, const std::vector<double>& knots, const store::Camera& cam, const DiceOptions& o, std::vector<Leaf>& out, DiceStats& stats)
-      : p_(p), proj_(cam), cam_(cam), o_(o), out_(out), stats_(stats) {
-    for (double t : knots) {
-      shapes_.push_back(p.shapeAt(t));
-      mats_.push_back(p.xform->at(t));
-    }
-    const Attributes& a = *p.attrs;
-    const double mf = o.motionFactor ? *o.motionFactor : a.motionFactor;
-    motionFactor_ = mf;
-    rate_ = a.shadingRate * o.shadingRateScale;
-    const double mx = o.cullMargin * cam.width, my = o.cullMargin * cam.height;
-    window_[0] = -mx, window_[1] = cam.width + mx, window_[2] = -my, window_[3] = cam.height + my;
+// The point of a side of `steps` steps that rim position i of n snaps onto: the nearest, ties
+// upwards; monotone, 0 → 0 and n → steps.
+int snap(int i, int n, int steps) { return (2 * i * steps + n) / (2 * n); }
+
+void gridVertices(const Leaf& leaf, GridVertices& g) {
+  const int nu = leaf.nu, nv = leaf.nv, row = nu + 1;
+  g.uv.clear();
+  g.id.assign(size_t(row) * size_t(nv + 1), 0);
+  // Corners, each merged into the one before it along a collapsed side.
+  int rep[4] = {0, 1, 2, 3};
+  auto find = [&](int c) {
+    while (rep[c] != c) c = rep[c];
+    return c;
+  };
+  for (int c = 0; c < 4; ++c)
+    if (leaf.sides[size_t(c)].collapsed) rep[find((c + 1) % 4)] = find(c);
+  uint32_t corner[4];
+  for (int c = 0; c < 4; ++c)
+    if (find(c) == c) corner[c] = uint32_t(g.uv.size()), g.uv.push_back(leaf.corner(c));
+  for (int c = 0; c < 4; ++c) corner[c] = corner[find(c)];
+  // The points inside each side that is not collapsed.
+  uint32_t first[4];
+  for (size_t c = 0; c < 4; ++c) {
+    const LeafSide& s = leaf.sides[c];
+    first[c] = uint32_t(g.uv.size());
+    if (!s.collapsed)
+      for (int i = 1; i < s.steps(); ++i) g.uv.push_back(s.at(i));
   }
-
-  void run() { split(0, 1, 0, 1, 0, 0); }
-
- private:
-  static constexpr int kTest = 5;
-
-  Estimate estimate(double u0, double u1, double v0, double v1) const {
-    Estimate e;
-    const size_t K = shapes_.size();
-    glm::dvec2 r[kTest][kTest], prev[kTest][kTest];
-    bool fr[kTest][kTest], prevFront[kTest][kTest];
-    double bb[4] = {1e300, -1e300, 1e300, -1e300};
-    for (size_t k = 0; k < K; ++k) {
-      glm::dvec3 c[kTest][kTest];
-      int nFront = 0;
-      for (int j = 0; j < kTest; ++j)
-        for (int i = 0; i < kTest; ++i) {
-          const double u = u0 + (u1 - u0) * i / (kTest - 1), v = v0 + (v1 - v0) * j / (kTest - 1);
-          c[j][i] = glm::dvec3(mats_[k] * glm::dvec4(evalP(p_, shapes_[k], u, v), 1.0));
-          fr[j][i] = !proj_.perspective || c[j][i].z >= proj_.nearClip;
-          if (c[j][i].z <= cam_.farClip) e.beyondFar = false;
-          r[j][i] = glm::dvec2(0.0);
-          if (fr[j][i]) {
-            ++nFront;
-            r[j][i] = proj_.project(c[j][i]);
-            bb[0] = std::min(bb[0], r[j][i].x), bb[1] = std::max(bb[1], r[j][i].x);
-            bb[2] = std::min(bb[2], r[j][i].y), bb[3] = std::max(bb[3], r[j][i].y);
-          }
-        }
-      if (nFront) e.allBehind = false;
-      if (nFront && nFront < kTest * kTest) e.straddle = true;
-      // The longest test segment times the segment count: dicing steps are uniform in the
-      // parameter, so the fastest-moving stretch (near a silhouette fold, say) sets the step.
-      for (int j = 0; j < kTest; ++j) {
-        double lu = 0, lv = 0, cu = 0, cv = 0;
-        for (int i = 0; i + 1 < kTest; ++i) {
-          if (fr[j][i] && fr[j][i + 1]) lu = std::max(lu, (kTest - 1) * glm::length(r[j][i + 1] - r[j][i]));
-          if (fr[i][j] && fr[i + 1][j]) lv = std::max(lv, (kTest - 1) * glm::length(r[i + 1][j] - r[i][j]));
-          cu += glm::length(c[j][i + 1] - c[j][i]);
-          cv += glm::length(c[i + 1][j] - c[i][j]);
-        }
-        e.lu = std::max(e.lu, lu), e.lv = std::max(e.lv, lv);
-        e.cu = std::max(e.cu, cu), e.cv = std::max(e.cv, cv);
-      }
-      if (k > 0)
-        for (int j = 0; j < kTest; ++j)
-          for (int i = 0; i < kTest; ++i)
-            if (fr[j][i] && prevFront[j][i]) e.motion = std::max(e.motion, glm::length(r[j][i] - prev[j][i]));
-      for (int j = 0; j < kTest; ++j)
-        for (int i = 0; i < kTest; ++i) prev[j][i] = r[j][i], prevFront[j][i] = fr[j][i];
+  auto sidePoint = [&](int c, int i) -> uint32_t {
+    const LeafSide& s = leaf.sides[size_t(c)];
+    if (s.collapsed || i == 0) return corner[c];
+    return i == s.steps() ? corner[(c + 1) % 4] : first[c] + uint32_t(i - 1);
+  };
+  auto at = [&](int i, int j) -> uint32_t& { return g.id[size_t(j) * size_t(row) + size_t(i)]; };
+  const UV c0 = leaf.corner(0), c1 = leaf.corner(1), c2 = leaf.corner(2), c3 = leaf.corner(3);
+  for (int j = 1; j < nv; ++j)
+    for (int i = 1; i < nu; ++i) {
+      const double x = double(i) / nu, y = double(j) / nv;
+      const double w0 = (1 - x) * (1 - y), w1 = x * (1 - y), w2 = x * y, w3 = (1 - x) * y;
+      at(i, j) = uint32_t(g.uv.size());
+      g.uv.push_back({w0 * c0.u + w1 * c1.u + w2 * c2.u + w3 * c3.u, w0 * c0.v + w1 * c1.v + w2 * c2.v + w3 * c3.v});
     }
-    if (!e.allBehind) {
-      // Curved pieces bulge between test points: pad the bound by a tenth of its size.
-      const double px = 0.1 * (bb[1] - bb[0]) + 1, py = 0.1 * (bb[3] - bb[2]) + 1;
-      e.offscreen = bb[1] + px < window_[0] || bb[0] - px > window_[1] || bb[3] + py < window_[2] || bb[2] - py > window_[3];
-    }
-    return e;
-  }
-
-  void split(double u0, double u1, double v0, double v1, int depth, int eyeDepth) {
-    const Estimate e = estimate(u0, u1, v0, v1);
-    if (e.allBehind || e.beyondFar || e.offscreen) {
-      ++stats_.culledPieces;
-      return;
-    }
-    if (e.straddle) {
-      if (eyeDepth >= o_.maxEyeSplits || depth >= o_.maxSplitDepth) {
-        ++stats_.culledPieces;
-        return;
-      }
-      ++stats_.eyeSplits;
-      if (e.cu >= e.cv) {
-        const double um = 0.5 * (u0 + u1);
-        split(u0, um, v0, v1, depth + 1, eyeDepth + 1);
-        split(um, u1, v0, v1, depth + 1, eyeDepth + 1);
-      } else {
-        const double vm = 0.5 * (v0 + v1);
-        split(u0, u1, v0, vm, depth + 1, eyeDepth + 1);
-        split(u0, u1, vm, v1, depth + 1, eyeDepth + 1);
-      }
-      return;
-    }
-    const double rate = rate_ * (1.0 + motionFactor_ * e.motion / 16.0);
-    const double edge = std::sqrt(rate);
-    const double G = o_.maxGridSize;
-    const double nu = std::max(1.0, std::ceil(e.lu / edge)), nv = std::max(1.0, std::ceil(e.lv / edge));
-    if ((nu > G || nv > G) && depth < o_.maxSplitDepth) {
-      // Cut the dimension that overflows most into pieces of at most G (re-measured below).
-      if (nu / G >= nv / G) {
-        const int k = int(std::min(64.0, std::ceil(nu / G)));
-        for (int i = 0; i < k; ++i) split(u0 + (u1 - u0) * i / k, i + 1 == k ? u1 : u0 + (u1 - u0) * (i + 1) / k, v0, v1, depth + 1, eyeDepth);
-      } else {
-        const int k = int(std::min(64.0, std::ceil(nv / G)));
-        for (int i = 0; i < k; ++i) split(u0, u1, v0 + (v1 - v0) * i / k, i + 1 == k ? v1 : v0 + (v1 - v0) * (i + 1) / k, depth + 1, eyeDepth);
-      }
-      return;
-    }
-    // A disc needs a few steps around to have an area at all.
-    const double minU = p_.kind == PrimKind::Point ? 8 : 1;
-    Leaf leaf{u0, u1, v0, v1, int(std::min(std::max(nu, minU), G)), int(std::min(nv, G))};
-    out_.push_back(leaf);
-    ++stats_.leaves;
-  }
-
-  const Primitive& p_;
-  store::Projector proj_;
-  const store::Camera& cam_;
-  const DiceOptions& o_;
-  std::vector<Leaf>& out_;
-  DiceStats& stats_;
-  std::vector<Shape> shapes_;
-  std::vector<glm::dmat4> mats_;
-  double rate_ = 1, motionFactor_ = 0;
-  double window_[4];
-};
+  // The rim, side by side in running order (bottom left to right, right upwards, top right to
+  // left, left downwards); the corners last, as sides of no length snap everything to their start.
+  for (int i = 0; i <= nu; ++i) at(i, 0) = sidePoint(0, snap(i, nu, leaf.sides[0].steps()));
+  for (int j = 0; j <= nv; ++j) at(nu, j) = sidePoint(1, snap(j, nv, leaf.sides[1].steps()));
+  for (int i = 0; i <= nu; ++i) at(nu - i, nv) = sidePoint(2, snap(i, nu, leaf.sides[2].steps()));
+  for (int j = 0; j <= nv; ++j) at(0, nv - j) = sidePoint(3, snap(j, nv, leaf.sides[3].steps()));
+  at(0, 0) = corner[0], at(nu, 0) = corner[1], at(nu, nv) = corner[2], at(0, nv) = corner[3];
+}
 
 }  // namespace
 
-void splitPrimitive(const Primitive& p, const std::vector<double>& knots, const store::Camera& camera, const DiceOptions& options, std::vector<Leaf>& out,
-                    DiceStats& stats) {
-  Splitter(p, knots, camera, options, out, stats).run();
-}
-
 void diceLeaf(const Primitive& p, const Leaf& leaf, const std::vector<double>& knots, double shadeAt, double nearClip, bool perspective, DicedGrid& g) {
   const int nu = leaf.nu, nv = leaf.nv, row = nu + 1;
-  const uint32_t nV = uint32_t(row * (nv + 1));
+  thread_local GridVertices gv;
+  gridVertices(leaf, gv);
+  const uint32_t nV = uint32_t(gv.uv.size());
   const size_t K = knots.size();
   g.nu = nu, g.nv = nv, g.numVertices = nV;
   g.positions.resize(K * nV);
-  // Parameters at the grid lines; the last is the piece's edge exactly, so neighbouring grids
-  // evaluate identical points on their shared edge.
-  std::vector<double> us(size_t(nu) + 1), vs(size_t(nv) + 1);
-  for (int i = 0; i <= nu; ++i) us[size_t(i)] = i == nu ? leaf.u1 : leaf.u0 + (leaf.u1 - leaf.u0) * i / nu;
-  for (int j = 0; j <= nv; ++j) vs[size_t(j)] = j == nv ? leaf.v1 : leaf.v0 + (leaf.v1 - leaf.v0) * j / nv;
-
   for (size_t k = 0; k < K; ++k) {
     const Shape s = p.shapeAt(knots[k]);
     const glm::dmat4 m = p.xform->at(knots[k]);
     glm::vec3* out = g.positions.data() + k * nV;
-    for (int j = 0; j <= nv; ++j)
-      for (int i = 0; i <= nu; ++i) out[j * row + i] = glm::vec3(m * glm::dvec4(evalP(p, s, us[size_t(i)], vs[size_t(j)]), 1.0));
+    for (uint32_t i = 0; i < nV; ++i) out[i] = glm::vec3(m * glm::dvec4(evalP(p, s, gv.uv[i].u, gv.uv[i].v), 1.0));
   }
 
   // Geometry at the shading time.
@@ -494,51 +387,50 @@ void diceLeaf(const Primitive& p, const Leaf& leaf, const std::vector<double>& k
   std::array<glm::dvec2, 4> st;
   const bool hasN = p.mesh && p.corners(p.mesh->N, cornerN);
   const bool hasST = p.cornerST(st);
-  for (int j = 0; j <= nv; ++j)
-    for (int i = 0; i <= nu; ++i) {
-      const size_t idx = size_t(j * row + i);
-      const double u = us[size_t(i)], v = vs[size_t(j)];
-      g.P[idx] = glm::dvec3(m * glm::dvec4(evalP(p, s, u, v), 1.0));
-      glm::dvec3 ng = nm * evalNg(p, s, u, v);
-      double len = glm::length(ng);
-      ng = len > 0 ? flip * ng / len : glm::dvec3(0, 0, -1);
-      g.Ng[idx] = ng;
-      if (hasN) {
-        glm::dvec3 n = nm * bilinear(cornerN, u, v);
-        double l = glm::length(n);
-        g.N[idx] = l > 0 ? n / l : ng;
-      } else {
-        g.N[idx] = ng;
-      }
-      g.u[idx] = u, g.v[idx] = v;
-      if (hasST) {
-        g.s[idx] = (1 - u) * (1 - v) * st[0].x + u * (1 - v) * st[1].x + (1 - u) * v * st[2].x + u * v * st[3].x;
-        g.t[idx] = (1 - u) * (1 - v) * st[0].y + u * (1 - v) * st[1].y + (1 - u) * v * st[2].y + u * v * st[3].y;
-      } else {
-        g.s[idx] = u, g.t[idx] = v;
-      }
+  for (uint32_t idx = 0; idx < nV; ++idx) {
+    const double u = gv.uv[idx].u, v = gv.uv[idx].v;
+    g.P[idx] = glm::dvec3(m * glm::dvec4(evalP(p, s, u, v), 1.0));
+    glm::dvec3 ng = nm * evalNg(p, s, u, v);
+    double len = glm::length(ng);
+    ng = len > 0 ? flip * ng / len : glm::dvec3(0, 0, -1);
+    g.Ng[idx] = ng;
+    if (hasN) {
+      glm::dvec3 n = nm * bilinear(cornerN, u, v);
+      double l = glm::length(n);
+      g.N[idx] = l > 0 ? n / l : ng;
+    } else {
+      g.N[idx] = ng;
     }
+    g.u[idx] = u, g.v[idx] = v;
+    if (hasST) {
+      g.s[idx] = (1 - u) * (1 - v) * st[0].x + u * (1 - v) * st[1].x + (1 - u) * v * st[2].x + u * v * st[3].x;
+      g.t[idx] = (1 - u) * (1 - v) * st[0].y + u * (1 - v) * st[1].y + (1 - u) * v * st[2].y + u * v * st[3].y;
+    } else {
+      g.s[idx] = u, g.t[idx] = v;
+    }
+  }
 
   // Ring order counter-clockwise around N: the parametric order when the transform keeps
-  // handedness and the orientation is not flipped, reversed otherwise.
+  // handedness and the orientation is not flipped, reversed otherwise. Corners that are one
+  // point (snapped onto one point of a coarser side, or on a collapsed side) are kept once: such
+  // cells are triangles, or nothing.
   const bool reverse = (glm::determinant(m) < 0) != p.flipNormals;
   g.corners.clear();
   g.corners.reserve(size_t(nu) * nv * 4);
   g.droppedMicropolygons = 0;
   for (int j = 0; j < nv; ++j)
     for (int i = 0; i < nu; ++i) {
-      const uint32_t p0 = uint32_t(j * row + i), p1 = p0 + 1, p2 = p0 + 1 + uint32_t(row), p3 = p0 + uint32_t(row);
-      uint32_t c[4];
-      const bool tri = p.triangle && j == nv - 1 && leaf.v1 == 1.0;  // the collapsed last row of a triangle
-      if (tri) {
-        c[0] = p0, c[1] = reverse ? p3 : p1, c[2] = reverse ? p1 : p2, c[3] = store::kNoCorner;
-      } else if (reverse) {
-        c[0] = p0, c[1] = p3, c[2] = p2, c[3] = p1;
-      } else {
-        c[0] = p0, c[1] = p1, c[2] = p2, c[3] = p3;
-      }
+      const size_t p0 = size_t(j * row + i);
+      uint32_t ring[4] = {gv.id[p0], gv.id[p0 + 1], gv.id[p0 + 1 + size_t(row)], gv.id[p0 + size_t(row)]};
+      if (reverse) std::swap(ring[1], ring[3]);
+      uint32_t c[4] = {store::kNoCorner, store::kNoCorner, store::kNoCorner, store::kNoCorner};
+      int nc = 0;
+      for (uint32_t v : ring)
+        if (nc == 0 || v != c[nc - 1]) c[nc++] = v;
+      if (nc > 1 && c[nc - 1] == c[0]) --nc;
+      if (nc < 3) continue;
+      if (nc == 3) c[3] = store::kNoCorner;
       if (perspective) {
-        const int nc = tri ? 3 : 4;
         bool straddles = false, everInFront = false;
         for (size_t k = 0; k < K && !straddles; ++k) {
           int behind = 0;

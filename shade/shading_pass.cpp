@@ -141,6 +141,7 @@ SplitScene splitScene(const FrameScene& scene, const Interval& iv, const store::
   for (size_t i = 0; i < nPrims; ++i) {
     stats.culledPieces += diceStats[i].culledPieces;
     stats.eyeSplits += diceStats[i].eyeSplits;
+    stats.forcedCuts += diceStats[i].forcedCuts;
     for (const Leaf& l : split.leaves[i]) split.flat.emplace_back(uint32_t(i), &l);
   }
   return split;

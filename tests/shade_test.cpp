@@ -153,7 +153,7 @@ TEST(ShadeDice, SphereMicropolygonsNoLargerThanRateAndGridsBounded) {
   EXPECT_GT(sum / double(n), 2 * 0.3);  // nor much smaller than the rate on average
 }
 
-TEST(ShadeDice, GridsShareVerticesNoCracks) {
+TEST(ShadeDice, GridsAreConsistentDiscs) {
   FrameScene f = frameOf([](Scene& s) {
     s.translate(0, 0, 5);
     s.torus(1, 0.3, 0, 360, 360);
@@ -162,23 +162,32 @@ TEST(ShadeDice, GridsShareVerticesNoCracks) {
   });
   CaptureSink sink = shadeCapture(f);
   ASSERT_FALSE(sink.grids.empty());
+  uint64_t triangles = 0;
   for (const auto& g : sink.grids) {
     // Every directed edge once, every interior edge shared by index with its reverse (consistent
-    // winding, no duplicated vertices along it), and the unpaired ones exactly the grid's rim.
+    // winding, no duplicated vertices along it), every vertex used, and the whole a disc: V - E +
+    // F = 1 (quads, and triangles where a rim meets a coarser side or a collapsed one).
     std::map<std::pair<uint32_t, uint32_t>, int> edges;
+    std::set<uint32_t> used;
     for (size_t m = 0; m < g.mps(); ++m) {
       const uint32_t* c = &g.corners[m * 4];
-      ASSERT_NE(c[3], store::kNoCorner);
-      for (int i = 0; i < 4; ++i) ++edges[{c[i], c[(i + 1) % 4]}];
+      const int n = c[3] == store::kNoCorner ? 3 : 4;
+      triangles += n == 3;
+      for (int i = 0; i < n; ++i) {
+        ASSERT_NE(c[i], c[(i + 1) % n]);
+        ++edges[{c[i], c[(i + 1) % n]}];
+        used.insert(c[i]);
+      }
     }
-    size_t unpaired = 0;
+    size_t undirected = 0;
     for (const auto& [e, count] : edges) {
       ASSERT_EQ(count, 1);
-      if (!edges.count({e.second, e.first})) ++unpaired;
+      undirected += edges.count({e.second, e.first}) ? 1 : 2;  // an interior edge is met twice
     }
-    const size_t nMp = g.mps();
-    EXPECT_EQ(unpaired, 2 * (g.numVertices - nMp - 1)) << "grid " << g.gridId;
+    EXPECT_EQ(used.size(), g.numVertices) << "grid " << g.gridId;
+    EXPECT_EQ(int64_t(g.numVertices) - int64_t(undirected / 2) + int64_t(g.mps()), 1) << "grid " << g.gridId;
   }
+  EXPECT_GT(triangles, 0u);  // the sphere's poles at least
 }
 
 TEST(ShadeDiceHard, SphereCrossingEyePlane) {
@@ -243,9 +252,10 @@ TEST(ShadeDiceHard, SphereMovingThroughEyePlane) {
     ASSERT_EQ(sink.schedules[g.schedule].size(), 2u);
     for (size_t m = 0; m < g.mps(); ++m)
       for (uint32_t k = 0; k < 2; ++k) {
+        const int n = g.corners[m * 4 + 3] == store::kNoCorner ? 3 : 4;
         int behind = 0;
-        for (int i = 0; i < 4; ++i) behind += g.positions[k * g.numVertices + g.corners[m * 4 + i]].z < 0.1f;
-        ASSERT_TRUE(behind == 0 || behind == 4) << "a micropolygon straddles the near plane at knot " << k;
+        for (int i = 0; i < n; ++i) behind += g.positions[k * g.numVertices + g.corners[m * 4 + i]].z < 0.1f;
+        ASSERT_TRUE(behind == 0 || behind == n) << "a micropolygon straddles the near plane at knot " << k;
       }
   }
 }
@@ -607,7 +617,7 @@ TEST(ShadeAttributes, OrientationFlipsNormalsAndWindingFollowsThem) {
     for (const auto& g : sink.grids)
       for (size_t m = 0; m < g.mps(); ++m) {
         const uint32_t* c = &g.corners[m * 4];
-        const dvec3 p0(g.positions[c[0]]), p1(g.positions[c[1]]), p3(g.positions[c[3]]);
+        const dvec3 p0(g.positions[c[0]]), p1(g.positions[c[1]]), p3(g.positions[c[3] == store::kNoCorner ? c[2] : c[3]]);
         const dvec3 N(g.attrs[2][c[0] * 3], g.attrs[2][c[0] * 3 + 1], g.attrs[2][c[0] * 3 + 2]);
         const dvec3 outward = glm::normalize(p0 - dvec3(0, 0, 5));
         ASSERT_GT(expect * glm::dot(N, outward), 0.99) << "mode " << mode;
