@@ -62,7 +62,15 @@ struct Geometry {
   Scene::VertexData vd;
 };
 
-Geometry geometry(const Args& args, size_t first, std::initializer_list<std::string_view> own = {}) {
+/// The vertex data of a primitive's parameter list. `heightField` (columns, rows, periodic u and
+/// v) is given for patches and patch meshes, where "Pz" makes points (x, y) on the mesh's
+/// parametric grid (RenderMan: a height field over the patch's parameters).
+struct HeightField {
+  int nu = 0, nv = 0;
+  bool uPeriodic = false, vPeriodic = false;
+};
+
+Geometry geometry(const Args& args, size_t first, std::initializer_list<std::string_view> own = {}, const HeightField& heightField = {}) {
   Geometry g;
   std::vector<double> s, t;
   for (const Param& p : args.params(first)) {
@@ -77,7 +85,16 @@ Geometry geometry(const Args& args, size_t first, std::initializer_list<std::str
       for (size_t i = 0; i + 1 < v.size(); i += 2) g.vd.st.emplace_back(v[i], v[i + 1]);
     } else if (n == "s" && numbersOf(p)) s = *numbersOf(p);
     else if (n == "t" && numbersOf(p)) t = *numbersOf(p);
-    else if (n == "Pz") args.fail("\"Pz\" height fields are not supported");
+    else if (n == "Pz") {
+      const HeightField& h = heightField;
+      if (!h.nu) args.fail("\"Pz\" height fields are given for patches and patch meshes only");
+      const auto* z = numbersOf(p);
+      if (!z || z->size() != size_t(h.nu) * size_t(h.nv)) args.fail(cat("\"Pz\" needs ", size_t(h.nu) * size_t(h.nv), " numbers, has ", z ? z->size() : 1));
+      const double du = h.uPeriodic || h.nu == 1 ? h.nu : h.nu - 1, dv = h.vPeriodic || h.nv == 1 ? h.nv : h.nv - 1;
+      g.P.clear();
+      for (int j = 0; j < h.nv; ++j)
+        for (int i = 0; i < h.nu; ++i) g.P.emplace_back(i / du, j / dv, (*z)[size_t(j) * size_t(h.nu) + size_t(i)]);
+    }
     else warnOnce(cat("rib-primvar:", n), cat("primitive variable '", n, "' is not used by the built-in shaders; ignored"));
   }
   if (g.vd.st.empty() && !s.empty() && s.size() == t.size())
@@ -259,12 +276,12 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
   if (n == "Patch") {
     const std::string& type = a.string(0);
     if (type == "bicubic") {
-      Geometry g = geometry(a, 1);
+      Geometry g = geometry(a, 1, {}, {4, 4});
       if (g.P.size() != 16) a.fail(cat("bicubic patch needs 16 points, has ", g.P.size()));
       return s.patchMesh(true, 4, false, 4, false, g.P, g.vd), true;
     }
     if (type != "bilinear") a.fail(cat("patch type '", type, "' (bilinear or bicubic)"));
-    Geometry g = geometry(a, 1);
+    Geometry g = geometry(a, 1, {}, {2, 2});
     if (g.P.size() != 4) a.fail(cat("bilinear patch needs 4 points, has ", g.P.size()));
     return s.patch({g.P[0], g.P[1], g.P[2], g.P[3]}, g.vd), true;
   }
@@ -290,7 +307,7 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
     if (type != "bilinear" && type != "bicubic") a.fail(cat("patch type '", type, "' (bilinear or bicubic)"));
     const int nu = int(integerArg(a, 1, 1, 1 << 24)), nv = int(integerArg(a, 3, 1, 1 << 24));
     const bool uPeriodic = periodicArg(a, 2), vPeriodic = periodicArg(a, 4);
-    Geometry g = geometry(a, 5);
+    Geometry g = geometry(a, 5, {}, {nu, nv, uPeriodic, vPeriodic});
     return s.patchMesh(type == "bicubic", nu, uPeriodic, nv, vPeriodic, g.P, g.vd), true;
   }
   if (n == "ObjectBegin") return s.objectBegin(handleArg(r, 0)), true;

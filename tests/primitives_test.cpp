@@ -9,6 +9,7 @@
 
 #include "common/error.h"
 #include "shade/dice.h"
+#include "shade/rib_scene.h"
 #include "shade/scene.h"
 #include "tests/exr_test_util.h"
 #include "tests/test_util.h"
@@ -303,6 +304,54 @@ TEST(PrimQuadric, HyperboloidAndParaboloidAreTheirDefinitions) {
       const dvec3 g = glm::normalize(dvec3(p.x, p.y, -4.0 / (2 * 3)));
       EXPECT_GT(glm::dot(glm::normalize(evalNg(prims[3], prims[3].keys[0], u, v)), g), 1 - 1e-9);
     }
+}
+
+// The primitives of a RIB world block (read through the RIB reader and its scene handler).
+std::vector<Primitive> ribPrims(const std::string& world) {
+  test::ScratchDir dir;
+  std::ofstream(dir.path("s.rib")) << "WorldBegin\n" << world << "\nWorldEnd\n";
+  std::vector<Primitive> out;
+  Scene scene([&](FrameScene& f) { out = std::move(f.prims); });
+  readRibScene(dir.path("s.rib"), scene);
+  return out;
+}
+
+TEST(PrimPatch, HeightFieldsStandOnTheParametricGrid) {
+  // "Pz": RenderMan's height field, x and y the mesh's parameters, z given. A bilinear patch is
+  // then (u, v, bilinear z); a bicubic b-spline mesh over a 5 x 5 grid reproduces the plane z =
+  // 2x - y + 1 exactly (b-splines reproduce linear functions), over its inner knots.
+  {
+    const auto prims = ribPrims("Patch \"bilinear\" \"Pz\" [1 2 3 5]");
+    ASSERT_EQ(prims.size(), 1u);
+    for (double u : {0.0, 0.3, 1.0})
+      for (double v : {0.0, 0.6, 1.0}) {
+        const dvec3 p = evalP(prims[0], prims[0].keys[0], u, v);
+        EXPECT_NEAR(glm::length(p - dvec3(u, v, (1 - u) * (1 - v) * 1 + u * (1 - v) * 2 + (1 - u) * v * 3 + u * v * 5)), 0, 1e-12);
+      }
+  }
+  std::string z;
+  for (int j = 0; j < 5; ++j)
+    for (int i = 0; i < 5; ++i) z += cat(2.0 * i / 4 - j / 4.0 + 1, " ");  // exact in decimal
+  const auto mesh = ribPrims("Basis \"b-spline\" 1 \"b-spline\" 1\nPatchMesh \"bicubic\" 5 \"nonperiodic\" 5 \"nonperiodic\" \"Pz\" [" + z + "]");
+  ASSERT_EQ(mesh.size(), 4u);  // 2 x 2 patches
+  for (const Primitive& p : mesh)
+    for (double u : {0.0, 0.5, 1.0})
+      for (double v : {0.0, 0.25, 1.0}) {
+        const dvec3 q = evalP(p, p.keys[0], u, v);
+        EXPECT_GE(q.x, 0.25 - 1e-12);
+        EXPECT_LE(q.x, 0.75 + 1e-12);
+        EXPECT_NEAR(q.z, 2 * q.x - q.y + 1, 1e-12);
+      }
+  // Wrong counts and requests that have no parametric grid are one-line errors.
+  for (const std::string bad : {"Patch \"bilinear\" \"Pz\" [1 2 3]", "PatchMesh \"bilinear\" 3 \"nonperiodic\" 2 \"nonperiodic\" \"Pz\" [1 2 3 4 5]", "Polygon \"Pz\" [1 2 3]"}) {
+    try {
+      ribPrims(bad);
+      ADD_FAILURE() << bad << ": no error";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("Pz"), std::string::npos) << e.what();
+      EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos) << e.what();
+    }
+  }
 }
 
 // ---------------------------------------------------------------------------------------------
