@@ -66,7 +66,7 @@ struct ShadeCommand {
       if (verbosity() == Verbosity::Verbose)
         note(cat("frame ", n, ": ", r.shade.primitives, " primitives, ", r.shade.culledPieces,
                  " pieces culled (off screen, behind the eye or beyond the far plane), ", r.shade.eyeSplits, " eye splits, ", r.shade.droppedMicropolygons,
-                 " micropolygons dropped at the near plane, ", r.shade.forcedCuts, " sides left unfinished by the split depth limit, ", r.shade.vertices,
+                 " micropolygons dropped at the near plane, ", r.shade.trimmedMicropolygons, " trimmed away, ", r.shade.forcedCuts, " sides left unfinished by the split depth limit, ", r.shade.vertices,
                  " vertices shaded"));
     });
     shade::readRibScene(scene, sceneBuilder);

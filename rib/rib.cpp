@@ -175,6 +175,7 @@ DeclMap standardDeclarations() {
       {"sphere", "uniform float"},
       {"coordinatesystem", "uniform string"},
       {"name", "uniform string"},
+      {"sense", "uniform string"},  // Attribute "trimcurve"
       {"shadows", "uniform string"},
       {"jitter", "uniform integer"},
       {"subpixel", "uniform integer"},

@@ -49,32 +49,12 @@ glm::dvec3 bicubic(const Primitive& p, const Shape& s, double u, double v, bool 
   }
   return sum;
 }
-// Cox-de Boor (The NURBS Book, A2.2): the `order` B-spline basis functions that are non-zero on
-// the span [t[order-1], t[order]) of the local knots t, at x.
-void nurbsBasis(const std::vector<double>& t, int order, double x, double* N) {
-  const int deg = order - 1;
-  double left[33], right[33];
-  N[0] = 1;
-  for (int j = 1; j <= deg; ++j) {
-    left[j] = x - t[size_t(deg + 1 - j)];
-    right[j] = t[size_t(deg + j)] - x;
-    double saved = 0;
-    for (int r = 0; r < j; ++r) {
-      const double denom = right[r + 1] + left[j - r];
-      const double temp = denom != 0 ? N[r] / denom : 0;
-      N[r] = saved + right[r + 1] * temp;
-      saved = left[j - r] * temp;
-    }
-    N[j] = saved;
-  }
-}
-
 // A NURBS span at the primitive's (u, v): the rational combination of its control points.
 glm::dvec3 nurbsAt(const Primitive& p, const Shape& s, double u, double v) {
   const NurbsSpan& n = *p.nurbs;
   double Nu[32], Nv[32];
-  nurbsBasis(n.knotsU, n.orderU, n.u0 + u * (n.u1 - n.u0), Nu);
-  nurbsBasis(n.knotsV, n.orderV, n.v0 + v * (n.v1 - n.v0), Nv);
+  nurbsBasis(n.knotsU.data(), n.orderU, n.u0 + u * (n.u1 - n.u0), Nu);
+  nurbsBasis(n.knotsV.data(), n.orderV, n.v0 + v * (n.v1 - n.v0), Nv);
   glm::dvec3 sum(0.0);
   double w = 0;
   for (int l = 0; l < n.orderV; ++l)
@@ -140,6 +120,25 @@ void discAxes(const Shape& s, glm::dvec3& a, glm::dvec3& b) {
   if (!std::isfinite(b.x)) b = glm::normalize(glm::cross(glm::dvec3(0, 0, 1), a));
 }
 }  // namespace
+
+// Cox-de Boor (The NURBS Book, A2.2).
+void nurbsBasis(const double* t, int order, double x, double* N) {
+  const int deg = order - 1;
+  double left[33], right[33];
+  N[0] = 1;
+  for (int j = 1; j <= deg; ++j) {
+    left[j] = x - t[size_t(deg + 1 - j)];
+    right[j] = t[size_t(deg + j)] - x;
+    double saved = 0;
+    for (int r = 0; r < j; ++r) {
+      const double denom = right[r + 1] + left[j - r];
+      const double temp = denom != 0 ? N[r] / denom : 0;
+      N[r] = saved + right[r + 1] * temp;
+      saved = left[j - r] * temp;
+    }
+    N[j] = saved;
+  }
+}
 
 void CubicBasis::weights(double u, double w[4]) const {
   for (size_t k = 0; k < 4; ++k) w[k] = scale * (((m[k] * u + m[4 + k]) * u + m[8 + k]) * u + m[12 + k]);
@@ -417,7 +416,22 @@ void diceLeaf(const Primitive& p, const Leaf& leaf, const std::vector<double>& k
   const bool reverse = (glm::determinant(m) < 0) != p.flipNormals;
   g.corners.clear();
   g.corners.reserve(size_t(nu) * nv * 4);
-  g.droppedMicropolygons = 0;
+  g.droppedMicropolygons = g.trimmedMicropolygons = 0;
+  // Trim curves (trim.h) are given in the NuPatch's knot space: the span's (u, v) maps onto it.
+  const TrimLoops* trim = p.kind == PrimKind::Nurbs ? p.attrs->trim.get() : nullptr;
+  bool trimEach = false;
+  if (trim) {
+    const NurbsSpan& span = *p.nurbs;
+    double box[4] = {1e300, -1e300, 1e300, -1e300};
+    for (const UV& q : gv.uv) box[0] = std::min(box[0], q.u), box[1] = std::max(box[1], q.u), box[2] = std::min(box[2], q.v), box[3] = std::max(box[3], q.v);
+    auto ku = [&](double u) { return span.u0 + u * (span.u1 - span.u0); };
+    auto kv = [&](double v) { return span.v0 + v * (span.v1 - span.v0); };
+    trimEach = trim->crosses(ku(box[0]), ku(box[1]), kv(box[2]), kv(box[3]));
+    if (!trimEach && trim->encloses(ku(0.5 * (box[0] + box[1])), kv(0.5 * (box[2] + box[3]))) != p.attrs->trimKeepsInside) {
+      g.trimmedMicropolygons = uint64_t(nu) * uint64_t(nv);  // the whole grid is cut away
+      return;
+    }
+  }
   for (int j = 0; j < nv; ++j)
     for (int i = 0; i < nu; ++i) {
       const size_t p0 = size_t(j * row + i);
@@ -430,6 +444,15 @@ void diceLeaf(const Primitive& p, const Leaf& leaf, const std::vector<double>& k
       if (nc > 1 && c[nc - 1] == c[0]) --nc;
       if (nc < 3) continue;
       if (nc == 3) c[3] = store::kNoCorner;
+      if (trimEach) {
+        UV centre;
+        for (int n = 0; n < nc; ++n) centre.u += gv.uv[c[n]].u / nc, centre.v += gv.uv[c[n]].v / nc;
+        const NurbsSpan& span = *p.nurbs;
+        if (trim->encloses(span.u0 + centre.u * (span.u1 - span.u0), span.v0 + centre.v * (span.v1 - span.v0)) != p.attrs->trimKeepsInside) {
+          ++g.trimmedMicropolygons;
+          continue;
+        }
+      }
       if (perspective) {
         bool straddles = false, everInFront = false;
         for (size_t k = 0; k < K && !straddles; ++k) {

@@ -19,6 +19,10 @@
 
 namespace reshutter::shade {
 
+/// The `order` B-spline basis functions that are non-zero on the span [t[order-1], t[order]) of
+/// the 2 · order local knots t, at x (order ≤ 32).
+void nurbsBasis(const double* t, int order, double x, double* N);
+
 /// Object-space position at (u, v) of one shape of `p`.
 glm::dvec3 evalP(const Primitive& p, const Shape& s, double u, double v);
 /// Object-space surface normal at (u, v), along dPdu × dPdv (outward for quadrics with the
@@ -32,6 +36,7 @@ struct DicedGrid {
   std::vector<glm::vec3> positions;  // knots × vertices, camera space
   std::vector<uint32_t> corners;     // 4 per micropolygon, ring order counter-clockwise around N
   uint64_t droppedMicropolygons = 0;
+  uint64_t trimmedMicropolygons = 0;  // cut away by trim curves (trim.h)
   // At the shading time, per vertex (camera space):
   std::vector<glm::dvec3> P, N, Ng;  // N, Ng unit
   std::vector<double> u, v, s, t;    // u, v over the whole primitive

@@ -239,6 +239,15 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
         }
       return true;
     }
+    if (cls == "trimcurve") {
+      for (const Param& p : a.params(1))
+        if (p.decl.name == "sense" && p.value) {
+          const std::string sense = p.value->kind == Value::Kind::StringArray && !p.value->strings.empty() ? p.value->strings[0] : p.value->string;
+          if (sense != "inside" && sense != "outside") a.fail(cat("trimcurve sense '", sense, "' (inside or outside)"));
+          s.trimSense(sense == "outside");
+        }
+      return true;
+    }
     warnOnce(cat("attribute:", cls), cat(s.where, ": Attribute \"", cls, "\" has no effect on the shading pass; ignored"));
     return true;
   }
@@ -354,8 +363,13 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
     return true;
   }
   if (n == "TrimCurve") {
-    warnOnce("trimcurve", cat(s.where, ": TrimCurve is not supported yet; NURBS surfaces are drawn untrimmed"));
-    return true;
+    try {
+      auto loops = std::make_shared<const TrimLoops>(intArray(a, 0, 0, 1 << 24), intArray(a, 1, 0, 1 << 24), a.numbers(2), a.numbers(3), a.numbers(4),
+                                                     intArray(a, 5, 0, 1 << 24), a.numbers(6), a.numbers(7), a.numbers(8));
+      return s.trimCurve(loops->loops().empty() ? nullptr : std::move(loops)), true;
+    } catch (const Error& e) {
+      a.fail(e.problem());
+    }
   }
   if (n == "Curves" || n == "Points") {
     const bool curves = n == "Curves";

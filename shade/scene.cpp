@@ -486,6 +486,8 @@ void Scene::shadingRate(double r) {
   if (!(r > 0) || !std::isfinite(r)) error(cat("shading rate ", r, " must be positive"));
   mutableAttrs().shadingRate = r;
 }
+void Scene::trimCurve(std::shared_ptr<const TrimLoops> loops) { mutableAttrs().trim = std::move(loops); }
+void Scene::trimSense(bool keepInside) { mutableAttrs().trimKeepsInside = keepInside; }
 void Scene::motionFactor(double f) {
   if (!(f >= 0) || !std::isfinite(f)) error(cat("motion factor ", f, " must be non-negative"));
   mutableAttrs().motionFactor = f;

@@ -25,6 +25,7 @@
 #include <glm/vec3.hpp>
 
 #include "shade/subdivision.h"
+#include "shade/trim.h"
 #include "store/model.h"
 
 namespace reshutter::shade {
@@ -126,6 +127,8 @@ struct Attributes {
   uint32_t objectId = 0;       // 0: unnamed; otherwise 1 + index into FrameScene::objectNames
   uint32_t bxdf = 0;           // 0: none; otherwise 1 + index into FrameScene::risNodes
   std::shared_ptr<const std::array<CubicBasis, 2>> basis;  // Basis (u, v); null: bezier, bezier
+  std::shared_ptr<const TrimLoops> trim;                   // TrimCurve (NuPatch only); null: none
+  bool trimKeepsInside = false;                            // Attribute "trimcurve" "sense" "outside"
 };
 
 enum class PrimKind : uint8_t { Sphere, Cylinder, Cone, Disk, Torus, Hyperboloid, Paraboloid, Patch, Bicubic, Subdiv, Curve, Point, Nurbs };
@@ -321,6 +324,10 @@ class Scene {
   /// is varying (one value per patch corner) or uniform (one per patch).
   void patchMesh(bool bicubic, int nu, bool uPeriodic, int nv, bool vPeriodic, const std::vector<glm::dvec3>& P, const VertexData& vd = {});
   void basis(const CubicBasis& u, const CubicBasis& v);
+  /// TrimCurve: the loops that trim the NuPatches that follow (null: none); `keepInside` is
+  /// Attribute "trimcurve" "sense" (trim.h).
+  void trimCurve(std::shared_ptr<const TrimLoops> loops);
+  void trimSense(bool keepInside);
   /// Curves: one ribbon primitive per segment, `width` wide, facing the camera unless `N` (one
   /// per varying value) orients it; cubic ones use the current v basis and step. `width` holds
   /// one value per varying value (per segment end) or one for all; vertex data is varying or

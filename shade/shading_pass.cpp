@@ -50,7 +50,7 @@ struct GridOut {
 struct Batch {
   size_t first = 0, count = 0;  // into the flattened leaf list
   std::vector<GridOut> grids;
-  uint64_t dropped = 0;
+  uint64_t dropped = 0, trimmed = 0;
 };
 
 using BatchPtr = std::shared_ptr<Batch>;
@@ -218,6 +218,7 @@ void shadeBatch(const ShadeContext& c, Batch& b) {
     const Primitive& p = c.scene.prims[pi];
     diceLeaf(p, *leaf, c.split.knots[pi], c.shadeAt, c.nearClip, c.perspective, g);
     b.dropped += g.droppedMicropolygons;
+    b.trimmed += g.trimmedMicropolygons;
     lights.clear();
     for (uint32_t li : p.attrs->lights)
       if (li < c.lit.size()) lights.push_back(c.lit[li]);
@@ -241,6 +242,7 @@ class GridSender {
 
   void send(Batch& b) {
     stats_.droppedMicropolygons += b.dropped;
+    stats_.trimmedMicropolygons += b.trimmed;
     for (GridOut& go : b.grids)
       if (!go.corners.empty()) sendGrid(go);
   }

@@ -271,7 +271,13 @@ class Splitter {
       return;
     }
     const double edge = edgeLength(e.motion), G = o_.maxGridSize;
-    const double iu = std::ceil(e.lu / edge), iv = std::ceil(e.lv / edge);
+    // Steps across the interior; a piece too large or too fast to measure (infinite coordinates)
+    // takes a whole grid.
+    auto steps = [&](double length) {
+      const double n = std::ceil(length / edge);
+      return std::isfinite(n) ? n : G;
+    };
+    const double iu = steps(e.lu), iv = steps(e.lv);
     // A direction needs a cut when a side along it is not final, or when its interior needs more
     // than a grid and both sides can be cut at one of their points.
     auto needs = [&](const Side& s, const Side& t, double interior) {

@@ -11,6 +11,8 @@
 #include "shade/dice.h"
 #include "shade/rib_scene.h"
 #include "shade/scene.h"
+#include "shade/shading_pass.h"
+#include "shade/trim.h"
 #include "tests/exr_test_util.h"
 #include "tests/test_util.h"
 
@@ -349,6 +351,128 @@ TEST(PrimPatch, HeightFieldsStandOnTheParametricGrid) {
       ADD_FAILURE() << bad << ": no error";
     } catch (const Error& e) {
       EXPECT_NE(std::string(e.what()).find("Pz"), std::string::npos) << e.what();
+      EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos) << e.what();
+    }
+  }
+}
+
+// A circle as RenderMan writes it: a rational quadratic NURBS of nine points (weights 1 and
+// √2/2 at the corners of the square around it), exactly round.
+struct TrimCircle {
+  std::vector<int> ncurves{1}, order{3}, n{9};
+  std::vector<double> knot{0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1}, min{0}, max{1}, u, v, w;
+  TrimCircle(double cu, double cv, double r) {
+    const double s = std::sqrt(0.5);
+    const double x[9] = {1, 1, 0, -1, -1, -1, 0, 1, 1}, y[9] = {0, 1, 1, 1, 0, -1, -1, -1, 0};
+    for (int i = 0; i < 9; ++i) u.push_back(cu + r * x[i]), v.push_back(cv + r * y[i]), w.push_back(i % 2 ? s : 1);
+  }
+  std::string rib() const {
+    std::string out = "TrimCurve [1] [3] [0 0 0 0.25 0.25 0.5 0.5 0.75 0.75 1 1 1] [0] [1] [9] [";
+    for (double x : u) out += cat(x, " ");
+    out += "] [";
+    for (double x : v) out += cat(x, " ");
+    out += "] [";
+    for (double x : w) out += cat(x, " ");
+    return out + "]";
+  }
+};
+
+TEST(PrimTrim, LoopsAreTheirCurvesAndTheOddRuleHolds) {
+  // The flattened circle lies on the circle; a square of four linear curves is that square.
+  const TrimCircle c(0.5, 0.4, 0.3);
+  const TrimLoops circle(c.ncurves, c.order, c.knot, c.min, c.max, c.n, c.u, c.v, c.w);
+  ASSERT_EQ(circle.loops().size(), 1u);
+  EXPECT_GT(circle.loops()[0].size(), 100u);
+  for (const auto& p : circle.loops()[0]) EXPECT_NEAR(std::hypot(p.x - 0.5, p.y - 0.4), 0.3, 1e-12);
+  EXPECT_TRUE(circle.encloses(0.5, 0.4));
+  EXPECT_TRUE(circle.encloses(0.5 + 0.29, 0.4));
+  EXPECT_FALSE(circle.encloses(0.5 + 0.31, 0.4));
+  EXPECT_FALSE(circle.encloses(0.75, 0.65));  // inside the control square, outside the circle
+  // Two loops: a square with the circle inside it; the odd rule makes the ring between them inside.
+  const TrimLoops ring({4, 1}, {2, 2, 2, 2, 3}, {0, 0, 1, 1, 0, 0, 1, 1, 0, 0, 1, 1, 0, 0, 1, 1, 0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1},
+                       {0, 0, 0, 0, 0}, {1, 1, 1, 1, 1}, {2, 2, 2, 2, 9}, [&] {
+                         std::vector<double> u = {0, 1, 1, 1, 1, 0, 0, 0};
+                         u.insert(u.end(), c.u.begin(), c.u.end());
+                         return u;
+                       }(),
+                       [&] {
+                         std::vector<double> v = {-0.1, -0.1, -0.1, 0.9, 0.9, 0.9, 0.9, -0.1};
+                         v.insert(v.end(), c.v.begin(), c.v.end());
+                         return v;
+                       }(),
+                       [&] {
+                         std::vector<double> w(8, 1.0);
+                         w.insert(w.end(), c.w.begin(), c.w.end());
+                         return w;
+                       }());
+  ASSERT_EQ(ring.loops().size(), 2u);
+  EXPECT_FALSE(ring.encloses(0.5, 0.4));
+  EXPECT_TRUE(ring.encloses(0.05, 0.0));
+  EXPECT_FALSE(ring.encloses(1.05, 0.0));
+  EXPECT_TRUE(ring.crosses(0.75, 0.85, 0.3, 0.5));
+  EXPECT_FALSE(ring.crosses(0.45, 0.55, 0.35, 0.45));
+}
+
+// A NuPatch square (order 2, 60 x 60 pixels on screen, orthographic, 1 unit = 1 pixel),
+// optionally trimmed: the raster area its micropolygons cover, and the pass's statistics.
+std::pair<double, ShadeStats> trimmedSquareArea(const std::string& trim) {
+  test::ScratchDir dir;
+  std::ofstream(dir.path("t.rib")) << "Format 64 64 1\nProjection \"orthographic\"\nScreenWindow -32 32 -32 32\nWorldBegin\nShadingRate 0.25\n" << trim
+                                   << "\nNuPatch 2 2 [0 0 1 1] 0 1 2 2 [0 0 1 1] 0 1 \"P\" [-30 -30 5  30 -30 5  -30 30 5  30 30 5]\nWorldEnd\n";
+  FrameScene frame;
+  Scene scene([&](FrameScene& f) { frame = std::move(f); });
+  readRibScene(dir.path("t.rib"), scene);
+  struct AreaSink final : store::GridSink {
+    double area = 0;
+    uint32_t addSchedule(const store::Schedule&) override { return 0; }
+    void addGrid(const store::GridInput& g) override {
+      for (size_t m = 0; m < g.corners.size() / 4; ++m) {
+        const uint32_t* c = &g.corners[m * 4];
+        const int k = c[3] == store::kNoCorner ? 3 : 4;
+        for (int i = 0; i < k; ++i) {
+          const glm::vec3 a = g.positions[c[i]], b = g.positions[c[(i + 1) % k]];
+          area += 0.5 * (double(a.x) * b.y - double(b.x) * a.y);
+        }
+      }
+    }
+  } sink;
+  const ShadeStats stats = shadeFrame(frame, {}, sink);
+  return {std::abs(sink.area), stats};
+}
+
+TEST(PrimTrim, TrimmedPatchesCoverTheirTrimmedArea) {
+  // A circle of radius 0.3 (18 px) trims the square: by default ("inside") the disc is cut away,
+  // with "outside" only the disc is kept. Micropolygons are kept or cut by their centres, so the
+  // area is exact to within the boundary's length times half a micropolygon (0.5 px across).
+  const double square = 60.0 * 60.0, disc = M_PI * 18.0 * 18.0, tolerance = 2 * M_PI * 18.0 * 0.25;
+  const auto [whole, wholeStats] = trimmedSquareArea("");
+  EXPECT_NEAR(whole, square, 1e-3 * square);
+  EXPECT_EQ(wholeStats.trimmedMicropolygons, 0u);
+  const std::string circle = TrimCircle(0.5, 0.5, 0.3).rib();
+  const auto [holed, holedStats] = trimmedSquareArea(circle);
+  EXPECT_NEAR(holed, square - disc, tolerance);
+  EXPECT_GT(holedStats.trimmedMicropolygons, 0u);
+  const auto [kept, keptStats] = trimmedSquareArea("Attribute \"trimcurve\" \"sense\" \"outside\"\n" + circle);
+  EXPECT_NEAR(kept, disc, tolerance);
+  EXPECT_GT(keptStats.trimmedMicropolygons, holedStats.trimmedMicropolygons);
+  // The trim is an attribute: it ends with its block.
+  const auto [after, afterStats] = trimmedSquareArea("AttributeBegin\n" + circle + "\nAttributeEnd");
+  EXPECT_NEAR(after, square, 1e-3 * square);
+}
+
+TEST(PrimTrim, BadTrimCurvesAreOneLineErrors) {
+  for (const std::string bad : {"TrimCurve [1] [3] [0 0 0 1 1] [0] [1] [3] [0 1 0] [0 0 1] [1 1 1]",        // a knot short
+                                "TrimCurve [1] [3] [0 0 0 1 1 1] [0] [2] [3] [0 1 0] [0 0 1] [1 1 1]",      // range beyond the knots
+                                "TrimCurve [1] [3] [0 0 0 1 1 1] [0] [1] [3] [0 1 0] [0 0 1] [1 0 1]",      // a zero weight
+                                "TrimCurve [1] [4] [0 0 0 0 1 1 1] [0] [1] [3] [0 1 0] [0 0 1] [1 1 1]",    // order above the points
+                                "TrimCurve [1] [3] [0 0 1 0 1 1] [0] [1] [3] [0 1 0] [0 0 1] [1 1 1]",      // decreasing knots
+                                "TrimCurve [2] [3] [0 0 0 1 1 1] [0] [1] [3] [0 1 0] [0 0 1] [1 1 1]",      // a loop short of curves
+                                "Attribute \"trimcurve\" \"sense\" \"sideways\""}) {
+    try {
+      ribPrims(bad);
+      ADD_FAILURE() << bad << ": no error";
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find("s.rib:"), std::string::npos) << e.what();
       EXPECT_EQ(std::string(e.what()).find('\n'), std::string::npos) << e.what();
     }
   }
