@@ -154,10 +154,12 @@ void Scene::subdivisionMesh(SubdivScheme scheme, const std::vector<int>& nverts,
   for (size_t f = 0; f < nverts.size(); ++f) firstVertex[f + 1] = firstVertex[f] + size_t(nverts[f]);
   // Varying data as corner values per ptex face: a quad's own, an n-gon sub-face's (its vertex,
   // the two edge midpoints, the centroid), a triangle's with its apex repeated.
+  // Face-varying data (one value per face vertex) is taken per face vertex the same way.
   auto cornersOf = [&](int ptex, const auto& data, auto zero) {
     const auto [f, corner] = surface->baseFace(ptex);
     const size_t first = firstVertex[size_t(f)], nv = size_t(nverts[size_t(f)]);
-    auto at = [&](size_t i) { return data[size_t(verts[first + (i % nv)])]; };
+    const bool perFaceVertex = data.size() != P.size();
+    auto at = [&](size_t i) { return data[perFaceVertex ? first + (i % nv) : size_t(verts[first + (i % nv)])]; };
     if (nv == 3 && scheme == SubdivScheme::Loop) return std::array<decltype(zero), 4>{at(0), at(1), at(2), at(2)};
     if (nv == 4) return std::array<decltype(zero), 4>{at(0), at(1), at(3), at(2)};
     auto centroid = zero;
@@ -172,17 +174,18 @@ void Scene::subdivisionMesh(SubdivScheme scheme, const std::vector<int>& nverts,
     mesh->points = size_t(n) * 4, mesh->faces = size_t(n);
     auto expand = [&](const std::vector<glm::dvec3>& in, std::vector<glm::dvec3>& out, const char* name) {
       if (in.empty()) return;
-      if (in.size() == P.size()) {
+      if (in.size() == P.size() || in.size() == verts.size()) {
         for (int i = 0; i < n; ++i)
           for (const auto& c : cornersOf(i, in, glm::dvec3(0.0))) out.push_back(c);
       } else if (in.size() == nverts.size()) {
         for (int i = 0; i < n; ++i) out.push_back(in[size_t(surface->baseFace(i).first)]);
       } else {
-        warnOnce(cat("subdiv-var:", name), cat(where, ": \"", name, "\" has ", in.size(), " values; a subdivision mesh takes ", P.size(), " or ", nverts.size(), "; ignored"));
+        warnOnce(cat("subdiv-var:", name), cat(where, ": \"", name, "\" has ", in.size(), " values; a subdivision mesh takes ", P.size(), ", ", verts.size(),
+                                               " or ", nverts.size(), "; ignored"));
       }
     };
     expand(vd.Cs, mesh->Cs, "Cs"), expand(vd.Os, mesh->Os, "Os");
-    if (vd.st.size() == P.size())
+    if (vd.st.size() == P.size() || vd.st.size() == verts.size())
       for (int i = 0; i < n; ++i)
         for (const auto& c : cornersOf(i, vd.st, glm::dvec2(0.0))) mesh->st.push_back(c);
   }
@@ -359,36 +362,53 @@ void Scene::emitFaces(const std::vector<int>& nverts, const std::vector<int>& ve
   checkIndices(nverts, verts, P.size(), "polygons");
   for (const auto& c : P) checkFinite(*this, {c.x, c.y, c.z});
   const size_t nFaces = nverts.size();
+  // Face-varying data (one value per face vertex; RenderMan's facevarying) makes every face
+  // vertex a data point of its own, and vertex/varying arrays are spread onto face vertices too.
+  auto faceVarying = [&](size_t n) { return n == verts.size() && n != P.size(); };
+  const bool perFaceVertex = faceVarying(vd.N.size()) || faceVarying(vd.Cs.size()) || faceVarying(vd.Os.size()) || faceVarying(vd.st.size());
   std::shared_ptr<const MeshData> mesh;
   if (!vd.N.empty() || !vd.Cs.empty() || !vd.Os.empty() || !vd.st.empty()) {
     auto m = std::make_shared<MeshData>();
     m->N = vd.N, m->Cs = vd.Cs, m->Os = vd.Os, m->st = vd.st;
     m->points = P.size(), m->faces = nFaces;
+    if (perFaceVertex) {
+      auto spread = [&](auto& data) {
+        if (data.size() != P.size()) return;
+        std::remove_reference_t<decltype(data)> out;
+        for (int v : verts) out.push_back(data[size_t(v)]);
+        data = std::move(out);
+      };
+      spread(m->N), spread(m->Cs), spread(m->Os), spread(m->st);
+      m->points = verts.size();
+    }
     mesh = std::move(m);
   }
   size_t first = 0;
   for (size_t f = 0; f < nFaces; ++f) {
     const int n = nverts[f];
     const int* idx = verts.data() + first;
-    first += size_t(n);
-    if (n < 3) continue;
+    if (n < 3) {
+      first += size_t(n);
+      continue;
+    }
     // A fan of quads (and a closing triangle) from vertex 0; exact for convex planar polygons.
     for (int i = 1; i + 1 < n; i += 2) {
       const bool tri = i + 2 >= n;
-      const int ring[4] = {idx[0], idx[i], idx[i + 1], tri ? idx[i + 1] : idx[i + 2]};
+      const int ring[4] = {0, i, i + 1, tri ? i + 1 : i + 2};   // face vertices
       const int rib[4] = {ring[0], ring[1], ring[3], ring[2]};  // ring → P00 P10 P01 P11
       Primitive p = basePrim(PrimKind::Patch);
       p.triangle = tri;
       Shape s;
-      for (int c = 0; c < 4; ++c) s.P[c] = P[size_t(rib[c])];
+      for (int c = 0; c < 4; ++c) s.P[c] = P[size_t(idx[rib[c]])];
       p.keys = {s};
       if (mesh) {
         p.mesh = mesh;
-        for (int c = 0; c < 4; ++c) p.meshPoint[size_t(c)] = uint32_t(rib[c]);
+        for (int c = 0; c < 4; ++c) p.meshPoint[size_t(c)] = uint32_t(perFaceVertex ? first + size_t(rib[c]) : size_t(idx[rib[c]]));
         p.meshFace = uint32_t(f);
       }
       out.push_back(std::move(p));
     }
+    first += size_t(n);
   }
 }
 
@@ -415,11 +435,13 @@ void Scene::generalPolygons(const std::vector<int>& nloops, const std::vector<in
   checkIndices(nverts, verts, P.size(), "loops");
   // One face list for emitFaces: one-loop polygons as given, holed ones as their triangles.
   std::vector<int> faceVerts, faceIndices;
-  std::vector<size_t> source;  // the polygon each face comes from (for uniform data)
+  std::vector<size_t> source;     // the polygon each face comes from (for uniform data)
+  std::vector<size_t> faceVertex;  // each face index's loop vertex (for face-varying data)
   size_t loop = 0, at = 0;
   std::vector<std::array<int, 3>> tris;
   for (size_t poly = 0; poly < nloops.size(); ++poly) {
     std::vector<std::vector<int>> loops;
+    const size_t polyFirst = at;
     for (int l = 0; l < nloops[poly]; ++l, ++loop) {
       loops.emplace_back(verts.begin() + std::ptrdiff_t(at), verts.begin() + std::ptrdiff_t(at + size_t(nverts[loop])));
       at += size_t(nverts[loop]);
@@ -427,6 +449,7 @@ void Scene::generalPolygons(const std::vector<int>& nloops, const std::vector<in
     if (loops.size() == 1) {
       faceVerts.push_back(int(loops[0].size()));
       faceIndices.insert(faceIndices.end(), loops[0].begin(), loops[0].end());
+      for (size_t i = polyFirst; i < at; ++i) faceVertex.push_back(i);
       source.push_back(poly);
       continue;
     }
@@ -435,6 +458,7 @@ void Scene::generalPolygons(const std::vector<int>& nloops, const std::vector<in
     for (const auto& t : tris) {
       faceVerts.push_back(3);
       faceIndices.insert(faceIndices.end(), t.begin(), t.end());
+      for (int v : t) faceVertex.push_back(size_t(std::find(verts.begin() + std::ptrdiff_t(polyFirst), verts.begin() + std::ptrdiff_t(at), v) - verts.begin()));
       source.push_back(poly);
     }
   }
@@ -447,6 +471,14 @@ void Scene::generalPolygons(const std::vector<int>& nloops, const std::vector<in
     data = std::move(out);
   };
   perFace(faces.N), perFace(faces.Cs), perFace(faces.Os);
+  // Face-varying data follows its loop vertex to the faces' vertices.
+  auto perFaceVertex = [&](auto& data) {
+    if (data.size() != verts.size() || data.size() == P.size()) return;
+    std::remove_reference_t<decltype(data)> out;
+    for (size_t i : faceVertex) out.push_back(data[i]);
+    data = std::move(out);
+  };
+  perFaceVertex(faces.N), perFaceVertex(faces.Cs), perFaceVertex(faces.Os), perFaceVertex(faces.st);
   std::vector<Primitive> out;
   emitFaces(faceVerts, faceIndices, P, faces, out);
   addPrims(std::move(out));

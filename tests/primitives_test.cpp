@@ -478,6 +478,70 @@ TEST(PrimTrim, BadTrimCurvesAreOneLineErrors) {
   }
 }
 
+TEST(PrimFaceVarying, EachFaceTakesItsOwnValueAtSharedPoints) {
+  // Two quads sharing an edge, a colour per face vertex (RenderMan facevarying): at the shared
+  // points each face has its own colour; vertex data beside it (st per point) still follows the
+  // points. Face vertex k has colour (k, 0, 0) and each corner's colour names the face vertex it
+  // came from, so a corner's point can be checked against that face vertex's point.
+  const std::vector<dvec3> P = {{0, 0, 5}, {1, 0, 5}, {2, 0, 5}, {0, 1, 5}, {1, 1, 5}, {2, 1, 5}};
+  const std::vector<int> verts = {0, 1, 4, 3, 1, 2, 5, 4};
+  Scene::VertexData vd;
+  for (size_t k = 0; k < verts.size(); ++k) vd.Cs.emplace_back(double(k), 0, 0);
+  for (const auto& p : P) vd.st.emplace_back(p.x / 2, p.y);
+  auto checkCorners = [&](const std::vector<Primitive>& prims, const std::vector<int>& faceVerts, const char* what) {
+    ASSERT_FALSE(prims.empty()) << what;
+    for (const Primitive& p : prims) {
+      std::array<dvec3, 4> cs;
+      ASSERT_TRUE(p.corners(p.mesh->Cs, cs)) << what;
+      std::array<glm::dvec2, 4> st;
+      ASSERT_TRUE(p.cornerST(st)) << what;
+      for (size_t c = 0; c < 4; ++c) {
+        const size_t k = size_t(cs[c].x);
+        ASSERT_LT(k, faceVerts.size()) << what;
+        EXPECT_EQ(P[size_t(faceVerts[k])], p.keys[0].P[c]) << what << " corner " << c;
+        EXPECT_EQ(st[c], glm::dvec2(p.keys[0].P[c].x / 2, p.keys[0].P[c].y)) << what << " corner " << c;
+      }
+    }
+  };
+  const auto quads = primsOf([&](Scene& s) { s.pointsPolygons({4, 4}, verts, P, vd); });
+  ASSERT_EQ(quads.size(), 2u);
+  checkCorners(quads, verts, "PointsPolygons");
+  std::array<dvec3, 4> left, right;
+  quads[0].corners(quads[0].mesh->Cs, left), quads[1].corners(quads[1].mesh->Cs, right);
+  EXPECT_NE(left[1], right[0]);  // point 1, seen from each face
+
+  // A polygon with a hole: its triangles' corners take the colours of their loop vertices.
+  const std::vector<dvec3> Q = {{0, 0, 5}, {4, 0, 5}, {4, 4, 5}, {0, 4, 5}, {1, 1, 5}, {1, 3, 5}, {3, 3, 5}, {3, 1, 5}};
+  const std::vector<int> loops = {0, 1, 2, 3, 4, 5, 6, 7};
+  Scene::VertexData hv;
+  for (size_t k = 0; k < loops.size(); ++k) hv.Cs.emplace_back(double(k), 0, 0);
+  for (const auto& q : Q) hv.st.emplace_back(q.x / 2, q.y);
+  const auto holed = primsOf([&](Scene& s) { s.generalPolygons({2}, {4, 4}, loops, Q, hv); });
+  ASSERT_EQ(holed.size(), 8u);
+  for (const Primitive& p : holed) {
+    std::array<dvec3, 4> cs;
+    ASSERT_TRUE(p.corners(p.mesh->Cs, cs));
+    for (size_t c = 0; c < 4; ++c) EXPECT_EQ(Q[size_t(loops[size_t(cs[c].x)])], p.keys[0].P[c]) << "corner " << c;
+  }
+
+  // Subdivision: a ptex face's corners take its face vertices' values.
+  const auto subdiv = primsOf([&](Scene& s) {
+    Scene::VertexData sv;
+    sv.st = {{0, 0}, {1, 0}, {1, 1}, {0, 1}, {5, 0}, {6, 0}, {6, 1}, {5, 1}};  // two islands
+    SubdivTags tags;
+    tags.interpolateBoundary = 1;  // two boundary faces: without it neither has a limit surface
+    s.subdivisionMesh(SubdivScheme::CatmullClark, {4, 4}, verts, tags, P, sv);
+  });
+  ASSERT_EQ(subdiv.size(), 2u);
+  std::array<glm::dvec2, 4> st0, st1;
+  ASSERT_TRUE(subdiv[0].cornerST(st0));
+  ASSERT_TRUE(subdiv[1].cornerST(st1));
+  EXPECT_EQ(st0[0], glm::dvec2(0, 0));
+  EXPECT_EQ(st0[3], glm::dvec2(1, 1));  // P11: the face's third vertex
+  EXPECT_EQ(st1[0], glm::dvec2(5, 0));
+  EXPECT_EQ(st1[3], glm::dvec2(6, 1));
+}
+
 // ---------------------------------------------------------------------------------------------
 // Rendered through the CLI: coverage against exact areas, and cracks.
 
