@@ -3,6 +3,7 @@
 #include "rib/rib.h"
 
 #include <filesystem>
+#include <map>
 #include <unordered_map>
 
 #include "common/error.h"
@@ -302,6 +303,18 @@ struct Reader::Impl {
 
   Conditionals conditions;
 
+  // Inline archives: each request held with its own copy of the name (a Request's name views
+  // the lexer's buffer).
+  struct HeldRequest {
+    std::string name;
+    Request request;
+  };
+  std::map<std::string, std::vector<HeldRequest>, std::less<>> inlineArchives;
+  std::string recording;  // the inline archive being defined; empty: none
+  Location recordingFrom;
+  size_t heldRequests = 0;
+  int inlineDepth = 0;
+
   void parse(Lexer& lx, RequestHandler& handler, Reader& self, int depth);
   /// IfBegin/ElseIf/Else/IfEnd; false for any other request.
   bool conditional(const Request& req, const Args& args);
@@ -311,6 +324,7 @@ struct Reader::Impl {
   std::string delayedArchive(const Request& req, const Args& args);
   void checkClosed(const std::string& file) const {
     if (conditions.open()) fail(file, "ends inside an IfBegin block (IfEnd missing)");
+    if (!recording.empty()) fail(recordingFrom.str(), "ArchiveBegin \"", recording, "\" has no ArchiveEnd");
   }
   void dispatch(const Request& req, RequestHandler& handler, Reader& self, const std::string& file, int depth);
 };
@@ -519,7 +533,29 @@ void Reader::Impl::parse(Lexer& lx, RequestHandler& handler, Reader& self, int d
 void Reader::Impl::dispatch(const Request& req, RequestHandler& handler, Reader& self, const std::string& file, int depth) {
   Args args(req, self);
   const std::string_view n = req.name;
+  if (!recording.empty()) {
+    // Inside ArchiveBegin/ArchiveEnd everything is held as it is (conditionals included: they
+    // are evaluated where the archive is read).
+    if (n == "ArchiveBegin") args.fail(cat("inside inline archive \"", recording, "\" (ArchiveBegin does not nest)"));
+    if (n == "ArchiveEnd") {
+      recording.clear();
+      return;
+    }
+    if (++heldRequests > options.maxInlineRequests) args.fail(cat("inline archives hold more than ", options.maxInlineRequests, " requests"));
+    auto& held = inlineArchives[recording].emplace_back();
+    held.name = std::string(n);
+    held.request = req;
+    return;
+  }
   if (conditional(req, args) || !conditions.active()) return;
+  if (n == "ArchiveBegin") {
+    const std::string& name = args.string(0);
+    if (name.empty()) args.fail("an inline archive needs a name");
+    recording = name, recordingFrom = req.where;
+    inlineArchives[name].clear();  // a later definition replaces an earlier one
+    return;
+  }
+  if (n == "ArchiveEnd") args.fail("ArchiveEnd without ArchiveBegin");
   if (n == "version") return;
   if (n == "Option" && args.count() >= 1 && req.values[0].isString() && req.values[0].string == "user") recordUserOptions(args);
   if (n == "Declare") {
@@ -544,7 +580,24 @@ void Reader::Impl::dispatch(const Request& req, RequestHandler& handler, Reader&
     Lexer inner(openFileSource(p.string()), p.string());
     parse(inner, handler, self, depth + 1);
   };
-  if (n == "ReadArchive") return readArchive(args.string(0));
+  if (n == "ReadArchive") {
+    const auto inlined = inlineArchives.find(args.string(0));
+    if (inlined == inlineArchives.end()) return readArchive(args.string(0));
+    if (inlineDepth + 1 > options.maxInlineDepth) args.fail(cat("inline archives read inside one another deeper than ", options.maxInlineDepth, " (a cycle?)"));
+    ++inlineDepth;
+    struct Leave {
+      int& depth;
+      ~Leave() { --depth; }
+    } leave{inlineDepth};
+    // Replayed from a copy: the archive may be redefined while it is read.
+    const std::vector<HeldRequest> held = inlined->second;
+    for (const HeldRequest& h : held) {
+      Request r = h.request;
+      r.name = h.name;
+      dispatch(r, handler, self, file, depth);
+    }
+    return;
+  }
   if (const std::string archive = delayedArchive(req, args); !archive.empty()) {
     // A delayed archive is read where it stands, inside an attribute block of its own: what it
     // sets does not leak past it, as with the renderer expanding the procedural. Its bound only

@@ -6,7 +6,9 @@
 // "DelayedReadArchive"` archives in place (inside an AttributeBegin/End it hands the handler; other
 // procedurals are the handler's to refuse: no program is ever run), evaluates conditional RIB
 // (IfBegin/ElseIf/Else/IfEnd on Option "user" values: rib/conditional.h; a branch not taken is
-// never handed on) and hands every other request to a RequestHandler. Requests a handler does not take are warned about once per kind and
+// never handed on), keeps inline archives (ArchiveBegin "name" … ArchiveEnd: the requests are held,
+// not handed on, and a later ReadArchive "name" replays them where it stands) and hands every
+// other request to a RequestHandler. Requests a handler does not take are warned about once per kind and
 // skipped. Errors are reshutter::Error naming file:line (or file:byte N inside binary data) and
 // the request.
 #pragma once
@@ -100,7 +102,9 @@ class RequestHandler {
 
 struct ReaderOptions {
   bool warnUnsupported = true;
-  int maxArchiveDepth = 32;
+  int maxArchiveDepth = 32;  // files read by ReadArchive, nested (0: none is opened)
+  int maxInlineDepth = 32;   // inline archives replayed inside one another (a cycle stops here)
+  size_t maxInlineRequests = size_t(1) << 22;  // requests all inline archives may hold together
 };
 
 class Reader {

@@ -735,6 +735,33 @@ TEST(RibReaderHardTest, MalformedConditionalsAreOneLineErrors) {
   expectErrors(cases);
 }
 
+TEST(RibReaderTest, InlineArchivesAreHeldAndReplayedWhereTheyAreRead) {
+  // Defining hands nothing on; each ReadArchive replays the requests in order, conditionals
+  // evaluated where the archive is read; a file is read only when no inline archive has the name.
+  const std::string archive =
+      "ArchiveBegin \"part\"\n Translate 1 0 0\n IfBegin \"$user:lod > 1\"\n Sphere 1 -1 1 360\n Else\n Disk 0 1 360\n IfEnd\nArchiveEnd\n";
+  EXPECT_EQ(takenRequests(archive + "WorldBegin\n"), "WorldBegin");
+  EXPECT_EQ(takenRequests(archive + "Option \"user\" \"float lod\" [2]\nReadArchive \"part\"\nOption \"user\" \"float lod\" [0]\nReadArchive \"part\"\n"),
+            "Translate Sphere Translate Disk");
+  // The values come through whole (a parameter list, arrays).
+  Recorder rec;
+  Reader().parseBuffer("ArchiveBegin \"p\"\nPolygon \"P\" [0 0 0 1 0 0 1 1 0]\nArchiveEnd\nReadArchive \"p\"\n", "a.rib", rec);
+  ASSERT_EQ(rec.requests.size(), 1u);
+  EXPECT_EQ(rec.requests[0].name, "Polygon");
+  // A later definition replaces an earlier one.
+  EXPECT_EQ(takenRequests("ArchiveBegin \"a\"\nSphere 1 -1 1 360\nArchiveEnd\nArchiveBegin \"a\"\nCone 1 1 360\nArchiveEnd\nReadArchive \"a\"\n"), "Cone");
+}
+
+TEST(RibReaderHardTest, BadInlineArchivesAreOneLineErrors) {
+  expectErrors({
+      {"ArchiveBegin \"a\"\nSphere 1 -1 1 360\n", "bad.rib:1", "has no ArchiveEnd"},
+      {"ArchiveEnd\n", "bad.rib:1 (ArchiveEnd)", "without ArchiveBegin"},
+      {"ArchiveBegin \"a\"\nArchiveBegin \"b\"\n", "bad.rib:2 (ArchiveBegin)", "does not nest"},
+      {"ArchiveBegin \"a\"\nReadArchive \"a\"\nArchiveEnd\nReadArchive \"a\"\n", "bad.rib:2 (ReadArchive)", "a cycle?"},
+      {"ArchiveBegin \"\"\n", "bad.rib:1 (ArchiveBegin)", "needs a name"},
+  });
+}
+
 TEST(RibReaderHardTest, FuzzCorpusNeverCrashes) {
   // Inputs the fuzzer found interesting (tests/corpus/rib/): each parses or throws Error.
   const std::filesystem::path corpus = test::sourceDir() + "/tests/corpus/rib";
