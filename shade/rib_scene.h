@@ -1,6 +1,7 @@
 // RIB → Scene: the RequestHandler that turns the scene subset of the RenderMan Interface
-// (options, attributes, transforms, motion blocks, the built-in shaders and lights, quadrics,
-// bilinear patches and polygons) into Scene builder calls. Requests outside the subset return
+// (options, attributes, transforms, motion blocks, the built-in shaders and lights, RIS nodes,
+// every quadric, polygons, patches and patch meshes with Pz height fields, NuPatch with
+// TrimCurve, subdivision meshes, curves, points, retained objects) into Scene builder calls. Requests outside the subset return
 // false, so the reader warns once per kind and skips them; requests that are taken but have no
 // effect on a single shading pass (PixelFilter, Option, Hider …) are accepted quietly only where
 // ignoring them cannot change what is shaded.
