@@ -66,10 +66,10 @@ struct ShadeCommand {
       if (verbosity() == Verbosity::Verbose)
         note(cat("frame ", n, ": ", r.shade.primitives, " primitives, ", r.shade.culledPieces,
                  " pieces culled (off screen, behind the eye or beyond the far plane), ", r.shade.eyeSplits, " eye splits, ", r.shade.droppedMicropolygons,
-                 " micropolygons dropped at the near plane, ", r.shade.trimmedMicropolygons, " trimmed away, ", r.shade.forcedCuts, " sides left unfinished by the split depth limit, ", r.shade.vertices,
+                 " micropolygons dropped at the near plane, ", r.shade.trimmedMicropolygons, " trimmed away, ", r.shade.forcedCuts, " sides left unfinished by the split depth limit, ", frame.culledArchives, " delayed archives culled by their bound, ", r.shade.vertices,
                  " vertices shaded"));
     });
-    shade::readRibScene(scene, sceneBuilder);
+    shade::readRibScene(scene, sceneBuilder, opt.dice.cullMargin);
     if (sceneBuilder.framesShaded() == 0) fail(scene, "no WorldBegin/WorldEnd block: nothing to shade");
     if (written == 0) fail("--frame-range", "no frame of ", scene, " lies in '", frames, "'");
     return 0;

@@ -2,8 +2,11 @@
 // Declare, inline), follows ReadArchive, and dispatches to the RequestHandler.
 #include "rib/rib.h"
 
+#include <algorithm>
+#include <cmath>
 #include <filesystem>
 #include <map>
+#include <optional>
 #include <unordered_map>
 
 #include "common/error.h"
@@ -319,9 +322,9 @@ struct Reader::Impl {
   /// IfBegin/ElseIf/Else/IfEnd; false for any other request.
   bool conditional(const Request& req, const Args& args);
   void recordUserOptions(const Args& args);
-  /// The archive a Procedural "DelayedReadArchive" (or Procedural2 "DelayedReadArchive2") names;
-  /// empty for any other request.
-  std::string delayedArchive(const Request& req, const Args& args);
+  /// The archive a Procedural "DelayedReadArchive" (or Procedural2 "DelayedReadArchive2") names,
+  /// and its bound where it gives six finite numbers; empty for any other request.
+  std::string delayedArchive(const Request& req, const Args& args, std::optional<std::array<double, 6>>& bound);
   void checkClosed(const std::string& file) const {
     if (conditions.open()) fail(file, "ends inside an IfBegin block (IfEnd missing)");
     if (!recording.empty()) fail(recordingFrom.str(), "ArchiveBegin \"", recording, "\" has no ArchiveEnd");
@@ -400,21 +403,29 @@ bool Reader::Impl::conditional(const Request& req, const Args& args) {
   return false;
 }
 
-std::string Reader::Impl::delayedArchive(const Request& req, const Args& args) {
+std::string Reader::Impl::delayedArchive(const Request& req, const Args& args, std::optional<std::array<double, 6>>& bound) {
   if ((req.name != "Procedural" && req.name != "Procedural2") || req.values.empty() || !req.values[0].isString()) return {};
+  auto take = [&](const std::vector<double>& b) {
+    if (b.size() == 6 && std::all_of(b.begin(), b.end(), [](double x) { return std::isfinite(x); })) bound = std::array<double, 6>{b[0], b[1], b[2], b[3], b[4], b[5]};
+  };
   const std::string& kind = req.values[0].string;
   if (req.name == "Procedural" && kind == "DelayedReadArchive") {
     if (req.values.size() < 2 || req.values[1].kind != Value::Kind::StringArray || req.values[1].strings.empty())
       args.fail("DelayedReadArchive expects [\"archive.rib\"] and a bound");
+    if (req.values.size() > 2 && req.values[2].kind == Value::Kind::NumberArray) take(req.values[2].numbers);
     return req.values[1].strings[0];
   }
   if (req.name == "Procedural2" && kind == "DelayedReadArchive2") {
-    for (const Param& p : args.params(2))
+    std::string file;
+    for (const Param& p : args.params(2)) {
       if (p.decl.name == "filename" && p.value) {
-        if (p.value->kind == Value::Kind::String) return p.value->string;
-        if (p.value->kind == Value::Kind::StringArray && !p.value->strings.empty()) return p.value->strings[0];
+        if (p.value->kind == Value::Kind::String) file = p.value->string;
+        if (p.value->kind == Value::Kind::StringArray && !p.value->strings.empty()) file = p.value->strings[0];
       }
-    args.fail("DelayedReadArchive2 has no \"filename\"");
+      if (p.decl.name == "bound" && p.value && p.value->kind == Value::Kind::NumberArray) take(p.value->numbers);
+    }
+    if (file.empty()) args.fail("DelayedReadArchive2 has no \"filename\"");
+    return file;
   }
   return {};
 }
@@ -598,10 +609,12 @@ void Reader::Impl::dispatch(const Request& req, RequestHandler& handler, Reader&
     }
     return;
   }
-  if (const std::string archive = delayedArchive(req, args); !archive.empty()) {
+  std::optional<std::array<double, 6>> bound;
+  if (const std::string archive = delayedArchive(req, args, bound); !archive.empty()) {
     // A delayed archive is read where it stands, inside an attribute block of its own: what it
-    // sets does not leak past it, as with the renderer expanding the procedural. Its bound only
-    // saves a renderer work; every primitive is culled against the camera anyway.
+    // sets does not leak past it, as with the renderer expanding the procedural; an archive
+    // whose bound the handler culls is never opened.
+    if (bound && handler.cullsBound(*bound)) return;
     auto bracket = [&](const char* name) {
       Request r;
       r.name = name;

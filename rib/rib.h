@@ -13,6 +13,7 @@
 // the request.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <memory>
 #include <string>
@@ -98,6 +99,9 @@ class RequestHandler {
   virtual ~RequestHandler() = default;
   /// Returns false for requests this handler does not take: the reader warns once per kind.
   virtual bool handle(const Request& request, const Args& args) = 0;
+  /// A delayed archive's bound (xmin xmax ymin ymax zmin zmax in the current object space):
+  /// true when nothing inside it can be seen, and the reader then does not read the archive.
+  virtual bool cullsBound(const std::array<double, 6>& /*bound*/) { return false; }
 };
 
 struct ReaderOptions {

@@ -413,8 +413,43 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
   return false;
 }
 
-void readRibScene(const std::string& path, Scene& scene) {
-  RibSceneHandler handler(scene);
+bool RibSceneHandler::cullsBound(const std::array<double, 6>& b) {
+  if (!scene_.inWorld()) return false;
+  const store::Camera& cam = scene_.world().options.camera;
+  const store::Projector proj(cam);
+  const bool perspective = cam.projection == store::Projection::Perspective;
+  const MotionXform& ctm = scene_.currentTransform();
+  const double mx = cullMargin_ * cam.width, my = cullMargin_ * cam.height;
+  // Per knot, where the box's eight corners lie; culled only where one reason holds at every
+  // knot (between knots the box moves linearly, so it stays on that side).
+  bool behind = true, beyond = true, left = true, right = true, above = true, below = true;
+  const std::vector<double> times = ctm.times.empty() ? std::vector<double>{0.0} : ctm.times;
+  for (double t : times) {
+    const glm::dmat4 m = ctm.at(t);
+    bool allBehind = true, anyBehind = false, allBeyond = true;
+    double box[4] = {1e300, -1e300, 1e300, -1e300};
+    for (int i = 0; i < 8; ++i) {
+      const glm::dvec3 c(m * glm::dvec4(b[i & 1 ? 1 : 0], b[i & 2 ? 3 : 2], b[i & 4 ? 5 : 4], 1.0));
+      const bool eyeSide = perspective && c.z < cam.nearClip;
+      allBehind = allBehind && eyeSide, anyBehind = anyBehind || eyeSide;
+      allBeyond = allBeyond && c.z > cam.farClip;
+      if (!eyeSide) {
+        const glm::dvec2 r = proj.project(c);
+        box[0] = std::min(box[0], r.x), box[1] = std::max(box[1], r.x), box[2] = std::min(box[2], r.y), box[3] = std::max(box[3], r.y);
+      }
+    }
+    behind = behind && allBehind, beyond = beyond && allBeyond;
+    const bool sides = !anyBehind;  // a box reaching behind the eye projects without bound
+    left = left && sides && box[1] < -mx, right = right && sides && box[0] > cam.width + mx;
+    above = above && sides && box[3] < -my, below = below && sides && box[2] > cam.height + my;
+  }
+  if (!(behind || beyond || left || right || above || below)) return false;
+  scene_.archiveCulled();
+  return true;
+}
+
+void readRibScene(const std::string& path, Scene& scene, double cullMargin) {
+  RibSceneHandler handler(scene, cullMargin);
   rib::Reader reader;
   reader.parseFile(path, handler);
 }

@@ -16,14 +16,21 @@ namespace reshutter::shade {
 
 class RibSceneHandler final : public rib::RequestHandler {
  public:
-  explicit RibSceneHandler(Scene& scene) : scene_(scene) {}
+  /// `cullMargin`: what is kept beyond the screen edges, as a fraction of the resolution (the
+  /// shading pass's DiceOptions::cullMargin).
+  explicit RibSceneHandler(Scene& scene, double cullMargin = 0.1) : scene_(scene), cullMargin_(cullMargin) {}
   bool handle(const rib::Request& request, const rib::Args& args) override;
+  /// A delayed archive's bound is culled when, at every knot of the current transform, it lies
+  /// wholly behind the eye, wholly beyond the far plane, or wholly past one and the same edge of
+  /// the screen (and its margin); the archive is then not read, and the frame counts it.
+  bool cullsBound(const std::array<double, 6>& bound) override;
 
  private:
   Scene& scene_;
+  double cullMargin_;
 };
 
 /// Parses `path` into `scene` (whose callback receives each WorldEnd's frame).
-void readRibScene(const std::string& path, Scene& scene);
+void readRibScene(const std::string& path, Scene& scene, double cullMargin = 0.1);
 
 }  // namespace reshutter::shade

@@ -234,6 +234,7 @@ struct FrameScene {
   std::vector<RisNode> risNodes;  // Bxdf, Light, Pattern of the world block
   /// Primitives the scene gave that the shading pass cannot make, by request ("Curves": 3).
   std::map<std::string, uint64_t> skipped;
+  uint64_t culledArchives = 0;  // delayed archives whose bound is out of view: never read
   std::string source;  // "scene.rib", "built-in demo"
 };
 
@@ -299,6 +300,8 @@ class Scene {
   void ris(RisNode node);
   /// Counts a primitive request the shading pass cannot make (reported per frame).
   void skippedPrimitive(std::string_view request);
+  /// Counts a delayed archive whose bound was culled (never read).
+  void archiveCulled() { ++frame_.culledArchives; }
 
   // Motion
   void motionBegin(const std::vector<double>& times);
@@ -381,7 +384,8 @@ class Scene {
   struct ObjectDefinition {
     std::shared_ptr<const Attributes> attrsAtBegin;  // prims still carrying these take the instance's
     std::vector<Primitive> prims;
-    std::map<std::string, uint64_t> skipped;  // primitives the definition could not make
+    std::map<std::string, uint64_t> skipped;
+  uint64_t culledArchives = 0;  // delayed archives whose bound is out of view: never read  // primitives the definition could not make
   };
   struct State {
     std::shared_ptr<Attributes> attrs;

@@ -975,6 +975,29 @@ WorldEnd
   EXPECT_EQ(got.skipped, (std::map<std::string, uint64_t>{{"Procedural", 2}}));
 }
 
+TEST(ShadeRib, DelayedArchivesOutOfViewAreNeverRead) {
+  // "missing.rib" does not exist: reading it would be an error, so a scene that reads cleanly
+  // proves the archive was culled by its bound. In view, behind the eye, past an edge, and
+  // moving across the screen (in view between its knots).
+  test::ScratchDir dir;
+  std::ofstream(dir.path("sub.rib")) << "Sphere 1 -1 1 360\n";
+  auto frame = [&](const std::string& world) {
+    const std::string path = dir.path("scene.rib");
+    std::ofstream(path) << "Format 320 240 1\nProjection \"perspective\" \"fov\" [40]\nShutter 0 1\nWorldBegin\n" << world << "\nWorldEnd\n";
+    return onlyFrameOf(path);
+  };
+  const std::string missing = "Procedural \"DelayedReadArchive\" [\"missing.rib\"] [-1 1 -1 1 -1 1]\n";
+  EXPECT_EQ(frame("Translate 0 0 -5\n" + missing + "Disk 5 1 360").culledArchives, 1u);            // behind the eye
+  EXPECT_EQ(frame("Translate 40 0 5\n" + missing + "Disk 5 1 360").culledArchives, 1u);            // far to the right
+  EXPECT_EQ(frame("Translate 0 40 5\n" + missing + "Disk 5 1 360").culledArchives, 1u);            // far above
+  const FrameScene seen = frame("Translate 0 0 5\nProcedural \"DelayedReadArchive\" [\"sub.rib\"] [-1 1 -1 1 -1 1]");
+  EXPECT_EQ(seen.culledArchives, 0u);
+  EXPECT_EQ(seen.prims.size(), 1u);
+  // Moving from far left to far right: on screen in between, so read (and here: missing).
+  EXPECT_THROW(frame("MotionBegin [0 1]\nTranslate -40 0 5\nTranslate 40 0 5\nMotionEnd\n" + missing), Error);
+  EXPECT_THROW(frame("Translate 0 0 5\n" + missing), Error);  // in view: read, and missing
+}
+
 TEST(ShadeRib, BadInputNamesFileAndLine) {
   test::ScratchDir dir;
   const std::string path = dir.path("bad.rib");
