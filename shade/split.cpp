@@ -124,6 +124,7 @@ class Splitter {
 
     double longest = 0, motion = 0, spread = 0, scale = 0;
     glm::dvec2 prev[kTest];
+    bool prevFront[kTest] = {};
     for (size_t k = 0; k < shapes_.size(); ++k) {
       glm::dvec2 r[kTest];
       bool front[kTest];
@@ -135,9 +136,9 @@ class Splitter {
         spread = std::max(spread, glm::length(c - first));
         scale = std::max({scale, std::abs(c.x), std::abs(c.y), std::abs(c.z)});
         front[i] = inFront(c);
-        if (front[i]) r[i] = proj_.project(c);
-        if (front[i] && k > 0) motion = std::max(motion, glm::length(r[i] - prev[i]));
-        prev[i] = r[i];
+        r[i] = front[i] ? proj_.project(c) : glm::dvec2(0.0);
+        if (front[i] && prevFront[i]) motion = std::max(motion, glm::length(r[i] - prev[i]));
+        prev[i] = r[i], prevFront[i] = front[i];
       }
       for (int i = 0; i + 1 < kTest; ++i)
         if (front[i] && front[i + 1]) longest = std::max(longest, (kTest - 1) * glm::length(r[i + 1] - r[i]));
@@ -150,7 +151,7 @@ class Splitter {
       e.need = longest / edgeLength(motion);
       if (!std::isfinite(e.need)) e.need = o_.maxGridSize;
       // A disc needs a few steps around to have an area at all (it has no neighbours to agree with).
-      const int least = p_.kind == PrimKind::Point && std::abs(to.u - from.u) > std::abs(to.v - from.v) ? 8 : 1;
+      const int least = p_.kind == PrimKind::Point && std::abs(to.u - from.u) > std::abs(to.v - from.v) ? std::min(8, o_.maxGridSize) : 1;
       if (e.need <= o_.maxGridSize) e.n = std::max(least, int(std::ceil(e.need))), e.lo = 0, e.hi = e.n;
     }
     return {e, fromFirst};
