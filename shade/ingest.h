@@ -14,7 +14,8 @@
 // - Geometry: PointsPolygons, PointsGeneralPolygons, Polygon, GeneralPolygon. Triangles and quads
 //   are kept as given; convex polygons with more corners are fanned into quads (and a last
 //   triangle); non-convex simple polygons are triangulated by ear clipping; polygons with holes
-//   (more than one loop) are rejected with an error naming the request.
+//   (more than one loop) are triangulated with their holes (shade/triangulate.h), face-varying
+//   data following each loop vertex.
 // - Motion: MotionBegin [t0 … tn-1] around n copies of a primitive or of transforms; "blurP" (no
 //   motion block) is P at shutter close. Knots are the union of the primitive's and its moving
 //   transform's times, clipped to the shutter (positions interpolated at the shutter ends), as

@@ -70,7 +70,9 @@ struct Var {
 /// One polygon primitive (all motion copies), ready to become a grid.
 struct Prim {
   std::string request;
-  std::vector<uint32_t> faceStart, faceCount;  // face-corner ranges (outer loops)
+  std::vector<uint32_t> faceStart, faceCount;  // face-corner ranges (a face's loops one after another)
+  std::vector<uint32_t> faceLoops;             // per face: where its loop sizes start in loopSizes (faces with holes only: empty otherwise)
+  std::vector<uint32_t> loopSizes;             // the vertex count of each loop of faces with holes
   std::vector<uint32_t> verts;                 // vertex per face-corner
   uint32_t nP = 0;
   std::vector<std::vector<float>> P;  // per copy, 3 · nP, object space

@@ -164,7 +164,7 @@ std::vector<float> readPositions(const Args& a, const std::vector<rib::Param>& p
 }
 
 /// Faces (p.faceStart, p.faceCount) from the counts, every index checked against p.nP; the
-/// implicit vertex list of Polygon and GeneralPolygon. Holes are rejected (see ingest.h).
+/// implicit vertex list of Polygon and GeneralPolygon. A face with holes spans all its loops.
 void buildFaces(const Args& a, PolygonCounts& c, Prim& p) {
   if (!c.explicitVerts) {
     if (p.request == "Polygon") c.nverts = {p.nP}, c.loops = {1};
@@ -174,16 +174,28 @@ void buildFaces(const Args& a, PolygonCounts& c, Prim& p) {
     for (uint32_t i = 0; i < p.nP; ++i) p.verts.push_back(i);
   }
   size_t loop = 0, corner = 0;
+  bool holes = false;
   for (size_t f = 0; f < c.loops.size(); ++f) {
-    if (c.loops[f] != 1)
-      a.fail(cat("polygon ", f, " has ", c.loops[f], " loops: polygons with holes are not supported by ingest (triangulate them when dumping)"));
-    if (loop >= c.nverts.size()) a.fail(cat("loop counts name more loops than the ", c.nverts.size(), " vertex counts"));
-    const uint32_t n = c.nverts[loop++];
-    if (n < 3) a.fail(cat("polygon ", f, " has ", n, " vertices (at least 3)"));
+    if (c.loops[f] < 1) a.fail(cat("polygon ", f, " has no loop"));
+    holes = holes || c.loops[f] > 1;
+    p.faceLoops.push_back(uint32_t(p.loopSizes.size()));
+    uint32_t n = 0;
+    for (uint32_t l = 0; l < c.loops[f]; ++l) {
+      if (loop >= c.nverts.size()) a.fail(cat("loop counts name more loops than the ", c.nverts.size(), " vertex counts"));
+      const uint32_t m = c.nverts[loop++];
+      if (m < 3) a.fail(cat("polygon ", f, " has a loop of ", m, " vertices (at least 3)"));
+      p.loopSizes.push_back(m);
+      n += m;
+    }
     if (corner + n > p.verts.size()) a.fail(cat("vertex counts need ", corner + n, " indices, there are ", p.verts.size()));
     p.faceStart.push_back(uint32_t(corner));
     p.faceCount.push_back(n);
     corner += n;
+  }
+  if (holes) {
+    p.faceLoops.push_back(uint32_t(p.loopSizes.size()));
+  } else {
+    p.faceLoops.clear(), p.loopSizes.clear();
   }
   if (loop != c.nverts.size()) a.fail(cat(c.nverts.size(), " vertex counts but ", loop, " loops"));
   if (corner != p.verts.size()) a.fail(cat("vertex counts sum to ", corner, " but there are ", p.verts.size(), " indices"));
@@ -310,6 +322,27 @@ void DumpHandler::split(const Args& a, Prim& p) {
   std::vector<glm::dvec3> ring;
   for (uint32_t f = 0; f < p.faceStart.size(); ++f) {
     const uint32_t b = p.faceStart[f], n = p.faceCount[f];
+    if (!p.faceLoops.empty() && p.faceLoops[f + 1] - p.faceLoops[f] > 1) {
+      // Loops one after another from b: the outline, then the holes.
+      ring.clear();
+      for (uint32_t i = 0; i < n; ++i) {
+        const float* v = &p.P[0][size_t(p.verts[b + i]) * 3];
+        ring.push_back({v[0], v[1], v[2]});
+      }
+      std::vector<std::vector<int>> loops;
+      int at = 0;
+      for (uint32_t l = p.faceLoops[f]; l < p.faceLoops[f + 1]; ++l) {
+        std::vector<int>& loop = loops.emplace_back();
+        for (uint32_t i = 0; i < p.loopSizes[l]; ++i) loop.push_back(at++);
+      }
+      std::vector<std::array<int, 3>> tris;
+      if (n > 4096) a.fail(cat("polygon ", f, " has holes and ", n, " vertices; ingest triangulates up to 4096"));
+      if (!triangulateLoops(ring, loops, tris))
+        a.fail(cat("polygon ", f, " with holes cannot be triangulated (crossing edges, or a hole outside its outline)"));
+      for (auto& t : tris) add(f, {b + uint32_t(t[0]), b + uint32_t(t[1]), b + uint32_t(t[2])});
+      if (stats_) ++stats_->earClippedPolygons;
+      continue;
+    }
     if (n == 3) {
       add(f, {b, b + 1, b + 2});
       continue;

@@ -333,6 +333,38 @@ TEST(IngestTest, PolygonsAreKeptOrSplit) {
   EXPECT_EQ(std::vector<uint32_t>(r.grids[3].corners.begin(), r.grids[3].corners.end()), (std::vector<uint32_t>{0, 1, 2, kNoCorner, 0, 2, 3, 4}));
 }
 
+TEST(IngestTest, PolygonsWithHolesAreTriangulatedAroundThem) {
+  // A 4 x 4 square with a 2 x 2 hole, beside a plain triangle, a colour per face vertex: the
+  // pieces cover 16 - 4, wind like the outline, and each corner keeps its loop vertex's colour.
+  auto r = ingestText(kHeader +
+                      "PointsGeneralPolygons [2 1] [4 4 3] [0 1 2 3 4 5 6 7 0 1 2] \"P\" [0 0 5 4 0 5 4 4 5 0 4 5 1 1 5 1 3 5 3 3 5 3 1 5]"
+                      " \"facevarying color Cs\" [0 0 0 1 0 0 2 0 0 3 0 0 4 0 0 5 0 0 6 0 0 7 0 0 8 0 0 9 0 0 10 0 0]\n");
+  ASSERT_EQ(r.grids.size(), 1u);
+  const Grid& g = r.grids[0];
+  EXPECT_EQ(r.stats.earClippedPolygons, 1u);
+  const std::vector<glm::vec2> loopPoints = {{0, 0}, {4, 0}, {4, 4}, {0, 4}, {1, 1}, {1, 3}, {3, 3}, {3, 1}, {0, 0}, {4, 0}, {4, 4}};
+  const std::vector<float>& cs = r.attr(0, "Ci");  // a dump's Cs is its shaded colour
+  double holed = 0, triangle = 0;
+  for (size_t m = 0; m < g.corners.size() / 4; ++m) {
+    ASSERT_EQ(g.corners[m * 4 + 3], kNoCorner);
+    std::vector<uint32_t> piece(g.corners.begin() + std::ptrdiff_t(m * 4), g.corners.begin() + std::ptrdiff_t(m * 4 + 3));
+    const double a = area2d(g.positions, piece);
+    int face = -1;
+    for (uint32_t c : piece) {
+      // The vertex's colour names its face vertex, whose point must be where the vertex is.
+      const size_t k = size_t(std::lround(cs.at(c * 3)));
+      ASSERT_LT(k, loopPoints.size());
+      const glm::vec3 at = g.positions[c];
+      EXPECT_NEAR(at.x / at.z * 5, loopPoints[k].x, 1e-5);
+      EXPECT_NEAR(at.y / at.z * 5, loopPoints[k].y, 1e-5);
+      face = k < 8 ? 0 : 1;
+    }
+    (face == 0 ? holed : triangle) += a;
+  }
+  EXPECT_NEAR(std::abs(holed), 16 - 4, 1e-9);
+  EXPECT_NEAR(std::abs(triangle), 8, 1e-9);
+}
+
 TEST(IngestTest, EveryDeclaredVariableBecomesAnOutput) {
   auto r = ingestText(kHeader +
                       "Declare \"id\" \"uniform float\"\n"
@@ -520,8 +552,8 @@ TEST(IngestHardTest, BadDumpsGiveOneClearError) {
       {kHeader + "PointsPolygons [4] [0 1 2 9] " + kSquare + "\n", "dump.rib:5 (PointsPolygons)", "vertex index 9"},
       {kHeader + "PointsPolygons [4 4] [0 1 2 3] " + kSquare + "\n", "dump.rib:5 (PointsPolygons)", "vertex counts need 8"},
       {kHeader + "PointsPolygons [4] [0 1 2 3] \"P\" [0 0 5 1 0 5 1 1 5 0 1]\n", "dump.rib:5 (PointsPolygons)", "not a multiple of 3"},
-      {kHeader + "PointsGeneralPolygons [2] [4 3] [0 1 2 3 4 5 6] \"P\" [0 0 5 4 0 5 4 4 5 0 4 5 1 1 5 2 1 5 2 2 5]\n", "dump.rib:5 (PointsGeneralPolygons)",
-       "holes are not supported"},
+      {kHeader + "PointsGeneralPolygons [2] [4 3] [0 1 2 3 4 5 6] \"P\" [0 0 5 4 0 5 4 4 5 0 4 5 5 5 5 6 5 5 6 6 5]\n", "dump.rib:5 (PointsGeneralPolygons)",
+       "cannot be triangulated"},
       {kHeader + "Polygon \"P\" [0 0 5 2 0 5 0 2 5 2 2 5 1 -1 5]\n", "dump.rib:5 (Polygon)", "self-intersecting"},
       {kHeader + "PointsPolygons [4] [0 1 2 3] " + kSquare + " \"blurP\" [0 0 5]\n", "dump.rib:5 (PointsPolygons)", "\"blurP\" has 1 points"},
       {kHeader + "MotionBegin [0 1]\nPolygon " + kSquare + "\nPolygon \"P\" [0 0 5 1 0 5 1 1 5]\nMotionEnd\n", "dump.rib:7 (Polygon)", "different topology"},
