@@ -20,6 +20,7 @@ struct ShadeCommand {
   std::string scene, output, interval, frames, fps = "24";
   double shadeAt = NAN, motionFactor = NAN, rateScale = 1.0, overscan = 0.1;
   int gridSize = 16;
+  uint64_t primitiveBudget = shade::DiceOptions{}.maxMicropolygonsPerPrimitive;
 
   int run() const {
     shade::ShadeOptions opt;
@@ -40,6 +41,8 @@ struct ShadeCommand {
     opt.dice.maxGridSize = gridSize;
     if (!(overscan >= 0) || overscan > 10) fail("--overscan", "must be 0 to 10 (a fraction of the resolution)");
     opt.dice.cullMargin = overscan;
+    if (primitiveBudget < 1) fail("--primitive-budget", "must be at least 1");
+    opt.dice.maxMicropolygonsPerPrimitive = primitiveBudget;
     if (!store::parseRational(fps, opt.fps)) fail("--fps", "expected a frame rate such as 24, 25, 29.97 or 30000/1001, got '", fps, "'");
     std::vector<int64_t> wanted;
     if (!frames.empty()) wanted = parseFrameRange(frames, "--frame-range");
@@ -63,6 +66,9 @@ struct ShadeCommand {
                   r.shade.micropolygons ? double(r.write.fileBytes) / double(r.shade.micropolygons) : 0.0,
                   skipped.empty() ? "" : cat("; skipped primitives: ", skipped).c_str());
       std::fflush(stdout);
+      if (r.shade.overBudgetPrimitives)
+        warn(cat(scene, ": frame ", n, ": ", r.shade.overBudgetPrimitives, " primitive(s) needed more than ", grouped(opt.dice.maxMicropolygonsPerPrimitive),
+                 " micropolygons (seen edge-on under an extreme transform?) and were diced coarser than their shading rate"));
       if (verbosity() == Verbosity::Verbose)
         note(cat("frame ", n, ": ", r.shade.primitives, " primitives, ", r.shade.culledPieces,
                  " pieces culled (off screen, behind the eye or beyond the far plane), ", r.shade.eyeSplits, " eye splits, ", r.shade.droppedMicropolygons,
@@ -101,6 +107,10 @@ void addShadeCommand(CLI::App& app, Registry& registry) {
   sub->add_option("--rate-scale", cmd->rateScale, "Multiply every ShadingRate (quality knob)")->capture_default_str();
   sub->add_option("--grid-size", cmd->gridSize, "Largest grid, in micropolygons per side")->capture_default_str();
   sub->add_option("--overscan", cmd->overscan, "Keep geometry this far beyond the screen edges (fraction of the resolution), for re-framing and other cameras")
+      ->capture_default_str();
+  sub->add_option("--primitive-budget", cmd->primitiveBudget,
+                  "Most micropolygons one primitive may take; past it (a surface edge-on under an extreme transform) its remaining pieces are diced "
+                  "coarser, with a warning")
       ->capture_default_str();
   registry.add(sub, [cmd] { return cmd->run(); });
 }

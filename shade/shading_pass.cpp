@@ -142,6 +142,7 @@ SplitScene splitScene(const FrameScene& scene, const Interval& iv, const store::
     stats.culledPieces += diceStats[i].culledPieces;
     stats.eyeSplits += diceStats[i].eyeSplits;
     stats.forcedCuts += diceStats[i].forcedCuts;
+    stats.overBudgetPrimitives += diceStats[i].overBudget;
     for (const Leaf& l : split.leaves[i]) split.flat.emplace_back(uint32_t(i), &l);
   }
   return split;

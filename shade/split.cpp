@@ -262,6 +262,7 @@ class Splitter {
       ++stats_.culledPieces;
       return;
     }
+    if (overBudget_) return emit(pc, o_.maxGridSize, o_.maxGridSize);
     if (e.straddle) {
       if (eyeDepth >= o_.maxEyeSplits || depth >= o_.maxSplitDepth) {
         ++stats_.culledPieces;
@@ -291,6 +292,12 @@ class Splitter {
       splitPiece(pc, acrossU, depth, eyeDepth);
       return;
     }
+    emit(pc, iu, iv);
+  }
+
+  // The piece as a leaf whose interior needs iu × iv steps (its sides may need more).
+  void emit(const Piece& pc, double iu, double iv) {
+    const double G = o_.maxGridSize;
     Leaf leaf;
     for (size_t i = 0; i < 4; ++i) {
       const Side& s = pc.s[i];
@@ -309,6 +316,8 @@ class Splitter {
     leaf.nu = gridSteps(0, 2, iu), leaf.nv = gridSteps(1, 3, iv);
     out_.push_back(leaf);
     ++stats_.leaves;
+    micropolygons_ += uint64_t(leaf.nu) * uint64_t(leaf.nv);
+    if (!overBudget_ && micropolygons_ > o_.maxMicropolygonsPerPrimitive) overBudget_ = true, ++stats_.overBudget;
   }
 
   const Primitive& p_;
@@ -321,6 +330,8 @@ class Splitter {
   std::vector<glm::dmat4> mats_;
   double rate_ = 1, motionFactor_ = 0;
   double window_[4];
+  uint64_t micropolygons_ = 0;  // in the leaves so far
+  bool overBudget_ = false;
 };
 
 }  // namespace

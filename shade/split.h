@@ -27,7 +27,8 @@
 // points whatever rates their interiors need: no T-junction. The grid's rim is then snapped onto
 // its sides' points (diceLeaf). Sides are named in an order taken from their end points in space,
 // so two primitives that run along a shared side in opposite directions still agree.
-// Only a piece left unfinished by maxSplitDepth can still leave a T-junction; those are counted.
+// Only a piece left unfinished by maxSplitDepth or the micropolygon budget can still leave a
+// T-junction; those are counted.
 #pragma once
 
 #include <array>
@@ -47,6 +48,10 @@ struct DiceOptions {
   double cullMargin = 0.1;             // kept beyond the screen edges, as a fraction of the resolution
   int maxEyeSplits = 12;
   int maxSplitDepth = 60;  // halvings; a side 2^20 steps long needs 20
+  /// A primitive that needs more micropolygons than this (a surface seen edge-on under an
+  /// extreme shear, weights near zero: work without bound for what covers a few pixels) has its
+  /// remaining pieces diced a grid each, coarser than the shading rate, and is counted.
+  uint64_t maxMicropolygonsPerPrimitive = uint64_t(1) << 24;
 };
 
 /// A point of a primitive's (u, v) square.
@@ -82,6 +87,7 @@ struct Leaf {
 struct DiceStats {
   uint64_t leaves = 0, culledPieces = 0, eyeSplits = 0;
   uint64_t forcedCuts = 0;  // sides maxSplitDepth left unfinished: a possible T-junction
+  uint64_t overBudget = 0;  // primitives past maxMicropolygonsPerPrimitive (diced coarser)
 };
 
 /// The knot times of `p` inside [open, close]: just `open` for a static primitive, a zero-length

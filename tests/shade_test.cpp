@@ -998,6 +998,42 @@ TEST(ShadeRib, DelayedArchivesOutOfViewAreNeverRead) {
   EXPECT_THROW(frame("Translate 0 0 5\n" + missing), Error);  // in view: read, and missing
 }
 
+TEST(ShadeDiceHard, APathologicalPrimitiveStopsAtItsBudget) {
+  // Found by the RIB fuzzer: a tooled-steel cube instanced under a transform sheared 8047 times
+  // (a number cut by NUL bytes), which seen edge-on wants hundreds of millions of micropolygons
+  // (minutes of splitting). Past the budget its remaining pieces are diced a grid each: the
+  // work stops within one grid per level of the recursion, and the primitive is counted.
+  const std::string path = test::sourceDir() + "/tests/corpus/rib/fuzz_sheared_instance_timeout.rib";
+  setVerbosity(Verbosity::Quiet);  // the mutated file's undeclared parameters warn
+  const FrameScene f = onlyFrameOf(path);
+  setVerbosity(Verbosity::Normal);
+  const store::Camera cam = storeMeta(f, {}).cameras[0];
+  auto split = [&](uint64_t budget, uint64_t& over) {
+    DiceOptions o;
+    o.maxMicropolygonsPerPrimitive = budget;
+    uint64_t most = 0;
+    over = 0;
+    for (const Primitive& p : f.prims) {
+      std::vector<Leaf> leaves;
+      DiceStats stats;
+      splitPrimitive(p, clipKnots(p, 0, 0), cam, o, leaves, stats);
+      uint64_t mps = 0;
+      for (const Leaf& l : leaves) mps += uint64_t(l.nu) * uint64_t(l.nv);
+      most = std::max(most, mps);
+      over += stats.overBudget;
+    }
+    return most;
+  };
+  uint64_t over = 0;
+  const uint64_t budget = 1000000, bounded = split(budget, over);  // the other faces need less
+  EXPECT_EQ(over, 1u);
+  EXPECT_GT(bounded, budget);
+  EXPECT_LE(bounded, budget + 16 * 16 * uint64_t(DiceOptions{}.maxSplitDepth + 2));
+  // Four times the budget is reached too: the primitive really wants more.
+  EXPECT_GT(split(4 * budget, over), 4 * budget);
+  EXPECT_EQ(over, 1u);
+}
+
 TEST(ShadeRib, BadInputNamesFileAndLine) {
   test::ScratchDir dir;
   const std::string path = dir.path("bad.rib");

@@ -35,6 +35,7 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         if (!(rate > 0) || !std::isfinite(rate)) continue;
         shade::DiceOptions o;
         o.shadingRateScale = rate < 1 ? 1 / rate : 1;
+        o.maxMicropolygonsPerPrimitive = 20000;
         const auto knots = shade::clipKnots(p, f.options.shutterOpen, f.options.shutterClose);
         std::vector<shade::Leaf> leaves;
         shade::DiceStats stats;
