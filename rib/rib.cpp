@@ -406,7 +406,8 @@ bool Reader::Impl::conditional(const Request& req, const Args& args) {
 std::string Reader::Impl::delayedArchive(const Request& req, const Args& args, std::optional<std::array<double, 6>>& bound) {
   if ((req.name != "Procedural" && req.name != "Procedural2") || req.values.empty() || !req.values[0].isString()) return {};
   auto take = [&](const std::vector<double>& b) {
-    if (b.size() == 6 && std::all_of(b.begin(), b.end(), [](double x) { return std::isfinite(x); })) bound = std::array<double, 6>{b[0], b[1], b[2], b[3], b[4], b[5]};
+    if (b.size() == 6 && std::all_of(b.begin(), b.end(), [](double x) { return std::isfinite(x); }))
+      bound = std::array<double, 6>{b[0], b[1], b[2], b[3], b[4], b[5]};
   };
   const std::string& kind = req.values[0].string;
   if (req.name == "Procedural" && kind == "DelayedReadArchive") {

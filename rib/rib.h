@@ -106,8 +106,8 @@ class RequestHandler {
 
 struct ReaderOptions {
   bool warnUnsupported = true;
-  int maxArchiveDepth = 32;  // files read by ReadArchive, nested (0: none is opened)
-  int maxInlineDepth = 32;   // inline archives replayed inside one another (a cycle stops here)
+  int maxArchiveDepth = 32;                    // files read by ReadArchive, nested (0: none is opened)
+  int maxInlineDepth = 32;                     // inline archives replayed inside one another (a cycle stops here)
   size_t maxInlineRequests = size_t(1) << 22;  // requests all inline archives may hold together
 };
 

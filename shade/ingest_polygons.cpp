@@ -368,7 +368,8 @@ void DumpHandler::split(const Args& a, Prim& p) {
       if (n > 4096) a.fail(cat("polygon ", f, " is not convex and has ", n, " vertices; ingest triangulates up to 4096"));
       std::vector<int> loop(q.size());
       for (size_t i = 0; i < q.size(); ++i) loop[i] = int(i);
-      if (!simple(q) || !earClipLoop(q, loop, tris)) a.fail(cat("polygon ", f, " (", n, " vertices) is self-intersecting or degenerate; ingest cannot triangulate it"));
+      if (!simple(q) || !earClipLoop(q, loop, tris))
+        a.fail(cat("polygon ", f, " (", n, " vertices) is self-intersecting or degenerate; ingest cannot triangulate it"));
       for (auto& t : tris) add(f, {b + uint32_t(t[0]), b + uint32_t(t[1]), b + uint32_t(t[2])});
       if (stats_) ++stats_->earClippedPolygons;
     }

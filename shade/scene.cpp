@@ -495,9 +495,10 @@ void Scene::motionFactor(double f) {
 void Scene::matte(bool on) { mutableAttrs().matte = on; }
 void Scene::ris(RisNode node) {
   if (!inWorld_) {
-    options_.risOptions.erase(std::remove_if(options_.risOptions.begin(), options_.risOptions.end(),
-                                             [&](const RisNode& o) { return o.request == node.request && o.request != "DisplayFilter" && o.request != "SampleFilter"; }),
-                              options_.risOptions.end());
+    options_.risOptions.erase(
+        std::remove_if(options_.risOptions.begin(), options_.risOptions.end(),
+                       [&](const RisNode& o) { return o.request == node.request && o.request != "DisplayFilter" && o.request != "SampleFilter"; }),
+        options_.risOptions.end());
     options_.risOptions.push_back(std::move(node));
     return;
   }

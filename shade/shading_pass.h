@@ -35,7 +35,7 @@ struct ShadeStats {
   uint64_t primitives = 0, grids = 0, micropolygons = 0, vertices = 0, movingGrids = 0, movingMicropolygons = 0;
   uint64_t culledPieces = 0, droppedMicropolygons = 0, eyeSplits = 0;
   uint64_t trimmedMicropolygons = 0;  // cut away by trim curves
-  uint64_t forcedCuts = 0;  // leaf sides the split depth limit left unfinished (split.h): possible cracks
+  uint64_t forcedCuts = 0;            // leaf sides the split depth limit left unfinished (split.h): possible cracks
   uint64_t overBudgetPrimitives = 0;  // diced coarser for needing more than DiceOptions::maxMicropolygonsPerPrimitive
   double shadeAt = 0;
   double seconds = 0;

@@ -285,7 +285,9 @@ class Splitter {
     auto needs = [&](const Side& s, const Side& t, double interior) {
       return !s.e.n || !t.e.n || (interior > G && s.e.cuttableAtAPoint() && t.e.cuttableAtAPoint());
     };
-    auto stepsAlong = [&](const Side& s, const Side& t, double interior) { return std::max({interior, s.e.n ? s.e.steps() : s.e.need, t.e.n ? t.e.steps() : t.e.need}); };
+    auto stepsAlong = [&](const Side& s, const Side& t, double interior) {
+      return std::max({interior, s.e.n ? s.e.steps() : s.e.need, t.e.n ? t.e.steps() : t.e.need});
+    };
     const bool needU = needs(pc.s[0], pc.s[2], iu), needV = needs(pc.s[1], pc.s[3], iv);
     if ((needU || needV) && depth < o_.maxSplitDepth) {
       const bool acrossU = needU && (!needV || stepsAlong(pc.s[0], pc.s[2], iu) >= stepsAlong(pc.s[1], pc.s[3], iv));

@@ -20,8 +20,8 @@ TrimLoops::TrimLoops(const std::vector<int>& ncurves, const std::vector<int>& or
     curves += size_t(c);
   }
   if (order.size() != curves || min.size() != curves || max.size() != curves || n.size() != curves)
-    throw Error("TrimCurve", cat("", curves, " curves need as many orders, mins, maxes and point counts (", order.size(), ", ", min.size(), ", ",
-                    max.size(), ", ", n.size(), " given)"));
+    throw Error("TrimCurve", cat("", curves, " curves need as many orders, mins, maxes and point counts (", order.size(), ", ", min.size(), ", ", max.size(),
+                                 ", ", n.size(), " given)"));
   size_t knots = 0, points = 0;
   for (size_t c = 0; c < curves; ++c) {
     if (order[c] < 1 || order[c] > 32) throw Error("TrimCurve", cat("curve ", c, " has order ", order[c], " (1 to 32)"));
@@ -48,7 +48,8 @@ TrimLoops::TrimLoops(const std::vector<int>& ncurves, const std::vector<int>& or
           throw Error("TrimCurve", cat("curve ", c, " control point ", j, " is not finite or has a weight that is not positive"));
       }
       const double lo = min[c], hi = max[c];
-      if (!(lo < hi) || lo < t[k - 1] || hi > t[np]) throw Error("TrimCurve", cat("curve ", c, " range [", lo, ", ", hi, "] is not inside [", t[k - 1], ", ", t[np], "]"));
+      if (!(lo < hi) || lo < t[k - 1] || hi > t[np])
+        throw Error("TrimCurve", cat("curve ", c, " range [", lo, ", ", hi, "] is not inside [", t[k - 1], ", ", t[np], "]"));
       // Each knot span inside [lo, hi], flattened evenly; the curve's points in homogeneous
       // (u w, v w, w) combined by the span's basis functions.
       for (int span = k - 1; span < np; ++span) {

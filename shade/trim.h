@@ -26,8 +26,8 @@ class TrimLoops {
   /// flattened to `segmentsPerSpan` straight pieces per knot span. Throws reshutter::Error with a
   /// one-line message naming what is wrong.
   TrimLoops(const std::vector<int>& ncurves, const std::vector<int>& order, const std::vector<double>& knot, const std::vector<double>& min,
-            const std::vector<double>& max, const std::vector<int>& n, const std::vector<double>& u, const std::vector<double>& v,
-            const std::vector<double>& w, int segmentsPerSpan = 32);
+            const std::vector<double>& max, const std::vector<int>& n, const std::vector<double>& u, const std::vector<double>& v, const std::vector<double>& w,
+            int segmentsPerSpan = 32);
 
   /// Whether (u, v) is inside by the odd winding rule.
   bool encloses(double u, double v) const;
@@ -38,7 +38,7 @@ class TrimLoops {
 
  private:
   std::vector<std::vector<glm::dvec2>> loops_;  // closed polylines (the last point repeats the first)
-  std::vector<glm::dvec4> bounds_;               // per loop: u0 v0 u1 v1
+  std::vector<glm::dvec4> bounds_;              // per loop: u0 v0 u1 v1
 };
 
 }  // namespace reshutter::shade

@@ -84,10 +84,23 @@ TEST(PrimBicubic, EveryBasisIsItsTextbookDefinition) {
   // written in the literature, against the mesh's evaluation.
   using Fn = std::function<std::array<double, 4>(double)>;
   const std::vector<std::pair<std::string, Fn>> bases = {
-      {"b-spline", [](double t) { return std::array<double, 4>{std::pow(1 - t, 3) / 6, (3 * t * t * t - 6 * t * t + 4) / 6, (-3 * t * t * t + 3 * t * t + 3 * t + 1) / 6, t * t * t / 6}; }},
-      {"catmull-rom", [](double t) { return std::array<double, 4>{0.5 * (-t * t * t + 2 * t * t - t), 0.5 * (3 * t * t * t - 5 * t * t + 2), 0.5 * (-3 * t * t * t + 4 * t * t + t), 0.5 * (t * t * t - t * t)}; }},
-      {"hermite", [](double t) { return std::array<double, 4>{2 * t * t * t - 3 * t * t + 1, t * t * t - 2 * t * t + t, -2 * t * t * t + 3 * t * t, t * t * t - t * t}; }},
-      {"power", [](double t) { return std::array<double, 4>{t * t * t, t * t, t, 1}; }},
+      {"b-spline",
+       [](double t) {
+         return std::array<double, 4>{std::pow(1 - t, 3) / 6, (3 * t * t * t - 6 * t * t + 4) / 6, (-3 * t * t * t + 3 * t * t + 3 * t + 1) / 6, t * t * t / 6};
+       }},
+      {"catmull-rom",
+       [](double t) {
+         return std::array<double, 4>{0.5 * (-t * t * t + 2 * t * t - t), 0.5 * (3 * t * t * t - 5 * t * t + 2), 0.5 * (-3 * t * t * t + 4 * t * t + t),
+                                      0.5 * (t * t * t - t * t)};
+       }},
+      {"hermite",
+       [](double t) {
+         return std::array<double, 4>{2 * t * t * t - 3 * t * t + 1, t * t * t - 2 * t * t + t, -2 * t * t * t + 3 * t * t, t * t * t - t * t};
+       }},
+      {"power",
+       [](double t) {
+         return std::array<double, 4>{t * t * t, t * t, t, 1};
+       }},
   };
   for (const auto& [name, fn] : bases) {
     CubicBasis b;
@@ -150,7 +163,8 @@ TEST(PrimBicubic, PeriodicMeshesWrapAndBadCountsAreErrors) {
   EXPECT_EQ(evalP(prims[7], prims[7].keys[0], 1.0, 0.3), evalP(prims[0], prims[0].keys[0], 0.0, 0.3));  // closes on itself
   EXPECT_NE(buildError([&](Scene& s) { s.patchMesh(true, 5, false, 4, false, randomPoints(20, 1)); }).find("nu = 5 does not make whole bicubic patches"),
             std::string::npos);
-  EXPECT_NE(buildError([&](Scene& s) { s.patchMesh(true, 4, false, 4, false, randomPoints(15, 1)); }).find("needs 16 control points, has 15"), std::string::npos);
+  EXPECT_NE(buildError([&](Scene& s) { s.patchMesh(true, 4, false, 4, false, randomPoints(15, 1)); }).find("needs 16 control points, has 15"),
+            std::string::npos);
   CubicBasis bad;
   bad.step = 0;
   EXPECT_NE(buildError([&](Scene& s) { s.basis(bad, bad); }).find("step 0"), std::string::npos);
@@ -269,12 +283,21 @@ TEST(PrimSubdiv, LoopMeshesAreTrianglesAndBadMeshesAreOneLineErrors) {
     EXPECT_LT(glm::length(c), 1.0);
     EXPECT_GT(glm::dot(glm::normalize(evalNg(p, p.keys[0], 0.3, 0.3)), glm::normalize(c)), 0.5);  // outward
   }
-  EXPECT_NE(buildError([&](Scene& s) { s.subdivisionMesh(SubdivScheme::Loop, {4}, {0, 1, 2, 3}, {}, P); }).find("a loop mesh is made of triangles"), std::string::npos);
-  EXPECT_NE(buildError([&](Scene& s) { s.subdivisionMesh(SubdivScheme::CatmullClark, {3}, {0, 1, 9}, {}, P); }).find("vertex index 9 out of range"), std::string::npos);
+  EXPECT_NE(buildError([&](Scene& s) {
+              s.subdivisionMesh(SubdivScheme::Loop, {4}, {0, 1, 2, 3}, {}, P);
+            }).find("a loop mesh is made of triangles"),
+            std::string::npos);
+  EXPECT_NE(buildError([&](Scene& s) {
+              s.subdivisionMesh(SubdivScheme::CatmullClark, {3}, {0, 1, 9}, {}, P);
+            }).find("vertex index 9 out of range"),
+            std::string::npos);
   EXPECT_NE(buildError([&](Scene& s) { s.subdivisionMesh(SubdivScheme::CatmullClark, {4}, {0, 1, 2}, {}, P); }).find("add up to 4"), std::string::npos);
   SubdivTags badHole;
   badHole.holes = {3};
-  EXPECT_NE(buildError([&](Scene& s) { s.subdivisionMesh(SubdivScheme::CatmullClark, {3}, {0, 1, 2}, badHole, P); }).find("hole face 3 out of range"), std::string::npos);
+  EXPECT_NE(buildError([&](Scene& s) {
+              s.subdivisionMesh(SubdivScheme::CatmullClark, {3}, {0, 1, 2}, badHole, P);
+            }).find("hole face 3 out of range"),
+            std::string::npos);
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -355,7 +378,8 @@ TEST(PrimPatch, HeightFieldsStandOnTheParametricGrid) {
         EXPECT_NEAR(q.z, 2 * q.x - q.y + 1, 1e-12);
       }
   // Wrong counts and requests that have no parametric grid are one-line errors.
-  for (const std::string bad : {"Patch \"bilinear\" \"Pz\" [1 2 3]", "PatchMesh \"bilinear\" 3 \"nonperiodic\" 2 \"nonperiodic\" \"Pz\" [1 2 3 4 5]", "Polygon \"Pz\" [1 2 3]"}) {
+  for (const std::string bad :
+       {"Patch \"bilinear\" \"Pz\" [1 2 3]", "PatchMesh \"bilinear\" 3 \"nonperiodic\" 2 \"nonperiodic\" \"Pz\" [1 2 3 4 5]", "Polygon \"Pz\" [1 2 3]"}) {
     const std::string e = ribError(bad);
     EXPECT_NE(e.find("Pz"), std::string::npos) << bad << ": " << e;
     EXPECT_EQ(e.find('\n'), std::string::npos) << e;
@@ -395,22 +419,24 @@ TEST(PrimTrim, LoopsAreTheirCurvesAndTheOddRuleHolds) {
   EXPECT_FALSE(circle.encloses(0.5 + 0.31, 0.4));
   EXPECT_FALSE(circle.encloses(0.75, 0.65));  // inside the control square, outside the circle
   // Two loops: a square with the circle inside it; the odd rule makes the ring between them inside.
-  const TrimLoops ring({4, 1}, {2, 2, 2, 2, 3}, {0, 0, 1, 1, 0, 0, 1, 1, 0, 0, 1, 1, 0, 0, 1, 1, 0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1},
-                       {0, 0, 0, 0, 0}, {1, 1, 1, 1, 1}, {2, 2, 2, 2, 9}, [&] {
-                         std::vector<double> u = {0, 1, 1, 1, 1, 0, 0, 0};
-                         u.insert(u.end(), c.u.begin(), c.u.end());
-                         return u;
-                       }(),
-                       [&] {
-                         std::vector<double> v = {-0.1, -0.1, -0.1, 0.9, 0.9, 0.9, 0.9, -0.1};
-                         v.insert(v.end(), c.v.begin(), c.v.end());
-                         return v;
-                       }(),
-                       [&] {
-                         std::vector<double> w(8, 1.0);
-                         w.insert(w.end(), c.w.begin(), c.w.end());
-                         return w;
-                       }());
+  const TrimLoops ring(
+      {4, 1}, {2, 2, 2, 2, 3}, {0, 0, 1, 1, 0, 0, 1, 1, 0, 0, 1, 1, 0, 0, 1, 1, 0, 0, 0, 0.25, 0.25, 0.5, 0.5, 0.75, 0.75, 1, 1, 1}, {0, 0, 0, 0, 0},
+      {1, 1, 1, 1, 1}, {2, 2, 2, 2, 9},
+      [&] {
+        std::vector<double> u = {0, 1, 1, 1, 1, 0, 0, 0};
+        u.insert(u.end(), c.u.begin(), c.u.end());
+        return u;
+      }(),
+      [&] {
+        std::vector<double> v = {-0.1, -0.1, -0.1, 0.9, 0.9, 0.9, 0.9, -0.1};
+        v.insert(v.end(), c.v.begin(), c.v.end());
+        return v;
+      }(),
+      [&] {
+        std::vector<double> w(8, 1.0);
+        w.insert(w.end(), c.w.begin(), c.w.end());
+        return w;
+      }());
   ASSERT_EQ(ring.loops().size(), 2u);
   EXPECT_FALSE(ring.encloses(0.5, 0.4));
   EXPECT_TRUE(ring.encloses(0.05, 0.0));
@@ -423,8 +449,8 @@ TEST(PrimTrim, LoopsAreTheirCurvesAndTheOddRuleHolds) {
 // optionally trimmed: the raster area its micropolygons cover, and the pass's statistics.
 std::pair<double, ShadeStats> trimmedSquareArea(const std::string& trim) {
   test::ScratchDir dir;
-  std::ofstream(dir.path("t.rib")) << "Format 64 64 1\nProjection \"orthographic\"\nScreenWindow -32 32 -32 32\nWorldBegin\nShadingRate 0.25\n" << trim
-                                   << "\nNuPatch 2 2 [0 0 1 1] 0 1 2 2 [0 0 1 1] 0 1 \"P\" [-30 -30 5  30 -30 5  -30 30 5  30 30 5]\nWorldEnd\n";
+  std::ofstream(dir.path("t.rib")) << "Format 64 64 1\nProjection \"orthographic\"\nScreenWindow -32 32 -32 32\nWorldBegin\nShadingRate 0.25\n"
+                                   << trim << "\nNuPatch 2 2 [0 0 1 1] 0 1 2 2 [0 0 1 1] 0 1 \"P\" [-30 -30 5  30 -30 5  -30 30 5  30 30 5]\nWorldEnd\n";
   FrameScene frame;
   Scene scene([&](FrameScene& f) { frame = std::move(f); });
   readRibScene(dir.path("t.rib"), scene);
@@ -467,12 +493,12 @@ TEST(PrimTrim, TrimmedPatchesCoverTheirTrimmedArea) {
 }
 
 TEST(PrimTrim, BadTrimCurvesAreOneLineErrors) {
-  for (const std::string bad : {"TrimCurve [1] [3] [0 0 0 1 1] [0] [1] [3] [0 1 0] [0 0 1] [1 1 1]",        // a knot short
-                                "TrimCurve [1] [3] [0 0 0 1 1 1] [0] [2] [3] [0 1 0] [0 0 1] [1 1 1]",      // range beyond the knots
-                                "TrimCurve [1] [3] [0 0 0 1 1 1] [0] [1] [3] [0 1 0] [0 0 1] [1 0 1]",      // a zero weight
-                                "TrimCurve [1] [4] [0 0 0 0 1 1 1] [0] [1] [3] [0 1 0] [0 0 1] [1 1 1]",    // order above the points
-                                "TrimCurve [1] [3] [0 0 1 0 1 1] [0] [1] [3] [0 1 0] [0 0 1] [1 1 1]",      // decreasing knots
-                                "TrimCurve [2] [3] [0 0 0 1 1 1] [0] [1] [3] [0 1 0] [0 0 1] [1 1 1]",      // a loop short of curves
+  for (const std::string bad : {"TrimCurve [1] [3] [0 0 0 1 1] [0] [1] [3] [0 1 0] [0 0 1] [1 1 1]",      // a knot short
+                                "TrimCurve [1] [3] [0 0 0 1 1 1] [0] [2] [3] [0 1 0] [0 0 1] [1 1 1]",    // range beyond the knots
+                                "TrimCurve [1] [3] [0 0 0 1 1 1] [0] [1] [3] [0 1 0] [0 0 1] [1 0 1]",    // a zero weight
+                                "TrimCurve [1] [4] [0 0 0 0 1 1 1] [0] [1] [3] [0 1 0] [0 0 1] [1 1 1]",  // order above the points
+                                "TrimCurve [1] [3] [0 0 1 0 1 1] [0] [1] [3] [0 1 0] [0 0 1] [1 1 1]",    // decreasing knots
+                                "TrimCurve [2] [3] [0 0 0 1 1 1] [0] [1] [3] [0 1 0] [0 0 1] [1 1 1]",    // a loop short of curves
                                 "Attribute \"trimcurve\" \"sense\" \"sideways\""}) {
     const std::string e = ribError(bad);
     EXPECT_NE(e.find("s.rib:"), std::string::npos) << bad << ": " << e;
@@ -574,9 +600,9 @@ TEST(PrimBicubic, PlanarMeshesCoverExactlyTheirKnownArea) {
   for (int j = 0; j < n; ++j)
     for (int i = 0; i < n; ++i) P += cat(x0 + h * i, " ", y0 + h * j, " 5 ");
   for (const std::string basis : {"b-spline", "bezier"}) {
-    const std::string rib = cat("Format 32 32 1\nProjection \"orthographic\"\nScreenWindow -16 16 -16 16\nWorldBegin\nSurface \"constant\"\nBasis \"", basis, "\" ",
-                                basis == "bezier" ? 3 : 1, " \"", basis, "\" ", basis == "bezier" ? 3 : 1, "\nPatchMesh \"bicubic\" ", n, " \"nonperiodic\" ", n,
-                                " \"nonperiodic\" \"P\" [", P, "]\nWorldEnd\n");
+    const std::string rib = cat("Format 32 32 1\nProjection \"orthographic\"\nScreenWindow -16 16 -16 16\nWorldBegin\nSurface \"constant\"\nBasis \"", basis,
+                                "\" ", basis == "bezier" ? 3 : 1, " \"", basis, "\" ", basis == "bezier" ? 3 : 1, "\nPatchMesh \"bicubic\" ", n,
+                                " \"nonperiodic\" ", n, " \"nonperiodic\" \"P\" [", P, "]\nWorldEnd\n");
     const Rendered img = render(dir, basis, rib, "--samples 16x16 --filter box:1x1");
     const double lo = basis == "bezier" ? 0 : 1, hi = basis == "bezier" ? n - 1 : n - 2;
     // Screen (x, y) → raster (x + 16, 16 - y).
@@ -611,10 +637,12 @@ TEST(PrimCurves, RibbonsFollowTheirCurveAndFaceTheCamera) {
   for (double v : {0.0, 0.3, 0.8, 1.0}) {
     const Shape s = c.shapeAt(0);
     const dvec3 mid = evalP(c, s, 0.5, v), left = evalP(c, s, 0.0, v), right = evalP(c, s, 1.0, v);
-    EXPECT_LT(glm::length(mid - deCasteljau({cv[0], cv[1], cv[2], cv[3], cv[0], cv[1], cv[2], cv[3], cv[0], cv[1], cv[2], cv[3], cv[0], cv[1], cv[2], cv[3]}, v, 0)), 1e-12);
+    EXPECT_LT(
+        glm::length(mid - deCasteljau({cv[0], cv[1], cv[2], cv[3], cv[0], cv[1], cv[2], cv[3], cv[0], cv[1], cv[2], cv[3], cv[0], cv[1], cv[2], cv[3]}, v, 0)),
+        1e-12);
     EXPECT_NEAR(glm::length(right - left), 0.4 + v * (0.1 - 0.4), 1e-12);  // the width, interpolated
-    EXPECT_NEAR((right - left).z, 0.0, 1e-12);                              // across the view, not along it
-    EXPECT_LT(evalNg(c, s, 0.5, v).z, 0.0);                                 // facing the camera
+    EXPECT_NEAR((right - left).z, 0.0, 1e-12);                             // across the view, not along it
+    EXPECT_LT(evalNg(c, s, 0.5, v).z, 0.0);                                // facing the camera
   }
   // The linear curve's second segment starts where the first ends.
   EXPECT_EQ(evalP(prims[1], prims[1].keys[0], 0.5, 1.0), evalP(prims[2], prims[2].keys[0], 0.5, 0.0));
@@ -736,13 +764,23 @@ TEST(PrimNurbs, RationalQuarterCircleIsExactAndRangesRestrict) {
 TEST(PrimNurbs, BadPatchesAreOneLineErrors) {
   const std::vector<glm::dvec4> four(4, glm::dvec4(0, 0, 0, 1));
   const std::vector<double> k22 = {0, 0, 1, 1};
-  EXPECT_NE(buildError([&](Scene& s) { s.nuPatch(2, 2, {0, 1, 0.5, 1}, 0, 1, 2, 2, k22, 0, 1, four); }).find("u knot vector decreases at knot 2"), std::string::npos);
-  EXPECT_NE(buildError([&](Scene& s) { s.nuPatch(2, 3, {0, 0, 0, 1, 1}, 0, 1, 2, 2, k22, 0, 1, four); }).find("u order 3 is above its 2 control points"), std::string::npos);
+  EXPECT_NE(buildError([&](Scene& s) {
+              s.nuPatch(2, 2, {0, 1, 0.5, 1}, 0, 1, 2, 2, k22, 0, 1, four);
+            }).find("u knot vector decreases at knot 2"),
+            std::string::npos);
+  EXPECT_NE(buildError([&](Scene& s) {
+              s.nuPatch(2, 3, {0, 0, 0, 1, 1}, 0, 1, 2, 2, k22, 0, 1, four);
+            }).find("u order 3 is above its 2 control points"),
+            std::string::npos);
   EXPECT_NE(buildError([&](Scene& s) { s.nuPatch(2, 2, {0, 0, 1}, 0, 1, 2, 2, k22, 0, 1, four); }).find("need 4"), std::string::npos);
-  EXPECT_NE(buildError([&](Scene& s) { s.nuPatch(2, 2, k22, 0, 1, 2, 2, k22, 0, 1, {{0, 0, 0, 1}, {0, 0, 0, 0}, {0, 0, 0, 1}, {0, 0, 0, 1}}); }).find("weight 0 must be positive"),
+  EXPECT_NE(buildError([&](Scene& s) {
+              s.nuPatch(2, 2, k22, 0, 1, 2, 2, k22, 0, 1, {{0, 0, 0, 1}, {0, 0, 0, 0}, {0, 0, 0, 1}, {0, 0, 0, 1}});
+            }).find("weight 0 must be positive"),
             std::string::npos);
   EXPECT_NE(buildError([&](Scene& s) { s.nuPatch(2, 2, k22, 0, 2, 2, 2, k22, 0, 1, four); }).find("not inside [0, 1]"), std::string::npos);
-  EXPECT_NE(buildError([&](Scene& s) { s.nuPatch(2, 2, k22, 0, 1, 2, 2, k22, 0, 1, std::vector<glm::dvec4>(3, glm::dvec4(1))); }).find("needs 4 control points, has 3"),
+  EXPECT_NE(buildError([&](Scene& s) {
+              s.nuPatch(2, 2, k22, 0, 1, 2, 2, k22, 0, 1, std::vector<glm::dvec4>(3, glm::dvec4(1)));
+            }).find("needs 4 control points, has 3"),
             std::string::npos);
 }
 

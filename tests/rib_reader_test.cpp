@@ -636,8 +636,13 @@ TEST(RibReaderHardTest, LongRunsOfDefinitionsNeitherRecurseNorCrash) {
   }
   // Valid definitions, many in a row, still parse: each names a string directly.
   std::string defs;
-  for (int i = 0; i < 100000; ++i) defs += "\xcd\x01\x92" "ab";
-  defs += "\xcc\x07\x9a" "WorldBegin \xa6\x07";
+  for (int i = 0; i < 100000; ++i)
+    defs +=
+        "\xcd\x01\x92"
+        "ab";
+  defs +=
+      "\xcc\x07\x9a"
+      "WorldBegin \xa6\x07";
   struct H : RequestHandler {
     int worldBegins = 0;
     bool handle(const Request& r, const Args&) override { return worldBegins += r.name == "WorldBegin", true; }

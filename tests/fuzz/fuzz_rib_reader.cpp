@@ -13,8 +13,8 @@
 #include "common/error.h"
 #include "common/log.h"
 #include "rib/rib.h"
-#include "shade/rib_scene.h"
 #include "shade/dice.h"
+#include "shade/rib_scene.h"
 #include "shade/scene.h"
 #include "shade/split.h"
 
