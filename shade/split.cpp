@@ -257,6 +257,9 @@ class Splitter {
   }
 
   void split(const Piece& pc, int depth, int eyeDepth) {
+    // Pieces visited count too: splitting that culls nearly everything it makes (slivers along
+    // the screen's edge) works without emitting micropolygons.
+    if (++visited_ > o_.maxMicropolygonsPerPrimitive / 4 && !overBudget_) overBudget_ = true, ++stats_.overBudget;
     const Estimate e = estimate(pc);
     if (e.allBehind || e.beyondFar || e.offscreen) {
       ++stats_.culledPieces;
@@ -333,6 +336,7 @@ class Splitter {
   double rate_ = 1, motionFactor_ = 0;
   double window_[4];
   uint64_t micropolygons_ = 0;  // in the leaves so far
+  uint64_t visited_ = 0;        // pieces estimated so far
   bool overBudget_ = false;
 };
 

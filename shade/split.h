@@ -50,7 +50,8 @@ struct DiceOptions {
   int maxSplitDepth = 60;  // halvings; a side 2^20 steps long needs 20
   /// A primitive that needs more micropolygons than this (a surface seen edge-on under an
   /// extreme shear, weights near zero: work without bound for what covers a few pixels) has its
-  /// remaining pieces diced a grid each, coarser than the shading rate, and is counted.
+  /// remaining pieces diced a grid each, coarser than the shading rate, and is counted; so has
+  /// one whose splitting visits more than a quarter as many pieces.
   uint64_t maxMicropolygonsPerPrimitive = uint64_t(1) << 24;
 };
 

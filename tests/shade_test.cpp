@@ -1032,6 +1032,25 @@ TEST(ShadeDiceHard, APathologicalPrimitiveStopsAtItsBudget) {
   // Four times the budget is reached too: the primitive really wants more.
   EXPECT_GT(split(4 * budget, over), 4 * budget);
   EXPECT_EQ(over, 1u);
+
+  // Found next: a mutated CSG scene whose splitting culls nearly every piece it makes (it ran
+  // past the fuzzer's 30 s on a small camera). Pieces visited are bounded by a quarter of the
+  // budget, plus the pieces pending on the recursion.
+  setVerbosity(Verbosity::Quiet);
+  const FrameScene g = onlyFrameOf(test::sourceDir() + "/tests/corpus/rib/fuzz_culled_slivers_timeout.rib");
+  setVerbosity(Verbosity::Normal);
+  store::Camera small = storeMeta(g, {}).cameras[0];
+  small.width = 48, small.height = 36;
+  DiceOptions o;
+  o.maxMicropolygonsPerPrimitive = 20000;
+  uint64_t most = 0;
+  for (const Primitive& p : g.prims) {
+    std::vector<Leaf> leaves;
+    DiceStats stats;
+    splitPrimitive(p, clipKnots(p, 0, 0), small, o, leaves, stats);
+    most = std::max(most, stats.leaves + stats.culledPieces + stats.eyeSplits);
+  }
+  EXPECT_LE(most, 20000 / 4 + 2 * uint64_t(o.maxSplitDepth + 2));
 }
 
 TEST(ShadeRib, BadInputNamesFileAndLine) {
