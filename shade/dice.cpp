@@ -365,6 +365,28 @@ void diceLeaf(const Primitive& p, const Leaf& leaf, const std::vector<double>& k
   const int nu = leaf.nu, nv = leaf.nv, row = nu + 1;
   thread_local GridVertices gv;
   gridVertices(leaf, gv);
+  // Trim curves (trim.h) are given in the NuPatch's knot space: the span's (u, v) maps onto it.
+  // A grid no loop crosses is kept or cut away whole, before anything is evaluated.
+  g.trimmedMicropolygons = 0;
+  const TrimLoops* trim = p.kind == PrimKind::Nurbs ? p.attrs->trim.get() : nullptr;
+  auto knotSpace = [&](const UV& q) { return UV{p.nurbs->u0 + q.u * (p.nurbs->u1 - p.nurbs->u0), p.nurbs->v0 + q.v * (p.nurbs->v1 - p.nurbs->v0)}; };
+  auto cutAway = [&](const UV& q) {
+    const UV k = knotSpace(q);
+    return trim->encloses(k.u, k.v) != p.attrs->trimKeepsInside;
+  };
+  bool trimEach = false;
+  if (trim) {
+    UV lo{1e300, 1e300}, hi{-1e300, -1e300};
+    for (const UV& q : gv.uv) lo = {std::min(lo.u, q.u), std::min(lo.v, q.v)}, hi = {std::max(hi.u, q.u), std::max(hi.v, q.v)};
+    const UV a = knotSpace(lo), b = knotSpace(hi);
+    trimEach = trim->crosses(a.u, b.u, a.v, b.v);
+    if (!trimEach && cutAway({0.5 * (lo.u + hi.u), 0.5 * (lo.v + hi.v)})) {
+      g = DicedGrid{};
+      g.nu = nu, g.nv = nv;
+      g.trimmedMicropolygons = uint64_t(nu) * uint64_t(nv);
+      return;
+    }
+  }
   const uint32_t nV = uint32_t(gv.uv.size());
   const size_t K = knots.size();
   g.nu = nu, g.nv = nv, g.numVertices = nV;
@@ -416,22 +438,7 @@ void diceLeaf(const Primitive& p, const Leaf& leaf, const std::vector<double>& k
   const bool reverse = (glm::determinant(m) < 0) != p.flipNormals;
   g.corners.clear();
   g.corners.reserve(size_t(nu) * nv * 4);
-  g.droppedMicropolygons = g.trimmedMicropolygons = 0;
-  // Trim curves (trim.h) are given in the NuPatch's knot space: the span's (u, v) maps onto it.
-  const TrimLoops* trim = p.kind == PrimKind::Nurbs ? p.attrs->trim.get() : nullptr;
-  bool trimEach = false;
-  if (trim) {
-    const NurbsSpan& span = *p.nurbs;
-    double box[4] = {1e300, -1e300, 1e300, -1e300};
-    for (const UV& q : gv.uv) box[0] = std::min(box[0], q.u), box[1] = std::max(box[1], q.u), box[2] = std::min(box[2], q.v), box[3] = std::max(box[3], q.v);
-    auto ku = [&](double u) { return span.u0 + u * (span.u1 - span.u0); };
-    auto kv = [&](double v) { return span.v0 + v * (span.v1 - span.v0); };
-    trimEach = trim->crosses(ku(box[0]), ku(box[1]), kv(box[2]), kv(box[3]));
-    if (!trimEach && trim->encloses(ku(0.5 * (box[0] + box[1])), kv(0.5 * (box[2] + box[3]))) != p.attrs->trimKeepsInside) {
-      g.trimmedMicropolygons = uint64_t(nu) * uint64_t(nv);  // the whole grid is cut away
-      return;
-    }
-  }
+  g.droppedMicropolygons = 0;
   for (int j = 0; j < nv; ++j)
     for (int i = 0; i < nu; ++i) {
       const size_t p0 = size_t(j * row + i);
@@ -447,8 +454,7 @@ void diceLeaf(const Primitive& p, const Leaf& leaf, const std::vector<double>& k
       if (trimEach) {
         UV centre;
         for (int n = 0; n < nc; ++n) centre.u += gv.uv[c[n]].u / nc, centre.v += gv.uv[c[n]].v / nc;
-        const NurbsSpan& span = *p.nurbs;
-        if (trim->encloses(span.u0 + centre.u * (span.u1 - span.u0), span.v0 + centre.v * (span.v1 - span.v0)) != p.attrs->trimKeepsInside) {
+        if (cutAway(centre)) {
           ++g.trimmedMicropolygons;
           continue;
         }
