@@ -99,9 +99,14 @@ struct FieldsCommand {
     return fs;
   }
 
-  int run() const {
+  int run(const SequenceHook& hook) const {
     std::vector<int64_t> list = parseFrameRange(frames, "--frames");
     if (output.empty() && render.deep.empty()) fail("fields", "nothing to write: give -o OUT.####.exr, --deep DEEP.####.exr or both");
+    if (hook) {  // the job's stores are checked before it is submitted, not on the farm
+      store::ShotStores stores(input, 0);
+      resample::requireStores(stores, resample::fieldFrames(list, fields()));
+      return hook({"fields", input, list, output, &render});
+    }
     if (!twoPass) return renderSequence(input, output, resample::fieldFrames(list, fields()), render, "fields");
     // The reference semantics: two full progressive renders, rows interlaced afterwards.
     const resample::FieldShutter fs = fields();
@@ -144,7 +149,7 @@ struct RetimeCommand {
   ShutterOptions shutter;
   RenderOptions render;
 
-  int run() const {
+  int run(const SequenceHook& hook) const {
     std::vector<int64_t> list = parseFrameRange(frames, "--frames");
     resample::RateConversion rc;
     if (!store::parseRational(toFps, rc.to)) fail("--to-fps", "expected a rate like 25, 30000/1001 or 29.97, got '", toFps, "'");
@@ -159,6 +164,11 @@ struct RetimeCommand {
     shutter.interval(rc.open, rc.close, 0.0, 0.5);  // default: a 180° shutter opening on the nominal time
     rc.shape = shutter.parsedShape();
     rc.rolling = shutter.rollingShutter();
+    if (hook) {  // the job's stores are checked before it is submitted, not on the farm
+      store::ShotStores stores(input, 0);
+      resample::requireStores(stores, resample::retimeFrames(list, rc));
+      return hook({"retime", input, list, output, &render});
+    }
     return renderSequence(input, output, resample::retimeFrames(list, rc), render, "retime");
   }
 };
@@ -199,7 +209,7 @@ void addRetimeCommands(CLI::App& app, Registry& registry) {
         "Examples:\n"
         "  reshutter fields shot.####.mps --frames 1-48 -o ntsc.####.exr\n"
         "  reshutter fields shot.####.mps --frames 1-48 --dominance lower --field-shutter-angle 360 -o pal.%04d.exr");
-    registry.add(sub, [cmd] { return cmd->run(); });
+    registry.add(sub, [cmd, hook = registry.sequenceHook] { return cmd->run(hook); });
   }
   {
     auto cmd = std::make_shared<RetimeCommand>();
@@ -219,7 +229,7 @@ void addRetimeCommands(CLI::App& app, Registry& registry) {
         "  reshutter retime shot.####.mps --to-fps 30000/1001 --frames 1-120 -o ntsc.####.exr\n"
         "  reshutter retime shot.####.mps --from-fps 24 --to-fps 50 --shutter-angle 90 --frames 1-100 -o out.%04d.exr\n"
         "  reshutter retime shot.####.mps --to-fps 25 --shutter-angle 180 --shutter-position center --rolling-shutter 0.5 --frames 1-10 -o cmos.####.exr");
-    registry.add(sub, [cmd] { return cmd->run(); });
+    registry.add(sub, [cmd, hook = registry.sequenceHook] { return cmd->run(hook); });
   }
 }
 

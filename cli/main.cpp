@@ -32,12 +32,14 @@ int main(int argc, char** argv) {
   app.add_flag("--verbose,-v", verbose, "More detail");
 
   cli::Registry registry;
+  registry.argv.assign(argv, argv + argc);
   cli::addDemoCommand(app, registry);
   cli::addShadeCommand(app, registry);
   cli::addResampleCommand(app, registry);
   cli::addRetimeCommands(app, registry);
   cli::addIngestCommand(app, registry);
   cli::addStoreCommands(app, registry);
+  cli::addFarmCommands(app, registry);
 
   try {
     app.parse(argc, argv);

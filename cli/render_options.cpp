@@ -38,6 +38,9 @@ void RenderOptions::addTo(CLI::App* app) {
       ->capture_default_str()
       ->check(CLI::Range(0.0, 1e3))
       ->group("Outputs");
+  app->add_flag("--deep-all-channels", deepAllChannels,
+                "Write ZBack and AR AG AB even where no sample needs them (crop tiles that `reshutter assemble` merges later)")
+      ->group("Outputs");
   app->add_option("--quantize", quantize, "Preview quantisation ZERO,ONE,MIN,MAX (MAX > 255 gives 16 bits)")->capture_default_str()->group("Outputs");
   app->add_option("--dither", dither, "Preview dither amplitude")->capture_default_str()->group("Outputs");
   app->add_option("--opacity-threshold", opacityThreshold, "A sample stops once its opacity reaches this")
@@ -133,12 +136,17 @@ void RenderOptions::writeOutputs(const resample::RenderResult& result, const std
   if (!deep.empty()) {
     resample::DeepExrOptions deo;
     deo.compression = resample::parseDeepCompression(deepCompression, "--deep-compression");
+    deo.allChannels = deepAllChannels;
     resample::writeDeepExr(expandFramePattern(deep, frame), result.deep, result.provenance, deo);
   }
+  writePreviews(result.image, frame);
+}
+
+void RenderOptions::writePreviews(const resample::FlatImage& image, int64_t frame) const {
   const resample::Quantize q = parseQuantize(quantize, dither);
   for (const auto& p : previews) {
     const PreviewRequest r = parsePreview(p, frame);
-    resample::writePreview(r.path, result.image, r.channels, q, uint64_t(frame));
+    resample::writePreview(r.path, image, r.channels, q, uint64_t(frame));
   }
 }
 

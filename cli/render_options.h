@@ -35,6 +35,7 @@ struct RenderOptions {
   std::string deep;           // deep OpenEXR path ("" = none)
   std::string deepCompression = "zips";
   double deepTolerance = 0.01;
+  bool deepAllChannels = false;  // ZBack and AR AG AB even where no sample needs them (farm tiles)
 
   void addTo(CLI::App* app);
   /// Fills sampling, filter, AOV, crop and raster settings of `spec`.
@@ -45,6 +46,8 @@ struct RenderOptions {
   void checkOutputs(const std::string& exrPath, int64_t frame) const;
   /// Writes the EXR (when exrPath is set), the deep EXR (when --deep is) and any previews.
   void writeOutputs(const resample::RenderResult& result, const std::string& exrPath, int64_t frame) const;
+  /// Writes the --preview images of `image` (writeOutputs() does this too).
+  void writePreviews(const resample::FlatImage& image, int64_t frame) const;
 };
 
 }  // namespace reshutter::cli

@@ -589,8 +589,8 @@ void writeDeepExr(const std::string& path, const DeepImage& image, const ImagePr
   };
   const DeepLayout& L = image.layout;
   std::vector<Out> outs{{"R", false, kDeepR}, {"G", false, kDeepG}, {"B", false, kDeepB}, {"A", false, kDeepA}, {"Z", false, kDeepZ}};
-  if (image.anyThick()) outs.push_back({"ZBack", false, kDeepZBack});
-  if (image.anyColouredAlpha())
+  if (options.allChannels || image.anyThick()) outs.push_back({"ZBack", false, kDeepZBack});
+  if (options.allChannels || image.anyColouredAlpha())
     for (auto [n, f] : {std::pair{"AR", kDeepAR}, {"AG", kDeepAG}, {"AB", kDeepAB}}) outs.push_back({n, false, f});
   for (size_t i = 0; i < L.floats.size(); ++i) outs.push_back({L.floats[i].name, false, kDeepFixedFloats + int(i)});
   outs.push_back({"objectid", true, kDeepObjectId});

@@ -202,10 +202,13 @@ DeepCompression parseDeepCompression(const std::string& s, const std::string& wh
 
 struct DeepExrOptions {
   DeepCompression compression = DeepCompression::Zips;
+  /// Write ZBack and AR AG AB even where no sample needs them: for crop tiles that are assembled
+  /// later (resample/assemble.h), whose whole image may need them where the tile does not.
+  bool allChannels = false;
 };
 
 /// Writes a scanline deep OpenEXR: R G B A Z, ZBack if any sample is thick, AR AG AB if any
-/// opacity is coloured, the output variables, objectid (uint), idManifest if names are known,
+/// opacity is coloured (both always with allChannels), the output variables, objectid (uint), idManifest if names are known,
 /// deepImageState TIDY when the image is tidy, and the provenance of the flat image. Atomic;
 /// throws Error naming the file.
 void writeDeepExr(const std::string& path, const DeepImage& image, const ImageProvenance& info, const DeepExrOptions& options = {});

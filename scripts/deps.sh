@@ -7,6 +7,7 @@ packages=(
   libosd-dev
   libgtest-dev libbenchmark-dev
   openimageio-tools gnuplot-nox jq time
+  slurm-wlm iproute2
 )
 missing=()
 for p in "${packages[@]}"; do
