@@ -220,11 +220,13 @@ int runTask(const std::string& dir, int64_t indexOption, const std::string& fram
   }
   farm::Job::Task task = job.task(size_t(index));
   if (!framesOption.empty()) {
-    // A farm manager that hands out frame ranges (Deadline, OpenCue): those frames, this tile.
-    task.frames = parseFrameRange(framesOption, "--frames");
-    for (int64_t f : task.frames)
-      if (std::find(job.frames.begin(), job.frames.end(), f) == job.frames.end())
-        fail("--frames", "frame ", f, " is not one of the job's (", farm::frameList(job.frames), ")");
+    // A farm manager that hands out frame ranges (Deadline, OpenCue): the job's frames among
+    // those, this tile. A range such as 1-10 given for a job of every other frame is fine.
+    const std::vector<int64_t> asked = parseFrameRange(framesOption, "--frames");
+    task.frames.clear();
+    for (int64_t f : job.frames)
+      if (std::find(asked.begin(), asked.end(), f) != asked.end()) task.frames.push_back(f);
+    if (task.frames.empty()) fail("--frames", "none of ", framesOption, " is one of the job's frames (", farm::frameList(job.frames), ")");
   }
   const std::vector<int64_t> left = job.framesLeft(task);
   if (left.empty()) {

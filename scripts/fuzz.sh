@@ -2,6 +2,7 @@
 # Builds the libFuzzer targets with clang (ASan + UBSan) and runs one.
 #   scripts/fuzz.sh store [seconds] [--fast]    fuzz the .mps reader
 #   scripts/fuzz.sh rib [seconds] [--fast]      fuzz the RIB parser, scene interpreter, splitting and dicing
+#   scripts/fuzz.sh farm [seconds] [--fast]     fuzz the farm's job description reader (job.txt)
 # Findings land in build-fuzz/findings-<target>/; minimise them and copy them into
 # tests/corpus/<target>/, where the regression tests replay them on every test run.
 set -euo pipefail
@@ -15,8 +16,10 @@ sanitizers=address,undefined build=build-fuzz
 if [ "${3:-}" = --fast ]; then sanitizers=undefined build=build-fuzz-fast; fi
 cmake -S . -B "$build" -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DRESHUTTER_FUZZ=ON -DRESHUTTER_BENCH=OFF \
   -DRESHUTTER_FUZZ_SANITIZERS="$sanitizers" -DCMAKE_C_COMPILER=clang -DCMAKE_CXX_COMPILER=clang++ >/dev/null
-ninja -C "$build" "fuzz_${target}_reader" $( [ "$target" = store ] && echo reshutter ) >/dev/null
-bin=$build/fuzz_${target}_reader
+name=fuzz_${target}_reader
+[ "$target" = farm ] && name=fuzz_farm_job
+ninja -C "$build" "$name" $( [ "$target" = store ] && echo reshutter ) >/dev/null
+bin=$build/$name
 work=$build/work-$target
 mkdir -p "$work/corpus" "$build/findings-$target"
 cp tests/corpus/$target/* "$work/corpus/" 2>/dev/null || true

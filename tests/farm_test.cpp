@@ -117,6 +117,24 @@ TEST(FarmJob, DescriptionReadsBackAndBadOnesNameTheLine) {
   EXPECT_EQ(loadWith(head + "window 0 8 0 8\n"), "no error");
 }
 
+TEST(FarmJob, FuzzCorpusReadsOrFailsCleanly) {
+  // Job descriptions the fuzzer found interesting (tests/corpus/farm/): each reads or throws Error.
+  ScratchDir dir;
+  size_t files = 0, read = 0;
+  for (const auto& f : std::filesystem::directory_iterator(test::sourceDir() + "/tests/corpus/farm")) {
+    std::filesystem::copy_file(f.path(), dir.path("job.txt"), std::filesystem::copy_options::overwrite_existing);
+    ++files;
+    try {
+      const farm::Job job = farm::Job::load(dir.dir().string());
+      for (size_t i = 0; i < job.tasks() && i < 64; ++i) EXPECT_FALSE(job.task(i).frames.empty()) << f.path();
+      ++read;
+    } catch (const Error&) {
+    }
+  }
+  EXPECT_GE(files, 2u);
+  EXPECT_GE(read, 2u);  // the seeds are valid jobs
+}
+
 TEST(FarmSlurm, ArraySpecsAreSlurmsSyntax) {
   EXPECT_EQ(farm::arraySpec({0, 1, 2, 3}, 0), "0-3");
   EXPECT_EQ(farm::arraySpec({0, 1, 2, 5, 7, 8}, 0), "0-2,5,7-8");
