@@ -43,13 +43,30 @@ void checkNames(const std::vector<std::string>& names, size_t n) {
   if (names.size() != n) fail("assemble", "internal: ", n, " tiles but ", names.size(), " names");
 }
 
+// The tiles' data windows (checked to fill a rectangle, which is returned), and that tile i
+// comes from the render tile 0 does: display window, provenance, compression.
+template <class Tile>
+Box checkOneRender(const std::vector<Tile>& tiles, const std::vector<std::string>& names) {
+  checkNames(names, tiles.size());
+  std::vector<Box> boxes;
+  for (const Tile& t : tiles) boxes.push_back({t.image.x0, t.image.y0, t.image.x0 + t.image.width, t.image.y0 + t.image.height});
+  const Box u = unionOf(boxes, names);
+  const Tile& first = tiles[0];
+  for (size_t i = 1; i < tiles.size(); ++i) {
+    const Tile& t = tiles[i];
+    if (t.image.fullWidth != first.image.fullWidth || t.image.fullHeight != first.image.fullHeight)
+      fail(names[i], "display window ", t.image.fullWidth, "x", t.image.fullHeight, " differs from ", names[0], "'s ", first.image.fullWidth, "x",
+           first.image.fullHeight);
+    if (!sameProvenance(t.provenance, first.provenance)) fail(names[i], "comes from another render than ", names[0], " (frame, shutter or camera differ)");
+    if (t.options.compression != first.options.compression) fail(names[i], "compression differs from ", names[0], "'s");
+  }
+  return u;
+}
+
 }  // namespace
 
 FlatExr assembleFlat(std::vector<FlatExr> tiles, const std::vector<std::string>& names) {
-  checkNames(names, tiles.size());
-  std::vector<Box> boxes;
-  for (const FlatExr& t : tiles) boxes.push_back({t.image.x0, t.image.y0, t.image.x0 + t.image.width, t.image.y0 + t.image.height});
-  const Box u = unionOf(boxes, names);
+  const Box u = checkOneRender(tiles, names);
   const FlatExr& first = tiles[0];
   FlatExr out;
   out.provenance = first.provenance, out.options = first.options;
@@ -59,11 +76,6 @@ FlatExr assembleFlat(std::vector<FlatExr> tiles, const std::vector<std::string>&
   for (const ImageChannel& c : first.image.channels) img.add(c.name, c.isUInt).half = c.half;
   for (size_t i = 0; i < tiles.size(); ++i) {
     const FlatImage& t = tiles[i].image;
-    if (t.fullWidth != img.fullWidth || t.fullHeight != img.fullHeight)
-      fail(names[i], "display window ", t.fullWidth, "x", t.fullHeight, " differs from ", names[0], "'s ", img.fullWidth, "x", img.fullHeight);
-    if (!sameProvenance(tiles[i].provenance, first.provenance))
-      fail(names[i], "comes from another render than ", names[0], " (frame, shutter or camera differ)");
-    if (tiles[i].options.compression != first.options.compression) fail(names[i], "compression differs from ", names[0], "'s");
     if (t.channels.size() != img.channels.size()) fail(names[i], "has ", t.channels.size(), " channels, ", names[0], " has ", img.channels.size());
     for (size_t c = 0; c < t.channels.size(); ++c) {
       const ImageChannel& src = t.channels[c];
@@ -81,10 +93,7 @@ FlatExr assembleFlat(std::vector<FlatExr> tiles, const std::vector<std::string>&
 }
 
 DeepExr assembleDeep(std::vector<DeepExr> tiles, const std::vector<std::string>& names) {
-  checkNames(names, tiles.size());
-  std::vector<Box> boxes;
-  for (const DeepExr& t : tiles) boxes.push_back({t.image.x0, t.image.y0, t.image.x0 + t.image.width, t.image.y0 + t.image.height});
-  const Box u = unionOf(boxes, names);
+  const Box u = checkOneRender(tiles, names);
   const DeepExr& first = tiles[0];
   DeepExr out;
   out.provenance = first.provenance, out.options = first.options;
@@ -102,11 +111,6 @@ DeepExr assembleDeep(std::vector<DeepExr> tiles, const std::vector<std::string>&
   DeepPixel px;
   for (size_t i = 0; i < tiles.size(); ++i) {
     const DeepImage& t = tiles[i].image;
-    if (t.fullWidth != img.fullWidth || t.fullHeight != img.fullHeight)
-      fail(names[i], "display window ", t.fullWidth, "x", t.fullHeight, " differs from ", names[0], "'s ", img.fullWidth, "x", img.fullHeight);
-    if (!sameProvenance(tiles[i].provenance, first.provenance))
-      fail(names[i], "comes from another render than ", names[0], " (frame, shutter or camera differ)");
-    if (tiles[i].options.compression != first.options.compression) fail(names[i], "compression differs from ", names[0], "'s");
     if (!sameAux(t.layout.floats, L.floats) || !sameAux(t.layout.uints, L.uints)) fail(names[i], "output variables differ from ", names[0], "'s");
     if (t.objectNames != img.objectNames) fail(names[i], "object names (idManifest) differ from ", names[0], "'s");
     // An absent ZBack or AR AG AB was filled in on reading; exact only when the whole image
