@@ -323,7 +323,7 @@ void addFarmCommands(CLI::App& app, Registry& registry) {
     sub->add_option("--partition", fo->slurm.partition, "sbatch --partition")->group(g);
     sub->add_option("--time", fo->slurm.time, "sbatch --time, per task (e.g. 0:30:00)")->group(g);
     sub->add_option("--mem", fo->slurm.mem, "sbatch --mem, per task (e.g. 4G)")->group(g);
-    sub->add_option("--sbatch", fo->slurm.extra, "Any other sbatch option, repeatable (e.g. --sbatch=--qos=low)")->group(g);
+    sub->add_option("--sbatch", fo->slurm.extra, "Any other sbatch option, repeatable (e.g. --sbatch=--qos=low)")->allow_extra_args(false)->group(g);
     sub->add_option("--max-running", fo->slurm.maxRunning, "Run at most this many tasks at once (the array's %N)")->check(CLI::NonNegativeNumber)->group(g);
     sub->add_option("--job-name", fo->slurm.name, "Slurm job name")->capture_default_str()->group(g);
     sub->add_option("--reshutter", fo->binary, "The reshutter binary the tasks run (default: this one; it must be visible on the nodes)")->group(g);
