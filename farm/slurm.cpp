@@ -150,7 +150,11 @@ Submission submit(const Job& job, const std::vector<size_t>& tasks, const SlurmO
   std::string out;
   if (!tasks.empty()) {
     writeScript(taskPath, taskScript(job, tasks, o));
-    if (runCommand({"sbatch", "--parsable", taskPath}, out) != 0) fail("sbatch", "the task array was not submitted: ", firstLine(out));
+    if (runCommand({"sbatch", "--parsable", taskPath}, out) != 0) {
+      const bool array = out.find("array") != std::string::npos;
+      fail("sbatch", "the task array was not submitted: ", firstLine(out),
+           array ? cat(" (its largest index is ", tasks.back(), "; Slurm's MaxArraySize, `scontrol show config`, must exceed it: raise --chunk)") : std::string());
+    }
     sub.taskJob = firstLine(out).substr(0, firstLine(out).find(';'));
   }
   std::vector<std::string> cmd{"sbatch", "--parsable"};

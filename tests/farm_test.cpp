@@ -230,6 +230,24 @@ TEST(FarmCli, TiledTasksRunByHandAssembleToTheLocalRendersBytes) {
   EXPECT_EQ(files, 0u);
 }
 
+TEST(FarmCli, TwoPassFieldsRunAsTiles) {
+  // fields --two-pass through the farm: each task renders both fields of its tile and interlaces.
+  ScratchDir dir;
+  const std::string shot = writeShot(dir);
+  const std::string args = "fields " + shot + " --frames 2-3 --two-pass --filter gaussian:2x1 --spp 4";
+  ASSERT_EQ(runReshutter("-q farm " + args + " -o " + dir.path("f.####.exr") + " --chunk 2 --tiles 1x3 --job-dir " + dir.path("job") + " --dry-run")
+                .exitCode,
+            0);
+  const farm::Job job = farm::Job::load(dir.path("job"));
+  EXPECT_EQ(job.tasks(), 3u);
+  EXPECT_EQ(std::count(job.args.begin(), job.args.end(), "--two-pass"), 1);
+  for (int i = 0; i < 3; ++i) ASSERT_EQ(runReshutter("-q farm task " + dir.path("job") + " --index " + std::to_string(i)).exitCode, 0);
+  ASSERT_EQ(runReshutter("-q farm assemble " + dir.path("job")).exitCode, 0);
+  ASSERT_EQ(runReshutter("-q " + args + " -o " + dir.path("l.####.exr")).exitCode, 0);
+  for (const char* f : {"0002", "0003"})
+    EXPECT_EQ(readBytes(dir.path(std::string("f.") + f + ".exr")), readBytes(dir.path(std::string("l.") + f + ".exr"))) << f;
+}
+
 TEST(FarmCli, ResampleOfOneStoreRunsAsTiles) {
   ScratchDir dir;
   const std::string shot = writeShot(dir);
