@@ -157,6 +157,7 @@ int submitJob(const SequenceRequest& req, const FarmOptions& fo, const std::vect
   job.window = imageWindow(req);
   if (job.window.x1 - job.window.x0 < job.tilesX || job.window.y1 - job.window.y0 < job.tilesY) fail("--tiles", "more tiles than pixels");
   job.reshutter = fo.binary.empty() ? fs::read_symlink("/proc/self/exe").string() : absolute(fo.binary);
+  job.workdir = fs::current_path().string();
   std::string dir = fo.jobDir;
   if (dir.empty()) {
     // Beside the outputs, named after them: out/ntsc.####.exr → out/ntsc.farm
@@ -169,7 +170,7 @@ int submitJob(const SequenceRequest& req, const FarmOptions& fo, const std::vect
   if (!job.dir.empty() && job.dir.back() == '/') job.dir.pop_back();
   if (fs::exists(job.dir + "/job.txt")) {
     const farm::Job before = farm::Job::load(job.dir);
-    if (!(before == job))
+    if (!before.sameWork(job))
       fail(job.dir, "holds another job (its job.txt differs from this command): give another --job-dir, or remove the directory to start over");
   }
   job.save();
@@ -236,7 +237,11 @@ int runTask(const std::string& dir, int64_t indexOption, const std::string& fram
   const std::vector<std::string> command = job.taskCommand(task, left);
   std::string line;
   for (const auto& a : command) line += (line.empty() ? "" : " ") + a;
-  note(cat(describe(job, task), ": ", left.size(), " frame", left.size() == 1 ? "" : "s", " to render\n  ", line));
+  note(cat(describe(job, task), ": ", left.size(), " frame", left.size() == 1 ? "" : "s", " to render in ", job.workdir, "\n  ", line));
+  // Relative store paths are the submitting directory's, wherever the manager starts the task.
+  std::error_code ec;
+  fs::current_path(job.workdir, ec);
+  if (ec) fail(job.workdir, "cannot enter the job's working directory: ", ec.message());
   std::fflush(stdout), std::fflush(stderr);
   std::vector<char*> args;
   for (const auto& a : command) args.push_back(const_cast<char*>(a.c_str()));

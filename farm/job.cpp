@@ -145,6 +145,7 @@ void Job::save() const {
   s << "tiles " << tilesX << " " << tilesY << "\n";
   s << "window " << window.x0 << " " << window.x1 << " " << window.y0 << " " << window.y1 << "\n";
   s << "reshutter " << reshutter << "\n";
+  s << "workdir " << workdir << "\n";
   const std::string text = s.str();
   AtomicFile f(descriptionPath());
   writeAll(f.fd(), text.data(), text.size(), descriptionPath());
@@ -192,14 +193,22 @@ Job Job::load(const std::string& dirIn) {
         fail(where, "window must be x0 x1 y0 y1 with x0 < x1, y0 < y1");
     } else if (key == "reshutter") {
       j.reshutter = value;
+    } else if (key == "workdir") {
+      j.workdir = value;
     } else {
       fail(where, "unknown key '", key, "'");
     }
   }
-  if (!header || !sawCommand || !sawFrames || j.reshutter.empty()) fail(path, "incomplete job description");
+  if (!header || !sawCommand || !sawFrames || j.reshutter.empty() || j.workdir.empty()) fail(path, "incomplete job description");
   if (j.output.empty() && j.deep.empty()) fail(path, "the job writes nothing (no output, no deep)");
   if (int64_t(j.window.x1 - j.window.x0) < j.tilesX || int64_t(j.window.y1 - j.window.y0) < j.tilesY) fail(path, "more tiles than pixels");
   return j;
+}
+
+bool Job::sameWork(const Job& o) const {
+  Job a = *this;
+  a.reshutter = o.reshutter;
+  return a == o;
 }
 
 // ---------------------------------------------------------------------------------------------

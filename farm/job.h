@@ -34,6 +34,7 @@ struct Job {
   int tilesX = 1, tilesY = 1;  // crop tiles per frame
   Rect window;                 // the pixels the frames cover (the image, or the user's --crop)
   std::string reshutter;       // the binary tasks run (absolute)
+  std::string workdir;         // where the command was given: tasks run there (relative store paths)
   std::string dir;             // the job directory (absolute)
 
   size_t tiles() const { return size_t(tilesX) * size_t(tilesY); }
@@ -79,6 +80,8 @@ struct Job {
   /// Reads `dir`/job.txt; throws Error naming the file and line on anything malformed.
   static Job load(const std::string& dir);
   bool operator==(const Job&) const = default;
+  /// The same work: equal but for the binary that runs it (a resubmission may use a new build).
+  bool sameWork(const Job& o) const;
 };
 
 /// Frames as the shortest list of ranges: 1-4,6,8-12x2.

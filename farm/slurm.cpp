@@ -37,12 +37,11 @@ std::string shellWord(const std::string& s) {
 // The #SBATCH lines both jobs share.
 std::string commonDirectives(const Job& job, const SlurmOptions& o) {
   std::ostringstream s;
-  s << "#SBATCH --chdir=" << shellWord(fs::current_path().string()) << "\n";
+  s << "#SBATCH --chdir=" << shellWord(job.workdir) << "\n";
   if (!o.partition.empty()) s << "#SBATCH --partition=" << o.partition << "\n";
   if (!o.time.empty()) s << "#SBATCH --time=" << o.time << "\n";
   if (!o.mem.empty()) s << "#SBATCH --mem=" << o.mem << "\n";
   for (const auto& e : o.extra) s << "#SBATCH " << e << "\n";
-  (void)job;
   return s.str();
 }
 
@@ -153,7 +152,8 @@ Submission submit(const Job& job, const std::vector<size_t>& tasks, const SlurmO
     if (runCommand({"sbatch", "--parsable", taskPath}, out) != 0) {
       const bool array = out.find("array") != std::string::npos;
       fail("sbatch", "the task array was not submitted: ", firstLine(out),
-           array ? cat(" (its largest index is ", tasks.back(), "; Slurm's MaxArraySize, `scontrol show config`, must exceed it: raise --chunk)") : std::string());
+           array ? cat(" (its largest index is ", tasks.back(), "; Slurm's MaxArraySize, `scontrol show config`, must exceed it: raise --chunk)")
+                 : std::string());
     }
     sub.taskJob = firstLine(out).substr(0, firstLine(out).find(';'));
   }
