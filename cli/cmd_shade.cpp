@@ -55,8 +55,7 @@ struct ShadeCommand {
       frame.source = scene;
       std::string skipped;
       for (const auto& [request, count] : frame.skipped) skipped += cat(skipped.empty() ? "" : ", ", grouped(count), " ", request);
-      if (frame.prims.empty() && !skipped.empty())
-        fail(scene, "frame ", n, ": every primitive was skipped (", skipped, "); nothing to shade");
+      if (frame.prims.empty() && !skipped.empty()) fail(scene, "frame ", n, ": every primitive was skipped (", skipped, "); nothing to shade");
       const std::string path = expandFramePattern(output, n);
       shade::StoreResult r = shade::shadeToStore(frame, opt, path);
       ++written;
@@ -72,8 +71,9 @@ struct ShadeCommand {
       if (verbosity() == Verbosity::Verbose)
         note(cat("frame ", n, ": ", r.shade.primitives, " primitives, ", r.shade.culledPieces,
                  " pieces culled (off screen, behind the eye or beyond the far plane), ", r.shade.eyeSplits, " eye splits, ", r.shade.droppedMicropolygons,
-                 " micropolygons dropped at the near plane, ", r.shade.trimmedMicropolygons, " trimmed away, ", r.shade.forcedCuts, " sides left unfinished by the split depth limit, ", frame.culledArchives, " delayed archives culled by their bound, ", r.shade.vertices,
-                 " vertices shaded"));
+                 " micropolygons dropped at the near plane, ", r.shade.trimmedMicropolygons, " trimmed away, ", r.shade.forcedCuts,
+                 " sides left unfinished by the split depth limit, ", frame.culledArchives, " delayed archives culled by their bound, ", r.shade.vertices,
+                 " vertices shaded, ", r.shade.textureLookups, " texture lookups (", r.shade.missingTextures, " textures missing)"));
     });
     shade::readRibScene(scene, sceneBuilder, opt.dice.cullMargin);
     if (sceneBuilder.framesShaded() == 0) fail(scene, "no WorldBegin/WorldEnd block: nothing to shade");

@@ -8,6 +8,7 @@ packages=(
   libgtest-dev libbenchmark-dev
   openimageio-tools gnuplot-nox jq time
   slurm-wlm iproute2
+  libopenimageio-dev
 )
 missing=()
 for p in "${packages[@]}"; do

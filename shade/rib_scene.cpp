@@ -94,8 +94,7 @@ Geometry geometry(const Args& args, size_t first, std::initializer_list<std::str
       g.P.clear();
       for (int j = 0; j < h.nv; ++j)
         for (int i = 0; i < h.nu; ++i) g.P.emplace_back(i / du, j / dv, (*z)[size_t(j) * size_t(h.nu) + size_t(i)]);
-    }
-    else warnOnce(cat("rib-primvar:", n), cat("primitive variable '", n, "' is not used by the built-in shaders; ignored"));
+    } else warnOnce(cat("rib-primvar:", n), cat("primitive variable '", n, "' is not used by the built-in shaders; ignored"));
   }
   if (g.vd.st.empty() && !s.empty() && s.size() == t.size())
     for (size_t i = 0; i < s.size(); ++i) g.vd.st.emplace_back(s[i], t[i]);
@@ -190,9 +189,29 @@ void subdivisionMesh(Scene& s, const rib::Request& r, const Args& a) {
 
 /// The RenderMan Interface's geometric primitives: a frame counts those it could not make.
 bool isPrimitiveRequest(std::string_view n) {
-  static const char* const kinds[] = {"Polygon", "GeneralPolygon", "PointsPolygons", "PointsGeneralPolygons", "Patch", "PatchMesh", "NuPatch",
-                                      "SubdivisionMesh", "HierarchicalSubdivisionMesh", "Sphere", "Cone", "Cylinder", "Hyperboloid", "Paraboloid",
-                                      "Disk", "Torus", "Points", "Curves", "Blobby", "Procedural", "Geometry", "ObjectInstance", "Volume"};
+  static const char* const kinds[] = {"Polygon",
+                                      "GeneralPolygon",
+                                      "PointsPolygons",
+                                      "PointsGeneralPolygons",
+                                      "Patch",
+                                      "PatchMesh",
+                                      "NuPatch",
+                                      "SubdivisionMesh",
+                                      "HierarchicalSubdivisionMesh",
+                                      "Sphere",
+                                      "Cone",
+                                      "Cylinder",
+                                      "Hyperboloid",
+                                      "Paraboloid",
+                                      "Disk",
+                                      "Torus",
+                                      "Points",
+                                      "Curves",
+                                      "Blobby",
+                                      "Procedural",
+                                      "Geometry",
+                                      "ObjectInstance",
+                                      "Volume"};
   return std::find(std::begin(kinds), std::end(kinds), n) != std::end(kinds);
 }
 
@@ -217,7 +236,14 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
     return true;
   }
   if (n == "DisplayChannel") return true;  // declarations only; Display's mode selects variables
-  if (n == "Surface") return s.surface(a.string(0), numericParams(a.params(1))), true;
+  if (n == "Surface") {
+    const std::vector<Param> params = a.params(1);
+    std::map<std::string, std::string> strings;
+    for (const Param& p : params)
+      if (p.value && p.value->kind == Value::Kind::String) strings[p.decl.name] = p.value->string;
+      else if (p.value && p.value->kind == Value::Kind::StringArray && !p.value->strings.empty()) strings[p.decl.name] = p.value->strings.front();
+    return s.surface(a.string(0), numericParams(params), strings), true;
+  }
   if (n == "LightSource") {
     // The handle is a number (RI 3.2) or a string (3.3+); the parameter list follows it.
     return s.lightSource(a.string(0), handleArg(r, 1), numericParams(a.params(2))), true;
@@ -261,7 +287,17 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
                                    n == "Light" ? "lights yet (the frame is lit by LightSource lights only)" : "materials yet (the current Surface shades)"));
     return true;
   }
-  if (n == "Option") return true;  // renderer settings (searchpath, limits, user: the reader's conditions)
+  if (n == "Option") {
+    // Renderer settings: the texture search path is used; limits and the rest are a renderer's,
+    // "user" options are the reader's conditions.
+    if (a.string(0) == "searchpath")
+      for (const Param& p : a.params(1))
+        if (p.decl.name == "texture" && p.value) {
+          if (p.value->kind == Value::Kind::String) s.textureSearchPath(p.value->string);
+          else if (p.value->kind == Value::Kind::StringArray && !p.value->strings.empty()) s.textureSearchPath(p.value->strings.front());
+        }
+    return true;
+  }
   if (n == "ShadingInterpolation") return true;  // grids are shaded per vertex and interpolated ("smooth")
   if (n == "SolidBegin" || n == "SolidEnd") {
     warnOnce("rib-csg", cat(s.where, ": solid modelling (CSG) is not supported; the solids' primitives are shaded as a union"));

@@ -88,6 +88,8 @@ bool SurfaceShader::named(const std::string& name, SurfaceShader& s) {
     s.kind = SurfaceKind::Metal, s.Ka = 1, s.Ks = 1, s.roughness = 0.1;
   } else if (name == "plastic") {
     s.kind = SurfaceKind::Plastic, s.Ka = 1, s.Kd = 0.5, s.Ks = 0.5, s.roughness = 0.1;
+  } else if (name == "paintedplastic") {
+    s.kind = SurfaceKind::PaintedPlastic, s.Ka = 1, s.Kd = 0.5, s.Ks = 0.5, s.roughness = 0.1;
   } else if (name == "defaultsurface") {
     s.kind = SurfaceKind::DefaultSurface, s.Ka = 0.2, s.Kd = 0.8;
   } else {
@@ -268,6 +270,13 @@ void Scene::shutter(double open, double close) {
   if (!std::isfinite(open) || !std::isfinite(close) || close < open) error(cat("shutter [", open, ", ", close, "] is not an interval"));
   options_.shutterOpen = open, options_.shutterClose = close;
 }
+void Scene::textureSearchPath(const std::string& path) {
+  // "&" stands for the path so far (RenderMan's convention).
+  std::string out;
+  for (size_t i = 0; i < path.size(); ++i) out += path[i] == '&' ? options_.textureSearchPath : std::string(1, path[i]);
+  options_.textureSearchPath = out;
+}
+
 void Scene::pixelSamples(int x, int y) {
   options_.pixelSamples[0] = std::max(1, x);
   options_.pixelSamples[1] = std::max(1, y);
@@ -370,8 +379,8 @@ void Scene::worldEnd() {
   if (motion_.active) error("WorldEnd inside a motion block");
   cur_ = pop(Block::World, "WorldEnd");
   inWorld_ = false;
-  FrameScene done = std::move(frame_);
-  frame_ = FrameScene{};
+  FrameScene done;
+  std::swap(done, frame_);  // frame_ starts afresh (a swap: GCC 12 misreads assigning a temporary here as uninitialised use)
   lightHandles_.clear();
   objectIds_.clear();
   // Light indices point into this frame's list, which is gone now.
@@ -448,10 +457,12 @@ void Scene::opacity(const glm::dvec3& o) {
   if (motionTake(Pending::Opacity)) return motion_.colors.push_back(o);
   mutableAttrs().opacity = Animated<glm::dvec3>(o);
 }
-void Scene::surface(const std::string& name, const ParamMap& params) {
+void Scene::surface(const std::string& name, const ParamMap& params, const std::map<std::string, std::string>& strings) {
   SurfaceShader s;
   if (!SurfaceShader::named(name, s)) warnOnce(cat("surface:", name), cat(where, ": surface shader '", name, "' is not built in; using defaultsurface"));
   applyParams(s, params);
+  if (s.kind == SurfaceKind::PaintedPlastic)
+    if (auto it = strings.find("texturename"); it != strings.end()) s.textureName = it->second;
   if (motionTake(Pending::Surface)) return motion_.surfaces.push_back(s);
   mutableAttrs().surface = Animated<SurfaceShader>(s);
 }

@@ -56,12 +56,13 @@ struct Animated {
 };
 
 /// The built-in surface shaders (RenderMan standard shaders; shade/shaders.h has the formulas).
-enum class SurfaceKind : uint8_t { Constant, Matte, Metal, Plastic, DefaultSurface };
+enum class SurfaceKind : uint8_t { Constant, Matte, Metal, Plastic, DefaultSurface, PaintedPlastic };
 
 struct SurfaceShader {
   SurfaceKind kind = SurfaceKind::DefaultSurface;
   double Ka = 1, Kd = 0.5, Ks = 0.5, roughness = 0.1;
   glm::dvec3 specularColor{1.0};
+  std::string textureName;  // paintedplastic's "texturename": Cs is multiplied by texture(textureName) ("" = none)
   /// RenderMan's defaults for `name`; false (and defaultsurface) for a shader not built in.
   static bool named(const std::string& name, SurfaceShader& out);
   SurfaceShader lerp(const SurfaceShader& b, double w) const;
@@ -222,6 +223,9 @@ struct FrameOptions {
   std::vector<std::string> outputs;  // requested output variables, in request order, unique
   int pixelSamples[2] = {1, 1};
   std::vector<RisNode> risOptions;  // Integrator, DisplayFilter, SampleFilter, Hider
+  /// Option "searchpath" "texture": ':'-separated directories, "&" already replaced by the
+  /// previous path; relative ones are taken from the RIB file's directory ("" = that directory).
+  std::string textureSearchPath;
 };
 
 /// Everything WorldEnd hands to the shading pass.
@@ -283,7 +287,8 @@ class Scene {
   void sides(int n);
   void color(const glm::dvec3& c);
   void opacity(const glm::dvec3& o);
-  void surface(const std::string& name, const ParamMap& params);
+  void surface(const std::string& name, const ParamMap& params, const std::map<std::string, std::string>& strings = {});
+  void textureSearchPath(const std::string& path);
   void lightSource(const std::string& name, const std::string& handle, const ParamMap& params);
   void illuminate(const std::string& handle, bool on);
   void shadingRate(double r);

@@ -137,7 +137,8 @@ SurfaceOutput shadeSurface(const SurfaceShader& s, const SurfaceInput& in, std::
       out.viewDependent = spec;
       break;
     }
-    case SurfaceKind::Plastic: {
+    case SurfaceKind::Plastic:
+    case SurfaceKind::PaintedPlastic: {  // the texture is already in Cs (the shading pass looks it up)
       glm::dvec3 diff, specular;
       diffuseSpecular(in.P, Nf, V, s.roughness, lights, diff, specular);
       glm::dvec3 spec = in.Os * s.specularColor * s.Ks * specular;

@@ -7,6 +7,7 @@
 #include <array>
 #include <chrono>
 #include <cmath>
+#include <filesystem>
 #include <memory>
 #include <span>
 
@@ -18,6 +19,7 @@
 #include "common/log.h"
 #include "common/progress.h"
 #include "shade/shaders.h"
+#include "shade/texture.h"
 
 namespace reshutter::shade {
 
@@ -161,6 +163,7 @@ struct ShadeContext {
   double shadeAt;
   double nearClip;
   bool perspective;
+  const TextureLookup* textures = nullptr;  // only when some surface has a texture
 };
 
 /// Vertex i's output variables into `attrs` (parallel to the schema).
@@ -195,6 +198,29 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
   const bool hasCs = p.mesh && p.corners(p.mesh->Cs, cornerCs);
   const bool hasOs = p.mesh && p.corners(p.mesh->Os, cornerOs);
   const size_t nV = g.numVertices;
+  // A textured surface filters each vertex's lookup over the st span of a micropolygon it
+  // corners: its two sides from that corner (the shading rate's footprint).
+  struct Footprint {
+    float dsdx = 0, dtdx = 0, dsdy = 0, dtdy = 0;
+  };
+  std::vector<Footprint> footprint;
+  TextureLookup::Map map;
+  if (c.textures && shader.kind == SurfaceKind::PaintedPlastic && !shader.textureName.empty()) {
+    map = c.textures->find(shader.textureName);
+    footprint.resize(nV);
+    std::vector<uint8_t> set(nV, 0);
+    // The grid's corners have moved to `out` already (shadeBatch).
+    for (size_t m = 0; m + 4 <= out.corners.size(); m += 4) {
+      const uint32_t* q = &out.corners[m];
+      const int n = q[3] == store::kNoCorner ? 3 : 4;
+      for (int k = 0; k < n; ++k) {
+        const uint32_t v = q[k], a = q[(k + 1) % n], b = q[(k + n - 1) % n];
+        if (v >= nV || a >= nV || b >= nV || set[v]) continue;
+        footprint[v] = {float(g.s[a] - g.s[v]), float(g.t[a] - g.t[v]), float(g.s[b] - g.s[v]), float(g.t[b] - g.t[v])};
+        set[v] = 1;
+      }
+    }
+  }
   out.attrs.resize(c.vars.size());
   for (size_t ai = 0; ai < c.vars.size(); ++ai) out.attrs[ai].resize(nV * size_t(store::componentCount(c.schema.attrs[ai].type)));
   for (size_t i = 0; i < nV; ++i) {
@@ -204,6 +230,10 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
     // Per-vertex colours are given over the primitive's own (u, v) square.
     in.Cs = hasCs ? bilinear(cornerCs, g.u[i], g.v[i]) : Cs0;
     in.Os = hasOs ? bilinear(cornerOs, g.u[i], g.v[i]) : Os0;
+    if (!footprint.empty()) {
+      const Footprint& f = footprint[i];
+      in.Cs *= c.textures->rgb(map, float(g.s[i]), float(g.t[i]), f.dsdx, f.dtdx, f.dsdy, f.dtdy);
+    }
     const SurfaceOutput so = shadeSurface(shader, in, lights);
     storeOutputs(c.vars, g, i, in, so, out.attrs);
   }
@@ -315,6 +345,27 @@ void shadeAndSend(const ShadeContext& c, GridSender& sender, Progress& progress)
                                      tbb::make_filter<BatchPtr, void>(tbb::filter_mode::serial_in_order, sendInOrder));
 }
 
+// The texture search path with relative entries taken from the RIB file's directory, which is
+// also searched when the scene gives no path.
+std::string textureSearchPath(const FrameScene& scene) {
+  const std::filesystem::path base = std::filesystem::path(scene.source).parent_path();
+  const std::string dir = base.empty() ? "." : base.string();
+  const std::string& given = scene.options.textureSearchPath;
+  if (given.empty()) return dir;
+  std::string out;
+  size_t from = 0;
+  while (from <= given.size()) {
+    size_t to = given.find(':', from);
+    if (to == std::string::npos) to = given.size();
+    std::string entry = given.substr(from, to - from);
+    if (entry == "@" || entry.empty()) entry = dir;  // "@": the default path
+    else if (entry.front() != '/') entry = (std::filesystem::path(dir) / entry).string();
+    out += (out.empty() ? "" : ":") + entry;
+    from = to + 1;
+  }
+  return out;
+}
+
 }  // namespace
 
 ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::GridSink& sink) {
@@ -331,11 +382,22 @@ ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::Gri
   context.lit.reserve(scene.lights.size());
   for (const auto& l : scene.lights) context.lit.push_back(resolveLight(l, iv.shadeAt));
   for (const auto& a : meta.schema.attrs) context.vars.push_back(varOf(a.name));
+  // Textures only when a surface asks for one (no texture system otherwise).
+  std::unique_ptr<TextureLookup> textures;
+  for (const auto& p : scene.prims) {
+    const SurfaceShader sh = p.attrs->surface.at(iv.shadeAt);
+    if (sh.kind == SurfaceKind::PaintedPlastic && !sh.textureName.empty()) {
+      textures = std::make_unique<TextureLookup>(textureSearchPath(scene));
+      break;
+    }
+  }
+  context.textures = textures.get();
 
   GridSender sender(scene, split, context.vars.size(), sink, stats);
   Progress progress(cat("shading ", scene.source.empty() ? "frame" : scene.source), split.flat.size());
   shadeAndSend(context, sender, progress);
   progress.finish();
+  if (textures) stats.textureLookups = textures->lookups(), stats.missingTextures = textures->missing().size();
   stats.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return stats;
 }

@@ -37,6 +37,8 @@ struct ShadeStats {
   uint64_t trimmedMicropolygons = 0;  // cut away by trim curves
   uint64_t forcedCuts = 0;            // leaf sides the split depth limit left unfinished (split.h): possible cracks
   uint64_t overBudgetPrimitives = 0;  // diced coarser for needing more than DiceOptions::maxMicropolygonsPerPrimitive
+  uint64_t textureLookups = 0;        // filtered texture lookups (shade/texture.h), one per textured vertex
+  uint64_t missingTextures = 0;       // textures that could not be read (shown magenta)
   double shadeAt = 0;
   double seconds = 0;
 };
