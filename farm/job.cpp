@@ -55,8 +55,15 @@ Job::Task Job::task(size_t index) const {
 }
 
 namespace {
+// Where tile `tile`'s images of kind "flat" or "deep" go: the output pattern's file name (its
+// placeholder kept) in the tile's directory.
+// Only the file name is expanded: a placeholder-like character in the job directory stays.
+std::string tileDirectory(const std::string& dir, size_t tile, const char* kind) { return dir + "/tiles/" + std::to_string(tile) + "/" + kind + "/"; }
+std::string tilePattern(const std::string& dir, size_t tile, const char* kind, const std::string& pattern) {
+  return tileDirectory(dir, tile, kind) + fs::path(pattern).filename().string();
+}
 std::string tilePath(const std::string& dir, size_t tile, const char* kind, const std::string& pattern, int64_t frame) {
-  return dir + "/tiles/" + std::to_string(tile) + "/" + kind + "/" + expandFramePattern(fs::path(pattern).filename().string(), frame);
+  return tileDirectory(dir, tile, kind) + expandFramePattern(fs::path(pattern).filename().string(), frame);
 }
 bool exists(const std::string& p) {
   std::error_code ec;
@@ -103,12 +110,9 @@ std::vector<std::string> Job::taskCommand(const Task& t, const std::vector<int64
   const Rect& c = t.crop;
   a.insert(a.end(), {"--crop", std::to_string(c.x0), std::to_string(c.x1), std::to_string(c.y0), std::to_string(c.y1)});
   const bool tiled = tiles() > 1;
-  auto tileDir = [&](const char* kind, const std::string& pattern) {
-    return dir + "/tiles/" + std::to_string(t.tile) + "/" + kind + "/" + fs::path(pattern).filename().string();
-  };
-  if (!output.empty()) a.insert(a.end(), {"-o", tiled ? tileDir("flat", output) : output});
+  if (!output.empty()) a.insert(a.end(), {"-o", tiled ? tilePattern(dir, t.tile, "flat", output) : output});
   if (!deep.empty()) {
-    a.insert(a.end(), {"--deep", tiled ? tileDir("deep", deep) : deep});
+    a.insert(a.end(), {"--deep", tiled ? tilePattern(dir, t.tile, "deep", deep) : deep});
     if (tiled) a.push_back("--deep-all-channels");  // the whole frame may need channels this tile does not
   }
   if (!tiled)
