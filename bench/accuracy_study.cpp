@@ -28,6 +28,8 @@
 #include <string>
 #include <vector>
 
+#include <glm/gtc/matrix_transform.hpp>
+
 #include "bench/bench_util.h"
 #include "resample/deep.h"
 #include "resample/resampler.h"
@@ -724,6 +726,60 @@ void studyMotionFactor(const std::string& out) {
   table("motionfactor", "motion factor", true, "micropolygons");
 }
 
+/// The demo with soft shadows: its key light given the angular size of a large, close sun (8°)
+/// and a rectangular area light (2 × 1 units, 5 above the floor) over the glossy balls.
+shade::FrameScene softShadowDemo() {
+  shade::FrameScene scene = shade::demoFrame(kDW, kDH);
+  for (shade::Light& l : scene.lights)
+    if (l.name == "shadowdistant") l.angle = 8 * 3.14159265358979 / 180;
+  shade::Light area;
+  area.name = "area", area.kind = shade::LightKind::Point, area.shape = shade::LightShape::Rect;
+  area.width = 2, area.height = 1, area.oneSided = true, area.radiance = true, area.shadows = true, area.intensity = 6;
+  area.from = glm::dvec3(0.0), area.to = glm::dvec3(0, 0, 1);
+  // Light space: centred over (3, 5, 6.5), +Z turned to world -y; then the demo's world → camera.
+  const glm::dmat4 place = glm::rotate(glm::translate(glm::dmat4(1.0), glm::dvec3(3, 5, 6.5)), 1.5707963267948966, glm::dvec3(1, 0, 0));
+  area.xform = scene.worldToCamera.then(shade::MotionXform(place));
+  scene.globalLights.push_back(uint32_t(scene.lights.size()));
+  scene.lights.push_back(area);
+  return scene;
+}
+
+void studyShadowSamples(const std::string& out) {
+  std::fprintf(stderr, "shadow samples\n");
+  const shade::FrameScene scene = softShadowDemo();
+  const std::string path = gTmp + "/acc_demo_shadow.mps";
+  auto specFor = [&](const std::shared_ptr<const store::StoreReader>& st, uint64_t seed) {
+    const double F = double(st->meta().frame);
+    return demoSpec({st}, ShutterModel::progressive(F, F + 1), 4, seed);
+  };
+  // Reference: 1024 rays a point, rendered with the same pixel samples as every point, so the
+  // error is the soft shadows' alone.
+  shade::ShadeOptions refOpt;
+  refOpt.shadowSamples = gQuick ? 256 : 1024;
+  shade::shadeToStore(scene, refOpt, path);
+  const Img ref = toImg(render(specFor(std::make_shared<const store::StoreReader>(path), 1)));
+  shade::ShadeOptions noShadows;
+  noShadows.shadows = false;
+  const double tNone = shadeStore(scene, noShadows, path);
+  for (int n : {1, 2, 4, 8, 16, 32, 64}) {
+    shade::ShadeOptions o;
+    o.shadowSamples = n;
+    const double ts = shadeStore(scene, o, path);
+    auto st = std::make_shared<const store::StoreReader>(path);
+    measure(
+        "shadowsamples", "rays per point", n, [&](uint64_t) { return specFor(st, 1); }, ref, 1, ts);
+  }
+  plot(out, "shadowsamples", "Soft shadows (demo, area + 8-degree sun): shading + 16-spp render time vs error");
+  gTables << "### Soft-shadow samples\n\nScene: the demo at " << kDW << "×" << kDH
+          << " with its key light made an 8° sun and a 2 × 1 rectangular area light added over the glossy balls, gaussian 2×2, 16 spp, one "
+             "seed. Knob: rays per shaded point towards each soft light (`shade --shadow-samples`). Error: against "
+          << refOpt.shadowSamples
+          << " rays rendered with the same pixel samples (the shadows' error alone). Seconds = shading (best of 3) + render (best of 3); the "
+             "same frame shaded with `--shadows off` takes "
+          << fmt(tNone, "%.3f") << " s to shade.\n\n";
+  table("shadowsamples", "rays");
+}
+
 void studyDeep(const std::string& out) {
   std::fprintf(stderr, "deep tolerance\n");
   auto st = std::make_shared<const store::StoreReader>(gTmp + "/acc_demo_once.mps");
@@ -804,6 +860,10 @@ std::string headlines() {
     h << "- **Motion factor 4** (demo): " << fmt(b->bytes, "%.0f") << " micropolygons instead of " << fmt(a->bytes, "%.0f") << ", " << fmt(b->seconds, "%.2f")
       << " s instead of " << fmt(a->seconds, "%.2f") << " s (shade + 16-spp render), error RMSE " << fmt(b->rmse, "%.1e") << " vs 16-spp noise "
       << fmt(n->rmse, "%.1e") << ".\n";
+  if (auto a = find("shadowsamples", "rays", -1, 4.0), b = find("shadowsamples", "rays", -1, 16.0), c = find("shadowsamples", "rays", -1, 64.0); a && b && c)
+    h << "- **Soft shadows** (demo with an area light and an 8° sun): 4 rays a point leave RMSE " << fmt(a->rmse, "%.1e") << " (" << fmt(a->seconds, "%.2f")
+      << " s), 16 rays " << fmt(b->rmse, "%.1e") << " (" << fmt(b->seconds, "%.2f") << " s), 64 rays " << fmt(c->rmse, "%.1e") << " ("
+      << fmt(c->seconds, "%.2f") << " s).\n";
   if (auto a = find("deep", "deep", -1, 0.0), b = find("deep", "deep", -1, 0.01); a && b)
     h << "- **Deep tolerance**: 0 → 0.01 shrinks the deep EXR from " << fmt(a->bytes / 1e6, "%.1f") << " MB to " << fmt(b->bytes / 1e6, "%.1f")
       << " MB; the flattened image stays within RMSE " << fmt(std::max(a->rmse, b->rmse), "%.0e") << " of the flat one at every tolerance.\n";
@@ -813,7 +873,7 @@ std::string headlines() {
 }  // namespace
 
 int main(int argc, char** argv) {
-  static const char* const kStudies[] = {"spp", "timebounds", "knots", "depth", "codec", "filter", "fields", "motionfactor", "deep"};
+  static const char* const kStudies[] = {"spp", "timebounds", "knots", "depth", "codec", "filter", "fields", "motionfactor", "shadowsamples", "deep"};
   auto usage = [](FILE* to) {
     std::fprintf(to,
                  "usage: accuracy_study OUTDIR [--quick] [--tmp DIR] [--only a,b]\n"
@@ -821,7 +881,7 @@ int main(int argc, char** argv) {
                  "(bench/accuracy_study.sh turns them into docs/accuracy.md).\n"
                  "  --quick     fewer samples and time steps (a smoke run)\n"
                  "  --tmp DIR   scratch directory for stores (default /tmp)\n"
-                 "  --only L    comma-separated studies: spp timebounds knots depth codec filter fields motionfactor deep\n");
+                 "  --only L    comma-separated studies: spp timebounds knots depth codec filter fields motionfactor shadowsamples deep\n");
   };
   if (argc >= 2 && (std::string(argv[1]) == "-h" || std::string(argv[1]) == "--help")) {
     usage(stdout);
@@ -868,6 +928,7 @@ int main(int argc, char** argv) {
     if (want("filter")) studyFilters(out);
     if (want("fields")) studyFields(out);
     if (want("motionfactor")) studyMotionFactor(out);
+    if (want("shadowsamples")) studyShadowSamples(out);
     if (want("deep") && std::filesystem::exists(gTmp + "/acc_demo_once.mps")) studyDeep(out);
   } catch (const std::exception& e) {
     std::fprintf(stderr, "accuracy_study: %s\n", e.what());

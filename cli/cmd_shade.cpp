@@ -20,6 +20,8 @@ struct ShadeCommand {
   std::string scene, output, interval, frames, fps = "24";
   double shadeAt = NAN, motionFactor = NAN, rateScale = 1.0, overscan = 0.1;
   int gridSize = 16;
+  std::string shadows = "on";
+  int shadowSamples = shade::ShadeOptions{}.shadowSamples;
   uint64_t primitiveBudget = shade::DiceOptions{}.maxMicropolygonsPerPrimitive;
 
   int run() const {
@@ -43,6 +45,10 @@ struct ShadeCommand {
     opt.dice.cullMargin = overscan;
     if (primitiveBudget < 1) fail("--primitive-budget", "must be at least 1");
     opt.dice.maxMicropolygonsPerPrimitive = primitiveBudget;
+    if (shadows != "on" && shadows != "off") fail("--shadows", "expected on or off, got '", shadows, "'");
+    opt.shadows = shadows == "on";
+    if (shadowSamples < 1 || shadowSamples > 4096) fail("--shadow-samples", "must be 1 to 4096");
+    opt.shadowSamples = shadowSamples;
     if (!store::parseRational(fps, opt.fps)) fail("--fps", "expected a frame rate such as 24, 25, 29.97 or 30000/1001, got '", fps, "'");
     std::vector<int64_t> wanted;
     if (!frames.empty()) wanted = parseFrameRange(frames, "--frame-range");
@@ -73,7 +79,9 @@ struct ShadeCommand {
                  " pieces culled (off screen, behind the eye or beyond the far plane), ", r.shade.eyeSplits, " eye splits, ", r.shade.droppedMicropolygons,
                  " micropolygons dropped at the near plane, ", r.shade.trimmedMicropolygons, " trimmed away, ", r.shade.forcedCuts,
                  " sides left unfinished by the split depth limit, ", frame.culledArchives, " delayed archives culled by their bound, ", r.shade.vertices,
-                 " vertices shaded, ", r.shade.textureLookups, " texture lookups (", r.shade.missingTextures, " textures missing)"));
+                 " vertices shaded, ", r.shade.textureLookups, " texture lookups (", r.shade.missingTextures, " textures missing), ",
+                 grouped(r.shade.shadowRays), " shadow rays against ", grouped(r.shade.shadowMicropolygons), " micropolygons (scene built in ",
+                 cat(std::round(r.shade.shadowBuildSeconds * 100) / 100), " s)"));
     });
     shade::readRibScene(scene, sceneBuilder, opt.dice.cullMargin);
     if (sceneBuilder.framesShaded() == 0) fail(scene, "no WorldBegin/WorldEnd block: nothing to shade");
@@ -111,6 +119,11 @@ void addShadeCommand(CLI::App& app, Registry& registry) {
   sub->add_option("--primitive-budget", cmd->primitiveBudget,
                   "Most micropolygons one primitive may take; past it (a surface edge-on under an extreme transform) its remaining pieces are diced "
                   "coarser, with a warning")
+      ->capture_default_str();
+  sub->add_option("--shadows", cmd->shadows,
+                  "Ray-traced shadows for the lights that ask for them (RIS lights, shadowname \"raytrace\", Attribute \"light\" \"shadows\"): on or off")
+      ->capture_default_str();
+  sub->add_option("--shadow-samples", cmd->shadowSamples, "Rays per shaded point towards an area light or a soft distant light (soft-shadow quality)")
       ->capture_default_str();
   registry.add(sub, [cmd] { return cmd->run(); });
 }

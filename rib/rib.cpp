@@ -80,6 +80,7 @@ std::string parseDeclaration(std::string_view text, bool withName, ParamDecl& ou
         ++k;
         break;
       }
+  if (k < w.size() && w[k] == "reference") d.reference = true, ++k;
   if (k >= w.size()) return "no type";
   std::string_view type = w[k++];
   size_t br = type.find('[');
@@ -270,8 +271,8 @@ std::vector<Param> Args::params(size_t first) const {
     if (j + 1 >= n) fail(cat("parameter '", token, "' has no value"));
     Param p;
     if (!reader_.lookup(token, p.decl)) {
-      // Exporters write parameters a reader cannot know (a shader's own, RIS connections such as
-      // "reference color"): the scene goes on without them, with one warning per (request, name).
+      // Exporters write parameters a reader cannot know (a shader's own, another renderer's
+      // attributes): the scene goes on without them, with one warning per (request, name).
       const std::string_view bare = hasSpace(token) ? std::string_view(token).substr(token.find_last_of(" \t\n") + 1) : std::string_view(token);
       warnOnce(cat("rib-param:", r_.name, ":", bare),
                cat(r_.where.str(), " (", r_.name, "): parameter '", token, "' ",
@@ -280,7 +281,7 @@ std::vector<Param> Args::params(size_t first) const {
       continue;
     }
     p.value = &r_.values[j + 1];
-    const bool isString = p.decl.type == ParamType::String;
+    const bool isString = p.decl.type == ParamType::String || p.decl.reference;
     const Value::Kind k = p.value->kind;
     const bool empty = k == Value::Kind::NumberArray && p.value->numbers.empty();
     if (isString && !(k == Value::Kind::String || k == Value::Kind::StringArray || empty)) fail(cat("parameter '", p.decl.name, "' must be given strings"));

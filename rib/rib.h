@@ -58,6 +58,9 @@ struct ParamDecl {
   StorageClass storage = StorageClass::Uniform;
   ParamType type = ParamType::Float;
   int arraySize = 1;  // [n] in the declaration
+  /// "reference color diffuseColor": a RIS connection, its value strings naming "handle:output"
+  /// of another node instead of numbers.
+  bool reference = false;
   /// Numbers per element: 1 float/integer, 3 point/vector/normal/color, 4 hpoint, 16 matrix.
   int components() const;
 };

@@ -8,7 +8,7 @@ packages=(
   libgtest-dev libbenchmark-dev
   openimageio-tools gnuplot-nox jq time
   slurm-wlm iproute2
-  libopenimageio-dev
+  libopenimageio-dev libembree-dev
 )
 missing=()
 for p in "${packages[@]}"; do

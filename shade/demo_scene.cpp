@@ -3,6 +3,8 @@
 
 #include <cmath>
 
+#include "shade/texture.h"
+
 namespace reshutter::shade {
 
 namespace {
@@ -163,6 +165,17 @@ void holdout(Scene& s) {
   s.attributeEnd();
 }
 
+void brickWall(Scene& s) {
+  s.attributeBegin();
+  s.identifier("brick wall");
+  s.surface("paintedplastic", {{"Ks", {0.1}}, {"roughness", {0.3}}, {"Kd", {0.9}}}, {{"texturename", demoBrickTexture()}});
+  // st runs across the wall and down it, 1.25 texture tiles high (ten courses of bricks).
+  Scene::VertexData vd;
+  vd.st = {{0.0, 0.0}, {2.5, 0.0}, {0.0, 1.25}, {2.5, 1.25}};
+  s.patch({dvec3(5.2, 2.5, 12), dvec3(10.2, 2.5, 12), dvec3(5.2, 0, 12), dvec3(10.2, 0, 12)}, vd);
+  s.attributeEnd();
+}
+
 void glossyRow(Scene& s) {
   const dvec3 colours[4] = {{0.95, 0.55, 0.1}, {0.25, 0.8, 0.35}, {0.2, 0.35, 0.95}, {0.9, 0.9, 0.92}};
   for (int i = 0; i < 4; ++i) {
@@ -195,16 +208,20 @@ void buildDemoScene(Scene& s, int width, int height) {
   s.worldBegin();
 
   s.lightSource("ambientlight", "ambient", {{"intensity", {0.12}}, {"lightcolor", {0.8, 0.85, 1.0}}});
-  s.lightSource("distantlight", "key", {{"intensity", {0.8}}, {"lightcolor", {1.0, 0.93, 0.82}}, {"from", {-6, 9, -5}}, {"to", {0, 0, 4}}});
+  // The key and the spot cast ray-traced shadows; the fill does not.
+  s.lightSource("shadowdistant", "key", {{"intensity", {0.8}}, {"lightcolor", {1.0, 0.93, 0.82}}, {"from", {-6, 9, -5}}, {"to", {0, 0, 4}}},
+                {{"shadowname", "raytrace"}});
   s.lightSource(
-      "spotlight", "spot",
-      {{"intensity", {45}}, {"lightcolor", {1.0, 0.95, 0.9}}, {"from", {3, 8, 0}}, {"to", {0.5, 0, 4}}, {"coneangle", {0.55}}, {"conedeltaangle", {0.2}}});
+      "shadowspot", "spot",
+      {{"intensity", {45}}, {"lightcolor", {1.0, 0.95, 0.9}}, {"from", {3, 8, 0}}, {"to", {0.5, 0, 4}}, {"coneangle", {0.55}}, {"conedeltaangle", {0.2}}},
+      {{"shadowname", "raytrace"}});
   s.lightSource("pointlight", "fill", {{"intensity", {12}}, {"lightcolor", {0.55, 0.65, 1.0}}, {"from", {-3, 3, -6}}});
 
   backdrop(s);
   checkerFloor(s);
   flag(s);
   glossyRow(s);
+  brickWall(s);
   spinningCube(s);
   tumblingTorus(s);
   flyingBall(s);

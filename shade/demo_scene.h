@@ -4,7 +4,9 @@
 // gradient backdrop (static), a red ball flying across the frame (fast linear motion, 2 knots),
 // a colour cube spinning through 90° (5 knots), a gold torus tumbling (3 knots), a flag waving
 // (a deforming mesh, 3 knots), a translucent cyan sphere drifting up (opacity 0.35), a matte
-// holdout sphere (a cut-out in the alpha), and a row of glossy plastic balls (highlights).
+// holdout sphere (a cut-out in the alpha), a row of glossy plastic balls (highlights) and a
+// brick wall (a texture, made on first use: shade/texture.h). The key and the spot cast
+// ray-traced shadows.
 // Every object carries an identifier, so object ids come out named.
 #pragma once
 

@@ -30,6 +30,15 @@ ParamMap numericParams(const std::vector<Param>& params) {
   return m;
 }
 
+/// String parameters by bare name (the first string of an array).
+std::map<std::string, std::string> stringParams(const std::vector<Param>& params) {
+  std::map<std::string, std::string> m;
+  for (const Param& p : params)
+    if (p.value && !p.decl.reference && p.value->kind == Value::Kind::String) m[p.decl.name] = p.value->string;
+    else if (p.value && !p.decl.reference && p.value->kind == Value::Kind::StringArray && !p.value->strings.empty()) m[p.decl.name] = p.value->strings.front();
+  return m;
+}
+
 const std::vector<double>* numbersOf(const Param& p) {
   if (!p.value || p.value->kind != Value::Kind::NumberArray) return nullptr;
   return &p.value->numbers;
@@ -121,7 +130,10 @@ RisNode risNode(const rib::Request& r, const Args& a, size_t first) {
   node.numbers = numericParams(params);
   for (const Param& p : params) {
     if (!p.value) continue;
-    if (p.value->kind == Value::Kind::String) node.strings[p.decl.name] = {p.value->string};
+    if (p.decl.reference) {
+      const std::string ref = p.value->kind == Value::Kind::String ? p.value->string : p.value->strings.empty() ? "" : p.value->strings[0];
+      if (!ref.empty()) node.references[p.decl.name] = ref;
+    } else if (p.value->kind == Value::Kind::String) node.strings[p.decl.name] = {p.value->string};
     else if (p.value->kind == Value::Kind::StringArray) node.strings[p.decl.name] = p.value->strings;
   }
   return node;
@@ -238,15 +250,12 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
   if (n == "DisplayChannel") return true;  // declarations only; Display's mode selects variables
   if (n == "Surface") {
     const std::vector<Param> params = a.params(1);
-    std::map<std::string, std::string> strings;
-    for (const Param& p : params)
-      if (p.value && p.value->kind == Value::Kind::String) strings[p.decl.name] = p.value->string;
-      else if (p.value && p.value->kind == Value::Kind::StringArray && !p.value->strings.empty()) strings[p.decl.name] = p.value->strings.front();
-    return s.surface(a.string(0), numericParams(params), strings), true;
+    return s.surface(a.string(0), numericParams(params), stringParams(params)), true;
   }
   if (n == "LightSource") {
     // The handle is a number (RI 3.2) or a string (3.3+); the parameter list follows it.
-    return s.lightSource(a.string(0), handleArg(r, 1), numericParams(a.params(2))), true;
+    const std::vector<Param> params = a.params(2);
+    return s.lightSource(a.string(0), handleArg(r, 1), numericParams(params), stringParams(params)), true;
   }
   if (n == "Illuminate") return s.illuminate(handleArg(r, 0), a.number(1) != 0), true;
   if (n == "GeometricApproximation") {
@@ -265,6 +274,21 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
         }
       return true;
     }
+    if (cls == "visibility" || cls == "light") {
+      // "visibility" "transmission": 0/1 (RenderMan 21+) or "opaque"/"Os"/"shader"/"transparent"
+      // (earlier); "light" "shadows" "on" (BMRT, PRMan's ray-traced shadows for lights below).
+      for (const Param& p : a.params(1)) {
+        if (!p.value) continue;
+        const bool isString = p.value->kind == Value::Kind::String || p.value->kind == Value::Kind::StringArray;
+        const std::string str = p.value->kind == Value::Kind::String ? p.value->string : isString && !p.value->strings.empty() ? p.value->strings[0] : "";
+        bool on;
+        if (isString) on = !str.empty() && str != "transparent" && str != "off";
+        else on = p.value->kind == Value::Kind::Number ? p.value->number != 0 : !p.value->numbers.empty() && p.value->numbers[0] != 0;
+        if (cls == "visibility" && p.decl.name == "transmission") s.transmission(on);
+        if (cls == "light" && p.decl.name == "shadows") s.lightShadows(on);
+      }
+      return true;
+    }
     if (cls == "trimcurve") {
       for (const Param& p : a.params(1))
         if (p.decl.name == "sense" && p.value) {
@@ -281,10 +305,9 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
     // RIS requests are kept for the shading pass, never a reason to stop (Hider: the
     // re-sampler is the hider; its type and settings are kept with the options).
     const size_t first = n == "Hider" ? 1 : 2;
+    // Bxdf and Light map onto the built-in shaders and lights (shade/ris.h), which warn for
+    // types they do not know; a Pattern is read where a Bxdf connects to it.
     s.ris(risNode(r, a, first));
-    if (n == "Bxdf" || n == "Light" || n == "Pattern")
-      warnOnce(cat("ris:", n), cat(s.where, ": RIS ", n, " \"", a.string(0), "\" is kept with the scene, but the built-in shading does not evaluate RIS ",
-                                   n == "Light" ? "lights yet (the frame is lit by LightSource lights only)" : "materials yet (the current Surface shades)"));
     return true;
   }
   if (n == "Option") {

@@ -11,6 +11,7 @@
 
 #include "common/error.h"
 #include "common/log.h"
+#include "shade/ris.h"
 
 namespace reshutter::shade {
 
@@ -128,10 +129,12 @@ bool CubicBasis::named(const std::string& name, CubicBasis& b) {
 
 bool Light::named(const std::string& name, Light& l) {
   l = Light{};
+  l.name = name;
+  // The shadow* lights are their plain lights with a shadow map; here they trace rays instead.
   if (name == "ambientlight") l.kind = LightKind::Ambient;
-  else if (name == "distantlight") l.kind = LightKind::Distant;
-  else if (name == "pointlight") l.kind = LightKind::Point;
-  else if (name == "spotlight") l.kind = LightKind::Spot;
+  else if (name == "distantlight" || name == "shadowdistant") l.kind = LightKind::Distant;
+  else if (name == "pointlight" || name == "shadowpoint") l.kind = LightKind::Point;
+  else if (name == "spotlight" || name == "shadowspot") l.kind = LightKind::Spot;
   else return false;
   return true;
 }
@@ -467,19 +470,37 @@ void Scene::surface(const std::string& name, const ParamMap& params, const std::
   mutableAttrs().surface = Animated<SurfaceShader>(s);
 }
 
-void Scene::lightSource(const std::string& name, const std::string& handle, const ParamMap& params) {
+void Scene::lightSource(const std::string& name, const std::string& handle, const ParamMap& params, const std::map<std::string, std::string>& strings) {
   Light l;
   if (!Light::named(name, l)) {
     warnOnce(cat("light:", name), cat(where, ": light shader '", name, "' is not built in; skipped"));
     return;
   }
   applyParams(l, params);
-  l.xform = cur_.ctm;
-  uint32_t idx = uint32_t(frame_.lights.size());
-  frame_.lights.push_back(l);
-  if (!handle.empty()) lightHandles_[handle] = idx;
-  mutableAttrs().lights.push_back(idx);
+  // Shadows where the light asks for them: a shadow map name ("raytrace", or a map this pass
+  // cannot read, so rays stand in for it), "raytraceshadow", or Attribute "light" "shadows".
+  l.shadows = cur_.attrs->lightShadows;
+  for (const char* map : {"shadowname", "sfpx", "sfnx", "sfpy", "sfny", "sfpz", "sfnz"})
+    if (auto it = strings.find(map); it != strings.end() && !it->second.empty()) {
+      l.shadows = true;
+      if (it->second != "raytrace")
+        warnOnce(cat("shadowmap:", name), cat(where, ": ", name, " shadow map '", it->second, "' is not read; its shadows are ray traced instead"));
+    }
+  if (auto it = params.find("raytraceshadow"); it != params.end() && !it->second.empty() && it->second[0] != 0) l.shadows = true;
+  addLight(std::move(l), handle, false);
 }
+
+void Scene::addLight(Light l, const std::string& handle, bool global) {
+  l.xform = cur_.ctm;
+  const auto idx = uint32_t(frame_.lights.size());
+  frame_.lights.push_back(std::move(l));
+  if (!handle.empty()) lightHandles_[handle] = idx;
+  if (global) frame_.globalLights.push_back(idx);
+  else mutableAttrs().lights.push_back(idx);
+}
+
+void Scene::transmission(bool on) { mutableAttrs().transmission = on; }
+void Scene::lightShadows(bool on) { mutableAttrs().lightShadows = on; }
 
 void Scene::illuminate(const std::string& handle, bool on) {
   auto it = lightHandles_.find(handle);
@@ -513,9 +534,18 @@ void Scene::ris(RisNode node) {
     options_.risOptions.push_back(std::move(node));
     return;
   }
-  const bool bxdf = node.request == "Bxdf";
+  // RIS materials and lights become the built-in ones (shade/ris.h). A RIS light lights every
+  // primitive, declared before it or after, as RIS lights do.
+  if (node.request == "Bxdf") {
+    const SurfaceShader s = risMaterial(node, frame_.risNodes, where);
+    if (motionTake(Pending::Surface)) motion_.surfaces.push_back(s);
+    else mutableAttrs().surface = Animated<SurfaceShader>(s);
+    mutableAttrs().bxdf = uint32_t(frame_.risNodes.size() + 1);
+  } else if (node.request == "Light") {
+    Light l;
+    if (risLight(node, l, where)) addLight(std::move(l), node.handle, true);
+  }
   frame_.risNodes.push_back(std::move(node));
-  if (bxdf) mutableAttrs().bxdf = uint32_t(frame_.risNodes.size());
 }
 
 void Scene::skippedPrimitive(std::string_view request) {

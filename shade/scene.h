@@ -16,6 +16,7 @@
 #include <functional>
 #include <map>
 #include <memory>
+#include <optional>
 #include <string>
 #include <string_view>
 #include <vector>
@@ -62,13 +63,20 @@ struct SurfaceShader {
   SurfaceKind kind = SurfaceKind::DefaultSurface;
   double Ka = 1, Kd = 0.5, Ks = 0.5, roughness = 0.1;
   glm::dvec3 specularColor{1.0};
-  std::string textureName;  // paintedplastic's "texturename": Cs is multiplied by texture(textureName) ("" = none)
+  std::string textureName;    // paintedplastic's "texturename", a RIS PxrTexture's "filename": Cs × texture ("" = none)
+  bool textureFlipT = false;  // look up at 1 - t (PxrTexture's default "invertT")
+  /// A RIS material's own colour and presence: they replace the primitive's Cs and Os (RIS
+  /// materials ignore Color and Opacity unless connected to them).
+  std::optional<glm::dvec3> color, opacity;
   /// RenderMan's defaults for `name`; false (and defaultsurface) for a shader not built in.
   static bool named(const std::string& name, SurfaceShader& out);
   SurfaceShader lerp(const SurfaceShader& b, double w) const;
 };
 
 enum class LightKind : uint8_t { Ambient, Distant, Point, Spot };
+/// What a light's shadow rays aim at: its centre (Point), or points spread over an emitter in
+/// light space, centred at the origin and facing +Z (RenderMan's RIS lights' convention).
+enum class LightShape : uint8_t { Point, Sphere, Disk, Rect };
 
 /// A light source as declared (parameters in its shader space; `xform` maps that to camera space).
 struct Light {
@@ -79,6 +87,13 @@ struct Light {
   double coneAngle = 0.5235987755982988;        // radians(30)
   double coneDeltaAngle = 0.08726646259971647;  // radians(5)
   double beamDistribution = 2;
+  LightShape shape = LightShape::Point;
+  double width = 0, height = 0;  // Sphere, Disk: diameter in `width`; Rect: its sides (light space)
+  double angle = 0;              // Distant: the source's angular diameter in radians (soft shadows)
+  bool oneSided = false;         // Disk, Rect: emits towards +Z only, with the emitter's cosine
+  bool radiance = false;         // intensity is radiance: Cl also scales with the emitter's area
+  bool shadows = false;          // traces shadow rays (shade/shadows.h)
+  std::string name;              // the shader ("spotlight", "PxrRectLight"), for messages
   MotionXform xform;
   /// RenderMan's defaults for `name`; false for a light not built in.
   static bool named(const std::string& name, Light& out);
@@ -93,6 +108,7 @@ struct RisNode {
   std::string request, type, handle;
   ParamMap numbers;
   std::map<std::string, std::vector<std::string>> strings;
+  std::map<std::string, std::string> references;  // "reference color diffuseColor": "handle:resultRGB"
 };
 void applyParams(SurfaceShader& s, const ParamMap& params);
 void applyParams(Light& l, const ParamMap& params);
@@ -124,9 +140,11 @@ struct Attributes {
   double shadingRate = 1.0;
   double motionFactor = 0.0;  // GeometricApproximation "motionfactor"
   bool matte = false, twoSided = true;
-  bool orientationRH = false;  // Orientation: "lh" (RenderMan's default, "outside") or "rh"
-  uint32_t objectId = 0;       // 0: unnamed; otherwise 1 + index into FrameScene::objectNames
-  uint32_t bxdf = 0;           // 0: none; otherwise 1 + index into FrameScene::risNodes
+  bool orientationRH = false;                              // Orientation: "lh" (RenderMan's default, "outside") or "rh"
+  bool transmission = true;                                // Attribute "visibility" "transmission": casts shadows
+  bool lightShadows = false;                               // Attribute "light" "shadows" "on": lights declared under it cast shadows
+  uint32_t objectId = 0;                                   // 0: unnamed; otherwise 1 + index into FrameScene::objectNames
+  uint32_t bxdf = 0;                                       // 0: none; otherwise 1 + index into FrameScene::risNodes
   std::shared_ptr<const std::array<CubicBasis, 2>> basis;  // Basis (u, v); null: bezier, bezier
   std::shared_ptr<const TrimLoops> trim;                   // TrimCurve (NuPatch only); null: none
   bool trimKeepsInside = false;                            // Attribute "trimcurve" "sense" "outside"
@@ -161,7 +179,7 @@ struct Shape {
 /// One span of a NuPatch: the knots around it and the part of its parameter range it covers.
 struct NurbsSpan {
   int orderU = 4, orderV = 4;
-  std::vector<double> knotsU, knotsV;  // 2 · order knots each; the span is [knots[order-1], knots[order])
+  std::vector<double> knotsU, knotsV;     // 2 · order knots each; the span is [knots[order-1], knots[order])
   double u0 = 0, u1 = 1, v0 = 0, v1 = 1;  // the primitive's (0..1) maps onto [u0, u1] × [v0, v1]
 };
 
@@ -191,7 +209,7 @@ struct Primitive {
   int ptexFace = 0;                                        // Subdiv: which of its faces
   bool orthographicView = false;                           // Curve, Point: how they face the camera
   std::shared_ptr<const NurbsSpan> nurbs;                  // Nurbs: its knots and range
-  bool flipNormals = false;  // orientation differs from the coordinate system's handedness
+  bool flipNormals = false;                                // orientation differs from the coordinate system's handedness
 
   /// The shape at time t: keys interpolated; camera-facing kinds get the eye at t.
   Shape shapeAt(double t) const;
@@ -235,11 +253,12 @@ struct FrameScene {
   std::vector<Light> lights;
   std::vector<Primitive> prims;
   std::vector<std::string> objectNames;
-  std::vector<RisNode> risNodes;  // Bxdf, Light, Pattern of the world block
+  std::vector<RisNode> risNodes;       // Bxdf, Light, Pattern of the world block
+  std::vector<uint32_t> globalLights;  // lights that illuminate every primitive (RIS lights)
   /// Primitives the scene gave that the shading pass cannot make, by request ("Curves": 3).
   std::map<std::string, uint64_t> skipped;
   uint64_t culledArchives = 0;  // delayed archives whose bound is out of view: never read
-  std::string source;  // "scene.rib", "built-in demo"
+  std::string source;           // "scene.rib", "built-in demo"
 };
 
 /// The RenderMan-style builder. Calls mirror the RI; inside motionBegin/motionEnd every call of
@@ -289,7 +308,9 @@ class Scene {
   void opacity(const glm::dvec3& o);
   void surface(const std::string& name, const ParamMap& params, const std::map<std::string, std::string>& strings = {});
   void textureSearchPath(const std::string& path);
-  void lightSource(const std::string& name, const std::string& handle, const ParamMap& params);
+  void lightSource(const std::string& name, const std::string& handle, const ParamMap& params, const std::map<std::string, std::string>& strings = {});
+  void transmission(bool on);
+  void lightShadows(bool on);
   void illuminate(const std::string& handle, bool on);
   void shadingRate(double r);
   void motionFactor(double f);
@@ -389,14 +410,14 @@ class Scene {
   struct ObjectDefinition {
     std::shared_ptr<const Attributes> attrsAtBegin;  // prims still carrying these take the instance's
     std::vector<Primitive> prims;
-    std::map<std::string, uint64_t> skipped;
-  uint64_t culledArchives = 0;  // delayed archives whose bound is out of view: never read  // primitives the definition could not make
+    std::map<std::string, uint64_t> skipped;  // primitives the definition could not make
   };
   struct State {
     std::shared_ptr<Attributes> attrs;
     MotionXform ctm;
     Block block = Block::Attribute;  // the block whose Begin pushed this state
   };
+  void addLight(Light l, const std::string& handle, bool global);
   void push(Block b);
   State pop(Block b, const char* request);
 

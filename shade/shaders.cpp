@@ -31,6 +31,20 @@ LitLight resolveLight(const Light& l, double time) {
   r.cosOuter = std::cos(l.coneAngle);
   r.cosInner = std::cos(l.coneAngle - l.coneDeltaAngle);
   r.beam = l.beamDistribution;
+  r.oneSided = l.oneSided;
+  r.shadows = l.shadows;
+  r.shape = l.shape;
+  r.tanHalfAngle = std::tan(std::clamp(l.angle, 0.0, 3.0) / 2);
+  if (l.shape != LightShape::Point) {
+    r.halfU = glm::dvec3(m * glm::dvec4(l.width / 2, 0, 0, 0));
+    r.halfV = glm::dvec3(m * glm::dvec4(0, (l.shape == LightShape::Rect ? l.height : l.width) / 2, 0, 0));
+    if (l.radiance) {
+      // The emitter's area in camera space (a sphere's: its projected disc).
+      const double cross = glm::length(glm::cross(r.halfU, r.halfV));
+      const double pi = 3.14159265358979323846;
+      r.Cl0 *= l.shape == LightShape::Rect ? 4 * cross : l.shape == LightShape::Disk ? pi * cross : pi * glm::dot(r.halfU, r.halfU);
+    }
+  }
   return r;
 }
 
@@ -46,6 +60,11 @@ bool illuminate(const LitLight& l, const glm::dvec3& P, glm::dvec3& L, glm::dvec
       double d2 = glm::dot(L, L);
       if (!(d2 > 0)) return false;
       Cl = l.Cl0 / d2;
+      if (l.oneSided) {  // an area light's face: the emitter's cosine towards P
+        const double emit = -glm::dot(L, l.axis) / std::sqrt(d2);
+        if (!(emit > 0)) return false;
+        Cl *= emit;
+      }
       return true;
     }
     case LightKind::Spot: {

@@ -29,8 +29,16 @@ struct LitLight {
   LightKind kind = LightKind::Point;
   glm::dvec3 position{0.0};  // point, spot
   glm::dvec3 axis{0, 0, 1};  // distant: direction the light travels; spot: cone axis (unit)
-  glm::dvec3 Cl0{1.0};       // intensity · lightcolor
+  glm::dvec3 Cl0{1.0};       // intensity · lightcolor (area lights: × the emitter's area)
   double cosOuter = 0, cosInner = 0, beam = 2;
+  bool oneSided = false;  // emits towards `axis` only, with the emitter's cosine
+  // What shadow rays aim at (shade/shadows.h): the centre, or an emitter around `position`
+  // spanned by the half-extent vectors (sphere, disk: radius vectors), or, for a distant light,
+  // directions within its angular radius.
+  bool shadows = false;
+  LightShape shape = LightShape::Point;
+  glm::dvec3 halfU{0.0}, halfV{0.0};
+  double tanHalfAngle = 0;
 };
 
 LitLight resolveLight(const Light& light, double time);

@@ -18,7 +18,9 @@
 #include "common/error.h"
 #include "common/log.h"
 #include "common/progress.h"
+#include "common/random.h"
 #include "shade/shaders.h"
+#include "shade/shadows.h"
 #include "shade/texture.h"
 
 namespace reshutter::shade {
@@ -52,7 +54,7 @@ struct GridOut {
 struct Batch {
   size_t first = 0, count = 0;  // into the flattened leaf list
   std::vector<GridOut> grids;
-  uint64_t dropped = 0, trimmed = 0;
+  uint64_t dropped = 0, trimmed = 0, shadowRays = 0;
 };
 
 using BatchPtr = std::shared_ptr<Batch>;
@@ -164,6 +166,8 @@ struct ShadeContext {
   double nearClip;
   bool perspective;
   const TextureLookup* textures = nullptr;  // only when some surface has a texture
+  const ShadowScene* shadows = nullptr;     // only when a light asks for shadows
+  int shadowSamples = 16;
 };
 
 /// Vertex i's output variables into `attrs` (parallel to the schema).
@@ -190,13 +194,18 @@ void storeOutputs(const std::vector<Var>& vars, const DicedGrid& g, size_t i, co
 }
 
 /// Shades every vertex of the diced grid `g` of primitive `p` into `out.attrs`.
-void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g, std::span<const LitLight> lights, GridOut& out) {
+void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g, std::span<const LitLight> lights, uint64_t leafIndex, GridOut& out,
+                   uint64_t& shadowRays) {
   const Attributes& a = *p.attrs;
   const SurfaceShader shader = a.surface.at(c.shadeAt);
-  const glm::dvec3 Cs0 = a.color.at(c.shadeAt), Os0 = a.opacity.at(c.shadeAt);
+  // A RIS material's own colour and presence replace the primitive's.
+  const glm::dvec3 Cs0 = shader.color ? *shader.color : a.color.at(c.shadeAt), Os0 = shader.opacity ? *shader.opacity : a.opacity.at(c.shadeAt);
   std::array<glm::dvec3, 4> cornerCs, cornerOs;
-  const bool hasCs = p.mesh && p.corners(p.mesh->Cs, cornerCs);
-  const bool hasOs = p.mesh && p.corners(p.mesh->Os, cornerOs);
+  const bool hasCs = !shader.color && p.mesh && p.corners(p.mesh->Cs, cornerCs);
+  const bool hasOs = !shader.opacity && p.mesh && p.corners(p.mesh->Os, cornerOs);
+  const bool lit = shader.kind == SurfaceKind::Matte || shader.kind == SurfaceKind::Metal || shader.kind == SurfaceKind::Plastic ||
+                   shader.kind == SurfaceKind::PaintedPlastic;
+  const bool traces = c.shadows && lit && std::any_of(lights.begin(), lights.end(), [](const LitLight& l) { return l.shadows; });
   const size_t nV = g.numVertices;
   // A textured surface filters each vertex's lookup over the st span of a micropolygon it
   // corners: its two sides from that corner (the shading rate's footprint).
@@ -205,7 +214,24 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
   };
   std::vector<Footprint> footprint;
   TextureLookup::Map map;
-  if (c.textures && shader.kind == SurfaceKind::PaintedPlastic && !shader.textureName.empty()) {
+  // A shadow ray starts half a micropolygon off the surface (the diced surface cuts corners of
+  // the true one by about that much).
+  std::vector<float> bias;
+  if (traces) {
+    bias.assign(nV, 0.f);
+    for (size_t m = 0; m + 4 <= out.corners.size(); m += 4) {
+      const uint32_t* q = &out.corners[m];
+      const int n = q[3] == store::kNoCorner ? 3 : 4;
+      for (int k = 0; k < n; ++k) {
+        const uint32_t v = q[k], w = q[(k + 1) % n];
+        if (v >= nV || w >= nV) continue;
+        const float half = float(0.5 * glm::length(g.P[w] - g.P[v]));
+        bias[v] = std::max(bias[v], half), bias[w] = std::max(bias[w], half);
+      }
+    }
+  }
+  std::vector<LitLight> shadowed(lights.begin(), lights.end());
+  if (c.textures && !shader.textureName.empty()) {
     map = c.textures->find(shader.textureName);
     footprint.resize(nV);
     std::vector<uint8_t> set(nV, 0);
@@ -232,9 +258,28 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
     in.Os = hasOs ? bilinear(cornerOs, g.u[i], g.v[i]) : Os0;
     if (!footprint.empty()) {
       const Footprint& f = footprint[i];
-      in.Cs *= c.textures->rgb(map, float(g.s[i]), float(g.t[i]), f.dsdx, f.dtdx, f.dsdy, f.dtdy);
+      const float t = shader.textureFlipT ? 1.f - float(g.t[i]) : float(g.t[i]);
+      in.Cs *= c.textures->rgb(map, float(g.s[i]), t, f.dsdx, shader.textureFlipT ? -f.dtdx : f.dtdx, f.dsdy, shader.textureFlipT ? -f.dtdy : f.dtdy);
     }
-    const SurfaceOutput so = shadeSurface(shader, in, lights);
+    std::span<const LitLight> vertexLights = lights;
+    if (traces) {
+      // Each shadowed light's Cl scaled by the share of it that reaches this point; lights
+      // behind the point's shading hemisphere add nothing and trace nothing.
+      const double nlen = glm::length(in.N);
+      const glm::dvec3 Nn = nlen > 0 ? in.N / nlen : glm::dvec3(0, 0, -1);
+      const glm::dvec3 Nf = glm::dot(in.I, in.Ng) > 0 ? -Nn : Nn;
+      const glm::dvec3 Ng = glm::dot(in.Ng, in.Ng) > 0 ? glm::normalize(in.Ng) : Nf;
+      const double floorBias = 1e-6 * std::max({std::abs(in.P.x), std::abs(in.P.y), std::abs(in.P.z), 1.0});
+      for (size_t li = 0; li < lights.size(); ++li) {
+        shadowed[li] = lights[li];
+        glm::dvec3 L, Cl;
+        if (!lights[li].shadows || !illuminate(lights[li], in.P, L, Cl) || !(glm::dot(L, Nf) > 0)) continue;
+        const uint64_t seed = hashCombine(hashCombine(leafIndex, i), li);
+        shadowed[li].Cl0 *= lightVisibility(*c.shadows, lights[li], in.P, Ng, std::max(double(bias[i]), floorBias), c.shadowSamples, seed, shadowRays);
+      }
+      vertexLights = shadowed;
+    }
+    const SurfaceOutput so = shadeSurface(shader, in, vertexLights);
     storeOutputs(c.vars, g, i, in, so, out.attrs);
   }
 }
@@ -243,6 +288,7 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
 void shadeBatch(const ShadeContext& c, Batch& b) {
   DicedGrid g;
   std::vector<LitLight> lights;
+  uint64_t shadowRays = 0;
   b.grids.resize(b.count);
   for (size_t n = 0; n < b.count; ++n) {
     const auto [pi, leaf] = c.split.flat[b.first + n];
@@ -253,14 +299,17 @@ void shadeBatch(const ShadeContext& c, Batch& b) {
     lights.clear();
     for (uint32_t li : p.attrs->lights)
       if (li < c.lit.size()) lights.push_back(c.lit[li]);
+    for (uint32_t li : c.scene.globalLights)
+      if (li < c.lit.size()) lights.push_back(c.lit[li]);
     GridOut& out = b.grids[n];
     out.prim = pi;
     out.numVertices = g.numVertices;
     out.positions = std::move(g.positions);
     out.corners = std::move(g.corners);
-    shadeVertices(c, p, g, lights, out);
+    shadeVertices(c, p, g, lights, b.first + n, out, shadowRays);
     g = DicedGrid{};
   }
+  b.shadowRays = shadowRays;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -274,6 +323,7 @@ class GridSender {
   void send(Batch& b) {
     stats_.droppedMicropolygons += b.dropped;
     stats_.trimmedMicropolygons += b.trimmed;
+    stats_.shadowRays += b.shadowRays;
     for (GridOut& go : b.grids)
       if (!go.corners.empty()) sendGrid(go);
   }
@@ -345,6 +395,37 @@ void shadeAndSend(const ShadeContext& c, GridSender& sender, Progress& progress)
                                      tbb::make_filter<BatchPtr, void>(tbb::filter_mode::serial_in_order, sendInOrder));
 }
 
+/// Whether some lit surface is illuminated by a light that asks for shadows.
+bool wantsShadows(const FrameScene& scene, std::span<const LitLight> lit, double shadeAt) {
+  auto shadowing = [&](uint32_t li) { return li < lit.size() && lit[li].shadows; };
+  const bool global = std::any_of(scene.globalLights.begin(), scene.globalLights.end(), shadowing);
+  for (const Primitive& p : scene.prims) {
+    const SurfaceKind k = p.attrs->surface.at(shadeAt).kind;
+    if (k == SurfaceKind::Constant || k == SurfaceKind::DefaultSurface) continue;
+    if (global || std::any_of(p.attrs->lights.begin(), p.attrs->lights.end(), shadowing)) return true;
+  }
+  return false;
+}
+
+/// The frame's micropolygons at the shading time, every leaf of a primitive that casts shadows
+/// diced again (the shading pass's grids stream out; keeping them all would hold the frame).
+std::unique_ptr<ShadowScene> buildShadowScene(const ShadeContext& c) {
+  std::vector<ShadowScene::Piece> pieces(c.split.flat.size());
+  tbb::parallel_for(tbb::blocked_range<size_t>(0, pieces.size(), 8), [&](const tbb::blocked_range<size_t>& r) {
+    DicedGrid g;
+    for (size_t i = r.begin(); i != r.end(); ++i) {
+      const auto [pi, leaf] = c.split.flat[i];
+      const Primitive& p = c.scene.prims[pi];
+      if (!p.attrs->transmission) continue;
+      diceLeaf(p, *leaf, c.split.knots[pi], c.shadeAt, c.nearClip, c.perspective, g);
+      pieces[i].P.assign(g.P.begin(), g.P.end());
+      pieces[i].corners = std::move(g.corners);
+      g = DicedGrid{};
+    }
+  });
+  return std::make_unique<ShadowScene>(pieces);
+}
+
 // The texture search path with relative entries taken from the RIB file's directory, which is
 // also searched when the scene gives no path.
 std::string textureSearchPath(const FrameScene& scene) {
@@ -386,12 +467,22 @@ ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::Gri
   std::unique_ptr<TextureLookup> textures;
   for (const auto& p : scene.prims) {
     const SurfaceShader sh = p.attrs->surface.at(iv.shadeAt);
-    if (sh.kind == SurfaceKind::PaintedPlastic && !sh.textureName.empty()) {
+    if (!sh.textureName.empty()) {
       textures = std::make_unique<TextureLookup>(textureSearchPath(scene));
       break;
     }
   }
   context.textures = textures.get();
+  // Shadows only when a light asks for them and lights something that reflects it.
+  std::unique_ptr<ShadowScene> shadows;
+  if (o.shadows && wantsShadows(scene, context.lit, iv.shadeAt)) {
+    const auto t0 = std::chrono::steady_clock::now();
+    shadows = buildShadowScene(context);
+    stats.shadowMicropolygons = shadows->micropolygons();
+    stats.shadowBuildSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+  }
+  context.shadows = shadows.get();
+  context.shadowSamples = std::max(o.shadowSamples, 1);
 
   GridSender sender(scene, split, context.vars.size(), sink, stats);
   Progress progress(cat("shading ", scene.source.empty() ? "frame" : scene.source), split.flat.size());

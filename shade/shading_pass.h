@@ -29,6 +29,11 @@ struct ShadeOptions {
   DiceOptions dice;
   store::Rational fps{24, 1};
   int tileSize = 32;
+  /// Ray-traced shadows for the lights that ask for them (false: every light unshadowed).
+  bool shadows = true;
+  /// Rays per shaded point towards an area light or a distant light with an angular size: the
+  /// soft-shadow quality knob (docs/accuracy.md has its error against time).
+  int shadowSamples = 16;
 };
 
 struct ShadeStats {
@@ -39,6 +44,9 @@ struct ShadeStats {
   uint64_t overBudgetPrimitives = 0;  // diced coarser for needing more than DiceOptions::maxMicropolygonsPerPrimitive
   uint64_t textureLookups = 0;        // filtered texture lookups (shade/texture.h), one per textured vertex
   uint64_t missingTextures = 0;       // textures that could not be read (shown magenta)
+  uint64_t shadowMicropolygons = 0;   // in the shadow scene (0: no light asked for shadows)
+  uint64_t shadowRays = 0;            // traced towards lights
+  double shadowBuildSeconds = 0;      // dicing the frame for the shadow scene and building its BVH
   double shadeAt = 0;
   double seconds = 0;
 };

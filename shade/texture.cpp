@@ -2,11 +2,18 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
+#include <filesystem>
+#include <system_error>
 
+#include <OpenImageIO/imagebuf.h>
+#include <OpenImageIO/imagebufalgo.h>
 #include <OpenImageIO/texture.h>
+#include <unistd.h>
 
 #include "common/error.h"
 #include "common/log.h"
+#include "common/random.h"
 
 namespace reshutter::shade {
 
@@ -72,6 +79,37 @@ uint64_t TextureLookup::lookups() const { return impl_->lookups.load(); }
 std::set<std::string> TextureLookup::missing() const {
   std::lock_guard<std::mutex> lock(impl_->mutex);
   return impl_->missing;
+}
+
+std::string demoBrickTexture() {
+  // The version in the name changes with the pattern, so an old file is never taken for it.
+  const std::filesystem::path path = std::filesystem::temp_directory_path() / "reshutter-demo-bricks-v1.tx";
+  std::error_code ec;
+  if (std::filesystem::exists(path, ec)) return path.string();
+  constexpr int size = 512, rows = 8, perRow = 4;
+  OIIO::ImageBuf image(OIIO::ImageSpec(size, size, 3, OIIO::TypeDesc::FLOAT));
+  const float mortar[3] = {0.72f, 0.70f, 0.66f};
+  for (int y = 0; y < size; ++y)
+    for (int x = 0; x < size; ++x) {
+      const double v = double(y) / size * rows, row = std::floor(v);
+      const double u = double(x) / size * perRow + (int(row) % 2 ? 0.5 : 0.0), col = std::floor(u);
+      const double fu = u - col, fv = v - row;
+      const bool joint = fu < 0.04 || fu > 0.96 || fv < 0.07 || fv > 0.93;
+      // Each brick its own shade of red-brown, from a hash of its place (wrapping with the tile).
+      const double h = toUnitDouble(mix64(uint64_t(row) * 131 + uint64_t(int(col) % perRow)));
+      const float brick[3] = {float(0.45 + 0.25 * h), float(0.16 + 0.10 * h), float(0.10 + 0.06 * h)};
+      image.setpixel(x, y, joint ? mortar : brick, 3);
+    }
+  // Written under a name of this process's own, then renamed: a reader never sees half a file.
+  const std::filesystem::path tmp =
+      std::filesystem::temp_directory_path() / cat("reshutter-demo-bricks-v1.", ::getpid(), ".tmp.tx");  // maketx picks the format by extension
+  OIIO::ImageSpec config;
+  config.attribute("maketx:filtername", "box");
+  if (!OIIO::ImageBufAlgo::make_texture(OIIO::ImageBufAlgo::MakeTxTexture, image, tmp.string(), config))
+    fail(tmp.string(), "cannot write the demo texture: ", OIIO::geterror());
+  std::filesystem::rename(tmp, path, ec);
+  if (ec) fail(path.string(), "cannot write the demo texture: ", ec.message());
+  return path.string();
 }
 
 }  // namespace reshutter::shade

@@ -51,4 +51,9 @@ class TextureLookup {
   std::unique_ptr<Impl> impl_;
 };
 
+/// A built-in texture for the demo scene (no input files): a brick wall, written once as a
+/// mip-mapped .tx in the temporary directory (atomically, so concurrent runs share it); its
+/// path. Errors if the file cannot be made.
+std::string demoBrickTexture();
+
 }  // namespace reshutter::shade

@@ -653,12 +653,17 @@ TEST(RibReaderHardTest, LongRunsOfDefinitionsNeitherRecurseNorCrash) {
 
 TEST(RibReaderTest, UnknownParametersWarnOncePerRequestAndNameAndAreSkipped) {
   // What exporters write that no reader can know: a shader's undeclared parameter, an attribute
-  // of another renderer, a RIS connection. The request goes on with the parameters it knows.
+  // of another renderer, a misspelt type. The request goes on with the parameters it knows; a RIS
+  // connection ("reference color") is one of them, its value the "handle:output" it names.
   struct H : RequestHandler {
     std::vector<std::vector<std::string>> names;
+    std::vector<std::string> references;
     bool handle(const Request& r, const Args& a) override {
       std::vector<std::string> n;
-      for (const Param& p : a.params(r.name == "Bxdf" ? 2 : a.count() % 2)) n.push_back(p.decl.name);
+      for (const Param& p : a.params(r.name == "Bxdf" ? 2 : a.count() % 2)) {
+        n.push_back(p.decl.name);
+        if (p.decl.reference) references.push_back(p.value->kind == Value::Kind::StringArray ? p.value->strings.at(0) : p.value->string);
+      }
       names.push_back(n);
       return true;
     }
@@ -675,10 +680,11 @@ TEST(RibReaderTest, UnknownParametersWarnOncePerRequestAndNameAndAreSkipped) {
   EXPECT_EQ(h.names[0], (std::vector<std::string>{"Kd"}));
   EXPECT_EQ(h.names[1], (std::vector<std::string>{"Ks"}));
   EXPECT_EQ(h.names[2], (std::vector<std::string>{"name"}));
-  EXPECT_EQ(h.names[3], (std::vector<std::string>{"diffuseColor"}));
+  EXPECT_EQ(h.names[3], (std::vector<std::string>{"diffuseColor", "diffuseColor"}));
+  EXPECT_EQ(h.references, (std::vector<std::string>{"tex:resultRGB"}));
   EXPECT_EQ(h.names[4], (std::vector<std::string>{"P"}));
   // One per skipped parameter (warnOnce prints a repeated (request, name) once and counts it).
-  EXPECT_EQ(warningCount() - before, 5u);
+  EXPECT_EQ(warningCount() - before, 4u);
 }
 
 namespace {

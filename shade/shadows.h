@@ -1,0 +1,57 @@
+// Ray-traced shadows for the shading pass: the frame's own micropolygons at the shading time, in
+// one Embree scene (Embree: the ray-tracing kernels the field uses, BVH build and traversal
+// included), and the share of a light that reaches a shaded point through them.
+//
+// A light's Cl at a point is multiplied by its visibility: 1 or 0 for a point, spot or sharp
+// distant light (one ray to its centre), the fraction of `samples` rays that reach points spread
+// over an area light's emitter (or, for a distant light with an angular size, directions within
+// it) - so the penumbra follows the emitter's shape while the unshadowed light stays the same
+// formula (shade/shaders.h). The pattern is a Hammersley set rotated per point by a hash of
+// the point's identity, so images are the same for any thread count.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <span>
+#include <vector>
+
+#include <glm/vec3.hpp>
+
+#include "shade/shaders.h"
+
+namespace reshutter::shade {
+
+class ShadowScene {
+ public:
+  /// One diced grid at the shading time: vertices in camera space and 4 corners per
+  /// micropolygon in ring order (store::kNoCorner as the fourth: a triangle).
+  struct Piece {
+    std::vector<glm::vec3> P;
+    std::vector<uint32_t> corners;
+  };
+  /// Builds the BVH over every piece's micropolygons (watertight traversal: a ray cannot slip
+  /// between two micropolygons that share an edge).
+  explicit ShadowScene(std::span<const Piece> pieces);
+  ~ShadowScene();
+  ShadowScene(const ShadowScene&) = delete;
+  ShadowScene& operator=(const ShadowScene&) = delete;
+
+  /// True when anything lies on the ray from `origin` along unit `dir` within (0, tfar).
+  /// Thread-safe.
+  bool occluded(const glm::dvec3& origin, const glm::dvec3& dir, double tfar) const;
+  uint64_t micropolygons() const { return micropolygons_; }
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+  uint64_t micropolygons_ = 0;
+};
+
+/// The share of `light` (0..1) that reaches P: `Ng` is the surface's unit geometric normal
+/// (either side), `bias` how far ray origins are lifted off the surface towards the light
+/// (about half a micropolygon: the diced surface is not the true one), `samples` the rays of an
+/// area or soft distant light, `seed` the point's identity. Counts the rays traced into `rays`.
+double lightVisibility(const ShadowScene& scene, const LitLight& light, const glm::dvec3& P, const glm::dvec3& Ng, double bias, int samples, uint64_t seed,
+                       uint64_t& rays);
+
+}  // namespace reshutter::shade
