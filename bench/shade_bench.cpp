@@ -3,6 +3,7 @@
 // every core, into a null sink (the pass alone) and into a StoreWriter (the pass plus
 // compression and I/O, what `reshutter shade` costs).
 // Usage: shade_bench [--quick] [--dir DIR]      (one line of results per configuration)
+//        shade_bench --shadows                    (the demo with shadows off and on, one thread)
 //        shade_bench --motion-factors DIR          (demo stores for motion factor 0, 0.5, 1, 2, 4 in DIR,
 //                                                   for the accuracy study in bench/RESULTS.md)
 #include <sys/resource.h>
@@ -38,9 +39,10 @@ struct NullSink final : store::GridSink {
   void addGrid(const store::GridInput&) override {}
 };
 
-void run(const char* label, int w, int h, double rateScale, int threads, const std::string& storePath, double motionFactor = 0) {
+void run(const char* label, int w, int h, double rateScale, int threads, const std::string& storePath, double motionFactor = 0, bool shadows = true) {
   tbb::global_control gc(tbb::global_control::max_allowed_parallelism, size_t(threads));
   shade::ShadeOptions o;
+  o.shadows = shadows;
   o.dice.shadingRateScale = rateScale;
   o.dice.motionFactor = motionFactor;
   Stopwatch build;
@@ -64,20 +66,24 @@ void run(const char* label, int w, int h, double rateScale, int threads, const s
               " grids %7.3f s wall %7.3f s cpu  %5.2f M mp/s  %5.2f M mp/s per cpu-s  %s  scene %.3f s  peak RSS %.0f MB\n",
               label, w, h, rateScale, threads, st.micropolygons, st.movingMicropolygons, st.grids, s, cpu, mps / 1e6, double(st.micropolygons) / cpu / 1e6,
               storePath.empty() ? "null sink" : (std::to_string(bytes / 1000000) + " MB store").c_str(), buildSeconds, bench::peakRssBytes() / 1e6);
+  if (st.shadowMicropolygons)
+    std::printf("       shadows: %" PRIu64 " rays against %" PRIu64 " micropolygons, scene built in %.3f s\n", st.shadowRays, st.shadowMicropolygons,
+                st.shadowBuildSeconds);
   std::fflush(stdout);
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  bool quick = false;
+  bool quick = false, shadows = false;
   std::string dir = std::filesystem::temp_directory_path().string(), mfDir;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--quick")) quick = true;
     else if (!std::strcmp(argv[i], "--motion-factors") && i + 1 < argc) mfDir = argv[++i];
+    else if (!std::strcmp(argv[i], "--shadows")) shadows = true;
     else if (!std::strcmp(argv[i], "--dir") && i + 1 < argc) dir = argv[++i];
     else {
-      std::fprintf(stderr, "usage: shade_bench [--quick] [--dir DIR]\n");
+      std::fprintf(stderr, "usage: shade_bench [--quick] [--dir DIR] [--shadows]\n");
       return 2;
     }
   }
@@ -89,6 +95,13 @@ int main(int argc, char** argv) {
       char label[16];
       std::snprintf(label, sizeof label, "mf%g", mf);
       run(label, 640, 360, 1, cores, mfDir + "/demo-" + label + ".mps", mf);
+    }
+    return 0;
+  }
+  if (shadows) {  // what the demo's two shadow-casting lights cost: the pass alone, one thread
+    for (auto [w, h] : {std::pair{640, 360}, {1920, 1080}}) {
+      run("off", w, h, 1, 1, "", 0, false);
+      run("on", w, h, 1, 1, "", 0, true);
     }
     return 0;
   }

@@ -135,6 +135,7 @@ bool Light::named(const std::string& name, Light& l) {
   else if (name == "distantlight" || name == "shadowdistant") l.kind = LightKind::Distant;
   else if (name == "pointlight" || name == "shadowpoint") l.kind = LightKind::Point;
   else if (name == "spotlight" || name == "shadowspot") l.kind = LightKind::Spot;
+  else if (name == "uberlight") l.kind = LightKind::Uber, l.from = glm::dvec3(0.0), l.to = glm::dvec3(0, 0, 1);
   else return false;
   return true;
 }
@@ -171,6 +172,28 @@ void applyParams(Light& l, const ParamMap& p) {
   get1(p, "coneangle", l.coneAngle);
   get1(p, "conedeltaangle", l.coneDeltaAngle);
   get1(p, "beamdistribution", l.beamDistribution);
+  if (l.kind == LightKind::Uber) {
+    UberLight& u = l.uber;
+    double parallel = 0;
+    get1(p, "parallelrays", parallel);
+    u.parallel = parallel != 0;
+    for (auto [name, field] : {std::pair{"cuton", &u.cuton},
+                               {"cutoff", &u.cutoff},
+                               {"nearedge", &u.nearedge},
+                               {"faredge", &u.faredge},
+                               {"falloff", &u.falloff},
+                               {"falloffdist", &u.falloffdist},
+                               {"maxintensity", &u.maxintensity},
+                               {"shearx", &u.shearx},
+                               {"sheary", &u.sheary},
+                               {"width", &u.width},
+                               {"height", &u.height},
+                               {"wedge", &u.wedge},
+                               {"hedge", &u.hedge},
+                               {"roundness", &u.roundness},
+                               {"beamdistribution", &u.beamdistribution}})
+      get1(p, name, *field);
+  }
 }
 
 Shape Primitive::shapeAt(double t) const {
@@ -480,7 +503,8 @@ void Scene::lightSource(const std::string& name, const std::string& handle, cons
   // Shadows where the light asks for them: a shadow map name ("raytrace", or a map this pass
   // cannot read, so rays stand in for it), "raytraceshadow", or Attribute "light" "shadows".
   l.shadows = cur_.attrs->lightShadows;
-  for (const char* map : {"shadowname", "sfpx", "sfnx", "sfpy", "sfny", "sfpz", "sfnz"})
+  if (auto it = strings.find("lighttype"); l.kind == LightKind::Uber && it != strings.end()) l.uber.omni = it->second == "omni" || it->second == "arealight";
+  for (const char* map : {"shadowname", "shadowmap", "sfpx", "sfnx", "sfpy", "sfny", "sfpz", "sfnz"})
     if (auto it = strings.find(map); it != strings.end() && !it->second.empty()) {
       l.shadows = true;
       if (it->second != "raytrace")

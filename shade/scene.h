@@ -73,7 +73,19 @@ struct SurfaceShader {
   SurfaceShader lerp(const SurfaceShader& b, double w) const;
 };
 
-enum class LightKind : uint8_t { Ambient, Distant, Point, Spot };
+enum class LightKind : uint8_t { Ambient, Distant, Point, Spot, Uber, Face /* resolved only: a one-sided Point */ };
+
+/// uberlight's controls (Barzel, "Lighting Controls for Computer Cinematography", 1997): a light
+/// at the origin of its space shining down +Z, its beam a superellipse cross-section with soft
+/// edges, cut on and off along Z, with a distance falloff.
+struct UberLight {
+  bool omni = false;      // lighttype "omni": no beam shape
+  bool parallel = false;  // parallelrays: light along +Z, the cross-section in x, y
+  double cuton = 0.01, cutoff = 1e6, nearedge = 0, faredge = 0;
+  double falloff = 0, falloffdist = 1, maxintensity = 1;
+  double shearx = 0, sheary = 0, width = 1, height = 1, wedge = 0.1, hedge = 0.1, roundness = 1;
+  double beamdistribution = 0;
+};
 /// What a light's shadow rays aim at: its centre (Point), or points spread over an emitter in
 /// light space, centred at the origin and facing +Z (RenderMan's RIS lights' convention).
 enum class LightShape : uint8_t { Point, Sphere, Disk, Rect };
@@ -92,6 +104,7 @@ struct Light {
   double angle = 0;              // Distant: the source's angular diameter in radians (soft shadows)
   bool oneSided = false;         // Disk, Rect: emits towards +Z only, with the emitter's cosine
   bool radiance = false;         // intensity is radiance: Cl also scales with the emitter's area
+  UberLight uber;                // Uber: its controls
   bool shadows = false;          // traces shadow rays (shade/shadows.h)
   std::string name;              // the shader ("spotlight", "PxrRectLight"), for messages
   MotionXform xform;

@@ -18,6 +18,7 @@
 #include <span>
 #include <vector>
 
+#include <glm/mat4x4.hpp>
 #include <glm/vec3.hpp>
 
 #include "shade/scene.h"
@@ -26,12 +27,11 @@ namespace reshutter::shade {
 
 /// A light resolved into camera space at the shading time.
 struct LitLight {
-  LightKind kind = LightKind::Point;
-  glm::dvec3 position{0.0};  // point, spot
-  glm::dvec3 axis{0, 0, 1};  // distant: direction the light travels; spot: cone axis (unit)
-  glm::dvec3 Cl0{1.0};       // intensity · lightcolor (area lights: × the emitter's area)
+  LightKind kind = LightKind::Point;  // Face: a one-sided area light (Light::oneSided), lit as a point with its cosine
+  glm::dvec3 position{0.0};           // point, spot
+  glm::dvec3 axis{0, 0, 1};           // distant: direction the light travels; spot: cone axis (unit)
+  glm::dvec3 Cl0{1.0};                // intensity · lightcolor (area lights: × the emitter's area)
   double cosOuter = 0, cosInner = 0, beam = 2;
-  bool oneSided = false;  // emits towards `axis` only, with the emitter's cosine
   // What shadow rays aim at (shade/shadows.h): the centre, or an emitter around `position`
   // spanned by the half-extent vectors (sphere, disk: radius vectors), or, for a distant light,
   // directions within its angular radius.
@@ -39,6 +39,9 @@ struct LitLight {
   LightShape shape = LightShape::Point;
   glm::dvec3 halfU{0.0}, halfV{0.0};
   double tanHalfAngle = 0;
+  // Uber: camera space to the light's own space, and its controls.
+  glm::dmat4 toLight{1.0};
+  UberLight uber;
 };
 
 LitLight resolveLight(const Light& light, double time);

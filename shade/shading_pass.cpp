@@ -230,7 +230,8 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
       }
     }
   }
-  std::vector<LitLight> shadowed(lights.begin(), lights.end());
+  std::vector<LitLight> shadowed;
+  if (traces) shadowed.assign(lights.begin(), lights.end());
   if (c.textures && !shader.textureName.empty()) {
     map = c.textures->find(shader.textureName);
     footprint.resize(nV);
@@ -288,6 +289,7 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
 void shadeBatch(const ShadeContext& c, Batch& b) {
   DicedGrid g;
   std::vector<LitLight> lights;
+  const Attributes* lightsOf = nullptr;
   uint64_t shadowRays = 0;
   b.grids.resize(b.count);
   for (size_t n = 0; n < b.count; ++n) {
@@ -296,11 +298,14 @@ void shadeBatch(const ShadeContext& c, Batch& b) {
     diceLeaf(p, *leaf, c.split.knots[pi], c.shadeAt, c.nearClip, c.perspective, g);
     b.dropped += g.droppedMicropolygons;
     b.trimmed += g.trimmedMicropolygons;
-    lights.clear();
-    for (uint32_t li : p.attrs->lights)
-      if (li < c.lit.size()) lights.push_back(c.lit[li]);
-    for (uint32_t li : c.scene.globalLights)
-      if (li < c.lit.size()) lights.push_back(c.lit[li]);
+    if (p.attrs.get() != lightsOf) {  // a primitive's grids come in runs: copy its lights once a run
+      lightsOf = p.attrs.get();
+      lights.clear();
+      for (uint32_t li : p.attrs->lights)
+        if (li < c.lit.size()) lights.push_back(c.lit[li]);
+      for (uint32_t li : c.scene.globalLights)
+        if (li < c.lit.size()) lights.push_back(c.lit[li]);
+    }
     GridOut& out = b.grids[n];
     out.prim = pi;
     out.numVertices = g.numVertices;

@@ -121,7 +121,8 @@ double radicalInverse2(uint32_t i) {
 double lightVisibility(const ShadowScene& scene, const LitLight& light, const glm::dvec3& P, const glm::dvec3& Ng, double bias, int samples, uint64_t seed,
                        uint64_t& rays) {
   if (!light.shadows || light.kind == LightKind::Ambient) return 1.0;
-  const glm::dvec3 towardCentre = light.kind == LightKind::Distant ? -light.axis : light.position - P;
+  const bool directional = light.kind == LightKind::Distant || (light.kind == LightKind::Uber && light.uber.parallel);
+  const glm::dvec3 towardCentre = directional ? -light.axis : light.position - P;
   // Lift the origin off the diced surface on the side the light is.
   const glm::dvec3 origin = P + (glm::dot(Ng, towardCentre) >= 0 ? bias : -bias) * Ng;
   const bool area = light.kind == LightKind::Distant ? light.tanHalfAngle > 0 : light.shape != LightShape::Point;
@@ -144,7 +145,7 @@ double lightVisibility(const ShadowScene& scene, const LitLight& light, const gl
     }
     glm::dvec3 dir;
     double tfar;
-    if (light.kind == LightKind::Distant) {
+    if (directional) {
       double x = 0, y = 0;
       if (area) concentric(a, b, x, y);
       dir = glm::normalize(-light.axis + light.tanHalfAngle * (x * e1 + y * e2));

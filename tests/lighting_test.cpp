@@ -181,6 +181,34 @@ TEST(Shadows, SoftShadowsAreTheSameForAnyThreadCount) {
   EXPECT_EQ(fileBytes(dir.path("p1.mps")), fileBytes(dir.path("p2.mps")));
 }
 
+// uberlight at the eye shining down the view onto a wall 10 away: its beam's cross-section at
+// unit distance is a superellipse of half-sizes width × height, so on the wall a rectangle
+// (roundness 0) of 5 × 2.5 or the ellipse inside it (roundness 1). 4 px a unit.
+std::string uberWall(const std::string& params) {
+  return "Format 64 64 1\nProjection \"orthographic\"\nScreenWindow -8 8 -8 8\nShutter 0 1\nWorldBegin\n"
+         "LightSource \"uberlight\" 1 \"intensity\" [1] \"float width\" [0.5] \"float height\" [0.25] \"float wedge\" [0.005] "
+         "\"float hedge\" [0.005] " +
+         params + "\nColor [1 1 1]\nSurface \"matte\"\nPolygon \"P\" [-20 -20 10  20 -20 10  20 20 10  -20 20 10]\nWorldEnd\n";
+}
+
+TEST(Lights, AnUberlightsBeamIsItsSuperellipse) {
+  ScratchDir dir;
+  auto at = [](const resample::FlatImage& img, double x, double y) { return pixel(img, int(32 + 4 * x), int(32 - 4 * y)).r; };
+  const auto box = render(dir, "box", uberWall("\"float roundness\" [0]"), "");
+  EXPECT_GT(at(box, 4.4, 0), 0.005f);  // inside |x| < 5
+  EXPECT_EQ(at(box, 5.6, 0), 0.0f);    // outside
+  EXPECT_GT(at(box, 0, 2.1), 0.005f);  // inside |y| < 2.5
+  EXPECT_EQ(at(box, 0, 2.9), 0.0f);
+  EXPECT_GT(at(box, 4.4, 2.1), 0.005f);  // the rectangle's corner
+  const auto ellipse = render(dir, "ellipse", uberWall("\"float roundness\" [1]"), "");
+  EXPECT_GT(at(ellipse, 4.4, 0), 0.005f);
+  EXPECT_EQ(at(ellipse, 4.4, 2.1), 0.0f);    // (4.4/5)² + (2.1/2.5)² > 1: outside the ellipse
+  EXPECT_GT(at(ellipse, 3.0, 1.5), 0.005f);  // 0.36 + 0.36 < 1
+  // Cut off before the wall: no light reaches it.
+  const auto cut = render(dir, "cut", uberWall("\"float roundness\" [0] \"float cutoff\" [9] \"float faredge\" [0.5]"), "");
+  EXPECT_EQ(at(cut, 0, 0), 0.0f);
+}
+
 // A sphere filling the middle of a 32×32 orthographic view, lit along the view by a RIS light
 // declared inside an attribute block before it (RIS lights light everything).
 std::string risSphere(const std::string& bxdf) {
