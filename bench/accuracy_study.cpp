@@ -769,7 +769,23 @@ void studyShadowSamples(const std::string& out) {
     measure(
         "shadowsamples", "rays per point", n, [&](uint64_t) { return specFor(st, 1); }, ref, 1, ts);
   }
+  // The shadow scene's coarseness at 16 rays, against the frame's own micropolygons with the
+  // same rays (the same rotations of the pattern): the coarser surface's error alone.
+  {
+    shade::ShadeOptions exact;
+    shade::shadeToStore(scene, exact, path);
+    const Img refExact = toImg(render(specFor(std::make_shared<const store::StoreReader>(path), 1)));
+    for (double rate : {1.0, 2.0, 4.0, 8.0, 16.0}) {
+      shade::ShadeOptions o;
+      o.shadowRate = rate;
+      const double ts = shadeStore(scene, o, path);
+      auto st = std::make_shared<const store::StoreReader>(path);
+      measure(
+          "shadowrate", "shadow rate", rate, [&](uint64_t) { return specFor(st, 1); }, refExact, 1, ts);
+    }
+  }
   plot(out, "shadowsamples", "Soft shadows (demo, area + 8-degree sun): shading + 16-spp render time vs error");
+  plot(out, "shadowrate", "Shadow scene coarseness (demo, 16 rays): shading + 16-spp render time vs error");
   gTables << "### Soft-shadow samples\n\nScene: the demo at " << kDW << "×" << kDH
           << " with its key light made an 8° sun and a 2 × 1 rectangular area light added over the glossy balls, gaussian 2×2, 16 spp, one "
              "seed. Knob: rays per shaded point towards each soft light (`shade --shadow-samples`). Error: against "
@@ -778,6 +794,9 @@ void studyShadowSamples(const std::string& out) {
              "same frame shaded with `--shadows off` takes "
           << fmt(tNone, "%.3f") << " s to shade.\n\n";
   table("shadowsamples", "rays");
+  gTables << "### Shadow rate\n\nThe same scene at 16 rays a point, the shadow scene diced at `shade --shadow-rate` times the shading rate (area): "
+             "error against rate 1 (the frame's own micropolygons) with the same rays, so it is the coarser surface's alone; seconds as above.\n\n";
+  table("shadowrate", "shadow rate");
 }
 
 void studyDeep(const std::string& out) {
@@ -864,6 +883,9 @@ std::string headlines() {
     h << "- **Soft shadows** (demo with an area light and an 8° sun): 4 rays a point leave RMSE " << fmt(a->rmse, "%.1e") << " (" << fmt(a->seconds, "%.2f")
       << " s), 16 rays " << fmt(b->rmse, "%.1e") << " (" << fmt(b->seconds, "%.2f") << " s), 64 rays " << fmt(c->rmse, "%.1e") << " ("
       << fmt(c->seconds, "%.2f") << " s).\n";
+  if (auto a = find("shadowrate", "shadow", -1, 1.0), b = find("shadowrate", "shadow", -1, 4.0); a && b)
+    h << "- **Shadow rate 4** (the shadow scene at 4× the shading rate): " << fmt(b->seconds, "%.2f") << " s instead of " << fmt(a->seconds, "%.2f")
+      << " s, error RMSE " << fmt(b->rmse, "%.1e") << " (max " << fmt(b->max, "%.2f") << ").\n";
   if (auto a = find("deep", "deep", -1, 0.0), b = find("deep", "deep", -1, 0.01); a && b)
     h << "- **Deep tolerance**: 0 → 0.01 shrinks the deep EXR from " << fmt(a->bytes / 1e6, "%.1f") << " MB to " << fmt(b->bytes / 1e6, "%.1f")
       << " MB; the flattened image stays within RMSE " << fmt(std::max(a->rmse, b->rmse), "%.0e") << " of the flat one at every tolerance.\n";

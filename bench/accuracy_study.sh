@@ -79,7 +79,7 @@ EOF
 | ![depth](accuracy/depth.png) | ![filters](accuracy/filter.png) |
 | ![codecs](accuracy/codec.png) | ![motion factor](accuracy/motionfactor.png) |
 | ![deep](accuracy/deep.png) | ![time bounds](accuracy/timebounds.png) |
-| ![shadow samples](accuracy/shadowsamples.png) | |
+| ![shadow samples](accuracy/shadowsamples.png) | ![shadow rate](accuracy/shadowrate.png) |
 
 ## Tables
 

@@ -3,7 +3,7 @@
 // every core, into a null sink (the pass alone) and into a StoreWriter (the pass plus
 // compression and I/O, what `reshutter shade` costs).
 // Usage: shade_bench [--quick] [--dir DIR]      (one line of results per configuration)
-//        shade_bench --shadows                    (the demo with shadows off and on, one thread)
+//        shade_bench --shadows                    (the demo with shadows off and on)
 //        shade_bench --motion-factors DIR          (demo stores for motion factor 0, 0.5, 1, 2, 4 in DIR,
 //                                                   for the accuracy study in bench/RESULTS.md)
 #include <sys/resource.h>
@@ -98,11 +98,12 @@ int main(int argc, char** argv) {
     }
     return 0;
   }
-  if (shadows) {  // what the demo's two shadow-casting lights cost: the pass alone, one thread
-    for (auto [w, h] : {std::pair{640, 360}, {1920, 1080}}) {
-      run("off", w, h, 1, 1, "", 0, false);
-      run("on", w, h, 1, 1, "", 0, true);
-    }
+  if (shadows) {  // what the demo's two shadow-casting lights cost: the pass alone
+    for (auto [w, h] : {std::pair{640, 360}, {1920, 1080}})
+      for (int threads : {1, cores}) {
+        run("off", w, h, 1, threads, "", 0, false);
+        run("on", w, h, 1, threads, "", 0, true);
+      }
     return 0;
   }
   const std::string store = dir + "/shade_bench.mps";

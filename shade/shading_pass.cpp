@@ -413,16 +413,17 @@ bool wantsShadows(const FrameScene& scene, std::span<const LitLight> lit, double
 }
 
 /// The frame's micropolygons at the shading time, every leaf of a primitive that casts shadows
-/// diced again (the shading pass's grids stream out; keeping them all would hold the frame).
-std::unique_ptr<ShadowScene> buildShadowScene(const ShadeContext& c) {
-  std::vector<ShadowScene::Piece> pieces(c.split.flat.size());
+/// diced again (the shading pass's grids stream out; keeping them all would hold the frame) -
+/// from `split`, the frame's own leaves, or leaves split at a coarser shadow rate.
+std::unique_ptr<ShadowScene> buildShadowScene(const ShadeContext& c, const SplitScene& split) {
+  std::vector<ShadowScene::Piece> pieces(split.flat.size());
   tbb::parallel_for(tbb::blocked_range<size_t>(0, pieces.size(), 8), [&](const tbb::blocked_range<size_t>& r) {
     DicedGrid g;
     for (size_t i = r.begin(); i != r.end(); ++i) {
-      const auto [pi, leaf] = c.split.flat[i];
+      const auto [pi, leaf] = split.flat[i];
       const Primitive& p = c.scene.prims[pi];
       if (!p.attrs->transmission) continue;
-      diceLeaf(p, *leaf, c.split.knots[pi], c.shadeAt, c.nearClip, c.perspective, g);
+      diceLeaf(p, *leaf, split.knots[pi], c.shadeAt, c.nearClip, c.perspective, g);
       pieces[i].P.assign(g.P.begin(), g.P.end());
       pieces[i].corners = std::move(g.corners);
       g = DicedGrid{};
@@ -480,9 +481,18 @@ ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::Gri
   context.textures = textures.get();
   // Shadows only when a light asks for them and lights something that reflects it.
   std::unique_ptr<ShadowScene> shadows;
+  if (!(o.shadowRate >= 1) || !std::isfinite(o.shadowRate)) fail("--shadow-rate", "must be at least 1");
   if (o.shadows && wantsShadows(scene, context.lit, iv.shadeAt)) {
     const auto t0 = std::chrono::steady_clock::now();
-    shadows = buildShadowScene(context);
+    if (o.shadowRate == 1) {
+      shadows = buildShadowScene(context, split);
+    } else {
+      // Coarser micropolygons for the shadow rays: the same split, every shading rate scaled.
+      DiceOptions coarse = o.dice;
+      coarse.shadingRateScale *= o.shadowRate;
+      ShadeStats ignored;
+      shadows = buildShadowScene(context, splitScene(scene, iv, cam, coarse, ignored));
+    }
     stats.shadowMicropolygons = shadows->micropolygons();
     stats.shadowBuildSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }

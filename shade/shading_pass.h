@@ -34,6 +34,10 @@ struct ShadeOptions {
   /// Rays per shaded point towards an area light or a distant light with an angular size: the
   /// soft-shadow quality knob (docs/accuracy.md has its error against time).
   int shadowSamples = 16;
+  /// The shadow scene's micropolygons at this many times the shading rate (area): 1 is the
+  /// frame's own micropolygons; 4 has about a quarter as many, cheaper to build, with
+  /// shadow edges traced against a coarser surface (docs/accuracy.md has the trade).
+  double shadowRate = 1;
 };
 
 struct ShadeStats {

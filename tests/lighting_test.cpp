@@ -51,14 +51,17 @@ std::string fileBytes(const std::string& path) {
   return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
 }
 
-uint64_t shadowRays(const std::string& report) {
+/// A count from `shade -v`'s report: "N shadow rays", "against N micropolygons".
+uint64_t reported(const std::string& report, const std::string& pattern) {
   std::smatch m;
-  const std::regex re("([0-9,]+) shadow rays");
+  const std::regex re(pattern);
   if (!std::regex_search(report, m, re)) return 0;
   std::string digits = m[1];
   digits.erase(std::remove(digits.begin(), digits.end(), ','), digits.end());
   return std::stoull(digits);
 }
+uint64_t shadowRays(const std::string& report) { return reported(report, "([0-9,]+) shadow rays"); }
+uint64_t shadowMicropolygons(const std::string& report) { return reported(report, "against ([0-9,]+) micropolygons"); }
 
 // Floor y = 0, a sphere of radius 0.5 centred 2 above it, a light straight down (world -y). The
 // orthographic camera looks down at 50°: the floor point (x, 0, z) is at screen (x, z sin 50°),
@@ -91,6 +94,14 @@ TEST(Shadows, ASphereLitFromAboveShadowsTheFloorUnderIt) {
   // Shadows off: the same spot is exactly the open floor.
   EXPECT_NEAR(pixel(off, 32, 32).r, pixel(off, 8, 32).r, 1e-5f);
   EXPECT_NEAR(pixel(off, 8, 32).r, open.r, 1e-5f);
+  // A coarser shadow scene (--shadow-rate 4: about a quarter of the micropolygons) casts the
+  // same shadow at its centre.
+  std::string fine, coarse;
+  render(dir, "fine", sphereOverFloor(light), "", &fine);
+  const auto coarseImg = render(dir, "coarse", sphereOverFloor(light), "--shadow-rate 4", &coarse);
+  EXPECT_LT(shadowMicropolygons(coarse) * 2, shadowMicropolygons(fine)) << coarse;
+  EXPECT_GT(shadowMicropolygons(coarse), 0u) << coarse;
+  EXPECT_NEAR(pixel(coarseImg, 32, 32).r, 0.1f, 0.01f);
 }
 
 TEST(Shadows, EveryWayALightAsksForShadowsTracesThem) {
