@@ -39,10 +39,12 @@ struct NullSink final : store::GridSink {
   void addGrid(const store::GridInput&) override {}
 };
 
-void run(const char* label, int w, int h, double rateScale, int threads, const std::string& storePath, double motionFactor = 0, bool shadows = true) {
+void run(const char* label, int w, int h, double rateScale, int threads, const std::string& storePath, double motionFactor = 0, bool shadows = true,
+         double shadowRate = 1) {
   tbb::global_control gc(tbb::global_control::max_allowed_parallelism, size_t(threads));
   shade::ShadeOptions o;
   o.shadows = shadows;
+  o.shadowRate = shadowRate;
   o.dice.shadingRateScale = rateScale;
   o.dice.motionFactor = motionFactor;
   Stopwatch build;
@@ -103,6 +105,7 @@ int main(int argc, char** argv) {
       for (int threads : {1, cores}) {
         run("off", w, h, 1, threads, "", 0, false);
         run("on", w, h, 1, threads, "", 0, true);
+        run("rate4", w, h, 1, threads, "", 0, true, 4);
       }
     return 0;
   }
