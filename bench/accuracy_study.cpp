@@ -752,37 +752,37 @@ void studyShadowSamples(const std::string& out) {
     const double F = double(st->meta().frame);
     return demoSpec({st}, ShutterModel::progressive(F, F + 1), 4, seed);
   };
+  // Shades with `o`; the store's 16-spp render (seed 1), or a measured point of `study`.
+  auto shaded = [&](const shade::ShadeOptions& o) {
+    shade::shadeToStore(scene, o, path);
+    return toImg(render(specFor(std::make_shared<const store::StoreReader>(path), 1)));
+  };
+  auto point = [&](const char* study, const char* curve, double knob, const shade::ShadeOptions& o, const Img& ref) {
+    const double ts = shadeStore(scene, o, path);
+    auto st = std::make_shared<const store::StoreReader>(path);
+    measure(
+        study, curve, knob, [&](uint64_t) { return specFor(st, 1); }, ref, 1, ts);
+  };
   // Reference: 1024 rays a point, rendered with the same pixel samples as every point, so the
   // error is the soft shadows' alone.
   shade::ShadeOptions refOpt;
   refOpt.shadowSamples = gQuick ? 256 : 1024;
-  shade::shadeToStore(scene, refOpt, path);
-  const Img ref = toImg(render(specFor(std::make_shared<const store::StoreReader>(path), 1)));
+  const Img ref = shaded(refOpt);
   shade::ShadeOptions noShadows;
   noShadows.shadows = false;
   const double tNone = shadeStore(scene, noShadows, path);
   for (int n : {1, 2, 4, 8, 16, 32, 64}) {
     shade::ShadeOptions o;
     o.shadowSamples = n;
-    const double ts = shadeStore(scene, o, path);
-    auto st = std::make_shared<const store::StoreReader>(path);
-    measure(
-        "shadowsamples", "rays per point", n, [&](uint64_t) { return specFor(st, 1); }, ref, 1, ts);
+    point("shadowsamples", "rays per point", n, o, ref);
   }
   // The shadow scene's coarseness at 16 rays, against the frame's own micropolygons with the
   // same rays (the same rotations of the pattern): the coarser surface's error alone.
-  {
-    shade::ShadeOptions exact;
-    shade::shadeToStore(scene, exact, path);
-    const Img refExact = toImg(render(specFor(std::make_shared<const store::StoreReader>(path), 1)));
-    for (double rate : {1.0, 2.0, 4.0, 8.0, 16.0}) {
-      shade::ShadeOptions o;
-      o.shadowRate = rate;
-      const double ts = shadeStore(scene, o, path);
-      auto st = std::make_shared<const store::StoreReader>(path);
-      measure(
-          "shadowrate", "shadow rate", rate, [&](uint64_t) { return specFor(st, 1); }, refExact, 1, ts);
-    }
+  const Img refExact = shaded(shade::ShadeOptions{});
+  for (double rate : {1.0, 2.0, 4.0, 8.0, 16.0}) {
+    shade::ShadeOptions o;
+    o.shadowRate = rate;
+    point("shadowrate", "shadow rate", rate, o, refExact);
   }
   plot(out, "shadowsamples", "Soft shadows (demo, area + 8-degree sun): shading + 16-spp render time vs error");
   plot(out, "shadowrate", "Shadow scene coarseness (demo, 16 rays): shading + 16-spp render time vs error");
