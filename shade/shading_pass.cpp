@@ -402,6 +402,7 @@ void shadeAndSend(const ShadeContext& c, GridSender& sender, Progress& progress)
 
 /// Whether some lit surface is illuminated by a light that asks for shadows.
 bool wantsShadows(const FrameScene& scene, std::span<const LitLight> lit, double shadeAt) {
+  if (std::none_of(lit.begin(), lit.end(), [](const LitLight& l) { return l.shadows; })) return false;  // the common case, at no cost per primitive
   auto shadowing = [&](uint32_t li) { return li < lit.size() && lit[li].shadows; };
   const bool global = std::any_of(scene.globalLights.begin(), scene.globalLights.end(), shadowing);
   for (const Primitive& p : scene.prims) {
