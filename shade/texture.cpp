@@ -1,58 +1,59 @@
 #include "shade/texture.h"
 
+#include <dlfcn.h>
+#include <unistd.h>
+
 #include <algorithm>
 #include <atomic>
 #include <cmath>
+#include <cstdlib>
 #include <filesystem>
 #include <system_error>
-
-#include <OpenImageIO/imagebuf.h>
-#include <OpenImageIO/imagebufalgo.h>
-#include <OpenImageIO/texture.h>
-#include <unistd.h>
+#include <vector>
 
 #include "common/error.h"
 #include "common/log.h"
 #include "common/random.h"
+#include "shade/texture_backend.h"
 
 namespace reshutter::shade {
 
+namespace {
+// The OpenImageIO module, loaded once for the process on first use (texture_backend.h says
+// why); RESHUTTER_TEXTURE_MODULE in the environment names another copy of it.
+TextureBackend& backend() {
+  static TextureBackend* b = [] {
+    const char* env = std::getenv("RESHUTTER_TEXTURE_MODULE");
+    const std::string path = env && *env ? env : RESHUTTER_TEXTURE_MODULE;
+    void* module = ::dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);
+    if (!module) fail(path, "cannot load the texture module: ", ::dlerror());
+    auto* entry = reinterpret_cast<TextureBackend* (*)()>(::dlsym(module, "reshutter_texture_backend"));
+    if (!entry) fail(path, "is not reshutter's texture module (no reshutter_texture_backend)");
+    return entry();
+  }();
+  return *b;
+}
+}  // namespace
+
 struct TextureLookup::Impl {
-  OIIO::TextureSystem* ts = nullptr;
+  TextureBackend* backend = nullptr;
   mutable std::mutex mutex;  // guards missing
   mutable std::set<std::string> missing;
   mutable std::atomic<uint64_t> lookups{0};
 };
 
-namespace {
-// One texture system for the process, kept until exit: its cache then serves every frame of a
-// shot. It is never destroyed because OpenImageIO 2.4's TextureSystem::destroy() deletes the
-// object through the wrong type (AddressSanitizer: new-delete-type-mismatch); a pointer held
-// here is reachable, so it is no leak either.
-OIIO::TextureSystem* processTextureSystem() {
-  static OIIO::TextureSystem* ts = [] {
-    OIIO::TextureSystem* t = OIIO::TextureSystem::create(false);
-    t->attribute("max_memory_MB", 512.0f);
-    return t;
-  }();
-  return ts;
-}
-}  // namespace
-
 TextureLookup::TextureLookup(const std::string& searchPath) : impl_(std::make_unique<Impl>()) {
-  impl_->ts = processTextureSystem();
-  impl_->ts->attribute("searchpath", searchPath);  // this scene's (frames are shaded one at a time)
+  impl_->backend = &backend();
+  impl_->backend->setSearchPath(searchPath);  // this scene's (frames are shaded one at a time)
 }
 
 TextureLookup::~TextureLookup() = default;
 
 TextureLookup::Map TextureLookup::find(const std::string& name) const {
-  const OIIO::ustring u(name);
-  OIIO::TextureSystem::TextureHandle* handle = impl_->ts->get_texture_handle(u);
   int channels = 0;
-  if (!handle || !impl_->ts->good(handle) || !impl_->ts->get_texture_info(handle, nullptr, 0, OIIO::ustring("channels"), OIIO::TypeDesc::INT, &channels) ||
-      channels < 1) {
-    const std::string why = impl_->ts->geterror();
+  std::string why;
+  const void* handle = impl_->backend->find(name, channels, why);
+  if (!handle) {
     std::lock_guard<std::mutex> lock(impl_->mutex);
     if (impl_->missing.insert(name).second)
       warn(cat("texture '", name, "' cannot be read (", why.empty() ? "not found on the texture search path" : why, "); it shows as magenta"));
@@ -64,12 +65,8 @@ TextureLookup::Map TextureLookup::find(const std::string& name) const {
 glm::dvec3 TextureLookup::rgb(const Map& map, float s, float t, float dsdx, float dtdx, float dsdy, float dtdy) const {
   if (!map.handle) return {kMissing[0], kMissing[1], kMissing[2]};
   impl_->lookups.fetch_add(1, std::memory_order_relaxed);
-  OIIO::TextureOpt opt;
-  opt.swrap = opt.twrap = OIIO::TextureOpt::WrapPeriodic;  // RenderMan's default wrap
   float result[3] = {0, 0, 0};
-  auto* handle = const_cast<OIIO::TextureSystem::TextureHandle*>(static_cast<const OIIO::TextureSystem::TextureHandle*>(map.handle));
-  if (!impl_->ts->texture(handle, nullptr, opt, s, t, dsdx, dtdx, dsdy, dtdy, std::min(map.channels, 3), result))
-    return {kMissing[0], kMissing[1], kMissing[2]};
+  if (!impl_->backend->lookup(map.handle, std::min(map.channels, 3), s, t, dsdx, dtdx, dsdy, dtdy, result)) return {kMissing[0], kMissing[1], kMissing[2]};
   if (map.channels < 3) return {result[0], result[0], result[0]};  // one channel: grey
   return {result[0], result[1], result[2]};
 }
@@ -87,7 +84,7 @@ std::string demoBrickTexture() {
   std::error_code ec;
   if (std::filesystem::exists(path, ec)) return path.string();
   constexpr int size = 512, rows = 8, perRow = 4;
-  OIIO::ImageBuf image(OIIO::ImageSpec(size, size, 3, OIIO::TypeDesc::FLOAT));
+  std::vector<float> image(size_t(size) * size * 3);
   const float mortar[3] = {0.72f, 0.70f, 0.66f};
   for (int y = 0; y < size; ++y)
     for (int x = 0; x < size; ++x) {
@@ -98,15 +95,13 @@ std::string demoBrickTexture() {
       // Each brick its own shade of red-brown, from a hash of its place (wrapping with the tile).
       const double h = toUnitDouble(mix64(uint64_t(row) * 131 + uint64_t(int(col) % perRow)));
       const float brick[3] = {float(0.45 + 0.25 * h), float(0.16 + 0.10 * h), float(0.10 + 0.06 * h)};
-      image.setpixel(x, y, joint ? mortar : brick, 3);
+      std::copy_n(joint ? mortar : brick, 3, &image[3 * (size_t(y) * size + size_t(x))]);
     }
   // Written under a name of this process's own, then renamed: a reader never sees half a file.
   const std::filesystem::path tmp =
       std::filesystem::temp_directory_path() / cat("reshutter-demo-bricks-v1.", ::getpid(), ".tmp.tx");  // maketx picks the format by extension
-  OIIO::ImageSpec config;
-  config.attribute("maketx:filtername", "box");
-  if (!OIIO::ImageBufAlgo::make_texture(OIIO::ImageBufAlgo::MakeTxTexture, image, tmp.string(), config))
-    fail(tmp.string(), "cannot write the demo texture: ", OIIO::geterror());
+  std::string why;
+  if (!backend().makeTexture(image.data(), size, size, tmp.string(), why)) fail(tmp.string(), "cannot write the demo texture: ", why);
   std::filesystem::rename(tmp, path, ec);
   if (ec) fail(path.string(), "cannot write the demo texture: ", ec.message());
   return path.string();

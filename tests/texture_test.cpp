@@ -82,7 +82,8 @@ TEST(Textures, AMinifiedCheckerFiltersToGrey) {
   ASSERT_EQ(test::runImageTool("oiiotool --pattern checker:width=2:height=2:color1=0,0,0:color2=1,1,1 512x512 3 -o " + dir.path("fine.tif")).exitCode, 0);
   ASSERT_EQ(test::runImageTool("maketx " + dir.path("fine.tif") + " -o " + dir.path("fine.tx")).exitCode, 0);
   std::ofstream(dir.path("scene.rib")) << sceneWith("", "fine.tx");
-  ASSERT_EQ(runReshutter("-q shade " + dir.path("scene.rib") + " -o " + dir.path("s.mps")).exitCode, 0);
+  const auto shade = runReshutter("-q shade " + dir.path("scene.rib") + " -o " + dir.path("s.mps"));
+  ASSERT_EQ(shade.exitCode, 0) << shade.err;
   ASSERT_EQ(runReshutter("-q resample " + dir.path("s.mps") + " --spp 4 --filter box:1 -o " + dir.path("s.exr")).exitCode, 0);
   const resample::FlatImage img = test::readFlatExr(dir.path("s.exr"));
   double lo = 1, hi = 0;
