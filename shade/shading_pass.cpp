@@ -405,7 +405,10 @@ bool wantsShadows(const FrameScene& scene, std::span<const LitLight> lit, double
   if (std::none_of(lit.begin(), lit.end(), [](const LitLight& l) { return l.shadows; })) return false;  // the common case, at no cost per primitive
   auto shadowing = [&](uint32_t li) { return li < lit.size() && lit[li].shadows; };
   const bool global = std::any_of(scene.globalLights.begin(), scene.globalLights.end(), shadowing);
+  const Attributes* seen = nullptr;
   for (const Primitive& p : scene.prims) {
+    if (p.attrs.get() == seen) continue;  // primitives share attributes in runs
+    seen = p.attrs.get();
     const SurfaceKind k = p.attrs->surface.at(shadeAt).kind;
     if (k == SurfaceKind::Constant || k == SurfaceKind::DefaultSurface) continue;
     if (global || std::any_of(p.attrs->lights.begin(), p.attrs->lights.end(), shadowing)) return true;
@@ -472,9 +475,13 @@ ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::Gri
   for (const auto& a : meta.schema.attrs) context.vars.push_back(varOf(a.name));
   // Textures only when a surface asks for one (no texture system otherwise).
   std::unique_ptr<TextureLookup> textures;
+  // (Primitives share attributes in runs; a texture at any key of an animated surface counts.)
+  const Attributes* seen = nullptr;
   for (const auto& p : scene.prims) {
-    const SurfaceShader sh = p.attrs->surface.at(iv.shadeAt);
-    if (!sh.textureName.empty()) {
+    if (p.attrs.get() == seen) continue;
+    seen = p.attrs.get();
+    const auto& keys = p.attrs->surface.values;
+    if (std::any_of(keys.begin(), keys.end(), [](const SurfaceShader& sh) { return !sh.textureName.empty(); })) {
       textures = std::make_unique<TextureLookup>(textureSearchPath(scene));
       break;
     }
