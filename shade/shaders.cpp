@@ -198,13 +198,16 @@ void diffuseSpecular(const glm::dvec3& P, const glm::dvec3& Nn, const glm::dvec3
 }
 }  // namespace
 
+glm::dvec3 facingNormal(const SurfaceInput& in) {
+  const double nl = glm::length(in.N);
+  const glm::dvec3 Nn = nl > 0 ? in.N / nl : glm::dvec3(0, 0, -1);
+  return glm::dot(in.I, in.Ng) > 0 ? -Nn : Nn;
+}
+
 SurfaceOutput shadeSurface(const SurfaceShader& s, const SurfaceInput& in, std::span<const LitLight> lights) {
   SurfaceOutput out;
   out.Oi = in.Os;
-  const double nl = glm::length(in.N);
-  const glm::dvec3 Nn = nl > 0 ? in.N / nl : glm::dvec3(0, 0, -1);
-  // faceforward(N, I) uses Ng to decide the side.
-  const glm::dvec3 Nf = glm::dot(in.I, in.Ng) > 0 ? -Nn : Nn;
+  const glm::dvec3 Nf = facingNormal(in);
   const double il = glm::length(in.I);
   const glm::dvec3 V = il > 0 ? -in.I / il : glm::dvec3(0, 0, -1);
   switch (s.kind) {

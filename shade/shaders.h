@@ -69,4 +69,10 @@ struct SurfaceOutput {
 
 SurfaceOutput shadeSurface(const SurfaceShader& shader, const SurfaceInput& in, std::span<const LitLight> lights);
 
+/// faceforward(normalize(N), I), the side Ng decides: the normal the shaders light with.
+glm::dvec3 facingNormal(const SurfaceInput& in);
+
+/// Whether a surface of this kind reflects light sources (so their shadows can show on it).
+constexpr bool usesLights(SurfaceKind k) { return k != SurfaceKind::Constant && k != SurfaceKind::DefaultSurface; }
+
 }  // namespace reshutter::shade

@@ -203,9 +203,7 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
   std::array<glm::dvec3, 4> cornerCs, cornerOs;
   const bool hasCs = !shader.color && p.mesh && p.corners(p.mesh->Cs, cornerCs);
   const bool hasOs = !shader.opacity && p.mesh && p.corners(p.mesh->Os, cornerOs);
-  const bool lit = shader.kind == SurfaceKind::Matte || shader.kind == SurfaceKind::Metal || shader.kind == SurfaceKind::Plastic ||
-                   shader.kind == SurfaceKind::PaintedPlastic;
-  const bool traces = c.shadows && lit && std::any_of(lights.begin(), lights.end(), [](const LitLight& l) { return l.shadows; });
+  const bool traces = c.shadows && usesLights(shader.kind) && std::any_of(lights.begin(), lights.end(), [](const LitLight& l) { return l.shadows; });
   const size_t nV = g.numVertices;
   // A textured surface filters each vertex's lookup over the st span of a micropolygon it
   // corners: its two sides from that corner (the shading rate's footprint).
@@ -266,13 +264,11 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
     if (traces) {
       // Each shadowed light's Cl scaled by the share of it that reaches this point; lights
       // behind the point's shading hemisphere add nothing and trace nothing.
-      const double nlen = glm::length(in.N);
-      const glm::dvec3 Nn = nlen > 0 ? in.N / nlen : glm::dvec3(0, 0, -1);
-      const glm::dvec3 Nf = glm::dot(in.I, in.Ng) > 0 ? -Nn : Nn;
+      const glm::dvec3 Nf = facingNormal(in);
       const glm::dvec3 Ng = glm::dot(in.Ng, in.Ng) > 0 ? glm::normalize(in.Ng) : Nf;
       const double floorBias = 1e-6 * std::max({std::abs(in.P.x), std::abs(in.P.y), std::abs(in.P.z), 1.0});
       for (size_t li = 0; li < lights.size(); ++li) {
-        shadowed[li] = lights[li];
+        shadowed[li].Cl0 = lights[li].Cl0;  // the previous vertex scaled it
         glm::dvec3 L, Cl;
         if (!lights[li].shadows || !illuminate(lights[li], in.P, L, Cl) || !(glm::dot(L, Nf) > 0)) continue;
         const uint64_t seed = hashCombine(hashCombine(leafIndex, i), li);
@@ -409,8 +405,7 @@ bool wantsShadows(const FrameScene& scene, std::span<const LitLight> lit, double
   for (const Primitive& p : scene.prims) {
     if (p.attrs.get() == seen) continue;  // primitives share attributes in runs
     seen = p.attrs.get();
-    const SurfaceKind k = p.attrs->surface.at(shadeAt).kind;
-    if (k == SurfaceKind::Constant || k == SurfaceKind::DefaultSurface) continue;
+    if (!usesLights(p.attrs->surface.at(shadeAt).kind)) continue;
     if (global || std::any_of(p.attrs->lights.begin(), p.attrs->lights.end(), shadowing)) return true;
   }
   return false;
