@@ -9,11 +9,11 @@
 //  - PxrTexture feeding diffuseColor shows the texture, t inverted as RIS reads it.
 // `shade -v` counts shadow rays, so each test also shows the path it meant was taken.
 #include <algorithm>
+#include <cctype>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
 #include <iterator>
-#include <regex>
 
 #include <gtest/gtest.h>
 
@@ -51,17 +51,19 @@ std::string fileBytes(const std::string& path) {
   return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
 }
 
-/// A count from `shade -v`'s report: "N shadow rays", "against N micropolygons".
-uint64_t reported(const std::string& report, const std::string& pattern) {
-  std::smatch m;
-  const std::regex re(pattern);
-  if (!std::regex_search(report, m, re)) return 0;
-  std::string digits = m[1];
+/// The grouped number ("7,215,624") just before `after` in `shade -v`'s report (0: absent). No
+/// std::regex: GCC 12 warns inside <regex> at -O1 (-Wmaybe-uninitialized).
+uint64_t numberBefore(const std::string& report, const std::string& after) {
+  const size_t at = report.find(after);
+  if (at == std::string::npos) return 0;
+  size_t from = at;
+  while (from > 0 && (std::isdigit(static_cast<unsigned char>(report[from - 1])) || report[from - 1] == ',')) --from;
+  std::string digits = report.substr(from, at - from);
   digits.erase(std::remove(digits.begin(), digits.end(), ','), digits.end());
-  return std::stoull(digits);
+  return digits.empty() ? 0 : std::stoull(digits);
 }
-uint64_t shadowRays(const std::string& report) { return reported(report, "([0-9,]+) shadow rays"); }
-uint64_t shadowMicropolygons(const std::string& report) { return reported(report, "against ([0-9,]+) micropolygons"); }
+uint64_t shadowRays(const std::string& report) { return numberBefore(report, " shadow rays"); }
+uint64_t shadowMicropolygons(const std::string& report) { return numberBefore(report, " micropolygons (scene built"); }
 
 // Floor y = 0, a sphere of radius 0.5 centred 2 above it, a light straight down (world -y). The
 // orthographic camera looks down at 50°: the floor point (x, 0, z) is at screen (x, z sin 50°),
@@ -277,6 +279,35 @@ TEST(RisShading, PxrTextureFeedsTheDiffuseColour) {
   EXPECT_NEAR(top.r, 0.0f, 0.03f);
   EXPECT_NEAR(bottom.r, 1.0f, 0.03f);
   EXPECT_NEAR(bottom.b, 0.0f, 0.03f);
+}
+
+}  // namespace
+}  // namespace reshutter
+
+namespace reshutter {
+namespace {
+
+TEST(Shadows, BadShadowOptionsAndAMissingTextureModuleAreClearErrors) {
+  ScratchDir dir;
+  std::ofstream(dir.path("s.rib")) << sphereOverFloor("LightSource \"shadowdistant\" 2 \"from\" [0 1 0] \"to\" [0 0 0] \"shadowname\" \"raytrace\"\n");
+  const struct {
+    const char* args;
+    const char* names;
+  } bad[] = {{"--shadows maybe", "--shadows"}, {"--shadow-samples 0", "--shadow-samples"}, {"--shadow-rate 0.5", "--shadow-rate"}};
+  for (const auto& b : bad) {
+    const auto r = runReshutter("shade " + dir.path("s.rib") + " -o " + dir.path("bad.mps") + " " + b.args);
+    EXPECT_NE(r.exitCode, 0) << b.args;
+    EXPECT_NE(r.err.find(b.names), std::string::npos) << r.err;
+    EXPECT_FALSE(std::filesystem::exists(dir.path("bad.mps"))) << b.args;
+  }
+  // A frame with a texture needs the texture module; one that cannot be loaded is one line naming it.
+  std::ofstream(dir.path("t.rib")) << "Format 8 8 1\nProjection \"orthographic\"\nWorldBegin\nSurface \"paintedplastic\" \"texturename\" \"x.tx\"\n"
+                                      "Patch \"bilinear\" \"P\" [-1 1 5  1 1 5  -1 -1 5  1 -1 5]\nWorldEnd\n";
+  const auto r = test::runCommand("RESHUTTER_TEXTURE_MODULE=" + dir.path("nowhere.so") + " " + std::string(RESHUTTER_BINARY) + " shade " + dir.path("t.rib") +
+                                  " -o " + dir.path("t.mps"));
+  EXPECT_EQ(r.exitCode, 1) << r.err;
+  EXPECT_NE(r.err.find("nowhere.so: cannot load the texture module"), std::string::npos) << r.err;
+  EXPECT_FALSE(std::filesystem::exists(dir.path("t.mps")));
 }
 
 }  // namespace
