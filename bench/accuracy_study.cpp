@@ -641,7 +641,7 @@ RenderSpec demoSpec(std::vector<std::shared_ptr<const store::StoreReader>> store
 }
 
 void studyFields(const std::string& out) {
-  std::fprintf(stderr, "fields: shade once vs re-shade each field\n");
+  std::fprintf(stderr, "fields: shade once, shade in time, re-shade each field\n");
   const shade::FrameScene scene = shade::demoFrame(kDW, kDH);
   shade::ShadeOptions once;
   const std::string pOnce = gTmp + "/acc_demo_once.mps", pA = gTmp + "/acc_demo_f1.mps", pB = gTmp + "/acc_demo_f2.mps";
@@ -652,48 +652,76 @@ void studyFields(const std::string& out) {
   const double tA = shadeStore(scene, a, pA), tB = shadeStore(scene, b, pB);
   auto sOnce = std::make_shared<const store::StoreReader>(pOnce);
   auto sA = std::make_shared<const store::StoreReader>(pA), sB = std::make_shared<const store::StoreReader>(pB);
+  // The reference: shading that follows time, made without shading in time - the frame cut into
+  // kSteps sub-intervals, each shaded at its middle into a store of its own, every sample drawn
+  // from the store of its time (the re-shade-per-field method taken to kSteps fields).
+  const int kSteps = gQuick ? 8 : 32;
+  std::vector<std::shared_ptr<const store::StoreReader>> steps;
+  for (int k = 0; k < kSteps; ++k) {
+    shade::ShadeOptions o;
+    o.interval = {double(k) / kSteps, double(k + 1) / kSteps}, o.shadeAt = (k + 0.5) / kSteps;
+    const std::string path = gTmp + "/acc_demo_step" + std::to_string(k) + ".mps";
+    shade::shadeToStore(scene, o, path);
+    steps.push_back(std::make_shared<const store::StoreReader>(path));
+  }
   const double F = double(sOnce->meta().frame);
   const ShutterModel fields = ShutterModel::fields(ShutterGroup{F, F + 0.5}, ShutterGroup{F + 0.5, F + 1.0}, 0);
   const int refSide = gQuick ? 8 : 24;
-  const Img ref = toImg(render(demoSpec({sA, sB}, fields, refSide, 99)));
+  const Img ref = toImg(render(demoSpec(steps, fields, refSide, 99)));
   for (int n : sppSides({1, 2, 4, 8})) {
     measure(
-        "fields", "shade once, re-sample both fields", n * n, [&](uint64_t seed) { return demoSpec({sOnce}, fields, n, seed); }, ref, 3, tOnce);
+        "fields", "shade once, re-sample both fields", NAN, [&](uint64_t seed) { return demoSpec({sOnce}, fields, n, seed); }, ref, 3, tOnce);
     measure(
-        "fields", "re-shade each field", n * n,
-        [&](uint64_t seed) {
-          return demoSpec({sA, sB}, fields, n, seed);
-        },
-        ref, 3, tA + tB);
+        "fields", "re-shade each field", NAN, [&](uint64_t seed) { return demoSpec({sA, sB}, fields, n, seed); }, ref, 3, tA + tB);
   }
-  // The shading error alone: both at the reference's samples.
-  const Img onceAtRefSamples = toImg(render(demoSpec({sOnce}, fields, refSide, 99)));
-  const Err shadingErr = compare(onceAtRefSamples, ref);
-  Err fieldErr[2];
-  for (int f = 0; f < 2; ++f) {  // rows of field f only (field 1: even rows, [0, 0.5])
-    Img a, b;
-    a.resize(ref.w, ref.h / 2), b.resize(ref.w, ref.h / 2);
-    for (int y = f; y + 1 < ref.h + 1 && y / 2 < ref.h / 2; y += 2)
-      for (int k = 0; k < 4; ++k)
-        for (int x = 0; x < ref.w; ++x)
-          a.c[k][size_t(y / 2) * ref.w + x] = onceAtRefSamples.c[k][size_t(y) * ref.w + x], b.c[k][size_t(y / 2) * ref.w + x] = ref.c[k][size_t(y) * ref.w + x];
-    fieldErr[f] = compare(a, b);
-  }
-  plot(out, "fields", "Interlaced frame (demo 256x144): shade once vs re-shade each field");
-  gTables << "### Shade once, re-sample vs re-shade at the target interval (the headline)\n\nScene: the built-in demo at " << kDW << "×" << kDH
+  // Shading in time at 16 spp, one point per tolerance, 3 and 5 shading times.
+  struct Timed {
+    double tolerance, seconds;
+    int times;
+    uint64_t grids, candidates, bytes;
+  };
+  std::vector<Timed> timed;
+  for (int times : {3, 5})
+    for (double tol : gQuick ? std::vector<double>{0.01} : std::vector<double>{0.1, 0.03, 0.01, 0.003, 0.0}) {
+      shade::ShadeOptions o;
+      o.timeTolerance = tol, o.shadingTimes = times;
+      const std::string path = gTmp + "/acc_demo_timed.mps";
+      double best = 1e30;
+      shade::StoreResult res;
+      for (int r = 0; r < 3; ++r) {
+        bench::Stopwatch sw;
+        res = shade::shadeToStore(scene, o, path);
+        best = std::min(best, sw.seconds());
+      }
+      auto st = std::make_shared<const store::StoreReader>(path);
+      measure(
+          "fields", "shade in time, " + std::to_string(times) + " times", tol, [&](uint64_t seed) { return demoSpec({st}, fields, 4, seed); }, ref, 3, best);
+      timed.push_back({tol, best, times, res.shade.timedGrids, res.shade.timeCandidateGrids, res.write.fileBytes});
+    }
+  // The shading error alone: at the reference's samples.
+  const Err shadingErr = compare(toImg(render(demoSpec({sOnce}, fields, refSide, 99))), ref);
+  const Err reshadeErr = compare(toImg(render(demoSpec({sA, sB}, fields, refSide, 99))), ref);
+  plot(out, "fields", "Interlaced frame (demo 256x144): shade once, shade in time, re-shade each field");
+  gTables << "### Shade once, shade in time, re-shade each field (the headline)\n\nScene: the built-in demo at " << kDW << "×" << kDH
           << ", gaussian 2×2, interlaced fields [0, 0.5] and [0.5, 1] of frame 1. *Shade once*: one shading pass over the frame's shutter "
-             "(shaded at open), both fields re-sampled from it. *Re-shade*: `reshutter shade --interval` run per field (shaded at each "
-             "field's open), the fields rendered from the two stores. Seconds = shading (best of 3) + rendering (best of the 3 seeds). "
-             "Reference: the re-shaded fields at "
-          << refSide * refSide << " spp. Shading: once " << fmt(tOnce, "%.3f") << " s; per field " << fmt(tA, "%.3f") << " + " << fmt(tB, "%.3f")
-          << " s. The error of shading once alone (same " << refSide * refSide << " samples as the reference): RMSE " << fmt(shadingErr.rmse, "%.2e")
-          << ", max " << fmt(shadingErr.max, "%.2e") << ", luminance RMSE " << fmt(shadingErr.lum, "%.2e") << "; field 1 rows (shaded at 0.0 "
-          << "either way; a 2-px filter still reaches the neighbouring field-2 rows) RMSE " << fmt(fieldErr[0].rmse, "%.2e") << " / max "
-          << fmt(fieldErr[0].max, "%.2e") << ", field 2 rows (shaded at 0.0 "
-          << "instead of 0.5) RMSE " << fmt(fieldErr[1].rmse, "%.2e") << " / max " << fmt(fieldErr[1].max, "%.2e") << ".\n\n";
-  std::fprintf(stderr, "  shading error: all %.3e, field 1 %.3e (max %.3e), field 2 %.3e (max %.3e)\n", shadingErr.rmse, fieldErr[0].rmse, fieldErr[0].max,
-               fieldErr[1].rmse, fieldErr[1].max);
-  table("fields", "spp");
+             "(shaded at open), both fields re-sampled from it. *Shade in time*: one pass with `--shade-in-time TOL --shade-times N` (the knob "
+             "column is the tolerance; 16 spp). *Re-shade*: `reshutter shade --interval` run per field (shaded at each field's open), the fields "
+             "rendered from the two stores. Seconds = shading (best of 3) + rendering (best of the 3 seeds). Reference: shading that follows "
+             "time without shading in time - "
+          << kSteps << " stores, each shaded at the middle of its 1/" << kSteps << " of the frame, each sample drawn from its own time's ("
+          << refSide * refSide << " spp). Shading: once " << fmt(tOnce, "%.3f") << " s; per field " << fmt(tA, "%.3f") << " + " << fmt(tB, "%.3f")
+          << " s. The shading error alone (the reference's samples): shade once RMSE " << fmt(shadingErr.rmse, "%.2e") << " (max "
+          << fmt(shadingErr.max, "%.2e") << "), re-shade each field RMSE " << fmt(reshadeErr.rmse, "%.2e") << " (max " << fmt(reshadeErr.max, "%.2e")
+          << ").\n\n";
+  gTables << "Shading in time, per setting: shading seconds, grids that kept every time of the candidates (grids whose shading could change), "
+             "store bytes (shade once: "
+          << std::filesystem::file_size(pOnce) << ").\n\n| times | tolerance | shading s | grids kept / candidates | store bytes |\n|---|---|---|---|---|\n";
+  for (const Timed& t : timed)
+    gTables << "| " << t.times << " | " << fmt(t.tolerance) << " | " << fmt(t.seconds, "%.3f") << " | " << t.grids << " / " << t.candidates << " | "
+            << t.bytes << " |\n";
+  gTables << "\n";
+  std::fprintf(stderr, "  shading error: once %.3e (max %.3e), re-shade %.3e (max %.3e)\n", shadingErr.rmse, shadingErr.max, reshadeErr.rmse, reshadeErr.max);
+  table("fields", "tolerance");
 }
 
 void studyMotionFactor(const std::string& out) {
@@ -850,11 +878,15 @@ const Point* find(const std::string& study, const std::string& curvePrefix, int 
 /// One line per study with its figure to quote (README, RESULTS).
 std::string headlines() {
   std::ostringstream h;
-  if (auto a = find("fields", "shade once", 16), b = find("fields", "re-shade", 16); a && b)
-    h << "- **Interlaced frame, shade once vs re-shade each field** (demo " << kDW << "×" << kDH << ", 16 spp): " << fmt(a->seconds, "%.2f")
-      << " s from one shading pass vs " << fmt(b->seconds, "%.2f") << " s re-shading each field (" << fmt(100 * (1 - a->seconds / b->seconds), "%.0f")
-      << " % less); the price is a shading-time bias of RMSE " << fmt(a->bias, "%.1e") << " (max " << fmt(a->max, "%.2f")
-      << ": the spinning cube and tumbling metal torus lit as at the frame's open, not each field's) against 16-spp noise of " << fmt(b->noise, "%.1e")
+  if (auto a = find("fields", "shade once", 16), b = find("fields", "re-shade", 16), c = find("fields", "shade in time, 3", 16, 0.01),
+      d = find("fields", "shade in time, 5", 16, 0.01);
+      a && b && c && d)
+    h << "- **Interlaced frame, shade once / shade in time / re-shade each field** (demo " << kDW << "×" << kDH << ", 16 spp, against shading that "
+      << "follows time): shade once " << fmt(a->seconds, "%.2f") << " s with a shading bias of RMSE " << fmt(a->bias, "%.1e") << " (max "
+      << fmt(a->max, "%.2f") << ": the spinning cube and tumbling metal torus lit as at the frame's open); shade in time (tolerance 0.01) with 3 times "
+      << fmt(c->seconds, "%.2f") << " s, bias " << fmt(c->bias, "%.1e") << " (max " << fmt(c->max, "%.2f") << "), with 5 times (the default) "
+      << fmt(d->seconds, "%.2f") << " s, bias " << fmt(d->bias, "%.1e") << " (max " << fmt(d->max, "%.2f") << "); re-shading each field "
+      << fmt(b->seconds, "%.2f") << " s, bias " << fmt(b->bias, "%.1e") << " (max " << fmt(b->max, "%.2f") << "); 16-spp noise " << fmt(b->noise, "%.1e")
       << ".\n";
   if (auto a = find("timebounds", "per-stratum", 64), b = find("timebounds", "one bound", 64); a && b)
     h << "- **Time bounds**: 1-px micropolygons moving 50 px at 64 spp render in " << fmt(a->seconds, "%.2f") << " s with per-stratum bounds vs "

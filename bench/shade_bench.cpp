@@ -4,6 +4,7 @@
 // compression and I/O, what `reshutter shade` costs).
 // Usage: shade_bench [--quick] [--dir DIR]      (one line of results per configuration)
 //        shade_bench --shadows                    (the demo with shadows off and on)
+//        shade_bench --shade-in-time              (the demo shaded once and in time, into stores)
 //        shade_bench --motion-factors DIR          (demo stores for motion factor 0, 0.5, 1, 2, 4 in DIR,
 //                                                   for the accuracy study in bench/RESULTS.md)
 #include <sys/resource.h>
@@ -11,6 +12,7 @@
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <thread>
 
@@ -40,9 +42,11 @@ struct NullSink final : store::GridSink {
 };
 
 void run(const char* label, int w, int h, double rateScale, int threads, const std::string& storePath, double motionFactor = 0, bool shadows = true,
-         double shadowRate = 1) {
+         double shadowRate = 1, std::optional<double> timeTolerance = {}, int shadingTimes = 3) {
   tbb::global_control gc(tbb::global_control::max_allowed_parallelism, size_t(threads));
   shade::ShadeOptions o;
+  o.timeTolerance = timeTolerance;
+  o.shadingTimes = shadingTimes;
   o.shadows = shadows;
   o.shadowRate = shadowRate;
   o.dice.shadingRateScale = rateScale;
@@ -68,6 +72,9 @@ void run(const char* label, int w, int h, double rateScale, int threads, const s
               " grids %7.3f s wall %7.3f s cpu  %5.2f M mp/s  %5.2f M mp/s per cpu-s  %s  scene %.3f s  peak RSS %.0f MB\n",
               label, w, h, rateScale, threads, st.micropolygons, st.movingMicropolygons, st.grids, s, cpu, mps / 1e6, double(st.micropolygons) / cpu / 1e6,
               storePath.empty() ? "null sink" : (std::to_string(bytes / 1000000) + " MB store").c_str(), buildSeconds, bench::peakRssBytes() / 1e6);
+  if (!st.shadingTimes.empty())
+    std::printf("       in time: %zu times, %" PRIu64 " of %" PRIu64 " candidate grids kept them (%" PRIu64 " micropolygons)\n", st.shadingTimes.size(),
+                st.timedGrids, st.timeCandidateGrids, st.timedMicropolygons);
   if (st.shadowMicropolygons)
     std::printf("       shadows: %" PRIu64 " rays against %" PRIu64 " micropolygons, scene built in %.3f s\n", st.shadowRays, st.shadowMicropolygons,
                 st.shadowBuildSeconds);
@@ -77,15 +84,16 @@ void run(const char* label, int w, int h, double rateScale, int threads, const s
 }  // namespace
 
 int main(int argc, char** argv) {
-  bool quick = false, shadows = false;
+  bool quick = false, shadows = false, inTime = false;
   std::string dir = std::filesystem::temp_directory_path().string(), mfDir;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--quick")) quick = true;
     else if (!std::strcmp(argv[i], "--motion-factors") && i + 1 < argc) mfDir = argv[++i];
     else if (!std::strcmp(argv[i], "--shadows")) shadows = true;
+    else if (!std::strcmp(argv[i], "--shade-in-time")) inTime = true;
     else if (!std::strcmp(argv[i], "--dir") && i + 1 < argc) dir = argv[++i];
     else {
-      std::fprintf(stderr, "usage: shade_bench [--quick] [--dir DIR] [--shadows]\n");
+      std::fprintf(stderr, "usage: shade_bench [--quick] [--dir DIR] [--shadows | --shade-in-time]\n");
       return 2;
     }
   }
@@ -110,6 +118,18 @@ int main(int argc, char** argv) {
     return 0;
   }
   const std::string store = dir + "/shade_bench.mps";
+  if (inTime) {  // what shading in time costs on the demo (into a store: its size too)
+    for (auto [w, h] : {std::pair{640, 360}, {1920, 1080}}) {
+      run("once", w, h, 1, cores, store);
+      for (double tol : {0.03, 0.01, 0.0}) {
+        char label[16];
+        std::snprintf(label, sizeof label, "t%g", tol);
+        run(label, w, h, 1, cores, store, 0, true, 1, tol, 5);
+      }
+    }
+    std::filesystem::remove(store);
+    return 0;
+  }
   run("demo", 640, 360, 1, 1, "");
   run("demo", 640, 360, 1, cores, "");
   run("demo", 640, 360, 1, cores, store);

@@ -23,6 +23,8 @@ struct ShadeCommand {
   std::string shadows = "on";
   int shadowSamples = shade::ShadeOptions{}.shadowSamples;
   double shadowRate = 1;
+  std::string shadeInTime = "off";
+  int shadingTimes = shade::ShadeOptions{}.shadingTimes;
   uint64_t primitiveBudget = shade::DiceOptions{}.maxMicropolygonsPerPrimitive;
 
   int run() const {
@@ -52,6 +54,15 @@ struct ShadeCommand {
     opt.shadowSamples = shadowSamples;
     if (!(shadowRate >= 1) || shadowRate > 1024) fail("--shadow-rate", "must be 1 to 1024");
     opt.shadowRate = shadowRate;
+    if (shadeInTime != "off") {
+      double tol = 0;
+      char extra = 0;
+      if (std::sscanf(shadeInTime.c_str(), "%lf%c", &tol, &extra) != 1 || !(tol >= 0) || !std::isfinite(tol))
+        fail("--shade-in-time", "expected off or a colour tolerance >= 0 (0: every grid that may change), got '", shadeInTime, "'");
+      opt.timeTolerance = tol;
+    }
+    if (shadingTimes < 2 || shadingTimes > int(store::StoreMeta::kMaxShadingTimes)) fail("--shade-times", "must be 2 to ", store::StoreMeta::kMaxShadingTimes);
+    opt.shadingTimes = shadingTimes;
     if (!store::parseRational(fps, opt.fps)) fail("--fps", "expected a frame rate such as 24, 25, 29.97 or 30000/1001, got '", fps, "'");
     std::vector<int64_t> wanted;
     if (!frames.empty()) wanted = parseFrameRange(frames, "--frame-range");
@@ -68,8 +79,13 @@ struct ShadeCommand {
       const std::string path = expandFramePattern(output, n);
       shade::StoreResult r = shade::shadeToStore(frame, opt, path);
       ++written;
-      std::printf("frame %lld: %s micropolygons in %s grids (%s moving), shaded at t=%g in %.2f s -> %s (%s, %.1f bytes/micropolygon)%s\n", (long long)n,
-                  grouped(r.shade.micropolygons).c_str(), grouped(r.shade.grids).c_str(), grouped(r.shade.movingGrids).c_str(), r.shade.shadeAt,
+      const std::string shadedWhen =
+          r.shade.shadingTimes.size() > 1
+              ? cat("shaded in time (", grouped(r.shade.timedGrids), " of ", grouped(r.shade.timeCandidateGrids), " grids that may change kept ",
+                    r.shade.shadingTimes.size(), " times)")
+              : cat("shaded at t=", r.shade.shadeAt);
+      std::printf("frame %lld: %s micropolygons in %s grids (%s moving), %s in %.2f s -> %s (%s, %.1f bytes/micropolygon)%s\n", (long long)n,
+                  grouped(r.shade.micropolygons).c_str(), grouped(r.shade.grids).c_str(), grouped(r.shade.movingGrids).c_str(), shadedWhen.c_str(),
                   r.shade.seconds, path.c_str(), humanBytes(double(r.write.fileBytes)).c_str(),
                   r.shade.micropolygons ? double(r.write.fileBytes) / double(r.shade.micropolygons) : 0.0,
                   skipped.empty() ? "" : cat("; skipped primitives: ", skipped).c_str());
@@ -131,6 +147,13 @@ void addShadeCommand(CLI::App& app, Registry& registry) {
   sub->add_option("--shadow-rate", cmd->shadowRate,
                   "Trace shadow rays against micropolygons this many times coarser (area) than the shaded ones: 1 is exact, 4 builds the shadow "
                   "scene about 4x faster (speed knob; error in docs/accuracy.md)")
+      ->capture_default_str();
+  sub->add_option("--shade-in-time", cmd->shadeInTime,
+                  "Shade grids whose shading can change over the shutter (moving under lights or a view-dependent shader, moving lights, animated "
+                  "colours) at --shade-times times too, and keep them where the colour changes by more than this tolerance (0: always); re-sampling "
+                  "then blends each sample's colour at its own time. off: shade once (error against time in docs/accuracy.md)")
+      ->capture_default_str();
+  sub->add_option("--shade-times", cmd->shadingTimes, "With --shade-in-time: shading times spread evenly over the interval, its open and close included")
       ->capture_default_str();
   registry.add(sub, [cmd] { return cmd->run(); });
 }

@@ -16,8 +16,14 @@
 namespace reshutter::cli {
 
 std::string grouped(uint64_t n) {
-  std::string s = std::to_string(n);
-  for (int i = int(s.size()) - 3; i > 0; i -= 3) s.insert(size_t(i), ",");
+  // Appended digit by digit: inserting commas into the string made GCC 12 warn of a bogus
+  // memcpy bound (-Wstringop-overflow) once this was inlined into more callers.
+  const std::string digits = std::to_string(n);
+  std::string s;
+  for (size_t i = 0; i < digits.size(); ++i) {
+    if (i > 0 && (digits.size() - i) % 3 == 0) s += ',';
+    s += digits[i];
+  }
   return s;
 }
 
@@ -36,6 +42,7 @@ using namespace store;
 
 struct Summary {
   uint64_t micropolygons = 0, vertices = 0, parts = 0, tiles = 0, behindCamera = 0;
+  uint64_t timedMicropolygons = 0, timedParts = 0, timedBytes = 0, timedColourBytes = 0;  // parts shaded in time
   std::map<std::string, uint64_t> effectParts;  // effect name → parts
   RasterRect screen;
 };
@@ -51,8 +58,12 @@ Summary summarise(const StoreReader& r) {
     ++s.parts;
     if (i == 0 || e.tx != entries[i - 1].tx || e.ty != entries[i - 1].ty) ++s.tiles;
     if (e.tx == kBehindCameraTile) s.behindCamera += e.numMicropolygons;
-    for (uint32_t bit = 1; bit <= kEffectColouredOpacity; bit <<= 1)
+    for (uint32_t bit = 1; bit <= kEffectShadedInTime; bit <<= 1)
       if (e.effects & bit) ++s.effectParts[effectNames(bit)];
+    if (e.effects & kEffectShadedInTime) {
+      s.timedMicropolygons += e.numMicropolygons, ++s.timedParts, s.timedBytes += e.compressedSize;
+      s.timedColourBytes += uint64_t(e.numVertices) * (m.shadingTimes.size() - 1) * 24;  // Ci@k and Oi@k, uncompressed
+    }
     s.screen.extend(r.bounds(i, m.shutterOpen, m.shutterClose));
   }
   return s;
@@ -111,7 +122,11 @@ int runInfo(const std::string& path, bool json) {
     if (!s.screen.empty) j.value("x0", double(s.screen.x0)).value("y0", double(s.screen.y0)).value("x1", double(s.screen.x1)).value("y1", double(s.screen.y1));
     j.endObject().beginObject("effect_parts");
     for (const auto& [name, n] : s.effectParts) j.value(name.c_str(), n);
-    j.endObject().value("provenance", m.provenance).endObject();
+    j.endObject().beginObject("shading_in_time").beginArray("times");
+    for (double t : m.shadingTimes) j.value(nullptr, t);
+    j.endArray().value("grids", m.shadedInTimeGrids).value("micropolygons", s.timedMicropolygons).value("parts", s.timedParts);
+    j.value("part_bytes", s.timedBytes).value("raw_colour_bytes", s.timedColourBytes).endObject();
+    j.value("provenance", m.provenance).endObject();
     std::printf("%s\n", j.str().c_str());
     return 0;
   }
@@ -129,6 +144,13 @@ int runInfo(const std::string& path, bool json) {
   for (size_t i = 0; i < m.schema.attrs.size(); ++i) {
     const auto& a = m.schema.attrs[i];
     std::printf("  %-14s %-10s %-7s per %-13s %s\n", i == 0 ? "schema" : "", a.name.c_str(), toString(a.type), toString(a.rate), toString(a.codec));
+  }
+  if (m.shadingTimes.empty()) {
+    std::printf("  shading        once\n");
+  } else {
+    std::printf("  shading        in time at %zu times %s: %s grids (%s micropolygons, %s parts, %s compressed) carry every time\n", m.shadingTimes.size(),
+                knotList(m.shadingTimes).c_str(), grouped(m.shadedInTimeGrids).c_str(), grouped(s.timedMicropolygons).c_str(), grouped(s.timedParts).c_str(),
+                humanBytes(double(s.timedBytes)).c_str());
   }
   if (!s.screen.empty) std::printf("  screen bounds  x [%.1f, %.1f]  y [%.1f, %.1f] over the shutter\n", s.screen.x0, s.screen.x1, s.screen.y0, s.screen.y1);
   std::string eff;

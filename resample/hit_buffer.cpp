@@ -40,8 +40,20 @@ void HitBuffer::reset(size_t slots) {
   fragmentsGrouped = false;
 }
 
-HitBuffer::HitContext HitBuffer::hitContext(const store::StoreMeta& meta, const store::TileEntry& entry, const store::TilePart& part) const {
+HitBuffer::HitContext HitBuffer::hitContext(const store::StoreMeta& meta, const store::TileEntry& entry, const store::TilePart& part, const float* sampleTime,
+                                            double toLocal) const {
   HitContext hc{&part, &meta.schema, meta.schema.ci(), meta.schema.oi(), (entry.effects & store::kEffectTransparent) != 0};
+  hc.timedCi[0] = hc.ci, hc.timedOi[0] = hc.oi;
+  if ((entry.effects & store::kEffectShadedInTime) && meta.shadingTimes.size() > 1) {
+    // The general path: per-hit time blends (the fast paths read one colour array).
+    hc.timed = true;
+    hc.numTimes = int(meta.shadingTimes.size());
+    hc.shadingTimes = meta.shadingTimes.data();
+    for (size_t k = 1; k < meta.shadingTimes.size(); ++k)
+      hc.timedCi[k] = meta.schema.find(store::StoreMeta::timedName("Ci", k)), hc.timedOi[k] = meta.schema.find(store::StoreMeta::timedName("Oi", k));
+    hc.sampleTime = sampleTime, hc.toLocal = toLocal;
+    return hc;
+  }
   if (!hc.transparentPart && !aovLayout.floatCount && !aovLayout.uintCount && hc.ci >= 0) {
     const auto& decl = meta.schema.attrs[size_t(hc.ci)];
     const auto& arr = part.attrs[size_t(hc.ci)].f;
@@ -65,12 +77,12 @@ void HitBuffer::recordAnyHit(const HitContext& hc, uint32_t sample, uint32_t m, 
   const store::TilePart& part = *hc.part;
   const bool matte = part.flags[m] & store::kMatte;
   float o[3] = {1.f, 1.f, 1.f};
-  if (hc.transparentPart) attrAt(part, *hc.schema, hc.oi, m, v, b, o);
+  if (hc.transparentPart) shadingAt(hc, hc.timedOi, sample, m, v, b, o);
   const bool opaque = o[0] >= 1.f && o[1] >= 1.f && o[2] >= 1.f;
   if (opaque) {
     if (!(z < zbuf[sample])) return;  // ties keep the surface drawn first (rasterizeQueued)
     float c[3];
-    attrAt(part, *hc.schema, hc.ci, m, v, b, c);
+    shadingAt(hc, hc.timedCi, sample, m, v, b, c);
     setNearestOpaque(sample, z, c, matte, part, m);
     if (aovLayout.floatCount || aovLayout.uintCount) {
       float fv[64];
@@ -83,7 +95,7 @@ void HitBuffer::recordAnyHit(const HitContext& hc, uint32_t sample, uint32_t m, 
   }
   if (!(z < zbuf[sample])) return;  // hidden behind an opaque surface already found
   float c[3];
-  attrAt(part, *hc.schema, hc.ci, m, v, b, c);
+  shadingAt(hc, hc.timedCi, sample, m, v, b, c);
   addFragment(sample, z, c, o, part.objectId[m], part.gridId[m], matte);
   if (aovLayout.floatCount || aovLayout.uintCount) {
     float fv[64];
@@ -92,6 +104,22 @@ void HitBuffer::recordAnyHit(const HitContext& hc, uint32_t sample, uint32_t m, 
     fragAov.insert(fragAov.end(), fv, fv + aovLayout.floatCount);
     fragAovU.insert(fragAovU.end(), uv, uv + aovLayout.uintCount);
   }
+}
+
+void HitBuffer::shadingAt(const HitContext& hc, const int* slots, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float out[3]) const {
+  if (!hc.timed) {
+    attrAt(*hc.part, *hc.schema, slots[0], m, v, b, out);
+    return;
+  }
+  const double t = double(hc.sampleTime[sample]) + hc.toLocal;
+  const double* T = hc.shadingTimes;
+  int k = 0;
+  while (k + 2 < hc.numTimes && T[k + 1] <= t) ++k;
+  const float w = float(std::clamp((t - T[k]) / (T[k + 1] - T[k]), 0.0, 1.0));
+  float a[3], c[3];
+  attrAt(*hc.part, *hc.schema, slots[k], m, v, b, a);
+  attrAt(*hc.part, *hc.schema, slots[k + 1], m, v, b, c);
+  for (int j = 0; j < 3; ++j) out[j] = a[j] + w * (c[j] - a[j]);
 }
 
 void HitBuffer::addFragment(uint32_t sample, float z, const float c[3], const float o[3], uint32_t objectId, uint32_t gridId, bool matte) {

@@ -45,8 +45,20 @@ struct HitBuffer {
     bool opaqueFast = false, transparentFast = false;
     const float* colour = nullptr;
     const float* opacity = nullptr;
+    // A part shaded in time (store::kEffectShadedInTime): colour and opacity at the sample's own
+    // time, linear between the two shading times around it (held at the first and last outside
+    // them). The sample's local time is sampleTime[sample] + toLocal.
+    bool timed = false;
+    int numTimes = 0;
+    const double* shadingTimes = nullptr;
+    int timedCi[store::StoreMeta::kMaxShadingTimes] = {}, timedOi[store::StoreMeta::kMaxShadingTimes] = {};
+    const float* sampleTime = nullptr;
+    double toLocal = 0;
   };
-  HitContext hitContext(const store::StoreMeta& meta, const store::TileEntry& entry, const store::TilePart& part) const;
+  /// The context of `part`'s hits; sampleTime / toLocal map a sample to the store's local time
+  /// (used by parts shaded in time).
+  HitContext hitContext(const store::StoreMeta& meta, const store::TileEntry& entry, const store::TilePart& part, const float* sampleTime,
+                        double toLocal) const;
 
   /// Records a hit of micropolygon m on a sample (its stratum-major index s * PS + p): triangle
   /// vertices v, barycentrics b, camera depth z.
@@ -131,6 +143,9 @@ struct HitBuffer {
   }
   void addFragment(uint32_t sample, float z, const float c[3], const float o[3], uint32_t objectId, uint32_t gridId, bool matte);
   void recordAnyHit(const HitContext& hc, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float z);
+  // Colour (slots = timedCi) or opacity (timedOi) of a hit: the stored attribute, or for a part
+  // shaded in time the blend at the sample's time.
+  void shadingAt(const HitContext& hc, const int* slots, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float out[3]) const;
   // Puts each sample's fragments next to each other, in the order resolve() visits the samples
   // (a counting sort by sample): the lists are then read sequentially, not chased through memory.
   void groupFragments(const BucketSamples& samples);

@@ -113,7 +113,7 @@ void BucketRasterizer::Impl::rasterizeQueued() {
 void BucketRasterizer::Impl::rasterizeChunk(const Source& src, const TileEntry& entry, const TilePart& part, const Chunk& ch) {
   const auto& meta = src.store->meta();
   const auto& knots = meta.schedules[entry.schedule];
-  const HitContext hc = hitContext(meta, entry, part);
+  const HitContext hc = hitContext(meta, entry, part, st.data(), tBase - double(src.frame));
   const bool moving = (entry.effects & store::kEffectMoving) && part.numKnots > 1 && !ch.still;
   if (!moving) {
     // Knot 0 holds every knot's positions: one pass serves all samples, all groups.

@@ -21,8 +21,11 @@
 //   transform's times, clipped to the shutter (positions interpolated at the shutter ends), as
 //   camera-space positions linear between knots. A grid whose knots are all equal (blurP = P: a
 //   static object) is stored static and not counted as moving.
-// - Appearance per knot: the first copy's variables (Cs, Os, N, …) are kept; if a later copy
-//   differs, a warning says so once. Positions are per knot.
+// - Appearance per knot: copies whose Cs or Os differ make the store shade in time (StoreMeta::
+//   shadingTimes: the first such block's knots, "Ci@k" / "Oi@k" at Ci's rate; a later block's
+//   colours are blended onto those times), and the re-sampler blends each sample's colour at its
+//   own time. Of the other variables (N, st, …) the first copy's are kept; if a later copy's
+//   differ, a warning says so once. Positions are per knot.
 // - Variables: every declared variable of a primitive becomes a store attribute of the same name
 //   (Cs → Ci, Os → Oi): per vertex for vertex/varying/facevarying, per micropolygon for
 //   uniform/constant (per vertex if another primitive gives it per vertex). Arrays (float[2] st)

@@ -184,11 +184,33 @@ void DumpHandler::gridAttributes(const Prim& p, const Attrs& s, double firstKnot
     auto& out = attrData_[ai];
     out.clear();
     int element = 0;
-    const Var* var = sourceOf(p, ad.name, element);
+    // Shading per knot: "Ci@k" / "Oi@k" (and "Ci" / "Oi" at the first shading time) blend the
+    // copies' Cs / Os at the store's shading time k; a primitive without shading per knot
+    // leaves the times absent (one colour).
+    const bool timedName = ad.name.starts_with("Ci@") || ad.name.starts_with("Oi@");
+    const bool timed = !p.knotCs.empty() || !p.knotOs.empty();
+    if (timedName && !timed) continue;
+    const std::string base = timedName ? ad.name.substr(0, 2) : ad.name;
+    const Var* var = sourceOf(p, base, element);
+    Var blended;
+    if (timed && (base == "Ci" || base == "Oi") && var) {
+      const auto& knots = base == "Ci" ? p.knotCs : p.knotOs;
+      const size_t k = timedName ? size_t(std::stoul(ad.name.substr(3))) : 0;
+      if (!knots.empty() && k < meta_->shadingTimes.size() && p.times.size() == knots.size() && knots.size() > 1) {
+        size_t i;
+        double w;
+        locate(p.times, meta_->shadingTimes[k], i, w);
+        blended.decl = var->decl;
+        blended.values.resize(var->values.size());
+        for (size_t j = 0; j < blended.values.size(); ++j)
+          blended.values[j] = float((1 - w) * knots[i][j] + w * knots[i + 1][j]);
+        var = &blended;
+      }
+    }
     const size_t count = ad.rate == AttrRate::Vertex ? gv.count : nMp;
     if (!var) {
-      if (ad.name != "Ci" && ad.name != "Oi") continue;  // absent in this grid
-      const glm::vec3 c = ad.name == "Ci" ? s.color : s.opacity;
+      if (base != "Ci" && base != "Oi") continue;  // absent in this grid
+      const glm::vec3 c = base == "Ci" ? s.color : s.opacity;
       for (size_t i = 0; i < count; ++i) out.insert(out.end(), {c.x, c.y, c.z});
     } else {
       if (ad.rate == AttrRate::Micropolygon && perVertexClass(var->decl.storage)) continue;  // cannot happen with one file

@@ -78,6 +78,8 @@ struct Prim {
   std::vector<std::vector<float>> P;  // per copy, 3 · nP, object space
   std::vector<double> times;          // copies' times; empty: static
   std::vector<Var> vars;              // the first copy's
+  // Shading per knot: "Cs" / "Os" values of every copy (empty: the same in every copy).
+  std::vector<std::vector<float>> knotCs, knotOs;
   // Micropolygons as face-corner indices, 4 each (kNoCorner: triangle), and their source face.
   std::vector<uint32_t> mpCorners, mpFace;
   bool unshare = false;  // one grid vertex per face-corner (facevarying/uniform-per-vertex data)
@@ -148,6 +150,7 @@ class DumpHandler final : public rib::RequestHandler {
   // Schema (pass 1)
   std::vector<std::string> schemaOrder_;
   std::map<std::string, SchemaEntry> schema_;
+  std::vector<double> shadingTimes_;  // the first primitive with shading per knot sets them
 
   // Output
   bool collect_, emit_, optimistic_;
@@ -188,6 +191,8 @@ class DumpHandler final : public rib::RequestHandler {
   void emitPrim(const Prim& p);
   uint32_t scheduleFor(const std::vector<double>& knots);
   void gridAttributes(const Prim& p, const Attrs& s, double firstKnot, store::GridInput& g);
+  /// A motion block whose copies carry different Cs or Os: the store shades in time.
+  void noteShadingPerKnot(const rib::Args& a);
 };
 
 }  // namespace reshutter::shade::ingest

@@ -3,6 +3,7 @@
 // copies, variables checked against the primitive's size - then split into quads and triangles
 // (fans for convex polygons, ear clipping for the others) and its variables entered in the
 // schema. Sending the Prim as a grid is ingest_grids.cpp's.
+#include <algorithm>
 #include <array>
 #include <cmath>
 
@@ -238,13 +239,29 @@ bool DumpHandler::polygons(const Request& r, const Args& a) {
   readPolygons(r, a, copy, false);
   if (copy.verts != prim_.verts || copy.faceCount != prim_.faceCount || copy.nP != prim_.nP)
     a.fail(cat("motion copy ", k + 1, " has a different topology from the first"));
-  // Appearance per knot: the first copy's values are kept.
+  // Appearance per knot: colour and opacity per copy (shading in time, as the RenderMan
+  // motion-blur reference allows); of the other variables the first copy's are kept.
   bool differs = copy.vars.size() != prim_.vars.size();
-  for (size_t i = 0; !differs && i < copy.vars.size(); ++i)
-    differs = copy.vars[i].decl.name != prim_.vars[i].decl.name || copy.vars[i].values != prim_.vars[i].values;
+  for (size_t i = 0; !differs && i < copy.vars.size(); ++i) {
+    const Var& first = prim_.vars[i];
+    if (copy.vars[i].decl.name != first.decl.name || copy.vars[i].values.size() != first.values.size()) differs = true;
+    else if (copy.vars[i].values == first.values) continue;
+    else if (first.decl.name == "Cs" || first.decl.name == "Os") {
+      auto& knots = first.decl.name == "Cs" ? prim_.knotCs : prim_.knotOs;
+      if (knots.empty()) knots.assign(k, first.values);  // the copies so far were the first's
+      knots.resize(k);
+    } else differs = true;
+  }
+  for (auto* knots : {&prim_.knotCs, &prim_.knotOs})
+    if (!knots->empty()) {
+      const std::string name = knots == &prim_.knotCs ? "Cs" : "Os";
+      const auto v = std::find_if(copy.vars.begin(), copy.vars.end(), [&](const Var& x) { return x.decl.name == name; });
+      knots->resize(k);
+      knots->push_back(v != copy.vars.end() ? v->values : knots->front());
+    }
   if (differs && collect_)
     warnOnce("ingest-appearance-knots",
-             cat(r.where.str(), " (", r.name, "): variables other than P change between motion copies; ingest keeps the first knot's"));
+             cat(r.where.str(), " (", r.name, "): variables other than P, Cs and Os change between motion copies; ingest keeps the first knot's"));
   prim_.P.push_back(std::move(copy.P[0]));
   return true;
 }

@@ -113,6 +113,13 @@ StoreMeta DumpHandler::scannedMeta(const std::string& file) const {
   }
   for (const auto& n : schemaOrder_)
     if (n != "Ci" && n != "Oi") add(n);
+  // Shading per knot: Ci@k / Oi@k (each at its base's rate), for every knot after the first.
+  if (shadingTimes_.size() > 1) {
+    m.shadingTimes = shadingTimes_;
+    for (size_t k = 1; k < shadingTimes_.size(); ++k)
+      for (const char* base : {"Ci", "Oi"})
+        m.schema.attrs.push_back(AttrDecl{StoreMeta::timedName(base, k), AttrType::Color, m.schema.attrs[size_t(m.schema.find(base))].rate, AttrCodec::Lossless});
+  }
   if (m.schema.attrs.size() > 64) fail(file, "declares ", m.schema.attrs.size(), " output variables; a store holds at most 64");
   m.provenance = cat("reshutter ingest ", std::filesystem::path(file).filename().string());
   m.validate(file);
@@ -142,8 +149,20 @@ void DumpHandler::endMotion(const Request& r, const Args& a) {
     a.fail(cat("the motion block has ", motionTimes_.size(), " knots but ", motionCount_, " copies of ", motionRequest_));
   if (!prim_.P.empty()) {
     prim_.times = motionTimes_;
+    if (!prim_.knotCs.empty() || !prim_.knotOs.empty()) noteShadingPerKnot(a);
     if (emit_) emitPrim(prim_);
   }
+}
+
+/// The first primitive whose copies carry their own Cs or Os makes the store shade in time at
+/// its knots; later ones are blended onto those times.
+void DumpHandler::noteShadingPerKnot(const Args& a) {
+  if (!shadingTimes_.empty() || (meta_ && !meta_->shadingTimes.empty())) return;
+  if (motionTimes_.size() > StoreMeta::kMaxShadingTimes)
+    a.fail(cat("carries colours at ", motionTimes_.size(), " knots; a store holds at most ", StoreMeta::kMaxShadingTimes, " shading times"));
+  if (!collect_) return;
+  shadingTimes_ = motionTimes_;
+  if (optimistic_ && sink_) throw SchemaGrew{};  // the open store has no room for them
 }
 
 /// Already-shaded micropolygons need no shading, display or sampling settings: taken and

@@ -25,6 +25,13 @@ std::vector<double> unionTimes(const std::vector<double>& a, const std::vector<d
   return t;
 }
 
+glm::dvec3 lerpValue(const glm::dvec3& a, const glm::dvec3& b, double w) { return a + (b - a) * w; }
+SurfaceShader lerpValue(const SurfaceShader& a, const SurfaceShader& b, double w) { return a.lerp(b, w); }
+
+bool csIsRightHanded(const MotionXform& x) { return glm::determinant(x.mats[0]) < 0; }
+
+}  // namespace
+
 // Segment and weight of `t` in increasing `times` (clamped at the ends: RenderMan holds the first
 // and last knot's values outside the block).
 void locate(const std::vector<double>& times, double t, size_t& i, double& w) {
@@ -40,12 +47,6 @@ void locate(const std::vector<double>& times, double t, size_t& i, double& w) {
   w = (t - times[i]) / (times[i + 1] - times[i]);
 }
 
-glm::dvec3 lerpValue(const glm::dvec3& a, const glm::dvec3& b, double w) { return a + (b - a) * w; }
-SurfaceShader lerpValue(const SurfaceShader& a, const SurfaceShader& b, double w) { return a.lerp(b, w); }
-
-bool csIsRightHanded(const MotionXform& x) { return glm::determinant(x.mats[0]) < 0; }
-
-}  // namespace
 
 // ---------------------------------------------------------------------------------------------
 

@@ -46,6 +46,11 @@ struct MotionXform {
   MotionXform then(const MotionXform& rhs) const;
 };
 
+/// Segment i and weight w of time t in increasing `times` (at least two): t lies w of the way
+/// from times[i] to times[i + 1], clamped at the ends (RenderMan holds the first and last knot's
+/// values outside a motion block).
+void locate(const std::vector<double>& times, double t, size_t& i, double& w);
+
 /// A value given at knot times (Color, Opacity and shader parameters inside motion blocks).
 template <typename T>
 struct Animated {

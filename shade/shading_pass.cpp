@@ -11,6 +11,8 @@
 #include <memory>
 #include <span>
 
+#include <glm/common.hpp>
+#include <glm/geometric.hpp>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_pipeline.h>
 #include <tbb/task_arena.h>
@@ -29,7 +31,10 @@ namespace {
 
 struct Interval {
   double open, close, shadeAt;
+  std::vector<double> times{};  // shading in time: every shading time (times[0] = shadeAt); empty: once
 };
+
+bool sceneMayShadeInTime(const FrameScene& scene, double open, double close);
 
 Interval intervalOf(const FrameScene& scene, const ShadeOptions& o) {
   const auto& opt = scene.options;
@@ -40,6 +45,15 @@ Interval intervalOf(const FrameScene& scene, const ShadeOptions& o) {
   }
   iv.shadeAt = o.shadeAt ? *o.shadeAt : iv.open;
   if (!std::isfinite(iv.shadeAt)) fail("--shade-at", "time is not finite");
+  if (o.timeTolerance) {
+    if (!(*o.timeTolerance >= 0) || !std::isfinite(*o.timeTolerance)) fail("--shade-in-time", "the tolerance must be a finite number >= 0");
+    if (o.shadingTimes < 2 || size_t(o.shadingTimes) > store::StoreMeta::kMaxShadingTimes)
+      fail("--shade-times", "must be 2 to ", store::StoreMeta::kMaxShadingTimes);
+    if (o.shadeAt && *o.shadeAt != iv.open) fail("--shade-at", "shading in time shades at times spread over the interval from its open; drop --shade-at");
+    if (iv.close > iv.open && sceneMayShadeInTime(scene, iv.open, iv.close))
+      for (int k = 0; k < o.shadingTimes; ++k)
+        iv.times.push_back(k == o.shadingTimes - 1 ? iv.close : iv.open + (iv.close - iv.open) * double(k) / double(o.shadingTimes - 1));
+  }
   return iv;
 }
 
@@ -55,13 +69,16 @@ struct Batch {
   size_t first = 0, count = 0;  // into the flattened leaf list
   std::vector<GridOut> grids;
   uint64_t dropped = 0, trimmed = 0, shadowRays = 0;
+  uint64_t timeCandidates = 0, timed = 0, timedMicropolygons = 0;
 };
 
 using BatchPtr = std::shared_ptr<Batch>;
 
-enum class Var : uint8_t { Ci, Oi, P, N, Ng, s, t, u, v, Cs, Os, depth, specular };
+// Timed: "Ci@k" / "Oi@k", filled by shading at the other times (shadeInTime()).
+enum class Var : uint8_t { Ci, Oi, P, N, Ng, s, t, u, v, Cs, Os, depth, specular, Timed };
 
 Var varOf(const std::string& name) {
+  if (name.starts_with("Ci@") || name.starts_with("Oi@")) return Var::Timed;
   static const std::pair<const char*, Var> table[] = {{"Ci", Var::Ci},
                                                       {"Oi", Var::Oi},
                                                       {"P", Var::P},
@@ -107,7 +124,13 @@ store::StoreMeta storeMeta(const FrameScene& scene, const ShadeOptions& o) {
   for (const auto& name : scene.options.outputs)
     for (const auto& v : knownOutputVars())
       if (v.name == name) m.schema.attrs.push_back({name, v.type, store::AttrRate::Vertex, store::AttrCodec::Lossless});
-  std::string prov = cat("reshutter shade: ", scene.source.empty() ? "scene" : scene.source, "; frame ", scene.options.frame, "; shaded at t=", iv.shadeAt,
+  if (iv.times.size() > 1) {
+    m.shadingTimes = iv.times;
+    for (size_t k = 1; k < iv.times.size(); ++k)
+      for (const char* base : {"Ci", "Oi"})
+        m.schema.attrs.push_back({store::StoreMeta::timedName(base, k), store::AttrType::Color, store::AttrRate::Vertex, store::AttrCodec::Lossless});
+  }
+  std::string prov = cat("reshutter shade: ", scene.source.empty() ? "scene" : scene.source, "; frame ", scene.options.frame, iv.times.size() > 1 ? cat("; shaded in time at ", iv.times.size(), " times from t=", iv.shadeAt) : cat("; shaded at t=", iv.shadeAt),
                          "; interval [", iv.open, ", ", iv.close, "]");
   if (!scene.objectNames.empty()) {
     prov += "; objects:";
@@ -168,6 +191,20 @@ struct ShadeContext {
   const TextureLookup* textures = nullptr;  // only when some surface has a texture
   const ShadowScene* shadows = nullptr;     // only when a light asks for shadows
   int shadowSamples = 16;
+  // Shading in time (times.size() > 1): the other times' lights, and what may change.
+  std::vector<double> times{};
+  std::vector<std::vector<LitLight>> litAt{};  // [k][light], k >= 1
+  std::vector<uint8_t> lightMoves{};           // per light: moves (in camera space) over the interval
+  // The camera-space box, over the interval, of each moving primitive that casts shadows: a
+  // receiver whose shadows they cannot reach keeps one colour.
+  struct Box {
+    glm::dvec3 lo{INFINITY}, hi{-INFINITY};
+    void add(const glm::vec3& p) { lo = glm::min(lo, glm::dvec3(p)), hi = glm::max(hi, glm::dvec3(p)); }
+  };
+  std::vector<Box> movingCasters{};
+  double tolerance = 0;
+  int ci = -1, oi = -1;
+  std::vector<int> timedCi{}, timedOi{};  // schema slots of "Ci@k" / "Oi@k" ([0] unused)
 };
 
 /// Vertex i's output variables into `attrs` (parallel to the schema).
@@ -189,17 +226,19 @@ void storeOutputs(const std::vector<Var>& vars, const DicedGrid& g, size_t i, co
       case Var::Os: put3(dst, i, in.Os); break;
       case Var::depth: dst[i] = float(g.P[i].z); break;
       case Var::specular: put3(dst, i, finite(so.viewDependent)); break;
+      case Var::Timed: break;
     }
   }
 }
 
-/// Shades every vertex of the diced grid `g` of primitive `p` into `out.attrs`.
-void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g, std::span<const LitLight> lights, uint64_t leafIndex, GridOut& out,
-                   uint64_t& shadowRays) {
+/// Shades every vertex of the diced grid `g` (its corners: `corners`) of primitive `p` at `time`,
+/// shading time k of the pass (0: the first), into `attrs` (parallel to the schema).
+void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g, std::span<const uint32_t> corners, std::span<const LitLight> lights, double time,
+                   size_t k, uint64_t leafIndex, std::vector<std::vector<float>>& attrs, uint64_t& shadowRays) {
   const Attributes& a = *p.attrs;
-  const SurfaceShader shader = a.surface.at(c.shadeAt);
+  const SurfaceShader shader = a.surface.at(time);
   // A RIS material's own colour and presence replace the primitive's.
-  const glm::dvec3 Cs0 = shader.color ? *shader.color : a.color.at(c.shadeAt), Os0 = shader.opacity ? *shader.opacity : a.opacity.at(c.shadeAt);
+  const glm::dvec3 Cs0 = shader.color ? *shader.color : a.color.at(time), Os0 = shader.opacity ? *shader.opacity : a.opacity.at(time);
   std::array<glm::dvec3, 4> cornerCs, cornerOs;
   const bool hasCs = !shader.color && p.mesh && p.corners(p.mesh->Cs, cornerCs);
   const bool hasOs = !shader.opacity && p.mesh && p.corners(p.mesh->Os, cornerOs);
@@ -217,11 +256,11 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
   std::vector<float> bias;
   if (traces) {
     bias.assign(nV, 0.f);
-    for (size_t m = 0; m + 4 <= out.corners.size(); m += 4) {
-      const uint32_t* q = &out.corners[m];
+    for (size_t m = 0; m + 4 <= corners.size(); m += 4) {
+      const uint32_t* q = &corners[m];
       const int n = q[3] == store::kNoCorner ? 3 : 4;
-      for (int k = 0; k < n; ++k) {
-        const uint32_t v = q[k], w = q[(k + 1) % n];
+      for (int j = 0; j < n; ++j) {
+        const uint32_t v = q[j], w = q[(j + 1) % n];
         if (v >= nV || w >= nV) continue;
         const float half = float(0.5 * glm::length(g.P[w] - g.P[v]));
         bias[v] = std::max(bias[v], half), bias[w] = std::max(bias[w], half);
@@ -234,20 +273,21 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
     map = c.textures->find(shader.textureName);
     footprint.resize(nV);
     std::vector<uint8_t> set(nV, 0);
-    // The grid's corners have moved to `out` already (shadeBatch).
-    for (size_t m = 0; m + 4 <= out.corners.size(); m += 4) {
-      const uint32_t* q = &out.corners[m];
+    // The grid's corners have moved to its GridOut already (shadeBatch).
+    for (size_t m = 0; m + 4 <= corners.size(); m += 4) {
+      const uint32_t* q = &corners[m];
       const int n = q[3] == store::kNoCorner ? 3 : 4;
-      for (int k = 0; k < n; ++k) {
-        const uint32_t v = q[k], a = q[(k + 1) % n], b = q[(k + n - 1) % n];
+      for (int j = 0; j < n; ++j) {
+        const uint32_t v = q[j], a = q[(j + 1) % n], b = q[(j + n - 1) % n];
         if (v >= nV || a >= nV || b >= nV || set[v]) continue;
         footprint[v] = {float(g.s[a] - g.s[v]), float(g.t[a] - g.t[v]), float(g.s[b] - g.s[v]), float(g.t[b] - g.t[v])};
         set[v] = 1;
       }
     }
   }
-  out.attrs.resize(c.vars.size());
-  for (size_t ai = 0; ai < c.vars.size(); ++ai) out.attrs[ai].resize(nV * size_t(store::componentCount(c.schema.attrs[ai].type)));
+  attrs.resize(c.vars.size());
+  for (size_t ai = 0; ai < c.vars.size(); ++ai)
+    if (c.vars[ai] != Var::Timed) attrs[ai].resize(nV * size_t(store::componentCount(c.schema.attrs[ai].type)));
   for (size_t i = 0; i < nV; ++i) {
     SurfaceInput in;
     in.P = g.P[i], in.N = g.N[i], in.Ng = g.Ng[i];
@@ -271,20 +311,146 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
         shadowed[li].Cl0 = lights[li].Cl0;  // the previous vertex scaled it
         glm::dvec3 L, Cl;
         if (!lights[li].shadows || !illuminate(lights[li], in.P, L, Cl) || !(glm::dot(L, Nf) > 0)) continue;
-        const uint64_t seed = hashCombine(hashCombine(leafIndex, i), li);
-        shadowed[li].Cl0 *= lightVisibility(*c.shadows, lights[li], in.P, Ng, std::max(double(bias[i]), floorBias), c.shadowSamples, seed, shadowRays);
+        uint64_t seed = hashCombine(hashCombine(leafIndex, i), li);
+        if (k > 0) seed = hashCombine(seed, k);
+        shadowed[li].Cl0 *= lightVisibility(*c.shadows, lights[li], in.P, Ng, std::max(double(bias[i]), floorBias), c.shadowSamples, seed, shadowRays, time);
       }
       vertexLights = shadowed;
     }
     const SurfaceOutput so = shadeSurface(shader, in, vertexLights);
-    storeOutputs(c.vars, g, i, in, so, out.attrs);
+    storeOutputs(c.vars, g, i, in, so, attrs);
   }
+}
+
+/// Whether every vertex moves by the same offset (a rigid translation in camera space).
+bool translatesRigidly(std::span<const glm::vec3> P, size_t nV, size_t K) {
+  float scale = 0;
+  for (const glm::vec3& p : P) scale = std::max({scale, std::abs(p.x), std::abs(p.y), std::abs(p.z)});
+  const float eps = 1e-5f * scale;
+  for (size_t k = 1; k < K; ++k) {
+    const glm::vec3 d = P[k * nV] - P[0];
+    for (size_t v = 1; v < nV; ++v) {
+      const glm::vec3 e = P[k * nV + v] - P[v] - d;
+      if (std::abs(e.x) > eps || std::abs(e.y) > eps || std::abs(e.z) > eps) return false;
+    }
+  }
+  return true;
+}
+
+/// Whether anything in box `caster` can shadow a point in box `recv` from `light` (conservative).
+bool mayShadow(const LitLight& light, const ShadeContext::Box& caster, const ShadeContext::Box& recv) {
+  if (light.kind == LightKind::Ambient) return false;
+  auto corners = [](const ShadeContext::Box& b, int i) { return glm::dvec3(i & 1 ? b.hi.x : b.lo.x, i & 2 ? b.hi.y : b.lo.y, i & 4 ? b.hi.z : b.lo.z); };
+  if (light.kind == LightKind::Distant || (light.kind == LightKind::Uber && light.uber.parallel)) {
+    // Shadows fall along the light's direction d: the receiver must lie beyond the caster along
+    // d, and overlap it seen along d (widened by a soft light's cone over the gap).
+    const glm::dvec3 d = glm::normalize(light.axis);
+    const glm::dvec3 a = std::abs(d.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0);
+    const glm::dvec3 e1 = glm::normalize(glm::cross(a, d)), e2 = glm::cross(d, e1);
+    double cb[3][2] = {{INFINITY, -INFINITY}, {INFINITY, -INFINITY}, {INFINITY, -INFINITY}}, rb[3][2] = {{INFINITY, -INFINITY}, {INFINITY, -INFINITY}, {INFINITY, -INFINITY}};
+    for (int i = 0; i < 8; ++i) {
+      const glm::dvec3 p = corners(caster, i), q = corners(recv, i);
+      const double pc[3] = {glm::dot(p, e1), glm::dot(p, e2), glm::dot(p, d)}, qc[3] = {glm::dot(q, e1), glm::dot(q, e2), glm::dot(q, d)};
+      for (int k = 0; k < 3; ++k)
+        cb[k][0] = std::min(cb[k][0], pc[k]), cb[k][1] = std::max(cb[k][1], pc[k]), rb[k][0] = std::min(rb[k][0], qc[k]), rb[k][1] = std::max(rb[k][1], qc[k]);
+    }
+    const double slack = 1e-6 * (1 + glm::length(caster.hi - caster.lo) + glm::length(recv.hi - recv.lo));
+    if (rb[2][1] + slack < cb[2][0]) return false;
+    const double grow = light.tanHalfAngle * std::max(0.0, rb[2][1] - cb[2][0]) + slack;
+    return rb[0][0] <= cb[0][1] + grow && cb[0][0] - grow <= rb[0][1] && rb[1][0] <= cb[1][1] + grow && cb[1][0] - grow <= rb[1][1];
+  }
+  // A local light (its emitter within radius rl of its position): the segment from a shadowed
+  // point to the light's centre passes within rl of the caster, so it meets the caster's
+  // bounding sphere grown by rl - the receiver's sphere must then lie in that sphere's cone.
+  const double rl = glm::length(light.halfU) + glm::length(light.halfV);
+  const glm::dvec3 cc = 0.5 * (caster.lo + caster.hi), rc = 0.5 * (recv.lo + recv.hi);
+  const double rB = 0.5 * glm::length(caster.hi - caster.lo) * (1 + 1e-6) + rl, rR = 0.5 * glm::length(recv.hi - recv.lo) * (1 + 1e-6);
+  const glm::dvec3 toB = cc - light.position, toR = rc - light.position;
+  const double dB = glm::length(toB), dR = glm::length(toR);
+  if (!(dB > rB) || !(dR > rR)) return true;
+  if (dR + rR < dB - rB) return false;  // wholly nearer the light than the caster
+  const double cosAngle = std::clamp(glm::dot(toB, toR) / (dB * dR), -1.0, 1.0);
+  return std::acos(cosAngle) <= std::asin(std::min(1.0, rB / dB)) + std::asin(std::min(1.0, rR / dR)) + 1e-9;
+}
+
+/// Whether grid `g` of primitive `pi` (lights: the indices into the frame's lights that light
+/// it) can shade differently at another time of the interval - decided from what the scene says
+/// moves or changes, conservatively: shading at the other times then confirms it. A grid that
+/// stands still under fixed lights, an unlit constant one, and a matte one translating rigidly
+/// under fixed distant lights that cast no shadows cannot.
+bool mayShadeDifferently(const ShadeContext& c, uint32_t pi, std::span<const glm::vec3> positions, uint32_t nV, std::span<const uint32_t> lights) {
+  const Primitive& p = c.scene.prims[pi];
+  const Attributes& a = *p.attrs;
+  if (a.color.values.size() > 1 || a.opacity.values.size() > 1 || a.surface.values.size() > 1) return true;
+  const SurfaceShader& sh = a.surface.values[0];
+  if (sh.kind == SurfaceKind::Constant) return false;
+  const bool lit = usesLights(sh.kind);
+  bool shadowed = false, local = false;
+  if (lit)
+    for (uint32_t li : lights) {
+      if (li >= c.lit.size()) continue;
+      if (c.lightMoves[li]) return true;
+      shadowed |= c.shadows && c.lit[li].shadows;
+      local |= c.lit[li].kind != LightKind::Distant && c.lit[li].kind != LightKind::Ambient;
+    }
+  if (shadowed && !c.movingCasters.empty()) {  // a moving caster's shadow may move over it
+    ShadeContext::Box recv;
+    for (const glm::vec3& q : positions) recv.add(q);
+    for (uint32_t li : lights)
+      if (li < c.lit.size() && c.lit[li].shadows)
+        for (const ShadeContext::Box& caster : c.movingCasters)
+          if (mayShadow(c.lit[li], caster, recv)) return true;
+  }
+  const size_t K = c.split.knots[pi].size();
+  if (K <= 1 || store::verticesStandStill(positions, nV, 0, nV)) return false;
+  if (sh.kind != SurfaceKind::Matte) return true;  // view-dependent terms (or defaultsurface's headlight)
+  return shadowed || local || !translatesRigidly(positions, nV, K);
+}
+
+/// Shading in time for one grid already shaded at the first time into `out`: shades it at the
+/// other times and keeps them ("Ci@k", "Oi@k") when the colour or opacity changes by more than
+/// the tolerance. Returns whether it kept them.
+bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const DicedGrid& g, std::span<const uint32_t> lightIdx, uint64_t leafIndex,
+                 GridOut& out, uint64_t& shadowRays) {
+  const Primitive& p = c.scene.prims[pi];
+  const size_t T = c.times.size();
+  const bool moves = c.split.knots[pi].size() > 1 && !store::verticesStandStill(out.positions, out.numVertices, 0, out.numVertices);
+  std::vector<std::vector<std::vector<float>>> at(T);
+  DicedGrid gk;
+  std::vector<LitLight> lights;
+  float change = 0;
+  for (size_t k = 1; k < T; ++k) {
+    // A grid that stands still has the same shading geometry at every time (only its lights,
+    // shadows and shader can differ): no second dicing.
+    const DicedGrid* geometry = &g;
+    if (moves) {
+      diceLeaf(p, leaf, c.split.knots[pi], c.times[k], c.nearClip, c.perspective, gk);
+      if (gk.numVertices != g.numVertices || gk.corners != out.corners) return false;  // the same grid, or no blend
+      geometry = &gk;
+    }
+    lights.clear();
+    for (uint32_t li : lightIdx)
+      if (li < c.lit.size()) lights.push_back(c.litAt[k][li]);
+    shadeVertices(c, p, *geometry, out.corners, lights, c.times[k], k, leafIndex, at[k], shadowRays);
+    for (int slot : {c.ci, c.oi}) {
+      const std::vector<float>& a = out.attrs[size_t(slot)];
+      const std::vector<float>& b = at[k][size_t(slot)];
+      for (size_t i = 0; i < a.size(); ++i) change = std::max(change, std::abs(b[i] - a[i]));
+    }
+  }
+  if (!(change > c.tolerance) && c.tolerance > 0) return false;
+  for (size_t k = 1; k < T; ++k) {
+    out.attrs[size_t(c.timedCi[k])] = std::move(at[k][size_t(c.ci)]);
+    out.attrs[size_t(c.timedOi[k])] = std::move(at[k][size_t(c.oi)]);
+  }
+  return true;
 }
 
 /// Dices and shades the batch's leaves into b.grids.
 void shadeBatch(const ShadeContext& c, Batch& b) {
   DicedGrid g;
   std::vector<LitLight> lights;
+  std::vector<uint32_t> lightIdx;  // the frame's lights that light the primitive
   const Attributes* lightsOf = nullptr;
   uint64_t shadowRays = 0;
   b.grids.resize(b.count);
@@ -296,18 +462,25 @@ void shadeBatch(const ShadeContext& c, Batch& b) {
     b.trimmed += g.trimmedMicropolygons;
     if (p.attrs.get() != lightsOf) {  // a primitive's grids come in runs: copy its lights once a run
       lightsOf = p.attrs.get();
-      lights.clear();
+      lights.clear(), lightIdx.clear();
       for (uint32_t li : p.attrs->lights)
-        if (li < c.lit.size()) lights.push_back(c.lit[li]);
+        if (li < c.lit.size()) lightIdx.push_back(li);
       for (uint32_t li : c.scene.globalLights)
-        if (li < c.lit.size()) lights.push_back(c.lit[li]);
+        if (li < c.lit.size()) lightIdx.push_back(li);
+      for (uint32_t li : lightIdx) lights.push_back(c.lit[li]);
     }
     GridOut& out = b.grids[n];
     out.prim = pi;
     out.numVertices = g.numVertices;
     out.positions = std::move(g.positions);
     out.corners = std::move(g.corners);
-    shadeVertices(c, p, g, lights, b.first + n, out, shadowRays);
+    shadeVertices(c, p, g, out.corners, lights, c.shadeAt, 0, b.first + n, out.attrs, shadowRays);
+    if (c.times.size() > 1 && !out.corners.empty()) {
+      if (mayShadeDifferently(c, pi, out.positions, out.numVertices, lightIdx)) {
+        ++b.timeCandidates;
+        if (shadeInTime(c, pi, *leaf, g, lightIdx, b.first + n, out, shadowRays)) ++b.timed, b.timedMicropolygons += out.corners.size() / 4;
+      }
+    }
     g = DicedGrid{};
   }
   b.shadowRays = shadowRays;
@@ -325,6 +498,9 @@ class GridSender {
     stats_.droppedMicropolygons += b.dropped;
     stats_.trimmedMicropolygons += b.trimmed;
     stats_.shadowRays += b.shadowRays;
+    stats_.timeCandidateGrids += b.timeCandidates;
+    stats_.timedGrids += b.timed;
+    stats_.timedMicropolygons += b.timedMicropolygons;
     for (GridOut& go : b.grids)
       if (!go.corners.empty()) sendGrid(go);
   }
@@ -414,7 +590,7 @@ bool wantsShadows(const FrameScene& scene, std::span<const LitLight> lit, double
 /// The frame's micropolygons at the shading time, every leaf of a primitive that casts shadows
 /// diced again (the shading pass's grids stream out; keeping them all would hold the frame) -
 /// from `split`, the frame's own leaves, or leaves split at a coarser shadow rate.
-std::unique_ptr<ShadowScene> buildShadowScene(const ShadeContext& c, const SplitScene& split) {
+std::unique_ptr<ShadowScene> buildShadowScene(const ShadeContext& c, const SplitScene& split, std::vector<ShadeContext::Box>* movingCasters = nullptr) {
   std::vector<ShadowScene::Piece> pieces(split.flat.size());
   tbb::parallel_for(tbb::blocked_range<size_t>(0, pieces.size(), 8), [&](const tbb::blocked_range<size_t>& r) {
     DicedGrid g;
@@ -423,12 +599,47 @@ std::unique_ptr<ShadowScene> buildShadowScene(const ShadeContext& c, const Split
       const Primitive& p = c.scene.prims[pi];
       if (!p.attrs->transmission) continue;
       diceLeaf(p, *leaf, split.knots[pi], c.shadeAt, c.nearClip, c.perspective, g);
-      pieces[i].P.assign(g.P.begin(), g.P.end());
+      if (c.times.size() > 1 && split.knots[pi].size() > 1) {
+        // Shading in time: the micropolygons move over the interval (their positions at the knots).
+        pieces[i].P = std::move(g.positions);
+        pieces[i].knots = split.knots[pi];
+      } else {
+        pieces[i].P.assign(g.P.begin(), g.P.end());
+      }
       pieces[i].corners = std::move(g.corners);
       g = DicedGrid{};
     }
   });
-  return std::make_unique<ShadowScene>(pieces);
+  if (movingCasters) {
+    // One box per moving primitive, over its pieces at every knot.
+    uint32_t last = UINT32_MAX;
+    for (size_t i = 0; i < pieces.size(); ++i) {
+      if (pieces[i].knots.size() <= 1) continue;
+      const size_t nV = pieces[i].P.size() / pieces[i].knots.size();
+      if (store::verticesStandStill(pieces[i].P, nV, 0, nV)) continue;
+      if (split.flat[i].first != last) movingCasters->emplace_back(), last = split.flat[i].first;
+      for (const glm::vec3& q : pieces[i].P) movingCasters->back().add(q);
+    }
+  }
+  return c.times.size() > 1 ? std::make_unique<ShadowScene>(pieces, c.times.front(), c.times.back()) : std::make_unique<ShadowScene>(pieces);
+}
+
+/// Whether anything in the scene can make shading differ over [open, close]: a light that moves
+/// in camera space, an animated colour, opacity or shader, or a primitive that moves or deforms
+/// under a shader that is not constant.
+bool sceneMayShadeInTime(const FrameScene& scene, double open, double close) {
+  for (const Light& l : scene.lights)
+    if (l.xform.moving() && l.xform.at(open) != l.xform.at(close)) return true;
+  const Attributes* seen = nullptr;
+  for (const Primitive& p : scene.prims) {
+    const Attributes& a = *p.attrs;
+    if (&a != seen) {
+      seen = &a;
+      if (a.color.values.size() > 1 || a.opacity.values.size() > 1 || a.surface.values.size() > 1) return true;
+    }
+    if (a.surface.values[0].kind != SurfaceKind::Constant && !p.knotTimes().empty() && clipKnots(p, open, close).size() > 1) return true;
+  }
+  return false;
 }
 
 // The texture search path with relative entries taken from the RIB file's directory, which is
@@ -468,6 +679,20 @@ ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::Gri
   context.lit.reserve(scene.lights.size());
   for (const auto& l : scene.lights) context.lit.push_back(resolveLight(l, iv.shadeAt));
   for (const auto& a : meta.schema.attrs) context.vars.push_back(varOf(a.name));
+  if (iv.times.size() > 1) {
+    context.times = iv.times;
+    context.tolerance = *o.timeTolerance;
+    context.ci = meta.schema.ci(), context.oi = meta.schema.oi();
+    context.litAt.resize(iv.times.size());
+    context.timedCi.assign(iv.times.size(), -1), context.timedOi.assign(iv.times.size(), -1);
+    for (size_t k = 1; k < iv.times.size(); ++k) {
+      for (const auto& l : scene.lights) context.litAt[k].push_back(resolveLight(l, iv.times[k]));
+      context.timedCi[k] = meta.schema.find(store::StoreMeta::timedName("Ci", k));
+      context.timedOi[k] = meta.schema.find(store::StoreMeta::timedName("Oi", k));
+    }
+    for (const auto& l : scene.lights) context.lightMoves.push_back(l.xform.moving() && l.xform.at(iv.open) != l.xform.at(iv.close));
+    stats.shadingTimes = iv.times;
+  }
   // Textures only when a surface asks for one (no texture system otherwise).
   std::unique_ptr<TextureLookup> textures;
   // (Primitives share attributes in runs; a texture at any key of an animated surface counts.)
@@ -488,13 +713,13 @@ ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::Gri
   if (o.shadows && wantsShadows(scene, context.lit, iv.shadeAt)) {
     const auto t0 = std::chrono::steady_clock::now();
     if (o.shadowRate == 1) {
-      shadows = buildShadowScene(context, split);
+      shadows = buildShadowScene(context, split, &context.movingCasters);
     } else {
       // Coarser micropolygons for the shadow rays: the same split, every shading rate scaled.
       DiceOptions coarse = o.dice;
       coarse.shadingRateScale *= o.shadowRate;
       ShadeStats ignored;
-      shadows = buildShadowScene(context, splitScene(scene, iv, cam, coarse, ignored));
+      shadows = buildShadowScene(context, splitScene(scene, iv, cam, coarse, ignored), &context.movingCasters);
     }
     stats.shadowMicropolygons = shadows->micropolygons();
     stats.shadowBuildSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();

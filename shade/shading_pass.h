@@ -38,6 +38,14 @@ struct ShadeOptions {
   /// frame's own micropolygons; 4 has about a quarter as many, cheaper to build, with
   /// shadow edges traced against a coarser surface (docs/accuracy.md has the trade).
   double shadowRate = 1;
+  /// Shading in time: unset shades every point once (at shadeAt). Set, each grid whose shading
+  /// can change over the interval (it moves or deforms under lights or a view-dependent shader,
+  /// a light moves, a colour or shader is animated) is also shaded at the other of `shadingTimes`
+  /// times spread evenly over the interval (the first at its open), and keeps them when its colour
+  /// or opacity changes by more than this tolerance somewhere (0: whenever it may change). The
+  /// re-sampler then blends each sample's colour at its own time.
+  std::optional<double> timeTolerance;
+  int shadingTimes = 5;
 };
 
 struct ShadeStats {
@@ -51,6 +59,9 @@ struct ShadeStats {
   uint64_t shadowMicropolygons = 0;   // in the shadow scene (0: no light asked for shadows)
   uint64_t shadowRays = 0;            // traced towards lights
   double shadowBuildSeconds = 0;      // dicing the frame for the shadow scene and building its BVH
+  uint64_t timeCandidateGrids = 0;    // shading in time: grids whose shading could change, shaded at every time
+  uint64_t timedGrids = 0, timedMicropolygons = 0;  // of them, those that changed enough to keep every time
+  std::vector<double> shadingTimes;   // empty: shaded once
   double shadeAt = 0;
   double seconds = 0;
 };

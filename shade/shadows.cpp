@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
 
 #include <embree3/rtcore.h>
 #include <tbb/parallel_for.h>
@@ -18,6 +19,7 @@ namespace reshutter::shade {
 struct ShadowScene::Impl {
   RTCDevice device = nullptr;
   RTCScene scene = nullptr;
+  double open = 0, close = 0;  // the moving pieces' interval (Embree's ray time 0 to 1)
   ~Impl() {
     if (scene) rtcReleaseScene(scene);
     if (device) rtcReleaseDevice(device);
@@ -31,31 +33,78 @@ void check(RTCDevice device, const char* what) {
 }
 }  // namespace
 
-ShadowScene::ShadowScene(std::span<const Piece> pieces) : impl_(std::make_unique<Impl>()) {
-  // Where each piece's vertices and micropolygons go in the one geometry.
-  std::vector<uint64_t> vertexBase(pieces.size() + 1, 0), quadBase(pieces.size() + 1, 0);
-  for (size_t i = 0; i < pieces.size(); ++i) {
-    vertexBase[i + 1] = vertexBase[i] + pieces[i].P.size();
-    quadBase[i + 1] = quadBase[i] + pieces[i].corners.size() / 4;
+namespace {
+
+// Where piece `p`'s vertices are at Embree time step `step` of `steps` over [open, close]: its own
+// knots when they are the steps, else linear between its knots (positions are linear between
+// knots, so resampling keeps each path's shape up to the steps' spacing).
+void stepPositions(const ShadowScene::Piece& p, size_t nV, unsigned step, unsigned steps, double open, double close, float* out) {
+  const size_t K = std::max<size_t>(1, p.knots.size());
+  auto put = [&](size_t v, const glm::vec3& P) { out[3 * v] = P.x, out[3 * v + 1] = P.y, out[3 * v + 2] = P.z; };
+  if (K == 1 || steps == 1 || steps == K) {
+    const size_t k = K == 1 || steps == 1 ? 0 : step;
+    for (size_t v = 0; v < nV; ++v) put(v, p.P[k * nV + v]);
+    return;
   }
-  micropolygons_ = quadBase.back();
-  if (vertexBase.back() > std::numeric_limits<uint32_t>::max()) fail("shadows", "the frame has more than 2^32 vertices at the shading time");
+  const double t = open + (close - open) * double(step) / double(steps - 1);
+  size_t k = 0;
+  while (k + 2 < K && p.knots[k + 1] <= t) ++k;
+  const float f = float(std::clamp((t - p.knots[k]) / (p.knots[k + 1] - p.knots[k]), 0.0, 1.0));
+  for (size_t v = 0; v < nV; ++v) {
+    const glm::vec3& a = p.P[k * nV + v];
+    put(v, a + f * (p.P[(k + 1) * nV + v] - a));
+  }
+}
+
+// Embree time steps for a piece: 1 when it stands still, its knots when they are evenly spread
+// over [open, close], else twice as many even steps.
+unsigned stepsFor(const ShadowScene::Piece& p, double open, double close) {
+  const size_t K = p.knots.size();
+  if (K <= 1 || !(close > open)) return 1;
+  const size_t nV = p.P.size() / K;
+  if (store::verticesStandStill(p.P, nV, 0, nV)) return 1;
+  const double span = close - open;
+  bool even = std::abs(p.knots.front() - open) <= 1e-9 * span && std::abs(p.knots.back() - close) <= 1e-9 * span;
+  for (size_t k = 0; even && k < K; ++k) even = std::abs(p.knots[k] - (open + span * double(k) / double(K - 1))) <= 1e-9 * span;
+  return unsigned(even ? K : std::min<size_t>(2 * K, 129));
+}
+
+}  // namespace
+
+ShadowScene::ShadowScene(std::span<const Piece> pieces, double open, double close) : impl_(std::make_unique<Impl>()) {
+  impl_->open = open, impl_->close = close;
   impl_->device = rtcNewDevice(nullptr);
   if (!impl_->device) fail("shadows", "Embree could not start (rtcNewDevice)");
   impl_->scene = rtcNewScene(impl_->device);
   rtcSetSceneFlags(impl_->scene, RTC_SCENE_FLAG_ROBUST);
   rtcSetSceneBuildQuality(impl_->scene, RTC_BUILD_QUALITY_MEDIUM);
-  if (micropolygons_ > 0) {
+  // One Embree geometry per count of time steps (a geometry's vertex buffers are its steps).
+  std::map<unsigned, std::vector<size_t>> groups;
+  for (size_t i = 0; i < pieces.size(); ++i)
+    if (!pieces[i].corners.empty()) groups[stepsFor(pieces[i], open, close)].push_back(i);
+  for (const auto& [steps, members] : groups) {
+    // Where each member's vertices and micropolygons go in the geometry.
+    std::vector<uint64_t> vertexBase(members.size() + 1, 0), quadBase(members.size() + 1, 0);
+    for (size_t j = 0; j < members.size(); ++j) {
+      const Piece& p = pieces[members[j]];
+      vertexBase[j + 1] = vertexBase[j] + p.P.size() / std::max<size_t>(1, p.knots.size());
+      quadBase[j + 1] = quadBase[j] + p.corners.size() / 4;
+    }
+    micropolygons_ += quadBase.back();
+    if (vertexBase.back() > std::numeric_limits<uint32_t>::max()) fail("shadows", "the frame has more than 2^32 vertices in one shadow geometry");
     RTCGeometry geom = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_QUAD);
-    auto* vertices = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, 0, RTC_FORMAT_FLOAT3, 3 * sizeof(float), vertexBase.back()));
+    if (steps > 1) rtcSetGeometryTimeStepCount(geom, steps);
+    std::vector<float*> vertices(steps);
+    for (unsigned s = 0; s < steps; ++s)
+      vertices[s] = static_cast<float*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_VERTEX, s, RTC_FORMAT_FLOAT3, 3 * sizeof(float), vertexBase.back()));
     auto* quads = static_cast<uint32_t*>(rtcSetNewGeometryBuffer(geom, RTC_BUFFER_TYPE_INDEX, 0, RTC_FORMAT_UINT4, 4 * sizeof(uint32_t), quadBase.back()));
     check(impl_->device, "allocate the shadow geometry");
-    tbb::parallel_for(size_t(0), pieces.size(), [&](size_t i) {
-      const Piece& p = pieces[i];
-      float* v = vertices + 3 * vertexBase[i];
-      for (const glm::vec3& P : p.P) *v++ = P.x, *v++ = P.y, *v++ = P.z;
-      uint32_t* q = quads + 4 * quadBase[i];
-      const auto base = uint32_t(vertexBase[i]);
+    tbb::parallel_for(size_t(0), members.size(), [&](size_t j) {
+      const Piece& p = pieces[members[j]];
+      const size_t nV = size_t(vertexBase[j + 1] - vertexBase[j]);
+      for (unsigned s = 0; s < steps; ++s) stepPositions(p, nV, s, steps, open, close, vertices[s] + 3 * vertexBase[j]);
+      uint32_t* q = quads + 4 * quadBase[j];
+      const auto base = uint32_t(vertexBase[j]);
       for (size_t m = 0; m + 4 <= p.corners.size(); m += 4) {
         const uint32_t* c = &p.corners[m];
         // Embree's quad is the triangles (v0 v1 v3) and (v2 v3 v1); a triangle repeats its last
@@ -74,7 +123,7 @@ ShadowScene::ShadowScene(std::span<const Piece> pieces) : impl_(std::make_unique
 
 ShadowScene::~ShadowScene() = default;
 
-bool ShadowScene::occluded(const glm::dvec3& origin, const glm::dvec3& dir, double tfar) const {
+bool ShadowScene::occluded(const glm::dvec3& origin, const glm::dvec3& dir, double tfar, double time) const {
   if (micropolygons_ == 0 || !(tfar > 0)) return false;
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
@@ -84,6 +133,8 @@ bool ShadowScene::occluded(const glm::dvec3& origin, const glm::dvec3& dir, doub
   ray.tnear = 0;
   ray.tfar = std::isfinite(tfar) ? float(tfar) : std::numeric_limits<float>::infinity();
   ray.mask = ~0u;
+  const double span = impl_->close - impl_->open;
+  ray.time = span > 0 ? float(std::clamp((time - impl_->open) / span, 0.0, 1.0)) : 0.f;
   rtcOccluded1(impl_->scene, &context, &ray);
   return ray.tfar == -std::numeric_limits<float>::infinity();
 }
@@ -119,7 +170,7 @@ double radicalInverse2(uint32_t i) {
 }  // namespace
 
 double lightVisibility(const ShadowScene& scene, const LitLight& light, const glm::dvec3& P, const glm::dvec3& Ng, double bias, int samples, uint64_t seed,
-                       uint64_t& rays) {
+                       uint64_t& rays, double time) {
   if (!light.shadows || light.kind == LightKind::Ambient) return 1.0;
   const bool directional = light.kind == LightKind::Distant || (light.kind == LightKind::Uber && light.uber.parallel);
   const glm::dvec3 towardCentre = directional ? -light.axis : light.position - P;
@@ -167,7 +218,7 @@ double lightVisibility(const ShadowScene& scene, const LitLight& light, const gl
       tfar = len * (1 - 1e-6);  // stop short of the emitter, which may itself be geometry
     }
     ++rays;
-    visible += !scene.occluded(origin, dir, tfar);
+    visible += !scene.occluded(origin, dir, tfar, time);
   }
   return double(visible) / n;
 }

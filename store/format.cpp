@@ -13,7 +13,8 @@ std::string effectNames(uint32_t e) {
                                                            {kEffectTwoSided, "two-sided"},
                                                            {kEffectTriangles, "triangles"},
                                                            {kEffectNearCrossing, "near-crossing"},
-                                                           {kEffectColouredOpacity, "coloured-opacity"}};
+                                                           {kEffectColouredOpacity, "coloured-opacity"},
+                                                           {kEffectShadedInTime, "shaded-in-time"}};
   std::string s;
   for (auto [bit, name] : names)
     if (e & bit) s += (s.empty() ? "" : " ") + std::string(name);
@@ -175,9 +176,16 @@ void writeMeta(const StoreMeta& m, ByteWriter& w) {
   }
   w.put<int32_t>(m.tileSize);
   w.putString(m.provenance);
+  if (formatVersionFor(m) >= 2) {
+    w.put<uint32_t>(uint32_t(m.shadingTimes.size()));
+    for (double t : m.shadingTimes) w.put<double>(t);
+    w.put<uint64_t>(m.shadedInTimeGrids);
+  }
 }
 
-StoreMeta readMeta(ByteReader& r) {
+uint32_t formatVersionFor(const StoreMeta& m) { return m.shadingTimes.empty() ? 1 : 2; }
+
+StoreMeta readMeta(ByteReader& r, uint32_t version) {
   StoreMeta m;
   m.frame = r.get<int64_t>();
   m.fps.num = r.get<int64_t>();
@@ -214,6 +222,12 @@ StoreMeta readMeta(ByteReader& r) {
   }
   m.tileSize = r.get<int32_t>();
   m.provenance = r.getString();
+  if (version >= 2) {
+    m.shadingTimes.resize(r.getCount(8));
+    for (double& t : m.shadingTimes) t = r.get<double>();
+    m.shadedInTimeGrids = r.get<uint64_t>();
+    if (m.shadingTimes.empty()) fail(r.context(), "format version 2 without shading times");
+  }
   if (!r.atEnd()) fail(r.context(), "unexpected bytes after the metadata");
   m.validate(r.context());
   return m;

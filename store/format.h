@@ -27,7 +27,9 @@ namespace reshutter::store {
 
 constexpr char kHeaderMagic[8] = {'R', 'S', 'H', 'U', 'T', 'M', 'P', 'S'};
 constexpr char kFooterMagic[8] = {'R', 'S', 'H', 'U', 'T', 'E', 'N', 'D'};
-constexpr uint32_t kFormatVersion = 1;
+/// Version 2 adds StoreMeta::shadingTimes; a store without them is written as version 1, so
+/// stores that do not shade in time stay readable by older builds, byte for byte as before.
+constexpr uint32_t kFormatVersion = 2;
 constexpr size_t kHeaderSize = 16;
 constexpr size_t kFooterSize = 64;
 /// Tile coordinate of micropolygons that never lie in front of the primary camera's near plane
@@ -46,6 +48,7 @@ enum Effect : uint32_t {
   kEffectTriangles = 16,        // some micropolygon is a triangle
   kEffectNearCrossing = 32,     // at some knot a vertex lies before the near plane
   kEffectColouredOpacity = 64,  // some Oi has unequal channels
+  kEffectShadedInTime = 128,    // its colours are given at every StoreMeta::shadingTimes ("Ci@k", "Oi@k")
 };
 std::string effectNames(uint32_t effects);
 
@@ -88,8 +91,11 @@ RasterRect projectCameraBox(const float box[6], const Projector& projector);
 /// Range of knot indices whose segments cover [t0, t1] (clamped to the schedule's ends).
 void knotRange(const Schedule& schedule, double t0, double t1, size_t& first, size_t& last);
 
+/// The format version a store with this metadata is written as (1 unless it shades in time).
+uint32_t formatVersionFor(const StoreMeta& meta);
 void writeMeta(const StoreMeta& meta, ByteWriter& out);
-StoreMeta readMeta(ByteReader& in);
+/// Reads metadata written as format `version`.
+StoreMeta readMeta(ByteReader& in, uint32_t version);
 void writeIndex(const std::vector<TileEntry>& entries, const StoreMeta& meta, ByteWriter& out);
 std::vector<TileEntry> readIndex(ByteReader& in, const StoreMeta& meta);
 

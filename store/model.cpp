@@ -177,7 +177,22 @@ void StoreMeta::validate(const std::string& where) const {
     if (i < 0) fail(where, "schema lacks '", required, "'");
     if (schema.attrs[size_t(i)].type != AttrType::Color) fail(where, "'", required, "' must be a color");
   }
+  if (shadingTimes.size() > kMaxShadingTimes) fail(where, shadingTimes.size(), " shading times (at most ", kMaxShadingTimes, ")");
+  for (size_t k = 0; k < shadingTimes.size(); ++k) {
+    if (!std::isfinite(shadingTimes[k])) fail(where, "shading time ", k, " is not finite");
+    if (k > 0 && !(shadingTimes[k] > shadingTimes[k - 1])) fail(where, "shading times not strictly increasing (", shadingTimes[k - 1], " then ", shadingTimes[k], ")");
+    for (const char* base : {"Ci", "Oi"}) {
+      if (k == 0) continue;
+      const int i = schema.find(timedName(base, k));
+      if (i < 0) fail(where, "shading time ", k, " has no '", timedName(base, k), "' in the schema");
+      const AttrDecl& a = schema.attrs[size_t(i)];
+      const AttrRate rate = schema.attrs[size_t(schema.find(base))].rate;
+      if (a.type != AttrType::Color || a.rate != rate) fail(where, "'", a.name, "' must be a color given as often as '", base, "'");
+    }
+  }
 }
+
+std::string StoreMeta::timedName(const std::string& base, size_t k) { return k == 0 ? base : base + "@" + std::to_string(k); }
 
 size_t TilePart::memoryBytes() const {
   size_t b = positions.size() * sizeof(glm::vec3) + corners.size() * 4 + objectId.size() * 4 + gridId.size() * 4 + flags.size();

@@ -119,6 +119,15 @@ struct StoreMeta {
   Schema schema;
   int tileSize = 32;  // pixels of the primary camera's raster
   std::string provenance;
+  /// Shading in time (frame-relative, increasing): empty when the frame was shaded once. Otherwise
+  /// "Ci" / "Oi" hold the shading at shadingTimes[0] and the schema declares "Ci@k" / "Oi@k"
+  /// (per-vertex colours) for the shading at shadingTimes[k]; a part whose grids' shading changed
+  /// over the shutter carries them (kEffectShadedInTime), the others only the first.
+  std::vector<double> shadingTimes;
+  uint64_t shadedInTimeGrids = 0;  // grids that carry shading at every time (counted by the writer)
+  static constexpr size_t kMaxShadingTimes = 16;
+  /// The schema name of attribute `base` ("Ci", "Oi") at shading time k (k = 0: base itself).
+  static std::string timedName(const std::string& base, size_t k);
 
   /// Throws Error(where, ...) when inconsistent: no cameras, knots not increasing or outside the
   /// shutter, schema without Ci/Oi, duplicate attribute names, non-finite values.

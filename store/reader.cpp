@@ -83,7 +83,7 @@ struct StoreReader::Impl {
     if (checksum(metaBytes) != metaSum) fail(path + ": metadata", "checksum mismatch");
     if (checksum(indexBytes) != indexSum) fail(path + ": index", "checksum mismatch");
     ByteReader metaReader(metaBytes, path + ": metadata");
-    meta = readMeta(metaReader);
+    meta = readMeta(metaReader, version);
     ByteReader indexReader(indexBytes, path + ": index");
     entries = readIndex(indexReader, meta);
     payloadEnd = metaOffset;

@@ -17,12 +17,13 @@ namespace {
 struct TileKey {
   int32_t tx, ty;
   uint32_t schedule;
+  bool shadedInTime;  // its grids carry colours at every shading time (parts stay homogeneous)
   bool operator==(const TileKey&) const = default;
-  auto order() const { return std::tuple(ty, tx, schedule); }
+  auto order() const { return std::tuple(ty, tx, schedule, shadedInTime); }
 };
 struct TileKeyHash {
   size_t operator()(const TileKey& k) const {
-    uint64_t h = (uint64_t(uint32_t(k.tx)) << 32 | uint32_t(k.ty)) ^ (uint64_t(k.schedule) * 0x9E3779B97F4A7C15ull);
+    uint64_t h = (uint64_t(uint32_t(k.tx)) << 32 | uint32_t(k.ty)) ^ ((uint64_t(k.schedule) * 2 + k.shadedInTime) * 0x9E3779B97F4A7C15ull);
     h ^= h >> 31;
     h *= 0xBF58476D1CE4E5B9ull;
     return size_t(h ^ (h >> 29));
@@ -123,7 +124,7 @@ struct Builder {
     vertices.reset(layout.vertexWords(knots));
     mps.reset(layout.mpWords());
     presence = 0;
-    effects = 0;
+    effects = k.shadedInTime ? uint32_t(kEffectShadedInTime) : 0u;
     bounds.assign(knots, KnotBounds{});
     for (auto& kb : bounds) {
       kb.raster[0] = kb.raster[1] = INFINITY, kb.raster[2] = kb.raster[3] = -INFINITY;
@@ -203,6 +204,10 @@ struct StoreWriter::Impl {
   // The grid being added: its schedule and positions as stored (static when it stands still).
   uint32_t gridSchedule = 0;
   std::span<const glm::vec3> gridPositions;
+  bool gridShadedInTime = false;
+  // Per schema attribute: an opacity ("Oi" or "Oi@k"), whose values set the transparency effects.
+  std::vector<uint8_t> isOpacity;
+  int firstTimedColour = -1;  // "Ci@1": present in a grid that is shaded in time
   // Per-grid scratch, reused.
   std::vector<glm::dvec2> raster;  // knot-major
   std::vector<uint8_t> inFront;    // knot-major
@@ -227,9 +232,11 @@ struct StoreWriter::Impl {
   }
 
   Impl(const std::string& path, StoreMeta m, WriterOptions o) : meta(std::move(m)), options(o), file(path), projector(meta.cameras.at(0)), layout(meta.schema) {
+    for (const auto& a : meta.schema.attrs) isOpacity.push_back(a.name == "Oi" || a.name.starts_with("Oi@"));
+    if (meta.shadingTimes.size() > 1) firstTimedColour = meta.schema.find(StoreMeta::timedName("Ci", 1));
     char header[kHeaderSize] = {};
     std::copy(std::begin(kHeaderMagic), std::end(kHeaderMagic), header);
-    uint32_t v = kFormatVersion;
+    uint32_t v = formatVersionFor(meta);
     std::memcpy(header + 8, &v, 4);
     writeAll(file.fd(), header, kHeaderSize, file.tempPath());
     if (options.maxPartMicropolygons == 0 || options.maxPartMicropolygons > kMaxPartMicropolygons) options.maxPartMicropolygons = kMaxPartMicropolygons;
@@ -288,13 +295,16 @@ struct StoreWriter::Impl {
       }
     if (!g.attrs.empty() && g.attrs.size() != meta.schema.attrs.size())
       fail(w, "gives ", g.attrs.size(), " attribute slots; the schema has ", meta.schema.attrs.size());
+    const bool timed = firstTimedColour >= 0 && size_t(firstTimedColour) < g.attrs.size() && g.attrs[size_t(firstTimedColour)].present();
     for (size_t ai = 0; ai < meta.schema.attrs.size(); ++ai) {
       const auto& a = meta.schema.attrs[ai];
       bool present = ai < g.attrs.size() && g.attrs[ai].present();
       if (!present) {
         if (a.name == "Ci" || a.name == "Oi") fail(w, "lacks '", a.name, "'");
+        if (timed && (a.name.starts_with("Ci@") || a.name.starts_with("Oi@"))) fail(w, "is shaded in time but lacks '", a.name, "'");
         continue;
       }
+      if (!timed && (a.name.starts_with("Ci@") || a.name.starts_with("Oi@"))) fail(w, "gives '", a.name, "' without 'Ci@1'");
       const auto& v = g.attrs[ai];
       size_t count = a.rate == AttrRate::Vertex ? g.numVertices : nMp;
       size_t expected = count * componentCount(a.type);
@@ -318,6 +328,8 @@ struct StoreWriter::Impl {
     // A grid that stands still is stored static whatever knots it came with: one position per
     // vertex, and parts whose effects say "static", which re-sampling draws on its static path.
     gridSchedule = g.schedule, gridPositions = g.positions;
+    gridShadedInTime = firstTimedColour >= 0 && size_t(firstTimedColour) < g.attrs.size() && g.attrs[size_t(firstTimedColour)].present();
+    meta.shadedInTimeGrids += gridShadedInTime;
     if (meta.schedules[g.schedule].size() > 1 && g.standsStill()) {
       gridSchedule = 0, gridPositions = g.positions.first(g.numVertices);
       stats.stillMicropolygons += nMp;
@@ -341,7 +353,7 @@ struct StoreWriter::Impl {
     for (size_t i = 0; i < nMp; ++i) {
       const uint32_t* c = &g.corners[i * 4];
       int nc = c[3] == kNoCorner ? 3 : 4;
-      TileKey key{kBehindCameraTile, kBehindCameraTile, gridSchedule};
+      TileKey key{kBehindCameraTile, kBehindCameraTile, gridSchedule, gridShadedInTime};
       for (uint32_t k = 0; k < K; ++k) {
         size_t base = size_t(k) * nV;
         bool front = true;
@@ -368,8 +380,6 @@ struct StoreWriter::Impl {
     }
 
     if (stamps.size() < nV) stamps.resize(nV, 0), local.resize(nV);
-    const auto& schema = meta.schema;
-    const int oi = schema.oi();
     for (uint32_t slot = 0; slot < slotKeys.size(); ++slot) {
       Builder* b = &builderFor(slotKeys[slot]);
       b->stamp = nextStamp();  // vertex indices are per grid: a fresh stamp per (builder, grid)
@@ -379,7 +389,7 @@ struct StoreWriter::Impl {
           retire(b->key);
           b = &builderFor(slotKeys[slot]);
         }
-        addMicropolygon(*b, g, i, K, oi);
+        addMicropolygon(*b, g, i, K);
       }
     }
     stats.micropolygons += nMp;
@@ -393,7 +403,7 @@ struct StoreWriter::Impl {
     if (full.size() >= 32) writeFull();
   }
 
-  void addMicropolygon(Builder& b, const GridInput& g, size_t i, uint32_t K, int oi) {
+  void addMicropolygon(Builder& b, const GridInput& g, size_t i, uint32_t K) {
     const uint32_t* c = &g.corners[i * 4];
     uint32_t localCorners[4];
     for (int j = 0; j < 4; ++j) {
@@ -406,7 +416,7 @@ struct StoreWriter::Impl {
       if (stamps[v] != b.stamp) {
         stamps[v] = b.stamp;
         local[v] = uint32_t(b.vertices.size());
-        addVertex(b, g, v, K, oi);
+        addVertex(b, g, v, K);
       }
       localCorners[j] = local[v];
     }
@@ -415,12 +425,12 @@ struct StoreWriter::Impl {
     r[4] = g.objectId, r[5] = g.gridId, r[6] = g.flags;
     if (g.flags & kMatte) b.effects |= kEffectMatte;
     if (g.flags & kTwoSided) b.effects |= kEffectTwoSided;
-    packAttributes(b, g, AttrRate::Micropolygon, i, r + RecordLayout::kMpFixedWords, oi);
+    packAttributes(b, g, AttrRate::Micropolygon, i, r + RecordLayout::kMpFixedWords);
   }
 
   // Copies element `element`'s attributes of one rate (per micropolygon or per vertex) into a
   // record's attribute words; an attribute the grid lacks is zero.
-  void packAttributes(Builder& b, const GridInput& g, AttrRate rate, size_t element, uint32_t* tail, int oi) {
+  void packAttributes(Builder& b, const GridInput& g, AttrRate rate, size_t element, uint32_t* tail) {
     const auto& schema = meta.schema;
     for (size_t ai = 0; ai < schema.attrs.size(); ++ai) {
       const auto& a = schema.attrs[ai];
@@ -436,7 +446,7 @@ struct StoreWriter::Impl {
       } else {
         const float* src = &g.attrs[ai].f[element * size_t(nc)];
         std::memcpy(dst, src, size_t(nc) * 4);
-        if (int(ai) == oi) noteOpacity(b, src);
+        if (isOpacity[ai]) noteOpacity(b, src);
       }
       b.presence |= uint64_t(1) << ai;
     }
@@ -447,7 +457,7 @@ struct StoreWriter::Impl {
     if (o[0] != o[1] || o[1] != o[2]) b.effects |= kEffectColouredOpacity;
   }
 
-  void addVertex(Builder& b, const GridInput& g, uint32_t v, uint32_t K, int oi) {
+  void addVertex(Builder& b, const GridInput& g, uint32_t v, uint32_t K) {
     const uint32_t nV = g.numVertices;
     uint32_t* r = b.vertices.append(chunks);
     const glm::vec3& p0 = gridPositions[v];
@@ -468,7 +478,7 @@ struct StoreWriter::Impl {
         b.effects |= kEffectNearCrossing;
       }
     }
-    packAttributes(b, g, AttrRate::Vertex, v, r + 3 * K, oi);
+    packAttributes(b, g, AttrRate::Vertex, v, r + 3 * K);
   }
 
   void spillLargest() {
@@ -575,7 +585,7 @@ struct StoreWriter::Impl {
     footer.put<uint64_t>(indexBytes.size());
     footer.put<uint64_t>(checksum(indexBytes.bytes()));
     footer.putBytes(kFooterMagic, 8);
-    footer.put<uint32_t>(kFormatVersion);
+    footer.put<uint32_t>(formatVersionFor(meta));
     footer.put<uint32_t>(0);
     writeAll(file.fd(), footer.bytes().data(), footer.size(), file.tempPath());
     stats.fileBytes = indexOffset + indexBytes.size() + footer.size();

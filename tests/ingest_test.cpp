@@ -476,14 +476,25 @@ TEST(IngestTest, CameraIsTheOneTheShadingPassReads) {
   }
 }
 
-TEST(IngestTest, AppearanceChangingPerKnotKeepsTheFirstWithAWarning) {
-  const size_t before = warningCount();
+TEST(IngestTest, ColourPerKnotIsShadingInTimeOtherVariablesKeepTheFirst) {
+  // Cs changing between copies: the store shades in time at the block's knots (Ci, Ci@1).
+  size_t before = warningCount();
   auto r = ingestText(kHeader + "MotionBegin [0 1]\nPolygon " + kSquare + " \"Cs\" [1 0 0  1 0 0  1 0 0  1 0 0]\nPolygon " + kSquare +
                       " \"Cs\" [0 1 0  0 1 0  0 1 0  0 1 0]\nMotionEnd\n");
-  EXPECT_GT(warningCount(), before);
+  EXPECT_EQ(warningCount(), before);
+  EXPECT_EQ(r.meta.shadingTimes, (std::vector<double>{0, 1}));
   EXPECT_EQ(r.attr(0, "Ci")[0], 1.0f);
   EXPECT_EQ(r.attr(0, "Ci")[1], 0.0f);
+  EXPECT_EQ(r.attr(0, "Ci@1")[0], 0.0f);
+  EXPECT_EQ(r.attr(0, "Ci@1")[1], 1.0f);
+  EXPECT_EQ(r.attr(0, "Oi@1")[0], 1.0f);  // opacity the same at every time
   EXPECT_EQ(r.grids[0].knots, (Schedule{0, 1}));
+  // Another variable changing between copies: the first copy's is kept, with a warning.
+  before = warningCount();
+  r = ingestText(kHeader + "MotionBegin [0 1]\nPolygon " + kSquare + " \"varying float k\" [1 1 1 1]\nPolygon " + kSquare + " \"varying float k\" [2 2 2 2]\nMotionEnd\n");
+  EXPECT_GT(warningCount(), before);
+  EXPECT_TRUE(r.meta.shadingTimes.empty());
+  EXPECT_EQ(r.attr(0, "k")[0], 1.0f);
 }
 
 TEST(IngestTest, CameraShutterAndFramesComeFromTheRib) {

@@ -61,7 +61,7 @@ void rewrite(const std::string& path, Edit edit) {
   auto bytes = test::readBytes(path);
   Footer f = footerOf(bytes);
   ByteReader mr({bytes.data() + f.metaOffset, f.metaSize}, "meta");
-  StoreMeta meta = readMeta(mr);
+  StoreMeta meta = readMeta(mr, 1);
   ByteReader ir({bytes.data() + f.indexOffset, f.indexSize}, "index");
   auto entries = readIndex(ir, meta);
   edit(meta, entries);
@@ -75,7 +75,7 @@ void rewrite(const std::string& path, Edit edit) {
   const uint8_t* nfp = reinterpret_cast<const uint8_t*>(&nf);
   out.insert(out.end(), nfp, nfp + sizeof nf);
   out.insert(out.end(), kFooterMagic, kFooterMagic + 8);
-  uint32_t tail[2] = {kFormatVersion, 0};
+  uint32_t tail[2] = {formatVersionFor(meta), 0};
   const uint8_t* tp = reinterpret_cast<const uint8_t*>(tail);
   out.insert(out.end(), tp, tp + 8);
   test::writeBytes(path, out);
@@ -91,7 +91,7 @@ void craftWithPart(const std::string& path, const StoreMeta& meta, TileEntry ent
   entry.compressedSize = uint32_t(compressed.size());
   entry.checksum = checksum(compressed);
   std::vector<uint8_t> out(kHeaderMagic, kHeaderMagic + 8);
-  uint32_t hv[2] = {kFormatVersion, 0};
+  uint32_t hv[2] = {formatVersionFor(meta), 0};
   out.insert(out.end(), reinterpret_cast<uint8_t*>(hv), reinterpret_cast<uint8_t*>(hv) + 8);
   out.insert(out.end(), compressed.begin(), compressed.end());
   ByteWriter mw, iw;

@@ -22,7 +22,9 @@ inline void repairChecksums(std::vector<uint8_t>& b) {
   if (f[0] > bodyEnd || f[1] > bodyEnd - f[0] || f[3] > bodyEnd || f[4] > bodyEnd - f[3]) return;
   try {
     ByteReader mr({b.data() + f[0], f[1]}, "meta");
-    StoreMeta meta = readMeta(mr);
+    uint32_t version;
+    std::memcpy(&version, b.data() + 8, 4);
+    StoreMeta meta = readMeta(mr, version);
     ByteReader ir({b.data() + f[3], f[4]}, "index");
     auto entries = readIndex(ir, meta);
     for (auto& e : entries)

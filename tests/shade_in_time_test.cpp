@@ -1,0 +1,359 @@
+// Shading in time (issue #29): grids whose shading changes over the shutter carry their colour at
+// several times, and the re-sampler blends each sample's colour at its own time. Every scene is a
+// RIB file shaded and re-sampled through the CLI, and the truths come from geometry:
+//  - a flat square rotating about a screen axis under a distant light along the view, matte:
+//    its colour at time t is the cosine between its normal at t and the light. Transforms are
+//    interpolated as matrices, so at t the square is the corners' blend: normal ∝
+//    (t sin θ, 0, 1 − t + t cos θ). Re-sampled at an instant it matches the blend of the stored
+//    times around t exactly, the truth within that blend's error, which shrinks with more times;
+//  - a sphere moving over a floor under a light from straight above: shaded in time, the floor's
+//    shadow at the close lies under the sphere's position at the close (the shadow rays see the
+//    moving sphere through Embree's motion blur);
+//  - what cannot change (constant shaders, rigid translation of a matte surface under a distant
+//    light, a still scene) keeps one colour: `shade -v` and `info` count the grids.
+#include <algorithm>
+#include <cctype>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+#include <gtest/gtest.h>
+
+#include "common/error.h"
+#include "store/reader.h"
+#include "store/writer.h"
+#include "tests/exr_test_util.h"
+#include "tests/test_util.h"
+
+namespace reshutter {
+namespace {
+
+using test::runReshutter;
+using test::ScratchDir;
+
+float red(const resample::FlatImage& img, int x, int y) { return img.find("R")->f[size_t(y - img.y0) * size_t(img.width) + size_t(x - img.x0)]; }
+
+/// The grouped number just before `after` in a report (0: absent).
+uint64_t numberBefore(const std::string& report, const std::string& after) {
+  const size_t at = report.find(after);
+  if (at == std::string::npos) return 0;
+  size_t from = at;
+  while (from > 0 && (std::isdigit(static_cast<unsigned char>(report[from - 1])) || report[from - 1] == ',')) --from;
+  std::string digits = report.substr(from, at - from);
+  digits.erase(std::remove(digits.begin(), digits.end(), ','), digits.end());
+  return digits.empty() ? 0 : std::stoull(digits);
+}
+
+struct Shaded {
+  std::string store, report;
+};
+Shaded shade(ScratchDir& dir, const std::string& name, const std::string& rib, const std::string& args) {
+  std::ofstream(dir.path(name + ".rib")) << rib;
+  Shaded s{dir.path(name + ".mps"), ""};
+  const auto r = runReshutter("-v shade " + dir.path(name + ".rib") + " -o " + s.store + " " + args);
+  EXPECT_EQ(r.exitCode, 0) << r.err;
+  s.report = r.out + r.err;
+  return s;
+}
+
+resample::FlatImage instant(ScratchDir& dir, const std::string& store, double t, const std::string& name) {
+  const std::string exr = dir.path(name + ".exr");
+  const auto r = runReshutter("-q resample " + store + " --shutter " + std::to_string(t) + ":" + std::to_string(t) + " --spp 4 --filter box:1 -o " + exr);
+  EXPECT_EQ(r.exitCode, 0) << r.err;
+  return test::readFlatExr(exr);
+}
+
+// A 2×2 square facing an orthographic camera 5 units away, rotating 60° about the screen's y axis
+// over the shutter; white matte (Kd 1, no ambient) under a distant light along the view.
+constexpr double kTheta = 60.0 * 3.14159265358979323846 / 180.0;
+const std::string kRotatingSquare =
+    "Format 32 32 1\nProjection \"orthographic\"\nScreenWindow -2 2 -2 2\nShutter 0 1\nWorldBegin\n"
+    "LightSource \"distantlight\" 1 \"from\" [0 0 0] \"to\" [0 0 1] \"intensity\" [1]\n"
+    "Color [1 1 1]\nSurface \"matte\" \"Ka\" [0] \"Kd\" [1]\n"
+    "Translate 0 0 5\nMotionBegin [0 1]\nRotate 0 0 1 0\nRotate 60 0 1 0\nMotionEnd\n"
+    "Patch \"bilinear\" \"P\" [-1 -1 0  1 -1 0  -1 1 0  1 1 0]\nWorldEnd\n";
+
+double rotatingTruth(double t) {
+  const double nx = t * std::sin(kTheta), nz = 1 - t + t * std::cos(kTheta);
+  return nz / std::sqrt(nx * nx + nz * nz);
+}
+
+// The blend of the truth at the stored times around t (n times spread over [0, 1]).
+double storedBlend(double t, int n) {
+  const double step = 1.0 / (n - 1);
+  const int k = std::min(int(t / step), n - 2);
+  const double w = (t - k * step) / step;
+  return (1 - w) * rotatingTruth(k * step) + w * rotatingTruth((k + 1) * step);
+}
+
+TEST(ShadeInTime, ARotatingSquareMatchesItsShadingAtEachInstant) {
+  ScratchDir dir;
+  const Shaded once = shade(dir, "once", kRotatingSquare, "");
+  const Shaded three = shade(dir, "three", kRotatingSquare, "--shade-in-time 0.01 --shade-times 3");
+  const Shaded nine = shade(dir, "nine", kRotatingSquare, "--shade-in-time 0.01 --shade-times 9");
+  // The path: the square's grids were candidates and kept every time.
+  EXPECT_GT(numberBefore(three.report, " of "), 0u) << three.report;
+  EXPECT_EQ(numberBefore(three.report, " of "), numberBefore(three.report, " grids that may change")) << three.report;
+  const auto info = runReshutter("info " + three.store);
+  EXPECT_NE(info.out.find("in time at 3 times [0 0.5 1]"), std::string::npos) << info.out;
+  double errThree = 0, errNine = 0;
+  for (double t : {0.0, 0.125, 0.25, 0.5, 0.6, 0.75, 1.0}) {
+    const std::string tag = std::to_string(int(t * 1000));
+    const float c1 = red(instant(dir, once.store, t, "once" + tag), 16, 16);
+    const float c3 = red(instant(dir, three.store, t, "three" + tag), 16, 16);
+    const float c9 = red(instant(dir, nine.store, t, "nine" + tag), 16, 16);
+    // Shaded once: the open's colour at every instant.
+    EXPECT_NEAR(c1, rotatingTruth(0), 1e-4) << "t=" << t;
+    // In time: exactly the blend of the stored times around t...
+    EXPECT_NEAR(c3, storedBlend(t, 3), 2e-4) << "t=" << t;
+    EXPECT_NEAR(c9, storedBlend(t, 9), 2e-4) << "t=" << t;
+    errThree = std::max(errThree, std::abs(c3 - rotatingTruth(t)));
+    errNine = std::max(errNine, std::abs(c9 - rotatingTruth(t)));
+  }
+  // ... which is the truth at the stored times, and near it between them, nearer with more times.
+  EXPECT_NEAR(red(instant(dir, three.store, 1.0, "three-end"), 16, 16), rotatingTruth(1.0), 2e-4);
+  EXPECT_GT(errThree, 0.01) << "the blend of three times should show its error between them";
+  EXPECT_LT(errThree, 0.05);
+  EXPECT_LT(errNine, errThree / 4);
+  // The shade-once error at the close is the whole change, 1 - cos 60° = 0.5.
+  EXPECT_NEAR(red(instant(dir, once.store, 1.0, "once-end"), 16, 16) - rotatingTruth(1.0), 0.5, 1e-3);
+}
+
+TEST(ShadeInTime, EachFieldOfAnInterlacedFrameSeesItsOwnShading) {
+  ScratchDir dir;
+  const Shaded once = shade(dir, "once", kRotatingSquare, "");
+  const Shaded timed = shade(dir, "timed", kRotatingSquare, "--shade-in-time 0.01 --shade-times 3");
+  auto fields = [&](const std::string& store, const std::string& name) {
+    const std::string exr = dir.path(name + ".exr");
+    const auto r = runReshutter("-q fields " + store + " --frames 1 --field-shutter 0:1 --spp 16 --filter box:1 -o " + exr);
+    EXPECT_EQ(r.exitCode, 0) << r.err;
+    return test::readFlatExr(exr);
+  };
+  const auto a = fields(once.store, "once"), b = fields(timed.store, "timed");
+  // Upper dominance: even rows are the first field [0, 0.5], odd rows the second [0.5, 1]. Each
+  // pixel's 16 samples stratify its field's time, over which the stored blend is linear: its
+  // mean is the two stored times' mean.
+  EXPECT_NEAR(red(b, 16, 16), 0.5 * (rotatingTruth(0) + rotatingTruth(0.5)), 0.01);
+  EXPECT_NEAR(red(b, 16, 17), 0.5 * (rotatingTruth(0.5) + rotatingTruth(1)), 0.01);
+  // Shaded once, both fields are lit as at the open.
+  EXPECT_NEAR(red(a, 16, 16), rotatingTruth(0), 1e-4);
+  EXPECT_NEAR(red(a, 16, 17), rotatingTruth(0), 1e-4);
+}
+
+TEST(ShadeInTime, TheToleranceDecidesWhichGridsKeepTheirTimes) {
+  ScratchDir dir;
+  // The square's colour changes by 0.5 over the shutter: kept under 0.4, not under 0.6.
+  const Shaded tight = shade(dir, "tight", kRotatingSquare, "--shade-in-time 0.4");
+  const Shaded loose = shade(dir, "loose", kRotatingSquare, "--shade-in-time 0.6");
+  const uint64_t candidates = numberBefore(loose.report, " grids that may change");
+  EXPECT_GT(candidates, 0u) << loose.report;
+  EXPECT_EQ(numberBefore(tight.report, " of "), candidates) << tight.report;
+  EXPECT_EQ(numberBefore(loose.report, " of "), 0u) << loose.report;
+  EXPECT_NEAR(red(instant(dir, loose.store, 1.0, "loose"), 16, 16), rotatingTruth(0), 1e-4);
+  EXPECT_NEAR(red(instant(dir, tight.store, 1.0, "tight"), 16, 16), rotatingTruth(1), 2e-4);
+}
+
+TEST(ShadeInTime, WhatCannotChangeKeepsOneColour) {
+  ScratchDir dir;
+  // A constant shader: never a candidate.
+  std::string constant = kRotatingSquare;
+  constant.replace(constant.find("Surface \"matte\" \"Ka\" [0] \"Kd\" [1]"), std::string("Surface \"matte\" \"Ka\" [0] \"Kd\" [1]").size(), "Surface \"constant\"");
+  const Shaded c = shade(dir, "constant", constant, "--shade-in-time 0");
+  EXPECT_EQ(numberBefore(c.report, " grids that may change"), 0u) << c.report;
+  // A matte square translating rigidly under the distant light: never a candidate either, though
+  // a tolerance of 0 keeps every candidate.
+  std::string sliding = kRotatingSquare;
+  sliding.replace(sliding.find("Rotate 0 0 1 0\nRotate 60 0 1 0"), std::string("Rotate 0 0 1 0\nRotate 60 0 1 0").size(), "Translate 0 0 0\nTranslate 0.5 0 0");
+  const Shaded s = shade(dir, "sliding", sliding, "--shade-in-time 0");
+  EXPECT_NE(s.report.find("shaded in time"), std::string::npos) << s.report;
+  EXPECT_EQ(numberBefore(s.report, " grids that may change"), 0u) << s.report;
+  // The rotating square is a candidate, and with tolerance 0 keeps its times.
+  const Shaded r = shade(dir, "rotating", kRotatingSquare, "--shade-in-time 0");
+  EXPECT_GT(numberBefore(r.report, " of "), 0u) << r.report;
+  // A scene where nothing moves: shading in time asks for nothing, and the store is the
+  // shade-once store byte for byte (format version 1).
+  std::string still = kRotatingSquare;
+  still.replace(still.find("MotionBegin [0 1]\nRotate 0 0 1 0\nRotate 60 0 1 0\nMotionEnd\n"),
+                std::string("MotionBegin [0 1]\nRotate 0 0 1 0\nRotate 60 0 1 0\nMotionEnd\n").size(), "Rotate 30 0 1 0\n");
+  std::ofstream(dir.path("still.rib")) << still;
+  const Shaded a{dir.path("still-a.mps"), runReshutter("-v shade " + dir.path("still.rib") + " -o " + dir.path("still-a.mps") + " --shade-in-time 0").err};
+  const Shaded b{dir.path("still-b.mps"), runReshutter("-v shade " + dir.path("still.rib") + " -o " + dir.path("still-b.mps")).err};
+  EXPECT_EQ(test::readBytes(a.store), test::readBytes(b.store));
+  EXPECT_EQ(test::readBytes(a.store).at(8), 1u) << "a store that does not shade in time is format version 1";
+  EXPECT_EQ(test::readBytes(r.store).at(8), 2u);
+}
+
+// Floor y = 0, a sphere of radius 0.5 two units above it moving from x = -1 to x = +1 over the
+// shutter, a shadowing distant light straight down, an orthographic camera looking straight down
+// (world (x, y, z) is camera (x, z, 10 - y)), 64 px over 8 units: floor point (x, 0, z) lies in
+// pixel (32 + 8x, 32 - 8z).
+const std::string kMovingSphereOverFloor =
+    "Format 64 64 1\nProjection \"orthographic\"\nScreenWindow -4 4 -4 4\nShutter 0 1\n"
+    "Translate 0 0 10\nRotate -90 1 0 0\nWorldBegin\n"
+    "LightSource \"ambientlight\" 1 \"intensity\" [0.1]\n"
+    "LightSource \"shadowdistant\" 2 \"from\" [0 1 0] \"to\" [0 0 0] \"shadowname\" \"raytrace\"\n"
+    "Color [1 1 1]\nSurface \"matte\"\n"
+    "Polygon \"P\" [-8 0 -8  -8 0 8  8 0 8  8 0 -8]\n"
+    "AttributeBegin\nMotionBegin [0 1]\nTranslate -1 2 0\nTranslate 1 2 0\nMotionEnd\nSphere 0.5 -0.5 0.5 360\nAttributeEnd\nWorldEnd\n";
+
+TEST(ShadeInTime, ShadowsFollowTheCasterThroughTheShutter) {
+  ScratchDir dir;
+  const Shaded once = shade(dir, "once", kMovingSphereOverFloor, "");
+  const Shaded timed = shade(dir, "timed", kMovingSphereOverFloor, "--shade-in-time 0.05");
+  // The floor is a candidate (a moving caster shadows it) and keeps its times.
+  EXPECT_GT(numberBefore(timed.report, " of "), 0u) << timed.report;
+  // The open's shadow, the floor at (-1, 0, 0): pixel (24, 32). At the close the sphere (and so
+  // its shadow, under it) is at x = +1, so the floor there is in the open: white matte, 0.1
+  // ambient + 1 from the light = 1.1; in shadow, 0.1.
+  const auto onceEnd = instant(dir, once.store, 1.0, "once-end");
+  const auto timedEnd = instant(dir, timed.store, 1.0, "timed-end");
+  const auto timedOpen = instant(dir, timed.store, 0.0, "timed-open");
+  const float openSpotOnce = red(onceEnd, 24, 32), openSpotTimed = red(timedEnd, 24, 32);
+  EXPECT_NEAR(openSpotOnce, 0.1f, 0.02f) << "shaded once, the floor keeps the open's shadow";
+  EXPECT_NEAR(openSpotTimed, 1.1f, 0.02f) << "shaded in time, the open's shadow has moved away by the close";
+  EXPECT_NEAR(red(timedOpen, 40, 32), 1.1f, 0.02f) << "at the open, the close's shadow spot is lit";
+}
+
+TEST(ShadeInTime, TheStoreIsTheSameForAnyThreadCount) {
+  ScratchDir dir;
+  std::ofstream(dir.path("s.rib")) << kMovingSphereOverFloor;
+  const auto one = runReshutter("-j 1 shade " + dir.path("s.rib") + " -o " + dir.path("one.mps") + " --shade-in-time 0.01");
+  const auto two = runReshutter("-j 2 shade " + dir.path("s.rib") + " -o " + dir.path("two.mps") + " --shade-in-time 0.01");
+  ASSERT_EQ(one.exitCode, 0) << one.err;
+  ASSERT_EQ(two.exitCode, 0) << two.err;
+  EXPECT_EQ(test::readBytes(dir.path("one.mps")), test::readBytes(dir.path("two.mps")));
+}
+
+TEST(ShadeInTime, StoresCheckTheirShadingTimes) {
+  ScratchDir dir;
+  store::StoreMeta meta;
+  meta.schema.attrs = {{"Ci", store::AttrType::Color}, {"Oi", store::AttrType::Color}};
+  meta.shadingTimes = {0.0, 1.0};
+  // Times without their colours, times out of order: clear errors.
+  EXPECT_THROW(meta.validate("m"), Error);
+  meta.schema.attrs.push_back({"Ci@1", store::AttrType::Color});
+  meta.schema.attrs.push_back({"Oi@1", store::AttrType::Color});
+  meta.validate("m");
+  store::StoreMeta backwards = meta;
+  backwards.shadingTimes = {1.0, 0.0};
+  try {
+    backwards.validate("m");
+    ADD_FAILURE() << "accepted decreasing shading times";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("shading times"), std::string::npos) << e.what();
+  }
+  // A grid that gives some times' colours and not others is refused, naming the grid.
+  store::StoreWriter w(dir.path("s.mps"), meta);
+  const std::vector<glm::vec3> P = {{-1, -1, 5}, {1, -1, 5}, {1, 1, 5}, {-1, 1, 5}};
+  const std::vector<uint32_t> corners = {0, 1, 2, 3};
+  const std::vector<float> white(12, 1.f);
+  store::GridInput g;
+  g.numVertices = 4, g.positions = P, g.corners = corners, g.gridId = 7;
+  g.attrs = {{white, {}}, {white, {}}, {white, {}}, {}};
+  try {
+    w.addGrid(g);
+    ADD_FAILURE() << "accepted a grid with Ci@1 but no Oi@1";
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("grid 7"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("Oi@1"), std::string::npos) << e.what();
+  }
+}
+
+TEST(ShadeInTime, AStoreKeepsWhichGridsCarryTheirTimes) {
+  ScratchDir dir;
+  store::StoreMeta meta;
+  meta.schema.attrs = {{"Ci", store::AttrType::Color}, {"Oi", store::AttrType::Color}, {"Ci@1", store::AttrType::Color}, {"Oi@1", store::AttrType::Color}};
+  meta.shadingTimes = {0.0, 1.0};
+  const std::vector<glm::vec3> P = {{-1, -1, 5}, {1, -1, 5}, {1, 1, 5}, {-1, 1, 5}};
+  const std::vector<uint32_t> corners = {0, 1, 2, 3};
+  const std::vector<float> white(12, 1.f), grey(12, 0.5f), half(12, 0.5f);
+  {
+    store::StoreWriter w(dir.path("s.mps"), meta);
+    store::GridInput timed;
+    timed.numVertices = 4, timed.positions = P, timed.corners = corners, timed.gridId = 0;
+    timed.attrs = {{white, {}}, {white, {}}, {grey, {}}, {half, {}}};
+    w.addGrid(timed);
+    store::GridInput once = timed;
+    once.gridId = 1;
+    once.attrs = {{white, {}}, {white, {}}, {}, {}};
+    w.addGrid(once);
+    w.close();
+  }
+  store::StoreReader r(dir.path("s.mps"));
+  EXPECT_EQ(r.meta().shadingTimes, meta.shadingTimes);
+  EXPECT_EQ(r.meta().shadedInTimeGrids, 1u);
+  int timedParts = 0, onceParts = 0;
+  for (size_t i = 0; i < r.entries().size(); ++i) {
+    const store::TileEntry& e = r.entries()[i];
+    const store::TilePart part = r.decode(i);
+    if (e.effects & store::kEffectShadedInTime) {
+      ++timedParts;
+      EXPECT_EQ(part.gridId.at(0), 0u);
+      EXPECT_EQ(part.attrs[2].f, grey);
+      // A transparent time makes the part transparent, though Oi at the first time is opaque.
+      EXPECT_TRUE(e.effects & store::kEffectTransparent);
+    } else {
+      ++onceParts;
+      EXPECT_EQ(part.gridId.at(0), 1u);
+      EXPECT_TRUE(part.attrs[2].f.empty());
+      EXPECT_FALSE(e.effects & store::kEffectTransparent);
+    }
+  }
+  EXPECT_EQ(timedParts, 1);
+  EXPECT_EQ(onceParts, 1);
+  r.verify();
+  const auto info = runReshutter("info --json " + dir.path("s.mps"));
+  EXPECT_NE(info.out.find("\"grids\": 1"), std::string::npos) << info.out;
+}
+
+// A dump whose motion copies carry their own Cs (the RenderMan motion-blur reference lets colour
+// change inside a motion block): ingested as shading in time, red at the open to blue at the
+// close; a square beside it without colour per copy keeps one colour.
+TEST(ShadeInTime, DumpsWithColourPerKnotAreIngestedInTime) {
+  ScratchDir dir;
+  std::ofstream(dir.path("dump.rib"))
+      << "Format 32 32 1\nProjection \"orthographic\"\nScreenWindow -2 2 -2 2\nShutter 0 1\nWorldBegin\n"
+         "MotionBegin [0 1]\n"
+         "PointsPolygons [4] [0 1 2 3] \"P\" [-1.5 -1 5  -0.5 -1 5  -0.5 1 5  -1.5 1 5] \"constant color Cs\" [1 0 0]\n"
+         "PointsPolygons [4] [0 1 2 3] \"P\" [-1.5 -1 5  -0.5 -1 5  -0.5 1 5  -1.5 1 5] \"constant color Cs\" [0 0 1]\n"
+         "MotionEnd\n"
+         "PointsPolygons [4] [0 1 2 3] \"P\" [0.5 -1 5  1.5 -1 5  1.5 1 5  0.5 1 5] \"constant color Cs\" [0 1 0]\n"
+         "WorldEnd\n";
+  const auto in = runReshutter("ingest " + dir.path("dump.rib") + " -o " + dir.path("dump.mps"));
+  ASSERT_EQ(in.exitCode, 0) << in.err;
+  const auto info = runReshutter("info --json " + dir.path("dump.mps"));
+  EXPECT_NE(info.out.find("\"grids\": 1"), std::string::npos) << info.out;
+  auto channel = [](const resample::FlatImage& img, const char* c, int x, int y) {
+    return img.find(c)->f[size_t(y - img.y0) * size_t(img.width) + size_t(x - img.x0)];
+  };
+  for (double t : {0.0, 0.3, 1.0}) {
+    const auto img = instant(dir, dir.path("dump.mps"), t, "dump" + std::to_string(int(t * 10)));
+    EXPECT_NEAR(channel(img, "R", 8, 16), 1 - t, 1e-5) << "t=" << t;
+    EXPECT_NEAR(channel(img, "B", 8, 16), t, 1e-5) << "t=" << t;
+    EXPECT_NEAR(channel(img, "G", 24, 16), 1, 1e-6) << "t=" << t;
+  }
+}
+
+TEST(ShadeInTime, BadOptionsAreOneLineErrors) {
+  ScratchDir dir;
+  std::ofstream(dir.path("s.rib")) << kRotatingSquare;
+  const struct {
+    const char* args;
+    const char* names;
+  } cases[] = {{"--shade-in-time maybe", "--shade-in-time"},
+               {"--shade-in-time -1", "--shade-in-time"},
+               {"--shade-in-time 0.1 --shade-times 1", "--shade-times"},
+               {"--shade-in-time 0.1 --shade-times 17", "--shade-times"},
+               {"--shade-in-time 0.1 --shade-at 0.5", "--shade-at"}};
+  for (const auto& c : cases) {
+    const auto r = runReshutter("shade " + dir.path("s.rib") + " -o " + dir.path("bad.mps") + " " + c.args);
+    EXPECT_NE(r.exitCode, 0) << c.args;
+    EXPECT_NE(r.err.find(c.names), std::string::npos) << c.args << ": " << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << c.args << ": " << r.err;
+    EXPECT_FALSE(std::filesystem::exists(dir.path("bad.mps"))) << c.args;
+  }
+}
+
+}  // namespace
+}  // namespace reshutter
