@@ -51,19 +51,8 @@ std::string fileBytes(const std::string& path) {
   return {std::istreambuf_iterator<char>(in), std::istreambuf_iterator<char>()};
 }
 
-/// The grouped number ("7,215,624") just before `after` in `shade -v`'s report (0: absent). No
-/// std::regex: GCC 12 warns inside <regex> at -O1 (-Wmaybe-uninitialized).
-uint64_t numberBefore(const std::string& report, const std::string& after) {
-  const size_t at = report.find(after);
-  if (at == std::string::npos) return 0;
-  size_t from = at;
-  while (from > 0 && (std::isdigit(static_cast<unsigned char>(report[from - 1])) || report[from - 1] == ',')) --from;
-  std::string digits = report.substr(from, at - from);
-  digits.erase(std::remove(digits.begin(), digits.end(), ','), digits.end());
-  return digits.empty() ? 0 : std::stoull(digits);
-}
-uint64_t shadowRays(const std::string& report) { return numberBefore(report, " shadow rays"); }
-uint64_t shadowMicropolygons(const std::string& report) { return numberBefore(report, " micropolygons (scene built"); }
+uint64_t shadowRays(const std::string& report) { return test::numberBefore(report, " shadow rays"); }
+uint64_t shadowMicropolygons(const std::string& report) { return test::numberBefore(report, " micropolygons (scene built"); }
 
 // Floor y = 0, a sphere of radius 0.5 centred 2 above it, a light straight down (world -y). The
 // orthographic camera looks down at 50°: the floor point (x, 0, z) is at screen (x, z sin 50°),

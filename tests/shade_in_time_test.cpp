@@ -34,16 +34,7 @@ using test::ScratchDir;
 
 float red(const resample::FlatImage& img, int x, int y) { return img.find("R")->f[size_t(y - img.y0) * size_t(img.width) + size_t(x - img.x0)]; }
 
-/// The grouped number just before `after` in a report (0: absent).
-uint64_t numberBefore(const std::string& report, const std::string& after) {
-  const size_t at = report.find(after);
-  if (at == std::string::npos) return 0;
-  size_t from = at;
-  while (from > 0 && (std::isdigit(static_cast<unsigned char>(report[from - 1])) || report[from - 1] == ',')) --from;
-  std::string digits = report.substr(from, at - from);
-  digits.erase(std::remove(digits.begin(), digits.end(), ','), digits.end());
-  return digits.empty() ? 0 : std::stoull(digits);
-}
+using test::numberBefore;
 
 struct Shaded {
   std::string store, report;

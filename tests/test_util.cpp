@@ -2,7 +2,9 @@
 
 #include <sys/wait.h>
 #include <unistd.h>
+#include <algorithm>
 #include <array>
+#include <cctype>
 #include <cstdio>
 #include <random>
 
@@ -57,6 +59,17 @@ void writeBytes(const std::string& path, const std::vector<uint8_t>& bytes) {
 }
 
 std::string sourceDir() { return RESHUTTER_SOURCE_DIR; }
+
+// No std::regex: GCC 12 warns inside <regex> at -O1 (-Wmaybe-uninitialized).
+uint64_t numberBefore(const std::string& report, const std::string& after) {
+  const size_t at = report.find(after);
+  if (at == std::string::npos) return 0;
+  size_t from = at;
+  while (from > 0 && (std::isdigit(static_cast<unsigned char>(report[from - 1])) || report[from - 1] == ',')) --from;
+  std::string digits = report.substr(from, at - from);
+  digits.erase(std::remove(digits.begin(), digits.end(), ','), digits.end());
+  return digits.empty() ? 0 : std::stoull(digits);
+}
 std::string sharedDir() { return std::string(RESHUTTER_SOURCE_DIR) + "/../shared"; }
 
 }  // namespace reshutter::test

@@ -1,6 +1,7 @@
 // Helpers shared by the tests: scratch directories, running the CLI, reading files.
 #pragma once
 
+#include <cstdint>
 #include <filesystem>
 #include <fstream>
 #include <string>
@@ -37,6 +38,10 @@ CommandResult runImageTool(const std::string& toolAndArgs);
 
 std::vector<uint8_t> readBytes(const std::string& path);
 void writeBytes(const std::string& path, const std::vector<uint8_t>& bytes);
+
+/// The grouped number ("7,215,624") just before `after` in a command's report (0: absent), for
+/// the counts `-v` and `--stats` print.
+uint64_t numberBefore(const std::string& report, const std::string& after);
 
 /// Path of ../shared relative to the source tree (tests read real inputs from there).
 std::string sharedDir();
