@@ -82,7 +82,10 @@ ShadowScene::ShadowScene(std::span<const Piece> pieces, double open, double clos
   std::map<unsigned, std::vector<size_t>> groups;
   for (size_t i = 0; i < pieces.size(); ++i)
     if (!pieces[i].corners.empty()) groups[stepsFor(pieces[i], open, close)].push_back(i);
-  for (const auto& [steps, members] : groups) {
+  for (const auto& group : groups) {
+    // Named copies, not structured bindings: clang 14 (the fuzz build) cannot capture those.
+    const unsigned steps = group.first;
+    const std::vector<size_t>& members = group.second;
     // Where each member's vertices and micropolygons go in the geometry.
     std::vector<uint64_t> vertexBase(members.size() + 1, 0), quadBase(members.size() + 1, 0);
     for (size_t j = 0; j < members.size(); ++j) {
