@@ -38,6 +38,7 @@ void HitBuffer::reset(size_t slots) {
   fragSeq = 0;
   anyFragments = false;
   fragmentsGrouped = false;
+  timedSlots.meta = nullptr;  // a bucket's stores outlive it; the next bucket's may not be these
 }
 
 HitBuffer::HitContext HitBuffer::hitContext(const store::StoreMeta& meta, const store::TileEntry& entry, const store::TilePart& part, const float* sampleTime,
@@ -49,8 +50,14 @@ HitBuffer::HitContext HitBuffer::hitContext(const store::StoreMeta& meta, const 
     hc.timed = true;
     hc.numTimes = int(meta.shadingTimes.size());
     hc.shadingTimes = meta.shadingTimes.data();
-    for (size_t k = 1; k < meta.shadingTimes.size(); ++k)
-      hc.timedCi[k] = meta.schema.find(store::StoreMeta::timedName("Ci", k)), hc.timedOi[k] = meta.schema.find(store::StoreMeta::timedName("Oi", k));
+    // The time colours' schema slots, looked up once per store and bucket (this runs per chunk).
+    if (timedSlots.meta != &meta) {
+      timedSlots.meta = &meta;
+      for (size_t k = 1; k < meta.shadingTimes.size(); ++k)
+        timedSlots.ci[k] = meta.schema.find(store::StoreMeta::timedName("Ci", k)), timedSlots.oi[k] = meta.schema.find(store::StoreMeta::timedName("Oi", k));
+    }
+    std::copy(timedSlots.ci + 1, timedSlots.ci + hc.numTimes, hc.timedCi + 1);
+    std::copy(timedSlots.oi + 1, timedSlots.oi + hc.numTimes, hc.timedOi + 1);
     hc.sampleTime = sampleTime, hc.toLocal = toLocal;
     return hc;
   }

@@ -168,6 +168,13 @@ struct HitBuffer {
     __builtin_prefetch(&colour[k]);
   }
 
+  // hitContext()'s lookup of a store's "Ci@k" / "Oi@k" slots, kept for the store it was made for.
+  struct TimedSlots {
+    const store::StoreMeta* meta = nullptr;
+    int ci[store::StoreMeta::kMaxShadingTimes] = {}, oi[store::StoreMeta::kMaxShadingTimes] = {};
+  };
+  mutable TimedSlots timedSlots;
+
   SkewedArray<uint32_t> fragCount{12};  // per sample, after groupFragments(): its fragments
   std::vector<uint32_t> fragEnd;        // per sample, after groupFragments(): the end of its run in frags
   std::vector<Fragment> frags, fragScratch;

@@ -187,15 +187,14 @@ void DumpHandler::gridAttributes(const Prim& p, const Attrs& s, double firstKnot
     // Shading per knot: "Ci@k" / "Oi@k" (and "Ci" / "Oi" at the first shading time) blend the
     // copies' Cs / Os at the store's shading time k; a primitive without shading per knot
     // leaves the times absent (one colour).
-    const bool timedName = ad.name.starts_with("Ci@") || ad.name.starts_with("Oi@");
+    const size_t k = StoreMeta::timedIndex(ad.name);  // 0: not a shading time's colour
     const bool timed = !p.knotCs.empty() || !p.knotOs.empty();
-    if (timedName && !timed) continue;
-    const std::string base = timedName ? ad.name.substr(0, 2) : ad.name;
+    if (k && !timed) continue;
+    const std::string base = k ? ad.name.substr(0, 2) : ad.name;
     const Var* var = sourceOf(p, base, element);
     Var blended;
     if (timed && (base == "Ci" || base == "Oi") && var) {
       const auto& knots = base == "Ci" ? p.knotCs : p.knotOs;
-      const size_t k = timedName ? size_t(std::stoul(ad.name.substr(3))) : 0;
       if (!knots.empty() && k < meta_->shadingTimes.size() && p.times.size() == knots.size() && knots.size() > 1) {
         size_t i;
         double w;

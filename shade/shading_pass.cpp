@@ -11,8 +11,6 @@
 #include <memory>
 #include <span>
 
-#include <glm/common.hpp>
-#include <glm/geometric.hpp>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_pipeline.h>
 #include <tbb/task_arena.h>
@@ -78,7 +76,7 @@ using BatchPtr = std::shared_ptr<Batch>;
 enum class Var : uint8_t { Ci, Oi, P, N, Ng, s, t, u, v, Cs, Os, depth, specular, Timed };
 
 Var varOf(const std::string& name) {
-  if (name.starts_with("Ci@") || name.starts_with("Oi@")) return Var::Timed;
+  if (store::StoreMeta::timedIndex(name)) return Var::Timed;
   static const std::pair<const char*, Var> table[] = {{"Ci", Var::Ci},
                                                       {"Oi", Var::Oi},
                                                       {"P", Var::P},
@@ -197,11 +195,7 @@ struct ShadeContext {
   std::vector<uint8_t> lightMoves{};           // per light: moves (in camera space) over the interval
   // The camera-space box, over the interval, of each moving primitive that casts shadows: a
   // receiver whose shadows they cannot reach keeps one colour.
-  struct Box {
-    glm::dvec3 lo{INFINITY}, hi{-INFINITY};
-    void add(const glm::vec3& p) { lo = glm::min(lo, glm::dvec3(p)), hi = glm::max(hi, glm::dvec3(p)); }
-  };
-  std::vector<Box> movingCasters{};
+  std::vector<ShadowBox> movingCasters{};
   double tolerance = 0;
   int ci = -1, oi = -1;
   std::vector<int> timedCi{}, timedOi{};  // schema slots of "Ci@k" / "Oi@k" ([0] unused)
@@ -337,51 +331,20 @@ bool translatesRigidly(std::span<const glm::vec3> P, size_t nV, size_t K) {
   return true;
 }
 
-/// Whether anything in box `caster` can shadow a point in box `recv` from `light` (conservative).
-bool mayShadow(const LitLight& light, const ShadeContext::Box& caster, const ShadeContext::Box& recv) {
-  if (light.kind == LightKind::Ambient) return false;
-  auto corners = [](const ShadeContext::Box& b, int i) { return glm::dvec3(i & 1 ? b.hi.x : b.lo.x, i & 2 ? b.hi.y : b.lo.y, i & 4 ? b.hi.z : b.lo.z); };
-  if (light.kind == LightKind::Distant || (light.kind == LightKind::Uber && light.uber.parallel)) {
-    // Shadows fall along the light's direction d: the receiver must lie beyond the caster along
-    // d, and overlap it seen along d (widened by a soft light's cone over the gap).
-    const glm::dvec3 d = glm::normalize(light.axis);
-    const glm::dvec3 a = std::abs(d.x) < 0.9 ? glm::dvec3(1, 0, 0) : glm::dvec3(0, 1, 0);
-    const glm::dvec3 e1 = glm::normalize(glm::cross(a, d)), e2 = glm::cross(d, e1);
-    double cb[3][2] = {{INFINITY, -INFINITY}, {INFINITY, -INFINITY}, {INFINITY, -INFINITY}}, rb[3][2] = {{INFINITY, -INFINITY}, {INFINITY, -INFINITY}, {INFINITY, -INFINITY}};
-    for (int i = 0; i < 8; ++i) {
-      const glm::dvec3 p = corners(caster, i), q = corners(recv, i);
-      const double pc[3] = {glm::dot(p, e1), glm::dot(p, e2), glm::dot(p, d)}, qc[3] = {glm::dot(q, e1), glm::dot(q, e2), glm::dot(q, d)};
-      for (int k = 0; k < 3; ++k)
-        cb[k][0] = std::min(cb[k][0], pc[k]), cb[k][1] = std::max(cb[k][1], pc[k]), rb[k][0] = std::min(rb[k][0], qc[k]), rb[k][1] = std::max(rb[k][1], qc[k]);
-    }
-    const double slack = 1e-6 * (1 + glm::length(caster.hi - caster.lo) + glm::length(recv.hi - recv.lo));
-    if (rb[2][1] + slack < cb[2][0]) return false;
-    const double grow = light.tanHalfAngle * std::max(0.0, rb[2][1] - cb[2][0]) + slack;
-    return rb[0][0] <= cb[0][1] + grow && cb[0][0] - grow <= rb[0][1] && rb[1][0] <= cb[1][1] + grow && cb[1][0] - grow <= rb[1][1];
-  }
-  // A local light (its emitter within radius rl of its position): the segment from a shadowed
-  // point to the light's centre passes within rl of the caster, so it meets the caster's
-  // bounding sphere grown by rl - the receiver's sphere must then lie in that sphere's cone.
-  const double rl = glm::length(light.halfU) + glm::length(light.halfV);
-  const glm::dvec3 cc = 0.5 * (caster.lo + caster.hi), rc = 0.5 * (recv.lo + recv.hi);
-  const double rB = 0.5 * glm::length(caster.hi - caster.lo) * (1 + 1e-6) + rl, rR = 0.5 * glm::length(recv.hi - recv.lo) * (1 + 1e-6);
-  const glm::dvec3 toB = cc - light.position, toR = rc - light.position;
-  const double dB = glm::length(toB), dR = glm::length(toR);
-  if (!(dB > rB) || !(dR > rR)) return true;
-  if (dR + rR < dB - rB) return false;  // wholly nearer the light than the caster
-  const double cosAngle = std::clamp(glm::dot(toB, toR) / (dB * dR), -1.0, 1.0);
-  return std::acos(cosAngle) <= std::asin(std::min(1.0, rB / dB)) + std::asin(std::min(1.0, rR / dR)) + 1e-9;
-}
+/// Whether a primitive's colour, opacity or shader is given at several times (a motion block).
+bool animated(const Attributes& a) { return a.color.values.size() > 1 || a.opacity.values.size() > 1 || a.surface.values.size() > 1; }
+
+/// Whether a light is somewhere else (in camera space) at the interval's close than at its open.
+bool lightMoves(const Light& l, double open, double close) { return l.xform.moving() && l.xform.at(open) != l.xform.at(close); }
 
 /// Whether grid `g` of primitive `pi` (lights: the indices into the frame's lights that light
 /// it) can shade differently at another time of the interval - decided from what the scene says
 /// moves or changes, conservatively: shading at the other times then confirms it. A grid that
 /// stands still under fixed lights, an unlit constant one, and a matte one translating rigidly
 /// under fixed distant lights that cast no shadows cannot.
-bool mayShadeDifferently(const ShadeContext& c, uint32_t pi, std::span<const glm::vec3> positions, uint32_t nV, std::span<const uint32_t> lights) {
-  const Primitive& p = c.scene.prims[pi];
-  const Attributes& a = *p.attrs;
-  if (a.color.values.size() > 1 || a.opacity.values.size() > 1 || a.surface.values.size() > 1) return true;
+bool mayShadeDifferently(const ShadeContext& c, uint32_t pi, std::span<const glm::vec3> positions, uint32_t nV, bool moves, std::span<const uint32_t> lights) {
+  const Attributes& a = *c.scene.prims[pi].attrs;
+  if (animated(a)) return true;
   const SurfaceShader& sh = a.surface.values[0];
   if (sh.kind == SurfaceKind::Constant) return false;
   const bool lit = usesLights(sh.kind);
@@ -394,27 +357,26 @@ bool mayShadeDifferently(const ShadeContext& c, uint32_t pi, std::span<const glm
       local |= c.lit[li].kind != LightKind::Distant && c.lit[li].kind != LightKind::Ambient;
     }
   if (shadowed && !c.movingCasters.empty()) {  // a moving caster's shadow may move over it
-    ShadeContext::Box recv;
+    ShadowBox recv;
     for (const glm::vec3& q : positions) recv.add(q);
     for (uint32_t li : lights)
       if (li < c.lit.size() && c.lit[li].shadows)
-        for (const ShadeContext::Box& caster : c.movingCasters)
+        for (const ShadowBox& caster : c.movingCasters)
           if (mayShadow(c.lit[li], caster, recv)) return true;
   }
-  const size_t K = c.split.knots[pi].size();
-  if (K <= 1 || store::verticesStandStill(positions, nV, 0, nV)) return false;
+  if (!moves) return false;
   if (sh.kind != SurfaceKind::Matte) return true;  // view-dependent terms (or defaultsurface's headlight)
-  return shadowed || local || !translatesRigidly(positions, nV, K);
+  return shadowed || local || !translatesRigidly(positions, nV, c.split.knots[pi].size());
 }
 
-/// Shading in time for one grid already shaded at the first time into `out`: shades it at the
-/// other times and keeps them ("Ci@k", "Oi@k") when the colour or opacity changes by more than
-/// the tolerance. Returns whether it kept them.
-bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const DicedGrid& g, std::span<const uint32_t> lightIdx, uint64_t leafIndex,
+/// Shading in time for one grid already shaded at the first time into `out` (`moves`: its
+/// positions differ between knots): shades it at the other times and keeps them ("Ci@k",
+/// "Oi@k") when the colour or opacity changes by more than the tolerance. Returns whether it
+/// kept them.
+bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const DicedGrid& g, bool moves, std::span<const uint32_t> lightIdx, uint64_t leafIndex,
                  GridOut& out, uint64_t& shadowRays) {
   const Primitive& p = c.scene.prims[pi];
   const size_t T = c.times.size();
-  const bool moves = c.split.knots[pi].size() > 1 && !store::verticesStandStill(out.positions, out.numVertices, 0, out.numVertices);
   std::vector<std::vector<std::vector<float>>> at(T);
   DicedGrid gk;
   std::vector<LitLight> lights;
@@ -476,9 +438,10 @@ void shadeBatch(const ShadeContext& c, Batch& b) {
     out.corners = std::move(g.corners);
     shadeVertices(c, p, g, out.corners, lights, c.shadeAt, 0, b.first + n, out.attrs, shadowRays);
     if (c.times.size() > 1 && !out.corners.empty()) {
-      if (mayShadeDifferently(c, pi, out.positions, out.numVertices, lightIdx)) {
+      const bool moves = c.split.knots[pi].size() > 1 && !store::verticesStandStill(out.positions, out.numVertices, 0, out.numVertices);
+      if (mayShadeDifferently(c, pi, out.positions, out.numVertices, moves, lightIdx)) {
         ++b.timeCandidates;
-        if (shadeInTime(c, pi, *leaf, g, lightIdx, b.first + n, out, shadowRays)) ++b.timed, b.timedMicropolygons += out.corners.size() / 4;
+        if (shadeInTime(c, pi, *leaf, g, moves, lightIdx, b.first + n, out, shadowRays)) ++b.timed, b.timedMicropolygons += out.corners.size() / 4;
       }
     }
     g = DicedGrid{};
@@ -590,7 +553,7 @@ bool wantsShadows(const FrameScene& scene, std::span<const LitLight> lit, double
 /// The frame's micropolygons at the shading time, every leaf of a primitive that casts shadows
 /// diced again (the shading pass's grids stream out; keeping them all would hold the frame) -
 /// from `split`, the frame's own leaves, or leaves split at a coarser shadow rate.
-std::unique_ptr<ShadowScene> buildShadowScene(const ShadeContext& c, const SplitScene& split, std::vector<ShadeContext::Box>* movingCasters = nullptr) {
+std::unique_ptr<ShadowScene> buildShadowScene(const ShadeContext& c, const SplitScene& split, std::vector<ShadowBox>* movingCasters = nullptr) {
   std::vector<ShadowScene::Piece> pieces(split.flat.size());
   tbb::parallel_for(tbb::blocked_range<size_t>(0, pieces.size(), 8), [&](const tbb::blocked_range<size_t>& r) {
     DicedGrid g;
@@ -629,13 +592,13 @@ std::unique_ptr<ShadowScene> buildShadowScene(const ShadeContext& c, const Split
 /// under a shader that is not constant.
 bool sceneMayShadeInTime(const FrameScene& scene, double open, double close) {
   for (const Light& l : scene.lights)
-    if (l.xform.moving() && l.xform.at(open) != l.xform.at(close)) return true;
+    if (lightMoves(l, open, close)) return true;
   const Attributes* seen = nullptr;
   for (const Primitive& p : scene.prims) {
     const Attributes& a = *p.attrs;
     if (&a != seen) {
       seen = &a;
-      if (a.color.values.size() > 1 || a.opacity.values.size() > 1 || a.surface.values.size() > 1) return true;
+      if (animated(a)) return true;
     }
     if (a.surface.values[0].kind != SurfaceKind::Constant && !p.knotTimes().empty() && clipKnots(p, open, close).size() > 1) return true;
   }
@@ -690,7 +653,7 @@ ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::Gri
       context.timedCi[k] = meta.schema.find(store::StoreMeta::timedName("Ci", k));
       context.timedOi[k] = meta.schema.find(store::StoreMeta::timedName("Oi", k));
     }
-    for (const auto& l : scene.lights) context.lightMoves.push_back(l.xform.moving() && l.xform.at(iv.open) != l.xform.at(iv.close));
+    for (const auto& l : scene.lights) context.lightMoves.push_back(lightMoves(l, iv.open, iv.close));
     stats.shadingTimes = iv.times;
   }
   // Textures only when a surface asks for one (no texture system otherwise).

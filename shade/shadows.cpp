@@ -46,10 +46,10 @@ void stepPositions(const ShadowScene::Piece& p, size_t nV, unsigned step, unsign
     for (size_t v = 0; v < nV; ++v) put(v, p.P[k * nV + v]);
     return;
   }
-  const double t = open + (close - open) * double(step) / double(steps - 1);
-  size_t k = 0;
-  while (k + 2 < K && p.knots[k + 1] <= t) ++k;
-  const float f = float(std::clamp((t - p.knots[k]) / (p.knots[k + 1] - p.knots[k]), 0.0, 1.0));
+  size_t k;
+  double w;
+  locate(p.knots, open + (close - open) * double(step) / double(steps - 1), k, w);
+  const float f = float(w);
   for (size_t v = 0; v < nV; ++v) {
     const glm::vec3& a = p.P[k * nV + v];
     put(v, a + f * (p.P[(k + 1) * nV + v] - a));
@@ -171,6 +171,41 @@ double radicalInverse2(uint32_t i) {
 }
 
 }  // namespace
+
+bool mayShadow(const LitLight& light, const ShadowBox& caster, const ShadowBox& receiver) {
+  if (light.kind == LightKind::Ambient) return false;
+  auto corner = [](const ShadowBox& b, int i) { return glm::dvec3(i & 1 ? b.hi.x : b.lo.x, i & 2 ? b.hi.y : b.lo.y, i & 4 ? b.hi.z : b.lo.z); };
+  if (light.kind == LightKind::Distant || (light.kind == LightKind::Uber && light.uber.parallel)) {
+    // Shadows fall along the light's direction d: the receiver must lie beyond the caster along
+    // d, and overlap it seen along d (widened by a soft light's cone over the gap).
+    const glm::dvec3 d = glm::normalize(light.axis);
+    glm::dvec3 e1, e2;
+    frame(d, e1, e2);
+    double cb[3][2] = {{INFINITY, -INFINITY}, {INFINITY, -INFINITY}, {INFINITY, -INFINITY}}, rb[3][2] = {{INFINITY, -INFINITY}, {INFINITY, -INFINITY}, {INFINITY, -INFINITY}};
+    for (int i = 0; i < 8; ++i) {
+      const glm::dvec3 p = corner(caster, i), q = corner(receiver, i);
+      const double pc[3] = {glm::dot(p, e1), glm::dot(p, e2), glm::dot(p, d)}, qc[3] = {glm::dot(q, e1), glm::dot(q, e2), glm::dot(q, d)};
+      for (int k = 0; k < 3; ++k)
+        cb[k][0] = std::min(cb[k][0], pc[k]), cb[k][1] = std::max(cb[k][1], pc[k]), rb[k][0] = std::min(rb[k][0], qc[k]), rb[k][1] = std::max(rb[k][1], qc[k]);
+    }
+    const double slack = 1e-6 * (1 + glm::length(caster.hi - caster.lo) + glm::length(receiver.hi - receiver.lo));
+    if (rb[2][1] + slack < cb[2][0]) return false;
+    const double grow = light.tanHalfAngle * std::max(0.0, rb[2][1] - cb[2][0]) + slack;
+    return rb[0][0] <= cb[0][1] + grow && cb[0][0] - grow <= rb[0][1] && rb[1][0] <= cb[1][1] + grow && cb[1][0] - grow <= rb[1][1];
+  }
+  // A local light (its emitter within radius rl of its position): the segment from a shadowed
+  // point to the light's centre passes within rl of the caster, so it meets the caster's
+  // bounding sphere grown by rl - the receiver's sphere must then lie in that sphere's cone.
+  const double rl = glm::length(light.halfU) + glm::length(light.halfV);
+  const glm::dvec3 cc = 0.5 * (caster.lo + caster.hi), rc = 0.5 * (receiver.lo + receiver.hi);
+  const double rB = 0.5 * glm::length(caster.hi - caster.lo) * (1 + 1e-6) + rl, rR = 0.5 * glm::length(receiver.hi - receiver.lo) * (1 + 1e-6);
+  const glm::dvec3 toB = cc - light.position, toR = rc - light.position;
+  const double dB = glm::length(toB), dR = glm::length(toR);
+  if (!(dB > rB) || !(dR > rR)) return true;
+  if (dR + rR < dB - rB) return false;  // wholly nearer the light than the caster
+  const double cosAngle = std::clamp(glm::dot(toB, toR) / (dB * dR), -1.0, 1.0);
+  return std::acos(cosAngle) <= std::asin(std::min(1.0, rB / dB)) + std::asin(std::min(1.0, rR / dR)) + 1e-9;
+}
 
 double lightVisibility(const ShadowScene& scene, const LitLight& light, const glm::dvec3& P, const glm::dvec3& Ng, double bias, int samples, uint64_t seed,
                        uint64_t& rays, double time) {

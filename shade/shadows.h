@@ -11,11 +11,13 @@
 // the point's identity, so images are the same for any thread count.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <memory>
 #include <span>
 #include <vector>
 
+#include <glm/common.hpp>
 #include <glm/vec3.hpp>
 
 #include "shade/shaders.h"
@@ -50,6 +52,18 @@ class ShadowScene {
   std::unique_ptr<Impl> impl_;
   uint64_t micropolygons_ = 0;
 };
+
+/// A camera-space box (the bounds of moving casters and receivers over an interval).
+struct ShadowBox {
+  glm::dvec3 lo{INFINITY}, hi{-INFINITY};
+  void add(const glm::vec3& p) { lo = glm::min(lo, glm::dvec3(p)), hi = glm::max(hi, glm::dvec3(p)); }
+};
+
+/// Whether anything inside `caster` can shadow a point inside `receiver` from `light`,
+/// conservatively (false only when it cannot): along a distant light's direction, widened by
+/// its cone; for a local light, inside its cone around the caster's bounding sphere, grown by
+/// the emitter's size.
+bool mayShadow(const LitLight& light, const ShadowBox& caster, const ShadowBox& receiver);
 
 /// The share of `light` (0..1) that reaches P: `Ng` is the surface's unit geometric normal
 /// (either side), `bias` how far ray origins are lifted off the surface towards the light

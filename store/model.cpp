@@ -194,6 +194,16 @@ void StoreMeta::validate(const std::string& where) const {
 
 std::string StoreMeta::timedName(const std::string& base, size_t k) { return k == 0 ? base : base + "@" + std::to_string(k); }
 
+size_t StoreMeta::timedIndex(const std::string& name) {
+  if (name.size() < 4 || !(name.starts_with("Ci@") || name.starts_with("Oi@"))) return 0;
+  size_t k = 0;
+  for (size_t i = 3; i < name.size(); ++i) {
+    if (name[i] < '0' || name[i] > '9' || k > kMaxShadingTimes) return 0;
+    k = k * 10 + size_t(name[i] - '0');
+  }
+  return k;
+}
+
 size_t TilePart::memoryBytes() const {
   size_t b = positions.size() * sizeof(glm::vec3) + corners.size() * 4 + objectId.size() * 4 + gridId.size() * 4 + flags.size();
   for (const auto& a : attrs) b += a.f.size() * 4 + a.u.size() * 4;

@@ -128,6 +128,8 @@ struct StoreMeta {
   static constexpr size_t kMaxShadingTimes = 16;
   /// The schema name of attribute `base` ("Ci", "Oi") at shading time k (k = 0: base itself).
   static std::string timedName(const std::string& base, size_t k);
+  /// k for a name timedName() makes for k >= 1 ("Ci@2" → 2), 0 for any other name.
+  static size_t timedIndex(const std::string& name);
 
   /// Throws Error(where, ...) when inconsistent: no cameras, knots not increasing or outside the
   /// shutter, schema without Ci/Oi, duplicate attribute names, non-finite values.

@@ -232,7 +232,7 @@ struct StoreWriter::Impl {
   }
 
   Impl(const std::string& path, StoreMeta m, WriterOptions o) : meta(std::move(m)), options(o), file(path), projector(meta.cameras.at(0)), layout(meta.schema) {
-    for (const auto& a : meta.schema.attrs) isOpacity.push_back(a.name == "Oi" || a.name.starts_with("Oi@"));
+    for (const auto& a : meta.schema.attrs) isOpacity.push_back(a.name == "Oi" || (a.name.starts_with("Oi@") && StoreMeta::timedIndex(a.name)));
     if (meta.shadingTimes.size() > 1) firstTimedColour = meta.schema.find(StoreMeta::timedName("Ci", 1));
     char header[kHeaderSize] = {};
     std::copy(std::begin(kHeaderMagic), std::end(kHeaderMagic), header);
@@ -275,6 +275,11 @@ struct StoreWriter::Impl {
     builders.erase(it);
   }
 
+  // A grid that gives "Ci@1" carries its shading at every time (validate() checks the rest).
+  bool shadedInTime(const GridInput& g) const {
+    return firstTimedColour >= 0 && size_t(firstTimedColour) < g.attrs.size() && g.attrs[size_t(firstTimedColour)].present();
+  }
+
   void validate(const GridInput& g) const {
     std::string w = cat(where(), ": grid ", g.gridId, " (object ", g.objectId, ")");
     if (g.schedule >= meta.schedules.size()) fail(w, "names motion schedule ", g.schedule, " but only ", meta.schedules.size(), " exist");
@@ -295,16 +300,16 @@ struct StoreWriter::Impl {
       }
     if (!g.attrs.empty() && g.attrs.size() != meta.schema.attrs.size())
       fail(w, "gives ", g.attrs.size(), " attribute slots; the schema has ", meta.schema.attrs.size());
-    const bool timed = firstTimedColour >= 0 && size_t(firstTimedColour) < g.attrs.size() && g.attrs[size_t(firstTimedColour)].present();
+    const bool timed = shadedInTime(g);
     for (size_t ai = 0; ai < meta.schema.attrs.size(); ++ai) {
       const auto& a = meta.schema.attrs[ai];
       bool present = ai < g.attrs.size() && g.attrs[ai].present();
       if (!present) {
         if (a.name == "Ci" || a.name == "Oi") fail(w, "lacks '", a.name, "'");
-        if (timed && (a.name.starts_with("Ci@") || a.name.starts_with("Oi@"))) fail(w, "is shaded in time but lacks '", a.name, "'");
+        if (timed && StoreMeta::timedIndex(a.name)) fail(w, "is shaded in time but lacks '", a.name, "'");
         continue;
       }
-      if (!timed && (a.name.starts_with("Ci@") || a.name.starts_with("Oi@"))) fail(w, "gives '", a.name, "' without 'Ci@1'");
+      if (!timed && StoreMeta::timedIndex(a.name)) fail(w, "gives '", a.name, "' without 'Ci@1'");
       const auto& v = g.attrs[ai];
       size_t count = a.rate == AttrRate::Vertex ? g.numVertices : nMp;
       size_t expected = count * componentCount(a.type);
@@ -328,7 +333,7 @@ struct StoreWriter::Impl {
     // A grid that stands still is stored static whatever knots it came with: one position per
     // vertex, and parts whose effects say "static", which re-sampling draws on its static path.
     gridSchedule = g.schedule, gridPositions = g.positions;
-    gridShadedInTime = firstTimedColour >= 0 && size_t(firstTimedColour) < g.attrs.size() && g.attrs[size_t(firstTimedColour)].present();
+    gridShadedInTime = shadedInTime(g);
     meta.shadedInTimeGrids += gridShadedInTime;
     if (meta.schedules[g.schedule].size() > 1 && g.standsStill()) {
       gridSchedule = 0, gridPositions = g.positions.first(g.numVertices);

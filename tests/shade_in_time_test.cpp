@@ -88,7 +88,7 @@ TEST(ShadeInTime, ARotatingSquareMatchesItsShadingAtEachInstant) {
   EXPECT_EQ(numberBefore(three.report, " of "), numberBefore(three.report, " grids that may change")) << three.report;
   const auto info = runReshutter("info " + three.store);
   EXPECT_NE(info.out.find("in time at 3 times [0 0.5 1]"), std::string::npos) << info.out;
-  double errThree = 0, errNine = 0;
+  double blendErr3 = 0, blendErr9 = 0;
   for (double t : {0.0, 0.125, 0.25, 0.5, 0.6, 0.75, 1.0}) {
     const std::string tag = std::to_string(int(t * 1000));
     const float c1 = red(instant(dir, once.store, t, "once" + tag), 16, 16);
@@ -99,14 +99,14 @@ TEST(ShadeInTime, ARotatingSquareMatchesItsShadingAtEachInstant) {
     // In time: exactly the blend of the stored times around t...
     EXPECT_NEAR(c3, storedBlend(t, 3), 2e-4) << "t=" << t;
     EXPECT_NEAR(c9, storedBlend(t, 9), 2e-4) << "t=" << t;
-    errThree = std::max(errThree, std::abs(c3 - rotatingTruth(t)));
-    errNine = std::max(errNine, std::abs(c9 - rotatingTruth(t)));
+    blendErr3 = std::max(blendErr3, std::abs(c3 - rotatingTruth(t)));
+    blendErr9 = std::max(blendErr9, std::abs(c9 - rotatingTruth(t)));
   }
   // ... which is the truth at the stored times, and near it between them, nearer with more times.
   EXPECT_NEAR(red(instant(dir, three.store, 1.0, "three-end"), 16, 16), rotatingTruth(1.0), 2e-4);
-  EXPECT_GT(errThree, 0.01) << "the blend of three times should show its error between them";
-  EXPECT_LT(errThree, 0.05);
-  EXPECT_LT(errNine, errThree / 4);
+  EXPECT_GT(blendErr3, 0.01) << "the blend of three times should show its error between them";
+  EXPECT_LT(blendErr3, 0.05);
+  EXPECT_LT(blendErr9, blendErr3 / 4);
   // The shade-once error at the close is the whole change, 1 - cos 60° = 0.5.
   EXPECT_NEAR(red(instant(dir, once.store, 1.0, "once-end"), 16, 16) - rotatingTruth(1.0), 0.5, 1e-3);
 }
