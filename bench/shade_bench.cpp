@@ -4,7 +4,9 @@
 // compression and I/O, what `reshutter shade` costs).
 // Usage: shade_bench [--quick] [--dir DIR]      (one line of results per configuration)
 //        shade_bench --shadows                    (the demo with shadows off and on)
-//        shade_bench --shade-in-time              (the demo shaded once and in time, into stores)
+//        shade_bench --shade-in-time [--quick] [--only once|t0.03|t0.01|t0] [--threads N]
+//                                                  (the demo shaded once and in time, into stores;
+//                                                   --quick: 640x360 only)
 //        shade_bench --motion-factors DIR          (demo stores for motion factor 0, 0.5, 1, 2, 4 in DIR,
 //                                                   for the accuracy study in bench/RESULTS.md)
 #include <sys/resource.h>
@@ -73,8 +75,9 @@ void run(const char* label, int w, int h, double rateScale, int threads, const s
               label, w, h, rateScale, threads, st.micropolygons, st.movingMicropolygons, st.grids, s, cpu, mps / 1e6, double(st.micropolygons) / cpu / 1e6,
               storePath.empty() ? "null sink" : (std::to_string(bytes / 1000000) + " MB store").c_str(), buildSeconds, bench::peakRssBytes() / 1e6);
   if (!st.shadingTimes.empty())
-    std::printf("       in time: %zu times, %" PRIu64 " of %" PRIu64 " candidate grids kept them (%" PRIu64 " micropolygons)\n", st.shadingTimes.size(),
-                st.timedGrids, st.timeCandidateGrids, st.timedMicropolygons);
+    std::printf("       in time: %zu times, %" PRIu64 " of %" PRIu64 " candidate grids kept them (%" PRIu64 " micropolygons), %" PRIu64
+                " later vertex shadings kept the first, %" PRIu64 " grid times blended\n",
+                st.shadingTimes.size(), st.timedGrids, st.timeCandidateGrids, st.timedMicropolygons, st.reusedVertices, st.blendedTimes);
   if (st.shadowMicropolygons)
     std::printf("       shadows: %" PRIu64 " rays against %" PRIu64 " micropolygons, scene built in %.3f s\n", st.shadowRays, st.shadowMicropolygons,
                 st.shadowBuildSeconds);
@@ -85,6 +88,8 @@ void run(const char* label, int w, int h, double rateScale, int threads, const s
 
 int main(int argc, char** argv) {
   bool quick = false, shadows = false, inTime = false;
+  int threadCount = 0;  // --threads N: that many instead of every core
+  std::string only;     // --only LABEL: that configuration alone (with --shade-in-time: once, t0.03, t0.01, t0)
   std::string dir = std::filesystem::temp_directory_path().string(), mfDir;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--quick")) quick = true;
@@ -92,8 +97,10 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--shadows")) shadows = true;
     else if (!std::strcmp(argv[i], "--shade-in-time")) inTime = true;
     else if (!std::strcmp(argv[i], "--dir") && i + 1 < argc) dir = argv[++i];
+    else if (!std::strcmp(argv[i], "--threads") && i + 1 < argc) threadCount = std::atoi(argv[++i]);
+    else if (!std::strcmp(argv[i], "--only") && i + 1 < argc) only = argv[++i];
     else {
-      std::fprintf(stderr, "usage: shade_bench [--quick] [--dir DIR] [--shadows | --shade-in-time]\n");
+      std::fprintf(stderr, "usage: shade_bench [--quick] [--dir DIR] [--threads N] [--shadows | --shade-in-time [--only LABEL]]\n");
       return 2;
     }
   }
@@ -120,11 +127,13 @@ int main(int argc, char** argv) {
   const std::string store = dir + "/shade_bench.mps";
   if (inTime) {  // what shading in time costs on the demo (into a store: its size too)
     for (auto [w, h] : {std::pair{640, 360}, {1920, 1080}}) {
-      run("once", w, h, 1, cores, store);
+      if (quick && w > 640) break;
+      const int n = threadCount > 0 ? threadCount : cores;
+      if (only.empty() || only == "once") run("once", w, h, 1, n, store);
       for (double tol : {0.03, 0.01, 0.0}) {
         char label[16];
         std::snprintf(label, sizeof label, "t%g", tol);
-        run(label, w, h, 1, cores, store, 0, true, 1, tol, 5);
+        if (only.empty() || only == label) run(label, w, h, 1, n, store, 0, true, 1, tol, 5);
       }
     }
     std::filesystem::remove(store);

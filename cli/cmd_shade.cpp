@@ -100,7 +100,11 @@ struct ShadeCommand {
                  " sides left unfinished by the split depth limit, ", frame.culledArchives, " delayed archives culled by their bound, ", r.shade.vertices,
                  " vertices shaded, ", r.shade.textureLookups, " texture lookups (", r.shade.missingTextures, " textures missing), ",
                  grouped(r.shade.shadowRays), " shadow rays against ", grouped(r.shade.shadowMicropolygons), " micropolygons (scene built in ",
-                 cat(std::round(r.shade.shadowBuildSeconds * 100) / 100), " s)"));
+                 cat(std::round(r.shade.shadowBuildSeconds * 100) / 100), " s)",
+                 r.shade.shadingTimes.size() > 1 ? cat("; in time: ", r.shade.blendedTimes, " grid times blended between shaded ones, ", r.shade.reusedVertices,
+                                                       " vertex shadings kept from the first time (only shadows could change, and did not), ",
+                                                       r.shade.stillOnlyRays, " rays against still micropolygons only (no moving caster could block them)")
+                                                 : std::string()));
     });
     shade::readRibScene(scene, sceneBuilder, opt.dice.cullMargin);
     if (sceneBuilder.framesShaded() == 0) fail(scene, "no WorldBegin/WorldEnd block: nothing to shade");

@@ -27,10 +27,6 @@ SphereAngles sphereAngles(const std::array<double, 5>& q, double u, double v) {
   return {u * q[3] * kDeg, lat0 + v * (lat1 - lat0), lat0, lat1};
 }
 
-glm::dvec3 bilinear(const std::array<glm::dvec3, 4>& c, double u, double v) {
-  return (1 - u) * (1 - v) * c[0] + u * (1 - v) * c[1] + (1 - u) * v * c[2] + u * v * c[3];
-}
-
 const std::array<CubicBasis, 2>& basesOf(const Primitive& p) { return cubicBases(p.basis); }
 
 // A bicubic patch (or a derivative along u or v) at (u, v): rows of control points weighted
@@ -120,6 +116,10 @@ void discAxes(const Shape& s, glm::dvec3& a, glm::dvec3& b) {
   if (!std::isfinite(b.x)) b = glm::normalize(glm::cross(glm::dvec3(0, 0, 1), a));
 }
 }  // namespace
+
+glm::dvec3 bilinear(const std::array<glm::dvec3, 4>& c, double u, double v) {
+  return (1 - u) * (1 - v) * c[0] + u * (1 - v) * c[1] + (1 - u) * v * c[2] + u * v * c[3];
+}
 
 // Cox-de Boor (The NURBS Book, A2.2).
 void nurbsBasis(const double* t, int order, double x, double* N) {

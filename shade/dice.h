@@ -6,6 +6,7 @@
 // dropped, so no projection ever divides by a depth at or behind the eye.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <optional>
 #include <vector>
@@ -44,5 +45,8 @@ struct DicedGrid {
 
 /// Dices `leaf` of `p`: positions at each of `knots` (one when empty), geometry at `shadeAt`.
 void diceLeaf(const Primitive& p, const Leaf& leaf, const std::vector<double>& knots, double shadeAt, double nearClip, bool perspective, DicedGrid& out);
+
+/// The bilinear blend of four corner values (c[0] at u = v = 0, c[1] at u = 1, c[2] at v = 1).
+glm::dvec3 bilinear(const std::array<glm::dvec3, 4>& c, double u, double v);
 
 }  // namespace reshutter::shade

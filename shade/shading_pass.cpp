@@ -19,11 +19,11 @@
 #include "common/log.h"
 #include "common/progress.h"
 #include "common/random.h"
-#include "shade/shaders.h"
-#include "shade/shadows.h"
-#include "shade/texture.h"
+#include "shade/shade_grid.h"
 
 namespace reshutter::shade {
+
+using namespace pass;
 
 namespace {
 
@@ -31,8 +31,6 @@ struct Interval {
   double open, close, shadeAt;
   std::vector<double> times{};  // shading in time: every shading time (times[0] = shadeAt); empty: once
 };
-
-bool sceneMayShadeInTime(const FrameScene& scene, double open, double close);
 
 Interval intervalOf(const FrameScene& scene, const ShadeOptions& o) {
   const auto& opt = scene.options;
@@ -56,54 +54,14 @@ Interval intervalOf(const FrameScene& scene, const ShadeOptions& o) {
 }
 
 // What the pipeline carries: one batch of leaves, shaded into ready-to-send grids.
-struct GridOut {
-  uint32_t prim = 0;
-  uint32_t numVertices = 0;
-  std::vector<glm::vec3> positions;
-  std::vector<uint32_t> corners;
-  std::vector<std::vector<float>> attrs;  // parallel to the schema
-};
 struct Batch {
   size_t first = 0, count = 0;  // into the flattened leaf list
   std::vector<GridOut> grids;
   uint64_t dropped = 0, trimmed = 0, shadowRays = 0;
-  uint64_t timeCandidates = 0, timed = 0, timedMicropolygons = 0;
+  uint64_t timeCandidates = 0, timed = 0, timedMicropolygons = 0, reusedVertices = 0, blendedTimes = 0, stillOnlyRays = 0;
 };
 
 using BatchPtr = std::shared_ptr<Batch>;
-
-// Timed: "Ci@k" / "Oi@k", filled by shading at the other times (shadeInTime()).
-enum class Var : uint8_t { Ci, Oi, P, N, Ng, s, t, u, v, Cs, Os, depth, specular, Timed };
-
-Var varOf(const std::string& name) {
-  if (store::StoreMeta::timedIndex(name)) return Var::Timed;
-  static const std::pair<const char*, Var> table[] = {{"Ci", Var::Ci},
-                                                      {"Oi", Var::Oi},
-                                                      {"P", Var::P},
-                                                      {"N", Var::N},
-                                                      {"Ng", Var::Ng},
-                                                      {"s", Var::s},
-                                                      {"t", Var::t},
-                                                      {"u", Var::u},
-                                                      {"v", Var::v},
-                                                      {"Cs", Var::Cs},
-                                                      {"Os", Var::Os},
-                                                      {"depth", Var::depth},
-                                                      {"specular", Var::specular}};
-  for (const auto& [n, v] : table)
-    if (name == n) return v;
-  fail("schema", "output variable '", name, "' is not computable");
-}
-
-void put3(std::vector<float>& dst, size_t i, const glm::dvec3& v) { dst[i * 3 + 0] = float(v.x), dst[i * 3 + 1] = float(v.y), dst[i * 3 + 2] = float(v.z); }
-
-glm::dvec3 bilinear(const std::array<glm::dvec3, 4>& c, double u, double v) {
-  return (1 - u) * (1 - v) * c[0] + u * (1 - v) * c[1] + (1 - u) * v * c[2] + u * v * c[3];
-}
-
-// A non-finite shading result (a light at the shaded point, an overflow) would poison the store:
-// the writer rejects it. Clamp to zero here, where the cause is known.
-glm::dvec3 finite(const glm::dvec3& c) { return {std::isfinite(c.x) ? c.x : 0.0, std::isfinite(c.y) ? c.y : 0.0, std::isfinite(c.z) ? c.z : 0.0}; }
 
 }  // namespace
 
@@ -128,7 +86,8 @@ store::StoreMeta storeMeta(const FrameScene& scene, const ShadeOptions& o) {
       for (const char* base : {"Ci", "Oi"})
         m.schema.attrs.push_back({store::StoreMeta::timedName(base, k), store::AttrType::Color, store::AttrRate::Vertex, store::AttrCodec::Lossless});
   }
-  std::string prov = cat("reshutter shade: ", scene.source.empty() ? "scene" : scene.source, "; frame ", scene.options.frame, iv.times.size() > 1 ? cat("; shaded in time at ", iv.times.size(), " times from t=", iv.shadeAt) : cat("; shaded at t=", iv.shadeAt),
+  std::string prov = cat("reshutter shade: ", scene.source.empty() ? "scene" : scene.source, "; frame ", scene.options.frame,
+                         iv.times.size() > 1 ? cat("; shaded in time at ", iv.times.size(), " times from t=", iv.shadeAt) : cat("; shaded at t=", iv.shadeAt),
                          "; interval [", iv.open, ", ", iv.close, "]");
   if (!scene.objectNames.empty()) {
     prov += "; objects:";
@@ -143,12 +102,6 @@ namespace {
 
 // ---------------------------------------------------------------------------------------------
 // 1. Split: knots and leaves per primitive, then every leaf in scene order.
-
-struct SplitScene {
-  std::vector<std::vector<double>> knots;              // per primitive: its knots inside the interval
-  std::vector<std::vector<Leaf>> leaves;               // per primitive, in dicing order
-  std::vector<std::pair<uint32_t, const Leaf*>> flat;  // (primitive, leaf): primitive order, then dicing order
-};
 
 /// Splits every primitive (in parallel; each primitive's list in dicing order) and counts culled
 /// pieces and eye splits into `stats`.
@@ -176,238 +129,6 @@ SplitScene splitScene(const FrameScene& scene, const Interval& iv, const store::
 // ---------------------------------------------------------------------------------------------
 // 2. Dice and shade, a batch of leaves at a time (in parallel).
 
-/// What shading any leaf needs, fixed for the frame.
-struct ShadeContext {
-  const FrameScene& scene;
-  const SplitScene& split;
-  const store::Schema& schema;
-  std::vector<Var> vars;      // what each schema attribute holds
-  std::vector<LitLight> lit;  // every light, resolved once at the shading time
-  double shadeAt;
-  double nearClip;
-  bool perspective;
-  const TextureLookup* textures = nullptr;  // only when some surface has a texture
-  const ShadowScene* shadows = nullptr;     // only when a light asks for shadows
-  int shadowSamples = 16;
-  // Shading in time (times.size() > 1): the other times' lights, and what may change.
-  std::vector<double> times{};
-  std::vector<std::vector<LitLight>> litAt{};  // [k][light], k >= 1
-  std::vector<uint8_t> lightMoves{};           // per light: moves (in camera space) over the interval
-  // The camera-space box, over the interval, of each moving primitive that casts shadows: a
-  // receiver whose shadows they cannot reach keeps one colour.
-  std::vector<ShadowBox> movingCasters{};
-  double tolerance = 0;
-  int ci = -1, oi = -1;
-  std::vector<int> timedCi{}, timedOi{};  // schema slots of "Ci@k" / "Oi@k" ([0] unused)
-};
-
-/// Vertex i's output variables into `attrs` (parallel to the schema).
-void storeOutputs(const std::vector<Var>& vars, const DicedGrid& g, size_t i, const SurfaceInput& in, const SurfaceOutput& so,
-                  std::vector<std::vector<float>>& attrs) {
-  for (size_t ai = 0; ai < vars.size(); ++ai) {
-    auto& dst = attrs[ai];
-    switch (vars[ai]) {
-      case Var::Ci: put3(dst, i, finite(so.Ci)); break;
-      case Var::Oi: put3(dst, i, finite(so.Oi)); break;
-      case Var::P: put3(dst, i, g.P[i]); break;
-      case Var::N: put3(dst, i, g.N[i]); break;
-      case Var::Ng: put3(dst, i, g.Ng[i]); break;
-      case Var::s: dst[i] = float(g.s[i]); break;
-      case Var::t: dst[i] = float(g.t[i]); break;
-      case Var::u: dst[i] = float(g.u[i]); break;
-      case Var::v: dst[i] = float(g.v[i]); break;
-      case Var::Cs: put3(dst, i, in.Cs); break;
-      case Var::Os: put3(dst, i, in.Os); break;
-      case Var::depth: dst[i] = float(g.P[i].z); break;
-      case Var::specular: put3(dst, i, finite(so.viewDependent)); break;
-      case Var::Timed: break;
-    }
-  }
-}
-
-/// Shades every vertex of the diced grid `g` (its corners: `corners`) of primitive `p` at `time`,
-/// shading time k of the pass (0: the first), into `attrs` (parallel to the schema).
-void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g, std::span<const uint32_t> corners, std::span<const LitLight> lights, double time,
-                   size_t k, uint64_t leafIndex, std::vector<std::vector<float>>& attrs, uint64_t& shadowRays) {
-  const Attributes& a = *p.attrs;
-  const SurfaceShader shader = a.surface.at(time);
-  // A RIS material's own colour and presence replace the primitive's.
-  const glm::dvec3 Cs0 = shader.color ? *shader.color : a.color.at(time), Os0 = shader.opacity ? *shader.opacity : a.opacity.at(time);
-  std::array<glm::dvec3, 4> cornerCs, cornerOs;
-  const bool hasCs = !shader.color && p.mesh && p.corners(p.mesh->Cs, cornerCs);
-  const bool hasOs = !shader.opacity && p.mesh && p.corners(p.mesh->Os, cornerOs);
-  const bool traces = c.shadows && usesLights(shader.kind) && std::any_of(lights.begin(), lights.end(), [](const LitLight& l) { return l.shadows; });
-  const size_t nV = g.numVertices;
-  // A textured surface filters each vertex's lookup over the st span of a micropolygon it
-  // corners: its two sides from that corner (the shading rate's footprint).
-  struct Footprint {
-    float dsdx = 0, dtdx = 0, dsdy = 0, dtdy = 0;
-  };
-  std::vector<Footprint> footprint;
-  TextureLookup::Map map;
-  // A shadow ray starts half a micropolygon off the surface (the diced surface cuts corners of
-  // the true one by about that much).
-  std::vector<float> bias;
-  if (traces) {
-    bias.assign(nV, 0.f);
-    for (size_t m = 0; m + 4 <= corners.size(); m += 4) {
-      const uint32_t* q = &corners[m];
-      const int n = q[3] == store::kNoCorner ? 3 : 4;
-      for (int j = 0; j < n; ++j) {
-        const uint32_t v = q[j], w = q[(j + 1) % n];
-        if (v >= nV || w >= nV) continue;
-        const float half = float(0.5 * glm::length(g.P[w] - g.P[v]));
-        bias[v] = std::max(bias[v], half), bias[w] = std::max(bias[w], half);
-      }
-    }
-  }
-  std::vector<LitLight> shadowed;
-  if (traces) shadowed.assign(lights.begin(), lights.end());
-  if (c.textures && !shader.textureName.empty()) {
-    map = c.textures->find(shader.textureName);
-    footprint.resize(nV);
-    std::vector<uint8_t> set(nV, 0);
-    // The grid's corners have moved to its GridOut already (shadeBatch).
-    for (size_t m = 0; m + 4 <= corners.size(); m += 4) {
-      const uint32_t* q = &corners[m];
-      const int n = q[3] == store::kNoCorner ? 3 : 4;
-      for (int j = 0; j < n; ++j) {
-        const uint32_t v = q[j], a = q[(j + 1) % n], b = q[(j + n - 1) % n];
-        if (v >= nV || a >= nV || b >= nV || set[v]) continue;
-        footprint[v] = {float(g.s[a] - g.s[v]), float(g.t[a] - g.t[v]), float(g.s[b] - g.s[v]), float(g.t[b] - g.t[v])};
-        set[v] = 1;
-      }
-    }
-  }
-  attrs.resize(c.vars.size());
-  for (size_t ai = 0; ai < c.vars.size(); ++ai)
-    if (c.vars[ai] != Var::Timed) attrs[ai].resize(nV * size_t(store::componentCount(c.schema.attrs[ai].type)));
-  for (size_t i = 0; i < nV; ++i) {
-    SurfaceInput in;
-    in.P = g.P[i], in.N = g.N[i], in.Ng = g.Ng[i];
-    in.I = c.perspective ? g.P[i] : glm::dvec3(0, 0, 1);
-    // Per-vertex colours are given over the primitive's own (u, v) square.
-    in.Cs = hasCs ? bilinear(cornerCs, g.u[i], g.v[i]) : Cs0;
-    in.Os = hasOs ? bilinear(cornerOs, g.u[i], g.v[i]) : Os0;
-    if (!footprint.empty()) {
-      const Footprint& f = footprint[i];
-      const float t = shader.textureFlipT ? 1.f - float(g.t[i]) : float(g.t[i]);
-      in.Cs *= c.textures->rgb(map, float(g.s[i]), t, f.dsdx, shader.textureFlipT ? -f.dtdx : f.dtdx, f.dsdy, shader.textureFlipT ? -f.dtdy : f.dtdy);
-    }
-    std::span<const LitLight> vertexLights = lights;
-    if (traces) {
-      // Each shadowed light's Cl scaled by the share of it that reaches this point; lights
-      // behind the point's shading hemisphere add nothing and trace nothing.
-      const glm::dvec3 Nf = facingNormal(in);
-      const glm::dvec3 Ng = glm::dot(in.Ng, in.Ng) > 0 ? glm::normalize(in.Ng) : Nf;
-      const double floorBias = 1e-6 * std::max({std::abs(in.P.x), std::abs(in.P.y), std::abs(in.P.z), 1.0});
-      for (size_t li = 0; li < lights.size(); ++li) {
-        shadowed[li].Cl0 = lights[li].Cl0;  // the previous vertex scaled it
-        glm::dvec3 L, Cl;
-        if (!lights[li].shadows || !illuminate(lights[li], in.P, L, Cl) || !(glm::dot(L, Nf) > 0)) continue;
-        uint64_t seed = hashCombine(hashCombine(leafIndex, i), li);
-        if (k > 0) seed = hashCombine(seed, k);
-        shadowed[li].Cl0 *= lightVisibility(*c.shadows, lights[li], in.P, Ng, std::max(double(bias[i]), floorBias), c.shadowSamples, seed, shadowRays, time);
-      }
-      vertexLights = shadowed;
-    }
-    const SurfaceOutput so = shadeSurface(shader, in, vertexLights);
-    storeOutputs(c.vars, g, i, in, so, attrs);
-  }
-}
-
-/// Whether every vertex moves by the same offset (a rigid translation in camera space).
-bool translatesRigidly(std::span<const glm::vec3> P, size_t nV, size_t K) {
-  float scale = 0;
-  for (const glm::vec3& p : P) scale = std::max({scale, std::abs(p.x), std::abs(p.y), std::abs(p.z)});
-  const float eps = 1e-5f * scale;
-  for (size_t k = 1; k < K; ++k) {
-    const glm::vec3 d = P[k * nV] - P[0];
-    for (size_t v = 1; v < nV; ++v) {
-      const glm::vec3 e = P[k * nV + v] - P[v] - d;
-      if (std::abs(e.x) > eps || std::abs(e.y) > eps || std::abs(e.z) > eps) return false;
-    }
-  }
-  return true;
-}
-
-/// Whether a primitive's colour, opacity or shader is given at several times (a motion block).
-bool animated(const Attributes& a) { return a.color.values.size() > 1 || a.opacity.values.size() > 1 || a.surface.values.size() > 1; }
-
-/// Whether a light is somewhere else (in camera space) at the interval's close than at its open.
-bool lightMoves(const Light& l, double open, double close) { return l.xform.moving() && l.xform.at(open) != l.xform.at(close); }
-
-/// Whether grid `g` of primitive `pi` (lights: the indices into the frame's lights that light
-/// it) can shade differently at another time of the interval - decided from what the scene says
-/// moves or changes, conservatively: shading at the other times then confirms it. A grid that
-/// stands still under fixed lights, an unlit constant one, and a matte one translating rigidly
-/// under fixed distant lights that cast no shadows cannot.
-bool mayShadeDifferently(const ShadeContext& c, uint32_t pi, std::span<const glm::vec3> positions, uint32_t nV, bool moves, std::span<const uint32_t> lights) {
-  const Attributes& a = *c.scene.prims[pi].attrs;
-  if (animated(a)) return true;
-  const SurfaceShader& sh = a.surface.values[0];
-  if (sh.kind == SurfaceKind::Constant) return false;
-  const bool lit = usesLights(sh.kind);
-  bool shadowed = false, local = false;
-  if (lit)
-    for (uint32_t li : lights) {
-      if (li >= c.lit.size()) continue;
-      if (c.lightMoves[li]) return true;
-      shadowed |= c.shadows && c.lit[li].shadows;
-      local |= c.lit[li].kind != LightKind::Distant && c.lit[li].kind != LightKind::Ambient;
-    }
-  if (shadowed && !c.movingCasters.empty()) {  // a moving caster's shadow may move over it
-    ShadowBox recv;
-    for (const glm::vec3& q : positions) recv.add(q);
-    for (uint32_t li : lights)
-      if (li < c.lit.size() && c.lit[li].shadows)
-        for (const ShadowBox& caster : c.movingCasters)
-          if (mayShadow(c.lit[li], caster, recv)) return true;
-  }
-  if (!moves) return false;
-  if (sh.kind != SurfaceKind::Matte) return true;  // view-dependent terms (or defaultsurface's headlight)
-  return shadowed || local || !translatesRigidly(positions, nV, c.split.knots[pi].size());
-}
-
-/// Shading in time for one grid already shaded at the first time into `out` (`moves`: its
-/// positions differ between knots): shades it at the other times and keeps them ("Ci@k",
-/// "Oi@k") when the colour or opacity changes by more than the tolerance. Returns whether it
-/// kept them.
-bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const DicedGrid& g, bool moves, std::span<const uint32_t> lightIdx, uint64_t leafIndex,
-                 GridOut& out, uint64_t& shadowRays) {
-  const Primitive& p = c.scene.prims[pi];
-  const size_t T = c.times.size();
-  std::vector<std::vector<std::vector<float>>> at(T);
-  DicedGrid gk;
-  std::vector<LitLight> lights;
-  float change = 0;
-  for (size_t k = 1; k < T; ++k) {
-    // A grid that stands still has the same shading geometry at every time (only its lights,
-    // shadows and shader can differ): no second dicing.
-    const DicedGrid* geometry = &g;
-    if (moves) {
-      diceLeaf(p, leaf, c.split.knots[pi], c.times[k], c.nearClip, c.perspective, gk);
-      if (gk.numVertices != g.numVertices || gk.corners != out.corners) return false;  // the same grid, or no blend
-      geometry = &gk;
-    }
-    lights.clear();
-    for (uint32_t li : lightIdx)
-      if (li < c.lit.size()) lights.push_back(c.litAt[k][li]);
-    shadeVertices(c, p, *geometry, out.corners, lights, c.times[k], k, leafIndex, at[k], shadowRays);
-    for (int slot : {c.ci, c.oi}) {
-      const std::vector<float>& a = out.attrs[size_t(slot)];
-      const std::vector<float>& b = at[k][size_t(slot)];
-      for (size_t i = 0; i < a.size(); ++i) change = std::max(change, std::abs(b[i] - a[i]));
-    }
-  }
-  if (!(change > c.tolerance) && c.tolerance > 0) return false;
-  for (size_t k = 1; k < T; ++k) {
-    out.attrs[size_t(c.timedCi[k])] = std::move(at[k][size_t(c.ci)]);
-    out.attrs[size_t(c.timedOi[k])] = std::move(at[k][size_t(c.oi)]);
-  }
-  return true;
-}
-
 /// Dices and shades the batch's leaves into b.grids.
 void shadeBatch(const ShadeContext& c, Batch& b) {
   DicedGrid g;
@@ -434,15 +155,28 @@ void shadeBatch(const ShadeContext& c, Batch& b) {
     GridOut& out = b.grids[n];
     out.prim = pi;
     out.numVertices = g.numVertices;
+    // Shading in time: whether the grid is a candidate is known from its positions, before it is
+    // shaded, so that a grid only shadows change records its rays (ShadowReuse).
+    bool candidate = false, moves = false;
+    if (c.times.size() > 1 && !g.corners.empty()) {
+      moves = c.split.knots[pi].size() > 1 && !store::verticesStandStill(g.positions, g.numVertices, 0, g.numVertices);
+      candidate = mayShadeDifferently(c, pi, g.positions, g.numVertices, moves, lightIdx);
+    }
+    ShadowReuse reuse;
+    ShadowReuse* reusing = candidate && c.shadows && onlyShadowsChange(c, pi, moves, lightIdx) ? &reuse : nullptr;
     out.positions = std::move(g.positions);
     out.corners = std::move(g.corners);
-    shadeVertices(c, p, g, out.corners, lights, c.shadeAt, 0, b.first + n, out.attrs, shadowRays);
-    if (c.times.size() > 1 && !out.corners.empty()) {
-      const bool moves = c.split.knots[pi].size() > 1 && !store::verticesStandStill(out.positions, out.numVertices, 0, out.numVertices);
-      if (mayShadeDifferently(c, pi, out.positions, out.numVertices, moves, lightIdx)) {
-        ++b.timeCandidates;
-        if (shadeInTime(c, pi, *leaf, g, moves, lightIdx, b.first + n, out, shadowRays)) ++b.timed, b.timedMicropolygons += out.corners.size() / 4;
-      }
+    // A grid no moving caster can shadow (mayShadeDifferently() tells) need not trace the moving
+    // micropolygons: with shading in time they are a BVH of their own, with motion blur.
+    const bool stillCastersOnly = c.times.size() > 1 && !candidate;
+    const uint64_t raysBefore = shadowRays;
+    shadeVertices(c, p, g, out.corners, lights, c.shadeAt, 0, b.first + n, out.attrs, shadowRays, reusing, stillCastersOnly);
+    if (stillCastersOnly) b.stillOnlyRays += shadowRays - raysBefore;
+    if (candidate) {
+      ++b.timeCandidates;
+      if (shadeInTime(c, pi, *leaf, g, moves, lightIdx, b.first + n, out, shadowRays, reusing, b.blendedTimes))
+        ++b.timed, b.timedMicropolygons += out.corners.size() / 4;
+      b.reusedVertices += reuse.reusedVertices;
     }
     g = DicedGrid{};
   }
@@ -463,6 +197,9 @@ class GridSender {
     stats_.shadowRays += b.shadowRays;
     stats_.timeCandidateGrids += b.timeCandidates;
     stats_.timedGrids += b.timed;
+    stats_.reusedVertices += b.reusedVertices;
+    stats_.blendedTimes += b.blendedTimes;
+    stats_.stillOnlyRays += b.stillOnlyRays;
     stats_.timedMicropolygons += b.timedMicropolygons;
     for (GridOut& go : b.grids)
       if (!go.corners.empty()) sendGrid(go);
@@ -553,7 +290,7 @@ bool wantsShadows(const FrameScene& scene, std::span<const LitLight> lit, double
 /// The frame's micropolygons at the shading time, every leaf of a primitive that casts shadows
 /// diced again (the shading pass's grids stream out; keeping them all would hold the frame) -
 /// from `split`, the frame's own leaves, or leaves split at a coarser shadow rate.
-std::unique_ptr<ShadowScene> buildShadowScene(const ShadeContext& c, const SplitScene& split, std::vector<ShadowBox>* movingCasters = nullptr) {
+std::unique_ptr<ShadowScene> buildShadowScene(const ShadeContext& c, const SplitScene& split, MovingCasters* movingCasters = nullptr) {
   std::vector<ShadowScene::Piece> pieces(split.flat.size());
   tbb::parallel_for(tbb::blocked_range<size_t>(0, pieces.size(), 8), [&](const tbb::blocked_range<size_t>& r) {
     DicedGrid g;
@@ -575,34 +312,18 @@ std::unique_ptr<ShadowScene> buildShadowScene(const ShadeContext& c, const Split
   });
   if (movingCasters) {
     // One box per moving primitive, over its pieces at every knot.
+    std::vector<ShadowBox> boxes;
     uint32_t last = UINT32_MAX;
     for (size_t i = 0; i < pieces.size(); ++i) {
       if (pieces[i].knots.size() <= 1) continue;
       const size_t nV = pieces[i].P.size() / pieces[i].knots.size();
       if (store::verticesStandStill(pieces[i].P, nV, 0, nV)) continue;
-      if (split.flat[i].first != last) movingCasters->emplace_back(), last = split.flat[i].first;
-      for (const glm::vec3& q : pieces[i].P) movingCasters->back().add(q);
+      if (split.flat[i].first != last) boxes.emplace_back(), last = split.flat[i].first;
+      for (const glm::vec3& q : pieces[i].P) boxes.back().add(q);
     }
+    if (!boxes.empty()) *movingCasters = MovingCasters(c.lit, std::move(boxes));
   }
   return c.times.size() > 1 ? std::make_unique<ShadowScene>(pieces, c.times.front(), c.times.back()) : std::make_unique<ShadowScene>(pieces);
-}
-
-/// Whether anything in the scene can make shading differ over [open, close]: a light that moves
-/// in camera space, an animated colour, opacity or shader, or a primitive that moves or deforms
-/// under a shader that is not constant.
-bool sceneMayShadeInTime(const FrameScene& scene, double open, double close) {
-  for (const Light& l : scene.lights)
-    if (lightMoves(l, open, close)) return true;
-  const Attributes* seen = nullptr;
-  for (const Primitive& p : scene.prims) {
-    const Attributes& a = *p.attrs;
-    if (&a != seen) {
-      seen = &a;
-      if (animated(a)) return true;
-    }
-    if (a.surface.values[0].kind != SurfaceKind::Constant && !p.knotTimes().empty() && clipKnots(p, open, close).size() > 1) return true;
-  }
-  return false;
 }
 
 // The texture search path with relative entries taken from the RIB file's directory, which is

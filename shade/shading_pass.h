@@ -61,6 +61,9 @@ struct ShadeStats {
   double shadowBuildSeconds = 0;      // dicing the frame for the shadow scene and building its BVH
   uint64_t timeCandidateGrids = 0;    // shading in time: grids whose shading could change, shaded at every time
   uint64_t timedGrids = 0, timedMicropolygons = 0;  // of them, those that changed enough to keep every time
+  uint64_t blendedTimes = 0;    // candidates' later times blended between shaded ones (their middle lay within the tolerance of the blend)
+  uint64_t reusedVertices = 0;
+  uint64_t stillOnlyRays = 0;   // shading in time: rays of grids no moving caster can shadow, traced against the still micropolygons only  // vertex shadings at later times that kept the first time's outputs (only shadows could change, and did not)
   std::vector<double> shadingTimes;   // empty: shaded once
   double shadeAt = 0;
   double seconds = 0;

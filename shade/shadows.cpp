@@ -18,10 +18,11 @@ namespace reshutter::shade {
 
 struct ShadowScene::Impl {
   RTCDevice device = nullptr;
-  RTCScene scene = nullptr;
-  double open = 0, close = 0;  // the moving pieces' interval (Embree's ray time 0 to 1)
+  RTCScene still = nullptr, moving = nullptr;  // moving: only when some piece moves
+  double open = 0, close = 0;                  // the moving pieces' interval (Embree's ray time 0 to 1)
   ~Impl() {
-    if (scene) rtcReleaseScene(scene);
+    if (still) rtcReleaseScene(still);
+    if (moving) rtcReleaseScene(moving);
     if (device) rtcReleaseDevice(device);
   }
 };
@@ -75,9 +76,13 @@ ShadowScene::ShadowScene(std::span<const Piece> pieces, double open, double clos
   impl_->open = open, impl_->close = close;
   impl_->device = rtcNewDevice(nullptr);
   if (!impl_->device) fail("shadows", "Embree could not start (rtcNewDevice)");
-  impl_->scene = rtcNewScene(impl_->device);
-  rtcSetSceneFlags(impl_->scene, RTC_SCENE_FLAG_ROBUST);
-  rtcSetSceneBuildQuality(impl_->scene, RTC_BUILD_QUALITY_MEDIUM);
+  auto newScene = [&] {
+    RTCScene scene = rtcNewScene(impl_->device);
+    rtcSetSceneFlags(scene, RTC_SCENE_FLAG_ROBUST);
+    rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_MEDIUM);
+    return scene;
+  };
+  impl_->still = newScene();
   // One Embree geometry per count of time steps (a geometry's vertex buffers are its steps).
   std::map<unsigned, std::vector<size_t>> groups;
   for (size_t i = 0; i < pieces.size(); ++i)
@@ -117,17 +122,20 @@ ShadowScene::ShadowScene(std::span<const Piece> pieces, double open, double clos
       }
     });
     rtcCommitGeometry(geom);
-    rtcAttachGeometry(impl_->scene, geom);
+    if (steps > 1 && !impl_->moving) impl_->moving = newScene();
+    rtcAttachGeometry(steps > 1 ? impl_->moving : impl_->still, geom);
     rtcReleaseGeometry(geom);
   }
-  rtcCommitScene(impl_->scene);
+  rtcCommitScene(impl_->still);
+  if (impl_->moving) rtcCommitScene(impl_->moving);
   check(impl_->device, "build the shadow scene");
 }
 
 ShadowScene::~ShadowScene() = default;
 
-bool ShadowScene::occluded(const glm::dvec3& origin, const glm::dvec3& dir, double tfar, double time) const {
-  if (micropolygons_ == 0 || !(tfar > 0)) return false;
+namespace {
+bool occludedIn(RTCScene scene, const glm::dvec3& origin, const glm::dvec3& dir, double tfar, float time) {
+  if (!scene || !(tfar > 0)) return false;
   RTCIntersectContext context;
   rtcInitIntersectContext(&context);
   RTCRay ray{};
@@ -136,10 +144,20 @@ bool ShadowScene::occluded(const glm::dvec3& origin, const glm::dvec3& dir, doub
   ray.tnear = 0;
   ray.tfar = std::isfinite(tfar) ? float(tfar) : std::numeric_limits<float>::infinity();
   ray.mask = ~0u;
-  const double span = impl_->close - impl_->open;
-  ray.time = span > 0 ? float(std::clamp((time - impl_->open) / span, 0.0, 1.0)) : 0.f;
-  rtcOccluded1(impl_->scene, &context, &ray);
+  ray.time = time;
+  rtcOccluded1(scene, &context, &ray);
   return ray.tfar == -std::numeric_limits<float>::infinity();
+}
+}  // namespace
+
+bool ShadowScene::occludedByStill(const glm::dvec3& origin, const glm::dvec3& dir, double tfar) const {
+  return occludedIn(impl_->still, origin, dir, tfar, 0.f);
+}
+
+bool ShadowScene::occludedByMoving(const glm::dvec3& origin, const glm::dvec3& dir, double tfar, double time) const {
+  if (!impl_->moving) return false;
+  const double span = impl_->close - impl_->open;
+  return occludedIn(impl_->moving, origin, dir, tfar, span > 0 ? float(std::clamp((time - impl_->open) / span, 0.0, 1.0)) : 0.f);
 }
 
 namespace {
@@ -172,44 +190,89 @@ double radicalInverse2(uint32_t i) {
 
 }  // namespace
 
-bool mayShadow(const LitLight& light, const ShadowBox& caster, const ShadowBox& receiver) {
-  if (light.kind == LightKind::Ambient) return false;
-  auto corner = [](const ShadowBox& b, int i) { return glm::dvec3(i & 1 ? b.hi.x : b.lo.x, i & 2 ? b.hi.y : b.lo.y, i & 4 ? b.hi.z : b.lo.z); };
-  if (light.kind == LightKind::Distant || (light.kind == LightKind::Uber && light.uber.parallel)) {
-    // Shadows fall along the light's direction d: the receiver must lie beyond the caster along
-    // d, and overlap it seen along d (widened by a soft light's cone over the gap).
-    const glm::dvec3 d = glm::normalize(light.axis);
-    glm::dvec3 e1, e2;
-    frame(d, e1, e2);
-    double cb[3][2] = {{INFINITY, -INFINITY}, {INFINITY, -INFINITY}, {INFINITY, -INFINITY}}, rb[3][2] = {{INFINITY, -INFINITY}, {INFINITY, -INFINITY}, {INFINITY, -INFINITY}};
-    for (int i = 0; i < 8; ++i) {
-      const glm::dvec3 p = corner(caster, i), q = corner(receiver, i);
-      const double pc[3] = {glm::dot(p, e1), glm::dot(p, e2), glm::dot(p, d)}, qc[3] = {glm::dot(q, e1), glm::dot(q, e2), glm::dot(q, d)};
-      for (int k = 0; k < 3; ++k)
-        cb[k][0] = std::min(cb[k][0], pc[k]), cb[k][1] = std::max(cb[k][1], pc[k]), rb[k][0] = std::min(rb[k][0], qc[k]), rb[k][1] = std::max(rb[k][1], qc[k]);
+namespace {
+glm::dvec3 corner(const ShadowBox& b, int i) { return glm::dvec3(i & 1 ? b.hi.x : b.lo.x, i & 2 ? b.hi.y : b.lo.y, i & 4 ? b.hi.z : b.lo.z); }
+bool parallel(const LitLight& l) { return l.kind == LightKind::Distant || (l.kind == LightKind::Uber && l.uber.parallel); }
+double diagonal(const ShadowBox& b) { return glm::length(b.hi - b.lo); }
+}  // namespace
+
+MovingCasters::MovingCasters(std::span<const LitLight> lights, std::vector<ShadowBox> casters) : casters_(std::move(casters)), lit_(lights) {
+  lights_.resize(lights.size());
+  for (size_t li = 0; li < lights.size(); ++li) {
+    const LitLight& light = lights[li];
+    FromLight& f = lights_[li];
+    f.shadows = light.shadows && light.kind != LightKind::Ambient;
+    if (!f.shadows) continue;
+    f.directional = parallel(light);
+    if (f.directional) f.d = glm::normalize(light.axis), frame(f.d, f.e1, f.e2);
+    const double rl = glm::length(light.halfU) + glm::length(light.halfV);
+    for (const ShadowBox& caster : casters_) {
+      Seen s;
+      if (f.directional) {
+        for (int k = 0; k < 3; ++k) s.lo[k] = INFINITY, s.hi[k] = -INFINITY;
+        for (int i = 0; i < 8; ++i) {
+          const glm::dvec3 p = corner(caster, i);
+          const double pc[3] = {glm::dot(p, f.e1), glm::dot(p, f.e2), glm::dot(p, f.d)};
+          for (int k = 0; k < 3; ++k) s.lo[k] = std::min(s.lo[k], pc[k]), s.hi[k] = std::max(s.hi[k], pc[k]);
+        }
+      } else {
+        // A local light (its emitter within radius rl of its position): the segment from a
+        // shadowed point to the light's centre passes within rl of the caster, so it meets the
+        // caster's bounding sphere grown by rl - the receiver's sphere must then lie in that
+        // sphere's cone.
+        s.radius = 0.5 * diagonal(caster) * (1 + 1e-6) + rl;
+        s.toCaster = 0.5 * (caster.lo + caster.hi) - light.position;
+        s.distance = glm::length(s.toCaster);
+        s.halfAngle = std::asin(std::min(1.0, s.radius / s.distance));
+      }
+      f.casters.push_back(s);
     }
-    const double slack = 1e-6 * (1 + glm::length(caster.hi - caster.lo) + glm::length(receiver.hi - receiver.lo));
-    if (rb[2][1] + slack < cb[2][0]) return false;
-    const double grow = light.tanHalfAngle * std::max(0.0, rb[2][1] - cb[2][0]) + slack;
-    return rb[0][0] <= cb[0][1] + grow && cb[0][0] - grow <= rb[0][1] && rb[1][0] <= cb[1][1] + grow && cb[1][0] - grow <= rb[1][1];
   }
-  // A local light (its emitter within radius rl of its position): the segment from a shadowed
-  // point to the light's centre passes within rl of the caster, so it meets the caster's
-  // bounding sphere grown by rl - the receiver's sphere must then lie in that sphere's cone.
-  const double rl = glm::length(light.halfU) + glm::length(light.halfV);
-  const glm::dvec3 cc = 0.5 * (caster.lo + caster.hi), rc = 0.5 * (receiver.lo + receiver.hi);
-  const double rB = 0.5 * glm::length(caster.hi - caster.lo) * (1 + 1e-6) + rl, rR = 0.5 * glm::length(receiver.hi - receiver.lo) * (1 + 1e-6);
-  const glm::dvec3 toB = cc - light.position, toR = rc - light.position;
-  const double dB = glm::length(toB), dR = glm::length(toR);
-  if (!(dB > rB) || !(dR > rR)) return true;
-  if (dR + rR < dB - rB) return false;  // wholly nearer the light than the caster
-  const double cosAngle = std::clamp(glm::dot(toB, toR) / (dB * dR), -1.0, 1.0);
-  return std::acos(cosAngle) <= std::asin(std::min(1.0, rB / dB)) + std::asin(std::min(1.0, rR / dR)) + 1e-9;
 }
 
-double lightVisibility(const ShadowScene& scene, const LitLight& light, const glm::dvec3& P, const glm::dvec3& Ng, double bias, int samples, uint64_t seed,
-                       uint64_t& rays, double time) {
-  if (!light.shadows || light.kind == LightKind::Ambient) return 1.0;
+bool MovingCasters::mayShadow(size_t li, const ShadowBox& receiver) const {
+  if (li >= lights_.size() || !lights_[li].shadows) return false;
+  const FromLight& f = lights_[li];
+  const LitLight& light = lit_[li];
+  if (f.directional) {
+    // Shadows fall along the light's direction d: the receiver must lie beyond the caster along
+    // d, and overlap it seen along d (widened by a soft light's cone over the gap).
+    double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+    for (int i = 0; i < 8; ++i) {
+      const glm::dvec3 q = corner(receiver, i);
+      const double qc[3] = {glm::dot(q, f.e1), glm::dot(q, f.e2), glm::dot(q, f.d)};
+      for (int k = 0; k < 3; ++k) lo[k] = std::min(lo[k], qc[k]), hi[k] = std::max(hi[k], qc[k]);
+    }
+    const double receiverSize = diagonal(receiver);
+    for (size_t ci = 0; ci < casters_.size(); ++ci) {
+      const Seen& c = f.casters[ci];
+      const double slack = 1e-6 * (1 + diagonal(casters_[ci]) + receiverSize);
+      if (hi[2] + slack < c.lo[2]) continue;
+      const double grow = light.tanHalfAngle * std::max(0.0, hi[2] - c.lo[2]) + slack;
+      if (lo[0] <= c.hi[0] + grow && c.lo[0] - grow <= hi[0] && lo[1] <= c.hi[1] + grow && c.lo[1] - grow <= hi[1]) return true;
+    }
+    return false;
+  }
+  const glm::dvec3 toR = 0.5 * (receiver.lo + receiver.hi) - light.position;
+  const double rR = 0.5 * diagonal(receiver) * (1 + 1e-6), dR = glm::length(toR);
+  if (!(dR > rR)) return true;
+  const double receiverAngle = std::asin(std::min(1.0, rR / dR));
+  for (const Seen& c : f.casters) {
+    if (!(c.distance > c.radius)) return true;
+    if (dR + rR < c.distance - c.radius) continue;  // wholly nearer the light than the caster
+    const double cosAngle = std::clamp(glm::dot(c.toCaster, toR) / (c.distance * dR), -1.0, 1.0);
+    if (std::acos(cosAngle) <= c.halfAngle + receiverAngle + 1e-9) return true;
+  }
+  return false;
+}
+
+namespace {
+
+/// Calls fn(ray) for each ray that samples `light` from P (shadowRays()' rays, in their order)
+/// and returns the share's denominator (0: the light casts no shadows).
+template <class Fn>
+size_t forEachShadowRay(const LitLight& light, const glm::dvec3& P, const glm::dvec3& Ng, double bias, int samples, uint64_t seed, Fn&& fn) {
+  if (!light.shadows || light.kind == LightKind::Ambient) return 0;
   const bool directional = light.kind == LightKind::Distant || (light.kind == LightKind::Uber && light.uber.parallel);
   const glm::dvec3 towardCentre = directional ? -light.axis : light.position - P;
   // Lift the origin off the diced surface on the side the light is.
@@ -225,20 +288,16 @@ double lightVisibility(const ShadowScene& scene, const LitLight& light, const gl
     const double d = glm::length(towardCentre);
     frame(d > 0 ? towardCentre / d : glm::dvec3(0, 0, 1), e1, e2);
   }
-  int visible = 0;
   for (int k = 0; k < n; ++k) {
     double a = 0.5, b = 0.5;
     if (area) {
       a = (k + 0.5) / n + rotA, b = radicalInverse2(uint32_t(k)) + rotB;
       a -= std::floor(a), b -= std::floor(b);
     }
-    glm::dvec3 dir;
-    double tfar;
     if (directional) {
       double x = 0, y = 0;
       if (area) concentric(a, b, x, y);
-      dir = glm::normalize(-light.axis + light.tanHalfAngle * (x * e1 + y * e2));
-      tfar = std::numeric_limits<double>::infinity();
+      fn(ShadowRay{origin, glm::normalize(-light.axis + light.tanHalfAngle * (x * e1 + y * e2)), std::numeric_limits<double>::infinity()});
     } else {
       glm::dvec3 target = light.position;
       if (light.shape == LightShape::Rect) {
@@ -252,13 +311,27 @@ double lightVisibility(const ShadowScene& scene, const LitLight& light, const gl
       const glm::dvec3 d = target - origin;
       const double len = glm::length(d);
       if (!(len > 0)) continue;
-      dir = d / len;
-      tfar = len * (1 - 1e-6);  // stop short of the emitter, which may itself be geometry
+      fn(ShadowRay{origin, d / len, len * (1 - 1e-6)});  // stop short of the emitter, which may itself be geometry
     }
-    ++rays;
-    visible += !scene.occluded(origin, dir, tfar, time);
   }
-  return double(visible) / n;
+  return size_t(n);
+}
+
+}  // namespace
+
+size_t shadowRays(const LitLight& light, const glm::dvec3& P, const glm::dvec3& Ng, double bias, int samples, uint64_t seed, std::vector<ShadowRay>& rays) {
+  rays.clear();
+  return forEachShadowRay(light, P, Ng, bias, samples, seed, [&](const ShadowRay& r) { rays.push_back(r); });
+}
+
+double lightVisibility(const ShadowScene& scene, const LitLight& light, const glm::dvec3& P, const glm::dvec3& Ng, double bias, int samples, uint64_t seed,
+                       uint64_t& rays, double time, bool stillOnly) {
+  size_t visible = 0;
+  const size_t n = forEachShadowRay(light, P, Ng, bias, samples, seed, [&](const ShadowRay& r) {
+    ++rays;
+    visible += !(stillOnly ? scene.occludedByStill(r.origin, r.dir, r.tfar) : scene.occluded(r.origin, r.dir, r.tfar, time));
+  });
+  return n ? double(visible) / double(n) : 1.0;
 }
 
 }  // namespace reshutter::shade

@@ -36,7 +36,9 @@ class ShadowScene {
   /// Builds the BVH over every piece's micropolygons (watertight traversal: a ray cannot slip
   /// between two micropolygons that share an edge). With `open` < `close`, moving pieces move
   /// over that interval (their knots inside it; Embree's time steps are even, so uneven knots
-  /// are resampled onto 2 × knots even steps) and occluded() takes a time.
+  /// are resampled onto 2 × knots even steps) and occluded() takes a time. Still and moving
+  /// micropolygons go to two BVHs: rays at a still point need only the moving one at later
+  /// times (occludedByStill(), occludedByMoving()), and the still one carries no time steps.
   explicit ShadowScene(std::span<const Piece> pieces, double open = 0, double close = 0);
   ~ShadowScene();
   ShadowScene(const ShadowScene&) = delete;
@@ -44,7 +46,12 @@ class ShadowScene {
 
   /// True when anything lies on the ray from `origin` along unit `dir` within (0, tfar), at
   /// `time` (frames; clamped to the interval). Thread-safe.
-  bool occluded(const glm::dvec3& origin, const glm::dvec3& dir, double tfar, double time = 0) const;
+  bool occluded(const glm::dvec3& origin, const glm::dvec3& dir, double tfar, double time = 0) const {
+    return occludedByStill(origin, dir, tfar) || occludedByMoving(origin, dir, tfar, time);
+  }
+  /// occluded() by the micropolygons that stand still, or by those that move.
+  bool occludedByStill(const glm::dvec3& origin, const glm::dvec3& dir, double tfar) const;
+  bool occludedByMoving(const glm::dvec3& origin, const glm::dvec3& dir, double tfar, double time) const;
   uint64_t micropolygons() const { return micropolygons_; }
 
  private:
@@ -59,17 +66,53 @@ struct ShadowBox {
   void add(const glm::vec3& p) { lo = glm::min(lo, glm::dvec3(p)), hi = glm::max(hi, glm::dvec3(p)); }
 };
 
-/// Whether anything inside `caster` can shadow a point inside `receiver` from `light`,
-/// conservatively (false only when it cannot): along a distant light's direction, widened by
-/// its cone; for a local light, inside its cone around the caster's bounding sphere, grown by
-/// the emitter's size.
-bool mayShadow(const LitLight& light, const ShadowBox& caster, const ShadowBox& receiver);
+/// The boxes of the frame's moving casters, seen from each light once: whether any of them can
+/// shadow a point inside a receiver's box, conservatively (false only when none can). Along a
+/// distant light's direction, widened by its cone; for a local light, inside its cone around the
+/// caster's bounding sphere, grown by the emitter's size.
+class MovingCasters {
+ public:
+  MovingCasters() = default;
+  MovingCasters(std::span<const LitLight> lights, std::vector<ShadowBox> casters);
+  bool empty() const { return casters_.empty(); }
+  /// Whether a caster can shadow `receiver` from light `li` (an index into the lights given).
+  bool mayShadow(size_t li, const ShadowBox& receiver) const;
 
-/// The share of `light` (0..1) that reaches P: `Ng` is the surface's unit geometric normal
+ private:
+  struct Seen {                                      // one caster from one light
+    double lo[3], hi[3];                             // distant: its extent along the light's frame (e1, e2, d)
+    double radius = 0, distance = 0, halfAngle = 0;  // local: its sphere grown by the emitter, seen from the light
+    glm::dvec3 toCaster{0};
+  };
+  struct FromLight {
+    bool shadows = false, directional = false;
+    glm::dvec3 e1{0}, e2{0}, d{0};
+    std::vector<Seen> casters;
+  };
+  std::vector<ShadowBox> casters_;
+  std::vector<FromLight> lights_;
+  std::span<const LitLight> lit_;
+};
+
+/// One ray towards a light: from `origin` along unit `dir`, blocked by anything within (0, tfar).
+struct ShadowRay {
+  glm::dvec3 origin, dir;
+  double tfar;
+};
+
+/// The rays that sample the share of `light` reaching P, into `rays` (replaced); the share is
+/// the fraction of them that nothing blocks. `Ng` is the surface's unit geometric normal
 /// (either side), `bias` how far ray origins are lifted off the surface towards the light
 /// (about half a micropolygon: the diced surface is not the true one), `samples` the rays of an
-/// area or soft distant light, `seed` the point's identity. Counts the rays traced into `rays`.
+/// area or soft distant light, `seed` the point's identity. Empty when the light casts no
+/// shadows (its share is 1); a degenerate ray towards a local light is left out of the rays but
+/// still counts as blocked - the returned count is the share's denominator.
+size_t shadowRays(const LitLight& light, const glm::dvec3& P, const glm::dvec3& Ng, double bias, int samples, uint64_t seed, std::vector<ShadowRay>& rays);
+
+/// The share of `light` (0..1) that reaches P at `time` through `scene` (shadowRays()' rays);
+/// `stillOnly`: through its still micropolygons alone (no moving one can shadow P). Counts the
+/// rays traced into `rays`.
 double lightVisibility(const ShadowScene& scene, const LitLight& light, const glm::dvec3& P, const glm::dvec3& Ng, double bias, int samples, uint64_t seed,
-                       uint64_t& rays, double time = 0);
+                       uint64_t& rays, double time = 0, bool stillOnly = false);
 
 }  // namespace reshutter::shade

@@ -111,6 +111,38 @@ TEST(ShadeInTime, ARotatingSquareMatchesItsShadingAtEachInstant) {
   EXPECT_NEAR(red(instant(dir, once.store, 1.0, "once-end"), 16, 16) - rotatingTruth(1.0), 0.5, 1e-3);
 }
 
+// Times are refined by bisection: the close, then the middle; a middle within the tolerance of
+// its ends' blend lets the span's other times be blended instead of shaded. A 20° rotation: at
+// t = 0.5 the truth lies 0.015 off the blend of the open and close, at t = 0.25 0.0039 off the
+// blend of the open and the middle.
+TEST(ShadeInTime, TimesBetweenShadedOnesAreBlendedWhereTheMiddleAgreesWithTheBlend) {
+  ScratchDir dir;
+  std::string gentle = kRotatingSquare;
+  gentle.replace(gentle.find("Rotate 60 0 1 0"), std::string("Rotate 60 0 1 0").size(), "Rotate 20 0 1 0");
+  const double theta = 20.0 * 3.14159265358979323846 / 180.0;
+  auto truth = [&](double t) {
+    const double nx = t * std::sin(theta), nz = 1 - t + t * std::cos(theta);
+    return nz / std::sqrt(nx * nx + nz * nz);
+  };
+  const Shaded loose = shade(dir, "loose", gentle, "--shade-in-time 0.02 --shade-times 5");
+  const Shaded tight = shade(dir, "tight", gentle, "--shade-in-time 0.005 --shade-times 5");
+  // The path: with 0.02 the middle agreed (0.015 off), so t = 0.25 and 0.75 were blended; with
+  // 0.005 it did not, and every time was shaded. Both kept their times (the change, 0.06, is
+  // above either tolerance).
+  EXPECT_GT(numberBefore(loose.report, " grid times blended"), 0u) << loose.report;
+  EXPECT_EQ(numberBefore(tight.report, " grid times blended"), 0u) << tight.report;
+  EXPECT_GT(numberBefore(loose.report, " of "), 0u) << loose.report;
+  const float blended = red(instant(dir, loose.store, 0.25, "loose-q"), 16, 16);
+  const float shaded = red(instant(dir, tight.store, 0.25, "tight-q"), 16, 16);
+  EXPECT_NEAR(blended, 0.5 * (truth(0) + truth(0.5)), 2e-4) << "blended between the open and the middle";
+  EXPECT_NEAR(shaded, truth(0.25), 2e-4) << "shaded at t = 0.25";
+  EXPECT_GT(std::abs(blended - truth(0.25)), 0.003) << "the blend should show its error";
+  EXPECT_LT(std::abs(blended - truth(0.25)), 0.02) << "within the tolerance";
+  // The middle and the close are shaded in both.
+  EXPECT_NEAR(red(instant(dir, loose.store, 0.5, "loose-m"), 16, 16), truth(0.5), 2e-4);
+  EXPECT_NEAR(red(instant(dir, loose.store, 1.0, "loose-c"), 16, 16), truth(1.0), 2e-4);
+}
+
 TEST(ShadeInTime, EachFieldOfAnInterlacedFrameSeesItsOwnShading) {
   ScratchDir dir;
   const Shaded once = shade(dir, "once", kRotatingSquare, "");
@@ -204,6 +236,52 @@ TEST(ShadeInTime, ShadowsFollowTheCasterThroughTheShutter) {
   EXPECT_NEAR(openSpotOnce, 0.1f, 0.02f) << "shaded once, the floor keeps the open's shadow";
   EXPECT_NEAR(openSpotTimed, 1.1f, 0.02f) << "shaded in time, the open's shadow has moved away by the close";
   EXPECT_NEAR(red(timedOpen, 40, 32), 1.1f, 0.02f) << "at the open, the close's shadow spot is lit";
+  // The still floor's later times traced only against the moving sphere, and the vertices its
+  // shadow never reached kept their first colour without being shaded again.
+  EXPECT_GT(numberBefore(timed.report, " vertex shadings kept from the first time"), 0u) << timed.report;
+  // Which is exact: at every shading time the floor matches the sphere frozen there, shaded once.
+  for (double t : {0.5, 1.0}) {
+    std::string frozen = kMovingSphereOverFloor;
+    const double x = -1 + 2 * t;
+    frozen.replace(frozen.find("MotionBegin [0 1]\nTranslate -1 2 0\nTranslate 1 2 0\nMotionEnd"),
+                   std::string("MotionBegin [0 1]\nTranslate -1 2 0\nTranslate 1 2 0\nMotionEnd").size(), "Translate " + std::to_string(x) + " 2 0");
+    const std::string tag = std::to_string(int(t * 10));
+    const Shaded still = shade(dir, "frozen" + tag, frozen, "");
+    const auto a = instant(dir, timed.store, t, "timed-at" + tag), b = instant(dir, still.store, t, "frozen-at" + tag);
+    int differ = 0;
+    for (int y = 0; y < 64; ++y)
+      for (int x2 = 0; x2 < 64; ++x2) differ += std::abs(red(a, x2, y) - red(b, x2, y)) > 0.02f;
+    // Pixels whose samples straddle the shadow's edge may differ by a sample or two of rounding.
+    EXPECT_LT(differ, 12) << "t=" << t;  // the open's shadow kept would differ over ~100 pixels
+  }
+}
+
+// A still sphere far from the moving one shadows the floor too (fully transparent, so that the
+// camera above sees its shadow). The floor there and the still sphere are no candidates (no
+// moving caster reaches them), so their rays skip the moving micropolygons: exactly, as the first
+// time's image there shows - the same as shading once, bit for bit.
+TEST(ShadeInTime, TheFirstTimeIsShadingOnceAndStillShadowsStay) {
+  ScratchDir dir;
+  std::string scene = kMovingSphereOverFloor;
+  scene.replace(scene.find("WorldEnd"), 8, "AttributeBegin\nOpacity [0 0 0]\nTranslate 3 1 2\nSphere 0.5 -0.5 0.5 360\nAttributeEnd\nWorldEnd");
+  const Shaded once = shade(dir, "once", scene, "");
+  const Shaded timed = shade(dir, "timed", scene, "--shade-in-time 0.01");
+  EXPECT_GT(numberBefore(timed.report, " rays against still micropolygons only"), 0u) << timed.report;
+  const auto a = instant(dir, once.store, 0.0, "once-open"), b = instant(dir, timed.store, 0.0, "timed-open");
+  ASSERT_EQ(a.width, b.width);
+  // World x >= 2 (pixels x >= 48), beyond where the moving sphere and its shadow ever are.
+  int compared = 0;
+  for (const char* channel : {"R", "G", "B", "A"})
+    for (int y = 0; y < 64; ++y)
+      for (int x = 48; x < 64; ++x) {
+        const size_t i = size_t(y) * size_t(a.width) + size_t(x);
+        EXPECT_EQ(a.find(channel)->f[i], b.find(channel)->f[i]) << channel << " at " << x << ", " << y;
+        ++compared;
+      }
+  EXPECT_EQ(compared, 4 * 64 * 16);
+  // The still sphere's shadow, under it: floor (3, 0, 2) is pixel (56, 16).
+  EXPECT_NEAR(red(b, 56, 16), 0.1f, 0.02f);
+  EXPECT_NEAR(red(b, 56, 24), 1.1f, 0.02f) << "a pixel beside it is lit";
 }
 
 TEST(ShadeInTime, TheStoreIsTheSameForAnyThreadCount) {

@@ -1,0 +1,193 @@
+// Shading one diced grid's vertices at one time (shade/shade_grid.h).
+#include <algorithm>
+#include <array>
+#include <cmath>
+
+#include "common/error.h"
+#include "common/random.h"
+#include "shade/shade_grid.h"
+
+namespace reshutter::shade::pass {
+
+Var varOf(const std::string& name) {
+  if (store::StoreMeta::timedIndex(name)) return Var::Timed;
+  static const std::pair<const char*, Var> table[] = {{"Ci", Var::Ci},
+                                                      {"Oi", Var::Oi},
+                                                      {"P", Var::P},
+                                                      {"N", Var::N},
+                                                      {"Ng", Var::Ng},
+                                                      {"s", Var::s},
+                                                      {"t", Var::t},
+                                                      {"u", Var::u},
+                                                      {"v", Var::v},
+                                                      {"Cs", Var::Cs},
+                                                      {"Os", Var::Os},
+                                                      {"depth", Var::depth},
+                                                      {"specular", Var::specular}};
+  for (const auto& [n, v] : table)
+    if (name == n) return v;
+  fail("schema", "output variable '", name, "' is not computable");
+}
+
+namespace {
+
+void put3(std::vector<float>& dst, size_t i, const glm::dvec3& v) { dst[i * 3 + 0] = float(v.x), dst[i * 3 + 1] = float(v.y), dst[i * 3 + 2] = float(v.z); }
+
+// A non-finite shading result (a light at the shaded point, an overflow) would poison the store:
+// the writer rejects it. Clamp to zero here, where the cause is known.
+glm::dvec3 finite(const glm::dvec3& c) { return {std::isfinite(c.x) ? c.x : 0.0, std::isfinite(c.y) ? c.y : 0.0, std::isfinite(c.z) ? c.z : 0.0}; }
+
+/// Vertex i's output variables into `attrs` (parallel to the schema).
+void storeOutputs(const std::vector<Var>& vars, const DicedGrid& g, size_t i, const SurfaceInput& in, const SurfaceOutput& so,
+                  std::vector<std::vector<float>>& attrs) {
+  for (size_t ai = 0; ai < vars.size(); ++ai) {
+    auto& dst = attrs[ai];
+    switch (vars[ai]) {
+      case Var::Ci: put3(dst, i, finite(so.Ci)); break;
+      case Var::Oi: put3(dst, i, finite(so.Oi)); break;
+      case Var::P: put3(dst, i, g.P[i]); break;
+      case Var::N: put3(dst, i, g.N[i]); break;
+      case Var::Ng: put3(dst, i, g.Ng[i]); break;
+      case Var::s: dst[i] = float(g.s[i]); break;
+      case Var::t: dst[i] = float(g.t[i]); break;
+      case Var::u: dst[i] = float(g.u[i]); break;
+      case Var::v: dst[i] = float(g.v[i]); break;
+      case Var::Cs: put3(dst, i, in.Cs); break;
+      case Var::Os: put3(dst, i, in.Os); break;
+      case Var::depth: dst[i] = float(g.P[i].z); break;
+      case Var::specular: put3(dst, i, finite(so.viewDependent)); break;
+      case Var::Timed: break;
+    }
+  }
+}
+
+}  // namespace
+
+void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g, std::span<const uint32_t> corners, std::span<const LitLight> lights,
+                   double time, size_t k, uint64_t leafIndex, std::vector<std::vector<float>>& attrs, uint64_t& shadowRays, ShadowReuse* reuse,
+                   bool stillCastersOnly) {
+  const Attributes& a = *p.attrs;
+  const SurfaceShader shader = a.surface.at(time);
+  // A RIS material's own colour and presence replace the primitive's.
+  const glm::dvec3 Cs0 = shader.color ? *shader.color : a.color.at(time), Os0 = shader.opacity ? *shader.opacity : a.opacity.at(time);
+  std::array<glm::dvec3, 4> cornerCs, cornerOs;
+  const bool hasCs = !shader.color && p.mesh && p.corners(p.mesh->Cs, cornerCs);
+  const bool hasOs = !shader.opacity && p.mesh && p.corners(p.mesh->Os, cornerOs);
+  const bool traces = c.shadows && usesLights(shader.kind) && std::any_of(lights.begin(), lights.end(), [](const LitLight& l) { return l.shadows; });
+  const size_t nV = g.numVertices;
+  // A textured surface filters each vertex's lookup over the st span of a micropolygon it
+  // corners: its two sides from that corner (the shading rate's footprint).
+  struct Footprint {
+    float dsdx = 0, dtdx = 0, dsdy = 0, dtdy = 0;
+  };
+  std::vector<Footprint> footprint;
+  TextureLookup::Map map;
+  // A shadow ray starts half a micropolygon off the surface (the diced surface cuts corners of
+  // the true one by about that much).
+  std::vector<float> bias;
+  if (traces) {
+    bias.assign(nV, 0.f);
+    for (size_t m = 0; m + 4 <= corners.size(); m += 4) {
+      const uint32_t* q = &corners[m];
+      const int n = q[3] == store::kNoCorner ? 3 : 4;
+      for (int j = 0; j < n; ++j) {
+        const uint32_t v = q[j], w = q[(j + 1) % n];
+        if (v >= nV || w >= nV) continue;
+        const float half = float(0.5 * glm::length(g.P[w] - g.P[v]));
+        bias[v] = std::max(bias[v], half), bias[w] = std::max(bias[w], half);
+      }
+    }
+  }
+  std::vector<LitLight> shadowed;
+  if (traces) shadowed.assign(lights.begin(), lights.end());
+  if (c.textures && !shader.textureName.empty()) {
+    map = c.textures->find(shader.textureName);
+    footprint.resize(nV);
+    std::vector<uint8_t> set(nV, 0);
+    // The grid's corners have moved to its GridOut already (shadeBatch).
+    for (size_t m = 0; m + 4 <= corners.size(); m += 4) {
+      const uint32_t* q = &corners[m];
+      const int n = q[3] == store::kNoCorner ? 3 : 4;
+      for (int j = 0; j < n; ++j) {
+        const uint32_t v = q[j], a = q[(j + 1) % n], b = q[(j + n - 1) % n];
+        if (v >= nV || a >= nV || b >= nV || set[v]) continue;
+        footprint[v] = {float(g.s[a] - g.s[v]), float(g.t[a] - g.t[v]), float(g.s[b] - g.s[v]), float(g.t[b] - g.t[v])};
+        set[v] = 1;
+      }
+    }
+  }
+  attrs.resize(c.vars.size());
+  for (size_t ai = 0; ai < c.vars.size(); ++ai)
+    if (c.vars[ai] != Var::Timed) attrs[ai].resize(nV * size_t(store::componentCount(c.schema.attrs[ai].type)));
+  if (reuse && reuse->recording) reuse->visibility.assign(nV * lights.size(), 1.f), reuse->stillBlocked.clear();
+  size_t ray = 0;  // reuse: the next ray of the first time's order
+  std::vector<ShadowRay> rays;
+  for (size_t i = 0; i < nV; ++i) {
+    SurfaceInput in;
+    in.P = g.P[i], in.N = g.N[i], in.Ng = g.Ng[i];
+    in.I = c.perspective ? g.P[i] : glm::dvec3(0, 0, 1);
+    std::span<const LitLight> vertexLights = lights;
+    if (traces) {
+      // Each shadowed light's Cl scaled by the share of it that reaches this point; lights
+      // behind the point's shading hemisphere add nothing and trace nothing.
+      const glm::dvec3 Nf = facingNormal(in);
+      const glm::dvec3 Ng = glm::dot(in.Ng, in.Ng) > 0 ? glm::normalize(in.Ng) : Nf;
+      const double floorBias = 1e-6 * std::max({std::abs(in.P.x), std::abs(in.P.y), std::abs(in.P.z), 1.0});
+      bool asFirst = reuse && !reuse->recording;
+      for (size_t li = 0; li < lights.size(); ++li) {
+        shadowed[li].Cl0 = lights[li].Cl0;  // the previous vertex scaled it
+        glm::dvec3 L, Cl;
+        if (!lights[li].shadows || !illuminate(lights[li], in.P, L, Cl) || !(glm::dot(L, Nf) > 0)) continue;
+        uint64_t seed = hashCombine(hashCombine(leafIndex, i), li);
+        if (k > 0 && !reuse) seed = hashCombine(seed, k);
+        if (!reuse) {
+          shadowed[li].Cl0 *= lightVisibility(*c.shadows, lights[li], in.P, Ng, std::max(double(bias[i]), floorBias), c.shadowSamples, seed, shadowRays, time,
+                                              stillCastersOnly);
+          continue;
+        }
+        const size_t n = shade::shadowRays(lights[li], in.P, Ng, std::max(double(bias[i]), floorBias), c.shadowSamples, seed, rays);
+        if (n == 0) continue;
+        size_t visible = 0;
+        for (const ShadowRay& r : rays) {
+          bool blocked;
+          if (reuse->recording) {
+            blocked = c.shadows->occludedByStill(r.origin, r.dir, r.tfar);
+            reuse->stillBlocked.push_back(blocked);
+            blocked = blocked || c.shadows->occludedByMoving(r.origin, r.dir, r.tfar, time);
+          } else {
+            blocked = reuse->stillBlocked[ray++] || c.shadows->occludedByMoving(r.origin, r.dir, r.tfar, time);
+          }
+          visible += !blocked;
+        }
+        shadowRays += rays.size();
+        const float share = float(double(visible) / double(n));
+        float& firstShare = reuse->visibility[i * lights.size() + li];
+        if (reuse->recording) firstShare = share;
+        else asFirst &= share == firstShare;
+        shadowed[li].Cl0 *= double(visible) / double(n);
+      }
+      if (asFirst) {  // every light as visible as at the first time: the first time's outputs
+        for (size_t ai = 0; ai < c.vars.size(); ++ai) {
+          if (c.vars[ai] == Var::Timed) continue;
+          const size_t comps = size_t(store::componentCount(c.schema.attrs[ai].type));
+          std::copy_n(&(*reuse->first)[ai][i * comps], comps, &attrs[ai][i * comps]);
+        }
+        ++reuse->reusedVertices;
+        continue;
+      }
+      vertexLights = shadowed;
+    }
+    // Per-vertex colours are given over the primitive's own (u, v) square.
+    in.Cs = hasCs ? bilinear(cornerCs, g.u[i], g.v[i]) : Cs0;
+    in.Os = hasOs ? bilinear(cornerOs, g.u[i], g.v[i]) : Os0;
+    if (!footprint.empty()) {
+      const Footprint& f = footprint[i];
+      const float t = shader.textureFlipT ? 1.f - float(g.t[i]) : float(g.t[i]);
+      in.Cs *= c.textures->rgb(map, float(g.s[i]), t, f.dsdx, shader.textureFlipT ? -f.dtdx : f.dtdx, f.dsdy, shader.textureFlipT ? -f.dtdy : f.dtdy);
+    }
+    const SurfaceOutput so = shadeSurface(shader, in, vertexLights);
+    storeOutputs(c.vars, g, i, in, so, attrs);
+  }
+}
+
+}  // namespace reshutter::shade::pass

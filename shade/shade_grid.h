@@ -1,0 +1,105 @@
+// Inside the shading pass (shade/shading_pass.h says what it promises): what shading one diced
+// grid needs and does. The frame's shading context, a grid's outputs, shading a grid's vertices
+// at one time (shade_grid.cpp), and shading in time - which grids may shade differently over
+// the shutter, and shading them at the other times (shade_in_time.cpp). shading_pass.cpp runs
+// the pipeline around them. Only those files include this one.
+#pragma once
+
+#include <cstdint>
+#include <span>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <glm/vec3.hpp>
+
+#include "shade/dice.h"
+#include "shade/scene.h"
+#include "shade/shaders.h"
+#include "shade/shadows.h"
+#include "shade/texture.h"
+#include "store/model.h"
+
+namespace reshutter::shade::pass {
+
+// Timed: "Ci@k" / "Oi@k", filled by shading at the other times (shadeInTime()).
+enum class Var : uint8_t { Ci, Oi, P, N, Ng, s, t, u, v, Cs, Os, depth, specular, Timed };
+Var varOf(const std::string& name);
+
+// What the pipeline carries: grids shaded and ready to send.
+struct GridOut {
+  uint32_t prim = 0;
+  uint32_t numVertices = 0;
+  std::vector<glm::vec3> positions;
+  std::vector<uint32_t> corners;
+  std::vector<std::vector<float>> attrs;  // parallel to the schema
+};
+
+struct SplitScene {
+  std::vector<std::vector<double>> knots;              // per primitive: its knots inside the interval
+  std::vector<std::vector<Leaf>> leaves;               // per primitive, in dicing order
+  std::vector<std::pair<uint32_t, const Leaf*>> flat;  // (primitive, leaf): primitive order, then dicing order
+};
+
+/// What shading any leaf needs, fixed for the frame.
+struct ShadeContext {
+  const FrameScene& scene;
+  const SplitScene& split;
+  const store::Schema& schema;
+  std::vector<Var> vars;      // what each schema attribute holds
+  std::vector<LitLight> lit;  // every light, resolved once at the shading time
+  double shadeAt;
+  double nearClip;
+  bool perspective;
+  const TextureLookup* textures = nullptr;  // only when some surface has a texture
+  const ShadowScene* shadows = nullptr;     // only when a light asks for shadows
+  int shadowSamples = 16;
+  // Shading in time (times.size() > 1): the other times' lights, and what may change.
+  std::vector<double> times{};
+  std::vector<std::vector<LitLight>> litAt{};  // [k][light], k >= 1
+  std::vector<uint8_t> lightMoves{};           // per light: moves (in camera space) over the interval
+  // The camera-space box, over the interval, of each moving primitive that casts shadows: a
+  // receiver whose shadows they cannot reach keeps one colour.
+  MovingCasters movingCasters{};
+  double tolerance = 0;
+  int ci = -1, oi = -1;
+  std::vector<int> timedCi{}, timedOi{};  // schema slots of "Ci@k" / "Oi@k" ([0] unused)
+};
+
+/// Shading in time for a grid whose shading can change only through moving casters' shadows (it
+/// stands still, its lights stand still, nothing of it is animated): its shadow rays are the same
+/// at every time, so the first time records which of them still micropolygons block, later times
+/// trace only the rest and only against the moving ones, and a vertex whose every light comes
+/// out as visible as at the first time keeps that time's outputs (nothing else can differ).
+struct ShadowReuse {
+  bool recording = true;                                   // the first time: record; later: reuse
+  std::vector<uint8_t> stillBlocked;                       // per ray, in the order traced
+  std::vector<float> visibility;                           // [vertex * lights + light] at the first time (1: not traced)
+  const std::vector<std::vector<float>>* first = nullptr;  // the first time's outputs (reusing)
+  uint64_t reusedVertices = 0;
+};
+
+/// Shades every vertex of the diced grid `g` (its corners: `corners`) of primitive `p` at `time`,
+/// shading time k of the pass (0: the first), into `attrs` (parallel to the schema); `reuse`
+/// (shading in time, a grid only shadows change): the first time records its rays, later times
+/// reuse them; `stillCastersOnly`: no moving caster can shadow the grid (not a candidate for
+/// shading in time), so its rays skip the moving micropolygons.
+void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g, std::span<const uint32_t> corners, std::span<const LitLight> lights,
+                   double time, size_t k, uint64_t leafIndex, std::vector<std::vector<float>>& attrs, uint64_t& shadowRays, ShadowReuse* reuse = nullptr,
+                   bool stillCastersOnly = false);
+
+/// Whether a primitive's colour, opacity or shader is given at several times (a motion block).
+bool animated(const Attributes& a);
+/// Whether a light is somewhere else (in camera space) at the interval's close than at its open.
+bool lightMoves(const Light& l, double open, double close);
+/// Whether anything in the scene can make shading differ over [open, close].
+bool sceneMayShadeInTime(const FrameScene& scene, double open, double close);
+/// Whether grid `g` of primitive `pi` can shade differently at another time of the interval.
+bool mayShadeDifferently(const ShadeContext& c, uint32_t pi, std::span<const glm::vec3> positions, uint32_t nV, bool moves, std::span<const uint32_t> lights);
+/// Whether only moving casters' shadows can change a grid's shading (ShadowReuse applies).
+bool onlyShadowsChange(const ShadeContext& c, uint32_t pi, bool moves, std::span<const uint32_t> lights);
+/// Shades a candidate at the other times; whether it kept them (shade_in_time.cpp).
+bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const DicedGrid& g, bool moves, std::span<const uint32_t> lightIdx, uint64_t leafIndex,
+                 GridOut& out, uint64_t& shadowRays, ShadowReuse* reuse, uint64_t& blendedTimes);
+
+}  // namespace reshutter::shade::pass
