@@ -55,9 +55,26 @@ HitBuffer::HitContext HitBuffer::hitContext(const store::StoreMeta& meta, const 
       timedSlots.meta = &meta;
       for (size_t k = 1; k < meta.shadingTimes.size(); ++k)
         timedSlots.ci[k] = meta.schema.find(store::StoreMeta::timedName("Ci", k)), timedSlots.oi[k] = meta.schema.find(store::StoreMeta::timedName("Oi", k));
+      // Output variables the store carries in time: every time's slot, or -1 at [1] (not carried).
+      timedSlots.aov.clear();
+      if (aovLayout.floatCount) {
+        constexpr size_t K = store::StoreMeta::kMaxShadingTimes;
+        timedSlots.aov.assign(aovs.size() * K, -1);
+        for (size_t a = 0; a < aovs.size(); ++a) {
+          const int base = aovs[a].schemaIndex;
+          if (aovs[a].isUInt || base < 0 || size_t(base) >= meta.schema.attrs.size()) continue;
+          int* slots = &timedSlots.aov[a * K];
+          slots[0] = base;
+          bool all = true;
+          for (size_t k = 1; k < meta.shadingTimes.size(); ++k)
+            all &= (slots[k] = meta.schema.find(store::StoreMeta::timedName(meta.schema.attrs[size_t(base)].name, k))) >= 0;
+          if (!all) slots[1] = -1;
+        }
+      }
     }
     std::copy(timedSlots.ci + 1, timedSlots.ci + hc.numTimes, hc.timedCi + 1);
     std::copy(timedSlots.oi + 1, timedSlots.oi + hc.numTimes, hc.timedOi + 1);
+    if (!timedSlots.aov.empty()) hc.timedAov = timedSlots.aov.data();
     hc.sampleTime = sampleTime, hc.toLocal = toLocal;
     return hc;
   }
@@ -94,7 +111,7 @@ void HitBuffer::recordAnyHit(const HitContext& hc, uint32_t sample, uint32_t m, 
     if (aovLayout.floatCount || aovLayout.uintCount) {
       float fv[64];
       uint32_t uv[16];
-      aovValues(part, *hc.schema, m, v, b, z, fv, uv);
+      aovValues(hc, sample, m, v, b, z, fv, uv);
       for (int c2 = 0; c2 < aovLayout.floatCount; ++c2) zAov[size_t(c2) * hitSlots + sample] = fv[c2];
       for (int c2 = 0; c2 < aovLayout.uintCount; ++c2) zAovU[size_t(c2) * hitSlots + sample] = uv[c2];
     }
@@ -107,7 +124,7 @@ void HitBuffer::recordAnyHit(const HitContext& hc, uint32_t sample, uint32_t m, 
   if (aovLayout.floatCount || aovLayout.uintCount) {
     float fv[64];
     uint32_t uv[16];
-    aovValues(part, *hc.schema, m, v, b, z, fv, uv);
+    aovValues(hc, sample, m, v, b, z, fv, uv);
     fragAov.insert(fragAov.end(), fv, fv + aovLayout.floatCount);
     fragAovU.insert(fragAovU.end(), uv, uv + aovLayout.uintCount);
   }
@@ -118,15 +135,20 @@ void HitBuffer::shadingAt(const HitContext& hc, const int* slots, uint32_t sampl
     attrAt(*hc.part, *hc.schema, slots[0], m, v, b, out);
     return;
   }
+  timedAt(hc, slots, sample, m, v, b, 3, out);
+}
+
+void HitBuffer::timedAt(const HitContext& hc, const int* slots, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], int components,
+                        float* out) const {
   const double t = double(hc.sampleTime[sample]) + hc.toLocal;
   const double* T = hc.shadingTimes;
   int k = 0;
   while (k + 2 < hc.numTimes && T[k + 1] <= t) ++k;
   const float w = float(std::clamp((t - T[k]) / (T[k + 1] - T[k]), 0.0, 1.0));
-  float a[3], c[3];
+  float a[16], c[16];
   attrAt(*hc.part, *hc.schema, slots[k], m, v, b, a);
   attrAt(*hc.part, *hc.schema, slots[k + 1], m, v, b, c);
-  for (int j = 0; j < 3; ++j) out[j] = a[j] + w * (c[j] - a[j]);
+  for (int j = 0; j < components; ++j) out[j] = a[j] + w * (c[j] - a[j]);
 }
 
 void HitBuffer::addFragment(uint32_t sample, float z, const float c[3], const float o[3], uint32_t objectId, uint32_t gridId, bool matte) {
@@ -182,8 +204,9 @@ void HitBuffer::nearerFragments(size_t k, float zo, std::vector<const Fragment*>
   }
 }
 
-void HitBuffer::aovValues(const store::TilePart& part, const store::Schema& schema, uint32_t m, const uint32_t v[3], const float b[3], float z, float* f,
-                          uint32_t* u) const {
+void HitBuffer::aovValues(const HitContext& hc, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float z, float* f, uint32_t* u) const {
+  const store::TilePart& part = *hc.part;
+  const store::Schema& schema = *hc.schema;
   for (size_t a = 0; a < aovs.size(); ++a) {
     const auto& ch = aovs[a];
     if (ch.isUInt) {
@@ -197,6 +220,8 @@ void HitBuffer::aovValues(const store::TilePart& part, const store::Schema& sche
       u[aovLayout.uintBase[a]] = val;
     } else if (ch.builtin == AovChannel::Builtin::Depth) {
       f[aovLayout.floatBase[a]] = z;
+    } else if (hc.timedAov && hc.timedAov[a * store::StoreMeta::kMaxShadingTimes + 1] >= 0) {
+      timedAt(hc, &hc.timedAov[a * store::StoreMeta::kMaxShadingTimes], sample, m, v, b, ch.components, f + aovLayout.floatBase[a]);
     } else {
       attrAt(part, schema, ch.schemaIndex, m, v, b, f + aovLayout.floatBase[a]);
     }

@@ -52,6 +52,10 @@ struct HitBuffer {
     int numTimes = 0;
     const double* shadingTimes = nullptr;
     int timedCi[store::StoreMeta::kMaxShadingTimes] = {}, timedOi[store::StoreMeta::kMaxShadingTimes] = {};
+    // Output variable a's slot at each time: timedAov[a * kMaxShadingTimes + k], [.. + 1] < 0 when
+    // the store carries it at the first time only (null: none carried). Valid until the next
+    // hitContext() call.
+    const int* timedAov = nullptr;
     const float* sampleTime = nullptr;
     double toLocal = 0;
   };
@@ -146,13 +150,16 @@ struct HitBuffer {
   // Colour (slots = timedCi) or opacity (timedOi) of a hit: the stored attribute, or for a part
   // shaded in time the blend at the sample's time.
   void shadingAt(const HitContext& hc, const int* slots, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float out[3]) const;
+  // An attribute of `components` (at most 16) at the sample's time, linear between the shading
+  // times around it (slots[k]: its schema slot at time k).
+  void timedAt(const HitContext& hc, const int* slots, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], int components, float* out) const;
   // Puts each sample's fragments next to each other, in the order resolve() visits the samples
   // (a counting sort by sample): the lists are then read sequentially, not chased through memory.
   void groupFragments(const BucketSamples& samples);
   // Sample slot's fragments nearer than its opaque depth zo, front to back into `list`.
   void nearerFragments(size_t k, float zo, std::vector<const Fragment*>& list) const;
-  void aovValues(const store::TilePart& part, const store::Schema& schema, uint32_t m, const uint32_t v[3], const float b[3], float z, float* f,
-                 uint32_t* u) const;
+  // Sample's output variables for a hit (at the sample's time where the part carries them in time).
+  void aovValues(const HitContext& hc, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float z, float* f, uint32_t* u) const;
   uint8_t hitState(size_t k) const {
     if (!(zbuf[k] < INFINITY)) return 0;
     return kHitOpaque | (colour[k].matte ? kHitMatte : 0);
@@ -172,6 +179,7 @@ struct HitBuffer {
   struct TimedSlots {
     const store::StoreMeta* meta = nullptr;
     int ci[store::StoreMeta::kMaxShadingTimes] = {}, oi[store::StoreMeta::kMaxShadingTimes] = {};
+    std::vector<int> aov;  // HitContext::timedAov's layout
   };
   mutable TimedSlots timedSlots;
 

@@ -63,7 +63,9 @@ struct ShadeContext {
   MovingCasters movingCasters{};
   double tolerance = 0;
   int ci = -1, oi = -1;
-  std::vector<int> timedCi{}, timedOi{};  // schema slots of "Ci@k" / "Oi@k" ([0] unused)
+  // Per attribute carried in time (Ci, Oi, output variables): its schema slot at each shading
+  // time ([0]: the attribute itself, [k]: "name@k").
+  std::vector<std::vector<int>> timedSlots{};
 };
 
 /// Shading in time for a grid whose shading can change only through moving casters' shadows (it

@@ -69,8 +69,9 @@ bool onlyShadowsChange(const ShadeContext& c, uint32_t pi, bool moves, std::span
 
 /// Shading in time for one grid already shaded at the first time into `out` (`moves`: its
 /// positions differ between knots; `reuse`: the first time's shadow rays, for a grid that only
-/// shadows change): shades it at the other times and keeps them ("Ci@k", "Oi@k") when the colour
-/// or opacity changes by more than the tolerance. Returns whether it kept them.
+/// shadows change): shades it at the other times and keeps them ("Ci@k", "Oi@k", and "name@k"
+/// for the output variables carried in time) when the colour or opacity changes by more than the
+/// tolerance. Returns whether it kept them.
 ///
 /// The times are refined by bisection: the close first, then the middle of each span whose
 /// ends are shaded; where the middle's colour lies within the tolerance of the blend of its
@@ -108,12 +109,13 @@ bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const Dic
     }
     return true;
   };
-  // Times lo < k < hi blended between lo and hi.
+  // Times lo < k < hi blended between lo and hi (every attribute carried in time).
   auto blend = [&](size_t lo, size_t hi) {
     for (size_t k = lo + 1; k < hi; ++k) {
       const float w = float((c.times[k] - c.times[lo]) / (c.times[hi] - c.times[lo]));
       at[k].resize(out.attrs.size());
-      for (int slot : slots) {
+      for (const std::vector<int>& timed : c.timedSlots) {
+        const int slot = timed[0];
         const std::vector<float>& a = values(lo, slot);
         const std::vector<float>& b = values(hi, slot);
         std::vector<float>& v = at[k][size_t(slot)];
@@ -146,10 +148,8 @@ bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const Dic
   };
   if (!shadeTime(T - 1) || !refine(refine, 0, T - 1)) return false;
   if (!(change > c.tolerance) && c.tolerance > 0) return false;
-  for (size_t k = 1; k < T; ++k) {
-    out.attrs[size_t(c.timedCi[k])] = std::move(at[k][size_t(c.ci)]);
-    out.attrs[size_t(c.timedOi[k])] = std::move(at[k][size_t(c.oi)]);
-  }
+  for (size_t k = 1; k < T; ++k)
+    for (const std::vector<int>& timed : c.timedSlots) out.attrs[size_t(timed[k])] = std::move(at[k][size_t(timed[0])]);
   return true;
 }
 

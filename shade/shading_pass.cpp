@@ -81,10 +81,20 @@ store::StoreMeta storeMeta(const FrameScene& scene, const ShadeOptions& o) {
     for (const auto& v : knownOutputVars())
       if (v.name == name) m.schema.attrs.push_back({name, v.type, store::AttrRate::Vertex, store::AttrCodec::Lossless});
   if (iv.times.size() > 1) {
+    // Colour, opacity and every output variable that can change with time (not the parametric
+    // s t u v) at the other shading times, declared as at the first - as many as the store's
+    // attribute limit holds (colour and opacity first).
     m.shadingTimes = iv.times;
-    for (size_t k = 1; k < iv.times.size(); ++k)
-      for (const char* base : {"Ci", "Oi"})
-        m.schema.attrs.push_back({store::StoreMeta::timedName(base, k), store::AttrType::Color, store::AttrRate::Vertex, store::AttrCodec::Lossless});
+    const std::vector<store::AttrDecl> first = m.schema.attrs;
+    for (const store::AttrDecl& a : first) {
+      if (a.name == "s" || a.name == "t" || a.name == "u" || a.name == "v") continue;
+      if (m.schema.attrs.size() + iv.times.size() - 1 > store::Schema::kMaxAttributes) {
+        warnOnce(cat("timed-aov:", a.name), cat("output variable '", a.name, "' is stored at the first shading time only (a store holds at most ",
+                                                store::Schema::kMaxAttributes, " attributes)"));
+        continue;
+      }
+      for (size_t k = 1; k < iv.times.size(); ++k) m.schema.attrs.push_back({store::StoreMeta::timedName(a.name, k), a.type, a.rate, a.codec});
+    }
   }
   std::string prov = cat("reshutter shade: ", scene.source.empty() ? "scene" : scene.source, "; frame ", scene.options.frame,
                          iv.times.size() > 1 ? cat("; shaded in time at ", iv.times.size(), " times from t=", iv.shadeAt) : cat("; shaded at t=", iv.shadeAt),
@@ -368,11 +378,14 @@ ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::Gri
     context.tolerance = *o.timeTolerance;
     context.ci = meta.schema.ci(), context.oi = meta.schema.oi();
     context.litAt.resize(iv.times.size());
-    context.timedCi.assign(iv.times.size(), -1), context.timedOi.assign(iv.times.size(), -1);
-    for (size_t k = 1; k < iv.times.size(); ++k) {
+    for (size_t k = 1; k < iv.times.size(); ++k)
       for (const auto& l : scene.lights) context.litAt[k].push_back(resolveLight(l, iv.times[k]));
-      context.timedCi[k] = meta.schema.find(store::StoreMeta::timedName("Ci", k));
-      context.timedOi[k] = meta.schema.find(store::StoreMeta::timedName("Oi", k));
+    for (size_t ai = 0; ai < meta.schema.attrs.size(); ++ai) {
+      const std::string& name = meta.schema.attrs[ai].name;
+      if (store::StoreMeta::timedIndex(name) || meta.schema.find(store::StoreMeta::timedName(name, 1)) < 0) continue;
+      std::vector<int> slots{int(ai)};
+      for (size_t k = 1; k < iv.times.size(); ++k) slots.push_back(meta.schema.find(store::StoreMeta::timedName(name, k)));
+      context.timedSlots.push_back(std::move(slots));
     }
     for (const auto& l : scene.lights) context.lightMoves.push_back(lightMoves(l, iv.open, iv.close));
     stats.shadingTimes = iv.times;

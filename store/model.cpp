@@ -1,5 +1,6 @@
 #include "store/model.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstring>
 #include <set>
@@ -164,7 +165,7 @@ void StoreMeta::validate(const std::string& where) const {
         if (!std::isfinite(c.worldToCamera[i][j])) fail(where, "camera '", c.name, "': world-to-camera matrix not finite");
   }
   if (tileSize < 4 || tileSize > 4096) fail(where, "tile size ", tileSize, " out of range (4 to 4096)");
-  if (schema.attrs.size() > 64) fail(where, "schema has ", schema.attrs.size(), " attributes (at most 64)");
+  if (schema.attrs.size() > Schema::kMaxAttributes) fail(where, "schema has ", schema.attrs.size(), " attributes (at most ", Schema::kMaxAttributes, ")");
   std::set<std::string> names;
   for (const auto& a : schema.attrs) {
     if (a.name.empty()) fail(where, "attribute with an empty name");
@@ -190,19 +191,35 @@ void StoreMeta::validate(const std::string& where) const {
       if (a.type != AttrType::Color || a.rate != rate) fail(where, "'", a.name, "' must be a color given as often as '", base, "'");
     }
   }
+  // Any other attribute at a shading time: its base declared alike, and it at every time.
+  for (const AttrDecl& a : schema.attrs) {
+    const size_t k = timedIndex(a.name);
+    if (k == 0) continue;
+    if (k >= std::max<size_t>(shadingTimes.size(), 1)) fail(where, "'", a.name, "' is for shading time ", k, ", but the store has ", shadingTimes.size());
+    const std::string base = timedBase(a.name);
+    const int bi = schema.find(base);
+    if (bi < 0) fail(where, "'", a.name, "' has no '", base, "' in the schema");
+    const AttrDecl& b = schema.attrs[size_t(bi)];
+    if (a.type != b.type || a.rate != b.rate || a.codec != b.codec) fail(where, "'", a.name, "' must be declared as '", base, "' is");
+    for (size_t j = 1; j < shadingTimes.size(); ++j)
+      if (schema.find(timedName(base, j)) < 0) fail(where, "'", base, "' is given at shading time ", k, " but not at ", j);
+  }
 }
 
 std::string StoreMeta::timedName(const std::string& base, size_t k) { return k == 0 ? base : base + "@" + std::to_string(k); }
 
 size_t StoreMeta::timedIndex(const std::string& name) {
-  if (name.size() < 4 || !(name.starts_with("Ci@") || name.starts_with("Oi@"))) return 0;
+  const size_t at = name.rfind('@');
+  if (at == std::string::npos || at == 0 || at + 1 == name.size()) return 0;
   size_t k = 0;
-  for (size_t i = 3; i < name.size(); ++i) {
+  for (size_t i = at + 1; i < name.size(); ++i) {
     if (name[i] < '0' || name[i] > '9' || k > kMaxShadingTimes) return 0;
     k = k * 10 + size_t(name[i] - '0');
   }
   return k;
 }
+
+std::string StoreMeta::timedBase(const std::string& name) { return timedIndex(name) ? name.substr(0, name.rfind('@')) : name; }
 
 size_t TilePart::memoryBytes() const {
   size_t b = positions.size() * sizeof(glm::vec3) + corners.size() * 4 + objectId.size() * 4 + gridId.size() * 4 + flags.size();

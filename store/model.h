@@ -47,6 +47,7 @@ struct AttrDecl {
 /// Every store has "Ci" (premultiplied colour) and "Oi" (per-channel opacity), both colours;
 /// any further attribute is an output variable.
 struct Schema {
+  static constexpr size_t kMaxAttributes = 64;
   std::vector<AttrDecl> attrs;
   int find(const std::string& name) const;  // -1 when absent
   int ci() const { return find("Ci"); }
@@ -121,15 +122,18 @@ struct StoreMeta {
   std::string provenance;
   /// Shading in time (frame-relative, increasing): empty when the frame was shaded once. Otherwise
   /// "Ci" / "Oi" hold the shading at shadingTimes[0] and the schema declares "Ci@k" / "Oi@k"
-  /// (per-vertex colours) for the shading at shadingTimes[k]; a part whose grids' shading changed
-  /// over the shutter carries them (kEffectShadedInTime), the others only the first.
+  /// (per-vertex colours) for the shading at shadingTimes[k] - and "name@k" for any output
+  /// variable carried in time; a part whose grids' shading changed over the shutter carries them
+  /// (kEffectShadedInTime), the others only the first.
   std::vector<double> shadingTimes;
   uint64_t shadedInTimeGrids = 0;  // grids that carry shading at every time (counted by the writer)
   static constexpr size_t kMaxShadingTimes = 16;
-  /// The schema name of attribute `base` ("Ci", "Oi") at shading time k (k = 0: base itself).
+  /// The schema name of attribute `base` ("Ci", "Oi", "N") at shading time k (k = 0: base itself).
   static std::string timedName(const std::string& base, size_t k);
-  /// k for a name timedName() makes for k >= 1 ("Ci@2" → 2), 0 for any other name.
+  /// k for a name timedName() makes for k >= 1 ("Ci@2" → 2, "N@3" → 3), 0 for any other name.
   static size_t timedIndex(const std::string& name);
+  /// The base of such a name ("N@3" → "N"); the name itself for any other.
+  static std::string timedBase(const std::string& name);
 
   /// Throws Error(where, ...) when inconsistent: no cameras, knots not increasing or outside the
   /// shutter, schema without Ci/Oi, duplicate attribute names, non-finite values.

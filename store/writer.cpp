@@ -618,6 +618,7 @@ uint32_t StoreWriter::addSchedule(const Schedule& knots) {
   probe.schedules = {Schedule{0.0}, knots};
   probe.cameras = m.cameras;
   probe.schema = m.schema;
+  probe.shadingTimes = m.shadingTimes;
   probe.validate(impl_->where());
   m.schedules.push_back(knots);
   return uint32_t(m.schedules.size() - 1);

@@ -143,6 +143,40 @@ TEST(ShadeInTime, TimesBetweenShadedOnesAreBlendedWhereTheMiddleAgreesWithTheBle
   EXPECT_NEAR(red(instant(dir, loose.store, 1.0, "loose-c"), 16, 16), truth(1.0), 2e-4);
 }
 
+// Output variables follow time too: the rotating square's normal N, carried at every shading
+// time, is blended at the sample's time like its colour. Unit normals at the stored times, from
+// the matrix blend: ∝ (t sin θ, 0, 1 − t + t cos θ) up to sign.
+TEST(ShadeInTime, OutputVariablesFollowTimeLikeTheColour) {
+  ScratchDir dir;
+  std::string withN = kRotatingSquare;
+  withN.replace(withN.find("WorldBegin"), 10, "Display \"+n.exr\" \"file\" \"N,s\"\nWorldBegin");
+  const Shaded once = shade(dir, "once", withN, "");
+  const Shaded timed = shade(dir, "timed", withN, "--shade-in-time 0 --shade-times 3");
+  // The schema: N at every time, the parametric s at the first only.
+  const store::StoreReader reader(timed.store);
+  EXPECT_GE(reader.meta().schema.find("N@2"), 0);
+  EXPECT_LT(reader.meta().schema.find("s@1"), 0);
+  auto normalX = [&](const std::string& store, double t, const std::string& name) {
+    const std::string exr = dir.path(name + ".exr");
+    const auto r = runReshutter("-q resample " + store + " --shutter " + std::to_string(t) + ":" + std::to_string(t) +
+                                " --spp 4 --filter box:1 --aov N --aov s -o " + exr);
+    EXPECT_EQ(r.exitCode, 0) << r.err;
+    const auto img = test::readFlatExr(exr);
+    const auto* nx = img.find("N.X");
+    EXPECT_NE(nx, nullptr);
+    return nx ? std::abs(nx->f[size_t(16 - img.y0) * size_t(img.width) + size_t(16 - img.x0)]) : -1.f;
+  };
+  auto unitX = [](double t) {
+    const double nx = t * std::sin(kTheta), nz = 1 - t + t * std::cos(kTheta);
+    return nx / std::sqrt(nx * nx + nz * nz);
+  };
+  EXPECT_NEAR(normalX(timed.store, 1.0, "t10"), unitX(1.0), 2e-4);  // sin 60°
+  EXPECT_NEAR(normalX(timed.store, 0.5, "t05"), unitX(0.5), 2e-4);
+  EXPECT_NEAR(normalX(timed.store, 0.25, "t025"), 0.5 * (unitX(0) + unitX(0.5)), 2e-4) << "blended between the stored times";
+  // Shaded once, the normal is the open's at every instant.
+  EXPECT_NEAR(normalX(once.store, 1.0, "o10"), 0.0, 2e-4);
+}
+
 TEST(ShadeInTime, EachFieldOfAnInterlacedFrameSeesItsOwnShading) {
   ScratchDir dir;
   const Shaded once = shade(dir, "once", kRotatingSquare, "");
@@ -304,6 +338,31 @@ TEST(ShadeInTime, StoresCheckTheirShadingTimes) {
   meta.schema.attrs.push_back({"Ci@1", store::AttrType::Color});
   meta.schema.attrs.push_back({"Oi@1", store::AttrType::Color});
   meta.validate("m");
+  // An output variable at a shading time: its base declared alike, at every time, within the
+  // store's times.
+  auto refused = [](store::StoreMeta m, const std::string& expected) {
+    try {
+      m.validate("m");
+      ADD_FAILURE() << "accepted a schema that should say: " << expected;
+    } catch (const Error& e) {
+      EXPECT_NE(std::string(e.what()).find(expected), std::string::npos) << e.what();
+    }
+  };
+  store::StoreMeta withN = meta;
+  withN.schema.attrs.push_back({"N@1", store::AttrType::Normal});
+  refused(withN, "no 'N' in the schema");
+  withN.schema.attrs.push_back({"N", store::AttrType::Float});
+  refused(withN, "must be declared as 'N' is");
+  withN.schema.attrs.back().type = store::AttrType::Normal;
+  withN.validate("m");
+  withN.schema.attrs.push_back({"N@2", store::AttrType::Normal});
+  refused(withN, "is for shading time 2, but the store has 2");
+  withN.shadingTimes = {0.0, 0.5, 1.0};
+  withN.schema.attrs.push_back({"Ci@2", store::AttrType::Color});
+  withN.schema.attrs.push_back({"Oi@2", store::AttrType::Color});
+  withN.validate("m");
+  withN.schema.attrs.erase(withN.schema.attrs.begin() + withN.schema.find("N@1"));
+  refused(withN, "'N' is given at shading time 2 but not at 1");
   store::StoreMeta backwards = meta;
   backwards.shadingTimes = {1.0, 0.0};
   try {
