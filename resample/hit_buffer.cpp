@@ -50,26 +50,24 @@ HitBuffer::HitContext HitBuffer::hitContext(const store::StoreMeta& meta, const 
     hc.timed = true;
     hc.numTimes = int(meta.shadingTimes.size());
     hc.shadingTimes = meta.shadingTimes.data();
-    // The time colours' schema slots, looked up once per store and bucket (this runs per chunk).
+    // The timed attributes' schema slots, looked up once per store and bucket (this runs per
+    // chunk): colour, opacity, and the output variables the store carries in time (slot [1] -1
+    // for one it carries at the first time only).
     if (timedSlots.meta != &meta) {
       timedSlots.meta = &meta;
-      for (size_t k = 1; k < meta.shadingTimes.size(); ++k)
-        timedSlots.ci[k] = meta.schema.find(store::StoreMeta::timedName("Ci", k)), timedSlots.oi[k] = meta.schema.find(store::StoreMeta::timedName("Oi", k));
-      // Output variables the store carries in time: every time's slot, or -1 at [1] (not carried).
+      auto lookUp = [&](int base, int* slots) {
+        slots[0] = base;
+        for (size_t k = 1; k < meta.shadingTimes.size(); ++k)
+          if ((slots[k] = meta.schema.find(store::StoreMeta::timedName(meta.schema.attrs[size_t(base)].name, k))) < 0) slots[1] = -1;
+      };
+      lookUp(hc.ci, timedSlots.ci), lookUp(hc.oi, timedSlots.oi);
       timedSlots.aov.clear();
       if (aovLayout.floatCount) {
         constexpr size_t K = store::StoreMeta::kMaxShadingTimes;
         timedSlots.aov.assign(aovs.size() * K, -1);
-        for (size_t a = 0; a < aovs.size(); ++a) {
-          const int base = aovs[a].schemaIndex;
-          if (aovs[a].isUInt || base < 0 || size_t(base) >= meta.schema.attrs.size()) continue;
-          int* slots = &timedSlots.aov[a * K];
-          slots[0] = base;
-          bool all = true;
-          for (size_t k = 1; k < meta.shadingTimes.size(); ++k)
-            all &= (slots[k] = meta.schema.find(store::StoreMeta::timedName(meta.schema.attrs[size_t(base)].name, k))) >= 0;
-          if (!all) slots[1] = -1;
-        }
+        for (size_t a = 0; a < aovs.size(); ++a)
+          if (!aovs[a].isUInt && aovs[a].schemaIndex >= 0 && size_t(aovs[a].schemaIndex) < meta.schema.attrs.size())
+            lookUp(aovs[a].schemaIndex, &timedSlots.aov[a * K]);
       }
     }
     std::copy(timedSlots.ci + 1, timedSlots.ci + hc.numTimes, hc.timedCi + 1);

@@ -175,7 +175,8 @@ struct HitBuffer {
     __builtin_prefetch(&colour[k]);
   }
 
-  // hitContext()'s lookup of a store's "Ci@k" / "Oi@k" slots, kept for the store it was made for.
+  // hitContext()'s lookup of a store's "Ci@k" / "Oi@k" (and output variables') slots, kept for
+  // the store it was made for.
   struct TimedSlots {
     const store::StoreMeta* meta = nullptr;
     int ci[store::StoreMeta::kMaxShadingTimes] = {}, oi[store::StoreMeta::kMaxShadingTimes] = {};

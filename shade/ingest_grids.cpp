@@ -190,7 +190,7 @@ void DumpHandler::gridAttributes(const Prim& p, const Attrs& s, double firstKnot
     const size_t k = StoreMeta::timedIndex(ad.name);  // 0: not a shading time's colour
     const bool timed = !p.knotCs.empty() || !p.knotOs.empty();
     if (k && !timed) continue;
-    const std::string base = k ? ad.name.substr(0, 2) : ad.name;
+    const std::string base = StoreMeta::timedBase(ad.name);
     const Var* var = sourceOf(p, base, element);
     Var blended;
     if (timed && (base == "Ci" || base == "Oi") && var) {

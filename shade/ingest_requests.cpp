@@ -120,7 +120,7 @@ StoreMeta DumpHandler::scannedMeta(const std::string& file) const {
       for (const char* base : {"Ci", "Oi"})
         m.schema.attrs.push_back(AttrDecl{StoreMeta::timedName(base, k), AttrType::Color, m.schema.attrs[size_t(m.schema.find(base))].rate, AttrCodec::Lossless});
   }
-  if (m.schema.attrs.size() > 64) fail(file, "declares ", m.schema.attrs.size(), " output variables; a store holds at most 64");
+  if (m.schema.attrs.size() > Schema::kMaxAttributes) fail(file, "declares ", m.schema.attrs.size(), " output variables; a store holds at most ", Schema::kMaxAttributes);
   m.provenance = cat("reshutter ingest ", std::filesystem::path(file).filename().string());
   m.validate(file);
   return m;

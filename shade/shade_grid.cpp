@@ -122,6 +122,18 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
   if (reuse && reuse->recording) reuse->visibility.assign(nV * lights.size(), 1.f), reuse->stillBlocked.clear();
   size_t ray = 0;  // reuse: the next ray of the first time's order
   std::vector<ShadowRay> rays;
+  // Whether a ray is blocked at this time: by still micropolygons (reusing: the first time's
+  // answer), then by the moving ones - unless no moving caster can reach the grid.
+  auto blocked = [&](const ShadowRay& r) {
+    bool still;
+    if (reuse && !reuse->recording) {
+      still = reuse->stillBlocked[ray++];
+    } else {
+      still = c.shadows->occludedByStill(r.origin, r.dir, r.tfar);
+      if (reuse) reuse->stillBlocked.push_back(still);
+    }
+    return still || (!stillCastersOnly && c.shadows->occludedByMoving(r.origin, r.dir, r.tfar, time));
+  };
   for (size_t i = 0; i < nV; ++i) {
     SurfaceInput in;
     in.P = g.P[i], in.N = g.N[i], in.Ng = g.Ng[i];
@@ -140,31 +152,17 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
         if (!lights[li].shadows || !illuminate(lights[li], in.P, L, Cl) || !(glm::dot(L, Nf) > 0)) continue;
         uint64_t seed = hashCombine(hashCombine(leafIndex, i), li);
         if (k > 0 && !reuse) seed = hashCombine(seed, k);
-        if (!reuse) {
-          shadowed[li].Cl0 *= lightVisibility(*c.shadows, lights[li], in.P, Ng, std::max(double(bias[i]), floorBias), c.shadowSamples, seed, shadowRays, time,
-                                              stillCastersOnly);
-          continue;
-        }
         const size_t n = shade::shadowRays(lights[li], in.P, Ng, std::max(double(bias[i]), floorBias), c.shadowSamples, seed, rays);
         if (n == 0) continue;
         size_t visible = 0;
-        for (const ShadowRay& r : rays) {
-          bool blocked;
-          if (reuse->recording) {
-            blocked = c.shadows->occludedByStill(r.origin, r.dir, r.tfar);
-            reuse->stillBlocked.push_back(blocked);
-            blocked = blocked || c.shadows->occludedByMoving(r.origin, r.dir, r.tfar, time);
-          } else {
-            blocked = reuse->stillBlocked[ray++] || c.shadows->occludedByMoving(r.origin, r.dir, r.tfar, time);
-          }
-          visible += !blocked;
-        }
+        for (const ShadowRay& r : rays) visible += !blocked(r);
         shadowRays += rays.size();
-        const float share = float(double(visible) / double(n));
+        const double share = double(visible) / double(n);
+        shadowed[li].Cl0 *= share;
+        if (!reuse) continue;
         float& firstShare = reuse->visibility[i * lights.size() + li];
-        if (reuse->recording) firstShare = share;
-        else asFirst &= share == firstShare;
-        shadowed[li].Cl0 *= double(visible) / double(n);
+        if (reuse->recording) firstShare = float(share);
+        else asFirst &= float(share) == firstShare;
       }
       if (asFirst) {  // every light as visible as at the first time: the first time's outputs
         for (size_t ai = 0; ai < c.vars.size(); ++ai) {

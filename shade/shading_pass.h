@@ -51,20 +51,20 @@ struct ShadeOptions {
 struct ShadeStats {
   uint64_t primitives = 0, grids = 0, micropolygons = 0, vertices = 0, movingGrids = 0, movingMicropolygons = 0;
   uint64_t culledPieces = 0, droppedMicropolygons = 0, eyeSplits = 0;
-  uint64_t trimmedMicropolygons = 0;  // cut away by trim curves
-  uint64_t forcedCuts = 0;            // leaf sides the split depth limit left unfinished (split.h): possible cracks
-  uint64_t overBudgetPrimitives = 0;  // diced coarser for needing more than DiceOptions::maxMicropolygonsPerPrimitive
-  uint64_t textureLookups = 0;        // filtered texture lookups (shade/texture.h), one per textured vertex
-  uint64_t missingTextures = 0;       // textures that could not be read (shown magenta)
-  uint64_t shadowMicropolygons = 0;   // in the shadow scene (0: no light asked for shadows)
-  uint64_t shadowRays = 0;            // traced towards lights
-  double shadowBuildSeconds = 0;      // dicing the frame for the shadow scene and building its BVH
-  uint64_t timeCandidateGrids = 0;    // shading in time: grids whose shading could change, shaded at every time
+  uint64_t trimmedMicropolygons = 0;                // cut away by trim curves
+  uint64_t forcedCuts = 0;                          // leaf sides the split depth limit left unfinished (split.h): possible cracks
+  uint64_t overBudgetPrimitives = 0;                // diced coarser for needing more than DiceOptions::maxMicropolygonsPerPrimitive
+  uint64_t textureLookups = 0;                      // filtered texture lookups (shade/texture.h), one per textured vertex
+  uint64_t missingTextures = 0;                     // textures that could not be read (shown magenta)
+  uint64_t shadowMicropolygons = 0;                 // in the shadow scene (0: no light asked for shadows)
+  uint64_t shadowRays = 0;                          // traced towards lights
+  double shadowBuildSeconds = 0;                    // dicing the frame for the shadow scene and building its BVH
+  uint64_t timeCandidateGrids = 0;                  // shading in time: grids whose shading could change, shaded at every time
   uint64_t timedGrids = 0, timedMicropolygons = 0;  // of them, those that changed enough to keep every time
-  uint64_t blendedTimes = 0;    // candidates' later times blended between shaded ones (their middle lay within the tolerance of the blend)
-  uint64_t reusedVertices = 0;
-  uint64_t stillOnlyRays = 0;   // shading in time: rays of grids no moving caster can shadow, traced against the still micropolygons only  // vertex shadings at later times that kept the first time's outputs (only shadows could change, and did not)
-  std::vector<double> shadingTimes;   // empty: shaded once
+  uint64_t blendedTimes = 0;                        // candidates' later times blended between shaded ones (their middle lay within the tolerance of the blend)
+  uint64_t reusedVertices = 0;       // vertex shadings at later times that kept the first time's outputs (only shadows could change, and did not)
+  uint64_t stillOnlyRays = 0;        // rays of grids no moving caster can shadow, traced against the still micropolygons only
+  std::vector<double> shadingTimes;  // empty: shaded once
   double shadeAt = 0;
   double seconds = 0;
 };

@@ -266,12 +266,8 @@ bool MovingCasters::mayShadow(size_t li, const ShadowBox& receiver) const {
   return false;
 }
 
-namespace {
-
-/// Calls fn(ray) for each ray that samples `light` from P (shadowRays()' rays, in their order)
-/// and returns the share's denominator (0: the light casts no shadows).
-template <class Fn>
-size_t forEachShadowRay(const LitLight& light, const glm::dvec3& P, const glm::dvec3& Ng, double bias, int samples, uint64_t seed, Fn&& fn) {
+size_t shadowRays(const LitLight& light, const glm::dvec3& P, const glm::dvec3& Ng, double bias, int samples, uint64_t seed, std::vector<ShadowRay>& rays) {
+  rays.clear();
   if (!light.shadows || light.kind == LightKind::Ambient) return 0;
   const bool directional = light.kind == LightKind::Distant || (light.kind == LightKind::Uber && light.uber.parallel);
   const glm::dvec3 towardCentre = directional ? -light.axis : light.position - P;
@@ -297,7 +293,7 @@ size_t forEachShadowRay(const LitLight& light, const glm::dvec3& P, const glm::d
     if (directional) {
       double x = 0, y = 0;
       if (area) concentric(a, b, x, y);
-      fn(ShadowRay{origin, glm::normalize(-light.axis + light.tanHalfAngle * (x * e1 + y * e2)), std::numeric_limits<double>::infinity()});
+      rays.push_back(ShadowRay{origin, glm::normalize(-light.axis + light.tanHalfAngle * (x * e1 + y * e2)), std::numeric_limits<double>::infinity()});
     } else {
       glm::dvec3 target = light.position;
       if (light.shape == LightShape::Rect) {
@@ -311,27 +307,10 @@ size_t forEachShadowRay(const LitLight& light, const glm::dvec3& P, const glm::d
       const glm::dvec3 d = target - origin;
       const double len = glm::length(d);
       if (!(len > 0)) continue;
-      fn(ShadowRay{origin, d / len, len * (1 - 1e-6)});  // stop short of the emitter, which may itself be geometry
+      rays.push_back(ShadowRay{origin, d / len, len * (1 - 1e-6)});  // stop short of the emitter, which may itself be geometry
     }
   }
   return size_t(n);
-}
-
-}  // namespace
-
-size_t shadowRays(const LitLight& light, const glm::dvec3& P, const glm::dvec3& Ng, double bias, int samples, uint64_t seed, std::vector<ShadowRay>& rays) {
-  rays.clear();
-  return forEachShadowRay(light, P, Ng, bias, samples, seed, [&](const ShadowRay& r) { rays.push_back(r); });
-}
-
-double lightVisibility(const ShadowScene& scene, const LitLight& light, const glm::dvec3& P, const glm::dvec3& Ng, double bias, int samples, uint64_t seed,
-                       uint64_t& rays, double time, bool stillOnly) {
-  size_t visible = 0;
-  const size_t n = forEachShadowRay(light, P, Ng, bias, samples, seed, [&](const ShadowRay& r) {
-    ++rays;
-    visible += !(stillOnly ? scene.occludedByStill(r.origin, r.dir, r.tfar) : scene.occluded(r.origin, r.dir, r.tfar, time));
-  });
-  return n ? double(visible) / double(n) : 1.0;
 }
 
 }  // namespace reshutter::shade

@@ -36,20 +36,17 @@ class ShadowScene {
   /// Builds the BVH over every piece's micropolygons (watertight traversal: a ray cannot slip
   /// between two micropolygons that share an edge). With `open` < `close`, moving pieces move
   /// over that interval (their knots inside it; Embree's time steps are even, so uneven knots
-  /// are resampled onto 2 × knots even steps) and occluded() takes a time. Still and moving
-  /// micropolygons go to two BVHs: rays at a still point need only the moving one at later
-  /// times (occludedByStill(), occludedByMoving()), and the still one carries no time steps.
+  /// are resampled onto 2 × knots even steps) and occludedByMoving() takes a time. Still and
+  /// moving micropolygons go to two BVHs: rays at a still point need only the moving one at
+  /// later times, and the still one carries no time steps.
   explicit ShadowScene(std::span<const Piece> pieces, double open = 0, double close = 0);
   ~ShadowScene();
   ShadowScene(const ShadowScene&) = delete;
   ShadowScene& operator=(const ShadowScene&) = delete;
 
-  /// True when anything lies on the ray from `origin` along unit `dir` within (0, tfar), at
-  /// `time` (frames; clamped to the interval). Thread-safe.
-  bool occluded(const glm::dvec3& origin, const glm::dvec3& dir, double tfar, double time = 0) const {
-    return occludedByStill(origin, dir, tfar) || occludedByMoving(origin, dir, tfar, time);
-  }
-  /// occluded() by the micropolygons that stand still, or by those that move.
+  /// True when a micropolygon that stands still lies on the ray from `origin` along unit `dir`
+  /// within (0, tfar); occludedByMoving(): one that moves, at `time` (frames; clamped to the
+  /// interval). A ray is blocked when either says so. Thread-safe.
   bool occludedByStill(const glm::dvec3& origin, const glm::dvec3& dir, double tfar) const;
   bool occludedByMoving(const glm::dvec3& origin, const glm::dvec3& dir, double tfar, double time) const;
   uint64_t micropolygons() const { return micropolygons_; }
@@ -101,18 +98,12 @@ struct ShadowRay {
 };
 
 /// The rays that sample the share of `light` reaching P, into `rays` (replaced); the share is
-/// the fraction of them that nothing blocks. `Ng` is the surface's unit geometric normal
+/// the fraction of them that nothing blocks (ShadowScene::occludedByStill / occludedByMoving). `Ng` is the surface's unit geometric normal
 /// (either side), `bias` how far ray origins are lifted off the surface towards the light
 /// (about half a micropolygon: the diced surface is not the true one), `samples` the rays of an
 /// area or soft distant light, `seed` the point's identity. Empty when the light casts no
 /// shadows (its share is 1); a degenerate ray towards a local light is left out of the rays but
 /// still counts as blocked - the returned count is the share's denominator.
 size_t shadowRays(const LitLight& light, const glm::dvec3& P, const glm::dvec3& Ng, double bias, int samples, uint64_t seed, std::vector<ShadowRay>& rays);
-
-/// The share of `light` (0..1) that reaches P at `time` through `scene` (shadowRays()' rays);
-/// `stillOnly`: through its still micropolygons alone (no moving one can shadow P). Counts the
-/// rays traced into `rays`.
-double lightVisibility(const ShadowScene& scene, const LitLight& light, const glm::dvec3& P, const glm::dvec3& Ng, double bias, int samples, uint64_t seed,
-                       uint64_t& rays, double time = 0, bool stillOnly = false);
 
 }  // namespace reshutter::shade

@@ -232,7 +232,7 @@ struct StoreWriter::Impl {
   }
 
   Impl(const std::string& path, StoreMeta m, WriterOptions o) : meta(std::move(m)), options(o), file(path), projector(meta.cameras.at(0)), layout(meta.schema) {
-    for (const auto& a : meta.schema.attrs) isOpacity.push_back(a.name == "Oi" || (a.name.starts_with("Oi@") && StoreMeta::timedIndex(a.name)));
+    for (const auto& a : meta.schema.attrs) isOpacity.push_back(StoreMeta::timedBase(a.name) == "Oi");
     if (meta.shadingTimes.size() > 1) firstTimedColour = meta.schema.find(StoreMeta::timedName("Ci", 1));
     char header[kHeaderSize] = {};
     std::copy(std::begin(kHeaderMagic), std::end(kHeaderMagic), header);

@@ -36,6 +36,13 @@ float red(const resample::FlatImage& img, int x, int y) { return img.find("R")->
 
 using test::numberBefore;
 
+// `scene` with its first `from` replaced by `to` (a failure if it has none).
+std::string edited(std::string scene, const std::string& from, const std::string& to) {
+  const size_t at = scene.find(from);
+  EXPECT_NE(at, std::string::npos) << "no '" << from << "' in the scene";
+  return at == std::string::npos ? scene : scene.replace(at, from.size(), to);
+}
+
 struct Shaded {
   std::string store, report;
 };
@@ -117,8 +124,7 @@ TEST(ShadeInTime, ARotatingSquareMatchesItsShadingAtEachInstant) {
 // blend of the open and the middle.
 TEST(ShadeInTime, TimesBetweenShadedOnesAreBlendedWhereTheMiddleAgreesWithTheBlend) {
   ScratchDir dir;
-  std::string gentle = kRotatingSquare;
-  gentle.replace(gentle.find("Rotate 60 0 1 0"), std::string("Rotate 60 0 1 0").size(), "Rotate 20 0 1 0");
+  const std::string gentle = edited(kRotatingSquare, "Rotate 60 0 1 0", "Rotate 20 0 1 0");
   const double theta = 20.0 * 3.14159265358979323846 / 180.0;
   auto truth = [&](double t) {
     const double nx = t * std::sin(theta), nz = 1 - t + t * std::cos(theta);
@@ -148,8 +154,7 @@ TEST(ShadeInTime, TimesBetweenShadedOnesAreBlendedWhereTheMiddleAgreesWithTheBle
 // the matrix blend: ∝ (t sin θ, 0, 1 − t + t cos θ) up to sign.
 TEST(ShadeInTime, OutputVariablesFollowTimeLikeTheColour) {
   ScratchDir dir;
-  std::string withN = kRotatingSquare;
-  withN.replace(withN.find("WorldBegin"), 10, "Display \"+n.exr\" \"file\" \"N,s\"\nWorldBegin");
+  const std::string withN = edited(kRotatingSquare, "WorldBegin", "Display \"+n.exr\" \"file\" \"N,s\"\nWorldBegin");
   const Shaded once = shade(dir, "once", withN, "");
   const Shaded timed = shade(dir, "timed", withN, "--shade-in-time 0 --shade-times 3");
   // The schema: N at every time, the parametric s at the first only.
@@ -214,14 +219,12 @@ TEST(ShadeInTime, TheToleranceDecidesWhichGridsKeepTheirTimes) {
 TEST(ShadeInTime, WhatCannotChangeKeepsOneColour) {
   ScratchDir dir;
   // A constant shader: never a candidate.
-  std::string constant = kRotatingSquare;
-  constant.replace(constant.find("Surface \"matte\" \"Ka\" [0] \"Kd\" [1]"), std::string("Surface \"matte\" \"Ka\" [0] \"Kd\" [1]").size(), "Surface \"constant\"");
+  const std::string constant = edited(kRotatingSquare, "Surface \"matte\" \"Ka\" [0] \"Kd\" [1]", "Surface \"constant\"");
   const Shaded c = shade(dir, "constant", constant, "--shade-in-time 0");
   EXPECT_EQ(numberBefore(c.report, " grids that may change"), 0u) << c.report;
   // A matte square translating rigidly under the distant light: never a candidate either, though
   // a tolerance of 0 keeps every candidate.
-  std::string sliding = kRotatingSquare;
-  sliding.replace(sliding.find("Rotate 0 0 1 0\nRotate 60 0 1 0"), std::string("Rotate 0 0 1 0\nRotate 60 0 1 0").size(), "Translate 0 0 0\nTranslate 0.5 0 0");
+  const std::string sliding = edited(kRotatingSquare, "Rotate 0 0 1 0\nRotate 60 0 1 0", "Translate 0 0 0\nTranslate 0.5 0 0");
   const Shaded s = shade(dir, "sliding", sliding, "--shade-in-time 0");
   EXPECT_NE(s.report.find("shaded in time"), std::string::npos) << s.report;
   EXPECT_EQ(numberBefore(s.report, " grids that may change"), 0u) << s.report;
@@ -230,9 +233,7 @@ TEST(ShadeInTime, WhatCannotChangeKeepsOneColour) {
   EXPECT_GT(numberBefore(r.report, " of "), 0u) << r.report;
   // A scene where nothing moves: shading in time asks for nothing, and the store is the
   // shade-once store byte for byte (format version 1).
-  std::string still = kRotatingSquare;
-  still.replace(still.find("MotionBegin [0 1]\nRotate 0 0 1 0\nRotate 60 0 1 0\nMotionEnd\n"),
-                std::string("MotionBegin [0 1]\nRotate 0 0 1 0\nRotate 60 0 1 0\nMotionEnd\n").size(), "Rotate 30 0 1 0\n");
+  const std::string still = edited(kRotatingSquare, "MotionBegin [0 1]\nRotate 0 0 1 0\nRotate 60 0 1 0\nMotionEnd\n", "Rotate 30 0 1 0\n");
   std::ofstream(dir.path("still.rib")) << still;
   const Shaded a{dir.path("still-a.mps"), runReshutter("-v shade " + dir.path("still.rib") + " -o " + dir.path("still-a.mps") + " --shade-in-time 0").err};
   const Shaded b{dir.path("still-b.mps"), runReshutter("-v shade " + dir.path("still.rib") + " -o " + dir.path("still-b.mps")).err};
@@ -275,10 +276,9 @@ TEST(ShadeInTime, ShadowsFollowTheCasterThroughTheShutter) {
   EXPECT_GT(numberBefore(timed.report, " vertex shadings kept from the first time"), 0u) << timed.report;
   // Which is exact: at every shading time the floor matches the sphere frozen there, shaded once.
   for (double t : {0.5, 1.0}) {
-    std::string frozen = kMovingSphereOverFloor;
     const double x = -1 + 2 * t;
-    frozen.replace(frozen.find("MotionBegin [0 1]\nTranslate -1 2 0\nTranslate 1 2 0\nMotionEnd"),
-                   std::string("MotionBegin [0 1]\nTranslate -1 2 0\nTranslate 1 2 0\nMotionEnd").size(), "Translate " + std::to_string(x) + " 2 0");
+    const std::string frozen =
+        edited(kMovingSphereOverFloor, "MotionBegin [0 1]\nTranslate -1 2 0\nTranslate 1 2 0\nMotionEnd", "Translate " + std::to_string(x) + " 2 0");
     const std::string tag = std::to_string(int(t * 10));
     const Shaded still = shade(dir, "frozen" + tag, frozen, "");
     const auto a = instant(dir, timed.store, t, "timed-at" + tag), b = instant(dir, still.store, t, "frozen-at" + tag);
@@ -296,8 +296,8 @@ TEST(ShadeInTime, ShadowsFollowTheCasterThroughTheShutter) {
 // time's image there shows - the same as shading once, bit for bit.
 TEST(ShadeInTime, TheFirstTimeIsShadingOnceAndStillShadowsStay) {
   ScratchDir dir;
-  std::string scene = kMovingSphereOverFloor;
-  scene.replace(scene.find("WorldEnd"), 8, "AttributeBegin\nOpacity [0 0 0]\nTranslate 3 1 2\nSphere 0.5 -0.5 0.5 360\nAttributeEnd\nWorldEnd");
+  const std::string scene =
+      edited(kMovingSphereOverFloor, "WorldEnd", "AttributeBegin\nOpacity [0 0 0]\nTranslate 3 1 2\nSphere 0.5 -0.5 0.5 360\nAttributeEnd\nWorldEnd");
   const Shaded once = shade(dir, "once", scene, "");
   const Shaded timed = shade(dir, "timed", scene, "--shade-in-time 0.01");
   EXPECT_GT(numberBefore(timed.report, " rays against still micropolygons only"), 0u) << timed.report;
@@ -440,14 +440,13 @@ TEST(ShadeInTime, AStoreKeepsWhichGridsCarryTheirTimes) {
 // close; a square beside it without colour per copy keeps one colour.
 TEST(ShadeInTime, DumpsWithColourPerKnotAreIngestedInTime) {
   ScratchDir dir;
-  std::ofstream(dir.path("dump.rib"))
-      << "Format 32 32 1\nProjection \"orthographic\"\nScreenWindow -2 2 -2 2\nShutter 0 1\nWorldBegin\n"
-         "MotionBegin [0 1]\n"
-         "PointsPolygons [4] [0 1 2 3] \"P\" [-1.5 -1 5  -0.5 -1 5  -0.5 1 5  -1.5 1 5] \"constant color Cs\" [1 0 0]\n"
-         "PointsPolygons [4] [0 1 2 3] \"P\" [-1.5 -1 5  -0.5 -1 5  -0.5 1 5  -1.5 1 5] \"constant color Cs\" [0 0 1]\n"
-         "MotionEnd\n"
-         "PointsPolygons [4] [0 1 2 3] \"P\" [0.5 -1 5  1.5 -1 5  1.5 1 5  0.5 1 5] \"constant color Cs\" [0 1 0]\n"
-         "WorldEnd\n";
+  std::ofstream(dir.path("dump.rib")) << "Format 32 32 1\nProjection \"orthographic\"\nScreenWindow -2 2 -2 2\nShutter 0 1\nWorldBegin\n"
+                                         "MotionBegin [0 1]\n"
+                                         "PointsPolygons [4] [0 1 2 3] \"P\" [-1.5 -1 5  -0.5 -1 5  -0.5 1 5  -1.5 1 5] \"constant color Cs\" [1 0 0]\n"
+                                         "PointsPolygons [4] [0 1 2 3] \"P\" [-1.5 -1 5  -0.5 -1 5  -0.5 1 5  -1.5 1 5] \"constant color Cs\" [0 0 1]\n"
+                                         "MotionEnd\n"
+                                         "PointsPolygons [4] [0 1 2 3] \"P\" [0.5 -1 5  1.5 -1 5  1.5 1 5  0.5 1 5] \"constant color Cs\" [0 1 0]\n"
+                                         "WorldEnd\n";
   const auto in = runReshutter("ingest " + dir.path("dump.rib") + " -o " + dir.path("dump.mps"));
   ASSERT_EQ(in.exitCode, 0) << in.err;
   const auto info = runReshutter("info --json " + dir.path("dump.mps"));
