@@ -6,6 +6,7 @@
 #include "common/atomic_file.h"
 #include "common/error.h"
 #include "common/frame_range.h"
+#include "common/log.h"
 #include "resample/simd.h"
 
 namespace reshutter::cli {
@@ -49,13 +50,26 @@ void RenderOptions::addTo(CLI::App* app) {
       ->group("Compositing");
   app->add_flag("--backface-cull", backfaceCull, "Knock out micropolygons facing away (unless two-sided)")->group("Compositing");
   app->add_option("--bucket", bucket, "Bucket size in pixels")->capture_default_str()->group("Performance");
-  app->add_option("--cache-mb", cacheMb, "Decoded tile cache per store, MB (parts leave it after their last bucket; the budget bounds what a sequence keeps for its next frame)")->capture_default_str()->group("Performance");
+  app->add_option("--cache-mb", cacheMb,
+                  "Decoded tile cache per store, MB (parts leave it after their last bucket; the budget bounds what a sequence keeps for its next frame)")
+      ->capture_default_str()
+      ->group("Performance");
   app->add_option("--simd", simd,
                   "Instruction set of the rasterizer's inner loops: auto (the widest this CPU runs), avx512, avx2 or none\n"
                   "(scalar); every choice gives the same image, bit for bit")
       ->capture_default_str()
       ->check(CLI::IsMember({"auto", "avx512", "avx2", "none"}))
       ->group("Performance");
+  app->add_option("--volume", volumes,
+                  "Add an OpenVDB fog volume in front of and between the surfaces, integrated per sample at its own time: "
+                  "FILE.vdb[,density=GRID][,emission=GRID][,velocity=GRID][,scale=S][,translate=X:Y:Z][,density-scale=K][,emission-color=R:G:B] "
+                  "(world units of the store's camera; velocity 'vel' or 'v' is used when present). Repeatable")
+      ->group("Volumes");
+  app->add_option("--volume-step", volumeStep, "Ray-march step in voxels: smaller is more accurate and slower (docs/accuracy.md)")
+      ->capture_default_str()
+      ->group("Volumes");
+  app->add_flag("--volume-no-skip", volumeNoSkip, "March through each volume's whole bounding box instead of skipping empty space (to measure it)")
+      ->group("Volumes");
   app->add_flag("--stats", stats, "Print sample tests, hits, efficiency and time per phase")->group("Performance");
 }
 
@@ -121,6 +135,18 @@ void RenderOptions::applyTo(resample::RenderSpec& spec) const {
   spec.deepOptions.tolerance = float(deepTolerance);
   resample::parseDeepCompression(deepCompression, "--deep-compression");
   parseQuantize(quantize, dither);
+  if (!volumes.empty()) {
+    if (!loadedVolumes) {
+      std::vector<resample::VolumeSpec> specs;
+      for (const auto& v : volumes) specs.push_back(resample::VolumeSpec::parse(v, "--volume"));
+      resample::VolumeOptions vo;
+      vo.step = float(volumeStep);
+      vo.skipEmpty = !volumeNoSkip;
+      loadedVolumes = std::make_shared<const resample::VolumeScene>(specs, vo);
+      for (const auto& w : loadedVolumes->warnings()) warn(w);
+    }
+    spec.volumes = loadedVolumes;
+  }
 }
 
 void RenderOptions::checkOutputs(const std::string& exrPath, int64_t frame) const {

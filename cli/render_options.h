@@ -36,6 +36,10 @@ struct RenderOptions {
   std::string deepCompression = "zips";
   double deepTolerance = 0.01;
   bool deepAllChannels = false;  // ZBack and AR AG AB even where no sample needs them (farm tiles)
+  std::vector<std::string> volumes;  // --volume specs (resample/volume.h)
+  double volumeStep = 0.5;           // voxels
+  bool volumeNoSkip = false;         // march through whole bounding boxes (to measure empty-space skipping)
+  mutable std::shared_ptr<const resample::VolumeScene> loadedVolumes;  // loaded once, by the first applyTo()
 
   void addTo(CLI::App* app);
   /// Fills sampling, filter, AOV, crop and raster settings of `spec`.

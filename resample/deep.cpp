@@ -273,7 +273,8 @@ namespace {
 struct Entry {
   uint32_t object;
   uint32_t matte;
-  float z;
+  int64_t slice;  // volume fragments: their depth slice + 1 (a group of its own); surfaces: 0
+  float z, zBack;
   uint32_t sample, fragment;
   uint32_t t;  // index of the sample's transmittance in front of this fragment
 };
@@ -292,7 +293,9 @@ void formDeepPixel(const WeightedSample* samples, size_t n, const DeepLayout& L,
     float T[3] = {1, 1, 1};
     for (size_t k = 0; k < samples[s].count; ++k) {
       const SampleFragment& f = samples[s].fragments[k];
-      if (std::isfinite(f.z)) entries.push_back({f.objectId, f.matte ? 1u : 0u, f.z, uint32_t(s), uint32_t(k), uint32_t(trans.size())});
+      if (std::isfinite(f.z))
+        entries.push_back({f.objectId, f.matte ? 1u : 0u, f.volume ? int64_t(f.slice) + (int64_t(1) << 32) : 0, f.z, f.volume ? f.zBack : f.z, uint32_t(s),
+                           uint32_t(k), uint32_t(trans.size())});
       trans.insert(trans.end(), T, T + 3);
       for (int c = 0; c < 3; ++c) T[c] *= 1.f - std::clamp(f.o[c], 0.f, 1.f);
     }
@@ -300,6 +303,7 @@ void formDeepPixel(const WeightedSample* samples, size_t n, const DeepLayout& L,
   std::sort(entries.begin(), entries.end(), [](const Entry& a, const Entry& b) {
     if (a.matte != b.matte) return a.matte < b.matte;
     if (a.object != b.object) return a.object < b.object;
+    if (a.slice != b.slice) return a.slice < b.slice;
     if (a.z != b.z) return a.z < b.z;
     if (a.sample != b.sample) return a.sample < b.sample;
     return a.fragment < b.fragment;
@@ -309,11 +313,13 @@ void formDeepPixel(const WeightedSample* samples, size_t n, const DeepLayout& L,
   thread_local std::vector<double> acc;
   acc.resize(6 + nAux);  // visible R G B, visible AR AG AB, visible output variables
   for (size_t i = 0; i < entries.size();) {
-    // Single-linkage chain in depth within one (matte, object).
+    // Single-linkage chain in depth within one (matte, object); a volume's fragments group by
+    // depth slice instead.
     size_t j = i + 1;
-    while (j < entries.size() && entries[j].object == entries[i].object && entries[j].matte == entries[i].matte &&
-           entries[j].z - entries[j - 1].z <= tol * std::max(std::abs(entries[j - 1].z), std::abs(entries[j].z)))
-      ++j;
+    float zBack = entries[i].zBack;
+    while (j < entries.size() && entries[j].object == entries[i].object && entries[j].matte == entries[i].matte && entries[j].slice == entries[i].slice &&
+           (entries[i].slice || entries[j].z - entries[j - 1].z <= tol * std::max(std::abs(entries[j - 1].z), std::abs(entries[j].z))))
+      zBack = std::max(zBack, entries[j].zBack), ++j;
     // What this group adds to the flat image: every fragment with the transmittance in front of
     // it in its own sample, weighted by the sample's filter weight.
     std::fill(acc.begin(), acc.end(), 0.0);
@@ -332,7 +338,7 @@ void formDeepPixel(const WeightedSample* samples, size_t n, const DeepLayout& L,
     const size_t o = out.add();
     float* r = out.at(o);
     uint32_t* u = out.uat(o);
-    r[kDeepZ] = entries[i].z, r[kDeepZBack] = entries[j - 1].z;
+    r[kDeepZ] = entries[i].z, r[kDeepZBack] = zBack;
     r[kDeepR] = float(acc[0]), r[kDeepG] = float(acc[1]), r[kDeepB] = float(acc[2]);
     r[kDeepAR] = float(acc[3]), r[kDeepAG] = float(acc[4]), r[kDeepAB] = float(acc[5]);
     r[kDeepA] = float((acc[3] + acc[4] + acc[5]) / 3);

@@ -240,7 +240,7 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
   // The depths the single-closest filters compare: only when there are output variables.
   if (anyAovs) out.aovZ.assign(slots, INFINITY);
   const float far = farClip;
-  if (!anyFragments && !anyAovs) {
+  if (!anyFragments && !anyAovs && !volumesHere) {
     // Opaque surfaces only, no output variables (the common case): each sample is its nearest
     // surface's colour or empty, as the general loop below computes it, without its branches.
     for (size_t slot = 0; slot < slots; ++slot) {
@@ -266,7 +266,7 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
     const float zo = zbuf[k];
     const SurfaceColour& nh = colour[k];
     const uint8_t s = hitState(k);
-    if (!anyFragments || !fragCount[k]) {
+    if ((!anyFragments || !fragCount[k]) && !volumesHere) {
       const bool visible = (s & kHitOpaque) && !(s & kHitMatte);
       out.r[slot] = visible ? nh.r : 0.f;
       out.g[slot] = visible ? nh.g : 0.f;
@@ -284,8 +284,20 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
       continue;
     }
     // Transparent surfaces in front of the nearest opaque one, front to back.
-    nearerFragments(k, zo, list);
+    if (anyFragments) nearerFragments(k, zo, list);
+    else list.clear();
     float T[3] = {1.f, 1.f, 1.f}, C[3] = {0.f, 0.f, 0.f}, A[3] = {0.f, 0.f, 0.f};
+    // The volumes between the previous surface (or the near plane) and depth z, composited
+    // under what is in front; true once the sample is opaque.
+    float zPrev = 0.f;
+    auto throughVolumes = [&](float z) {
+      if (!volumesHere) return false;
+      VolumeSegment v;
+      volumes->integrate(double(samples.sx[k]), double(samples.sy[k]), samples.tBase + double(samples.st[k]), double(zPrev), double(z), v);
+      zPrev = z;
+      for (int c = 0; c < 3; ++c) C[c] += T[c] * v.radiance[c], A[c] += T[c] * (1.f - v.transmittance), T[c] *= v.transmittance;
+      return T[0] <= stopT && T[1] <= stopT && T[2] <= stopT;
+    };
     float closestZ = INFINITY;
     bool closestChosen = false;
     float aovAcc[64];
@@ -302,6 +314,10 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
       }
     };
     for (const Fragment* f : list) {
+      if (throughVolumes(f->z)) {
+        opaqueReached = true;
+        break;
+      }
       const float oAvg = (f->o[0] + f->o[1] + f->o[2]) / 3.f;
       const float tAvg = (T[0] + T[1] + T[2]) / 3.f;
       const float* fv = fragAov.data() + size_t(f->seq) * aovLayout.floatCount;
@@ -319,6 +335,7 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
         break;
       }
     }
+    if (!opaqueReached && throughVolumes((s & kHitOpaque) ? zo : INFINITY)) opaqueReached = true;
     if (!opaqueReached && (s & kHitOpaque)) {
       const float tAvg = (T[0] + T[1] + T[2]) / 3.f;
       if (!(s & kHitMatte)) {
@@ -356,6 +373,10 @@ void HitBuffer::visitFragments(const BucketSamples& samples, const std::function
   std::vector<SampleFragment> outList;
   std::vector<float> opaqueAov(static_cast<size_t>(aovLayout.floatCount));
   std::vector<uint32_t> opaqueAovU(static_cast<size_t>(aovLayout.uintCount));
+  // A volume has no output variables: zero for composited ones (it has no surface to take them from).
+  const std::vector<float> noAov(static_cast<size_t>(aovLayout.floatCount), 0.f);
+  const std::vector<uint32_t> noAovU(static_cast<size_t>(aovLayout.uintCount), 0u);
+  std::vector<VolumeSlice> slices;
   groupFragments(samples);
   for (size_t slot = 0; slot < slots; ++slot) {
     const size_t k = idxOf[slot];  // the rasterizer keeps samples stratum-major
@@ -367,7 +388,32 @@ void HitBuffer::visitFragments(const BucketSamples& samples, const std::function
     else list.clear();
     float T[3] = {1.f, 1.f, 1.f};
     bool opaqueReached = false;
+    // The volumes between the previous surface (or the near plane) and depth z, as volume
+    // fragments of depth slices; true once the sample is opaque.
+    float zPrev = 0.f;
+    auto throughVolumes = [&](float z) {
+      if (!volumesHere) return false;
+      VolumeSegment v;
+      slices.clear();
+      volumes->integrate(double(samples.sx[k]), double(samples.sy[k]), samples.tBase + double(samples.st[k]), double(zPrev), double(z), v, &slices,
+                         volumeSliceRatio);
+      zPrev = z;
+      for (const VolumeSlice& vs : slices) {
+        SampleFragment sf;
+        sf.z = vs.zFront, sf.zBack = vs.zBack, sf.volume = true, sf.slice = vs.slice;
+        for (int c = 0; c < 3; ++c) sf.c[c] = vs.segment.radiance[c], sf.o[c] = 1.f - vs.segment.transmittance;
+        sf.objectId = kVolumeObjectId;
+        sf.aov = noAov.data(), sf.aovU = noAovU.data();
+        outList.push_back(sf);
+        for (int c = 0; c < 3; ++c) T[c] *= vs.segment.transmittance;
+      }
+      return T[0] <= stopT && T[1] <= stopT && T[2] <= stopT;
+    };
     for (const Fragment* f : list) {
+      if (throughVolumes(f->z)) {
+        opaqueReached = true;
+        break;
+      }
       SampleFragment sf;
       sf.z = f->z;
       for (int c = 0; c < 3; ++c) sf.c[c] = f->matte ? 0.f : f->c[c], sf.o[c] = f->o[c];
@@ -381,6 +427,7 @@ void HitBuffer::visitFragments(const BucketSamples& samples, const std::function
         break;
       }
     }
+    if (!opaqueReached && throughVolumes((s & kHitOpaque) ? zo : INFINITY)) opaqueReached = true;
     if (!opaqueReached && (s & kHitOpaque)) {
       SampleFragment sf;
       sf.z = zo;

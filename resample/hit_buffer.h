@@ -17,6 +17,7 @@
 
 #include "resample/bucket_samples.h"
 #include "resample/raster.h"
+#include "resample/volume.h"
 
 namespace reshutter::resample {
 
@@ -91,6 +92,12 @@ struct HitBuffer {
   SkewedArray<uint32_t> objectOf{56}, gridOf{4};
   std::vector<float> zAov;      // [component * hitSlots + sample]
   std::vector<uint32_t> zAovU;  // [component * hitSlots + sample]
+  // Volumes (resample/volume.h): this thread's tracer, and whether the region may see a volume
+  // (set per region by the rasterizer); resolve() and visitFragments() then march each sample's
+  // ray between its surfaces.
+  VolumeTracer* volumes = nullptr;
+  bool volumesHere = false;
+  double volumeSliceRatio = 1.01;  // deep output's depth slices (VolumeSlice)
 
  private:
   // A transparent surface in front of a sample's nearest opaque one.

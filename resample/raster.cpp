@@ -65,6 +65,7 @@ void BucketRasterizer::Impl::begin(int rx0, int ry0, int rw, int rh) {
   cellScratch.resize(slots + kPad);
   reset(slots);
   stats = RasterStats{};
+  volumesHere = volumes && volumes->touches(double(x0), double(y0), double(x0 + w), double(y0 + h));
   queued.clear(), chunks.clear(), movingTimes.clear();
 }
 
@@ -158,6 +159,10 @@ void BucketRasterizer::rasterizeQueued() { impl_->rasterizeQueued(); }
 const ResolvedSamples& BucketRasterizer::resolve() {
   if (!impl_->chunks.empty()) impl_->rasterizeQueued();
   return impl_->resolve(*impl_);
+}
+void BucketRasterizer::setVolumes(VolumeTracer* tracer, double deepSliceRatio) {
+  impl_->volumes = tracer;
+  impl_->volumeSliceRatio = deepSliceRatio;
 }
 void BucketRasterizer::visitFragments(const std::function<void(size_t, const SampleFragment*, size_t)>& fn) { impl_->visitFragments(*impl_, fn); }
 const RasterStats& BucketRasterizer::stats() const { return impl_->stats; }

@@ -27,6 +27,7 @@
 #include "resample/filter.h"
 #include "resample/sampling.h"
 #include "resample/shutter.h"
+#include "resample/volume.h"
 #include "store/model.h"
 #include "store/reader.h"
 
@@ -131,6 +132,11 @@ struct SampleFragment {
   float o[3] = {1, 1, 1};  // per-channel opacity
   uint32_t objectId = 0, gridId = 0;
   bool matte = false;
+  /// A stretch of volume (objectId kVolumeObjectId): it spans [z, zBack] and belongs to depth
+  /// slice `slice` (VolumeSlice), which deep output merges across a pixel's samples.
+  bool volume = false;
+  int32_t slice = 0;
+  float zBack = 0;
   const float* aov = nullptr;
   const uint32_t* aovU = nullptr;
 };
@@ -162,6 +168,10 @@ class BucketRasterizer {
   /// draw order, so the lists are deterministic.
   void visitFragments(const std::function<void(size_t slot, const SampleFragment* fragments, size_t count)>& fn);
   const RasterStats& stats() const;
+  /// Volumes to march each sample's ray through in resolve() and visitFragments() (which cuts
+  /// them into depth slices of ratio deepSliceRatio); the tracer must outlive the rasterizer's
+  /// use of it (null: none).
+  void setVolumes(VolumeTracer* tracer, double deepSliceRatio = 1.01);
 
  private:
   struct Impl;

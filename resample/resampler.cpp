@@ -43,6 +43,7 @@ std::string RenderStats::report() const {
     << " bounded from their interval ends, " << raster.chunkGatheredMicropolygons << " of those gathered by chunk, " << raster.chunkCulledMicropolygons
     << " skipped with their chunk), " << raster.parts << " parts (" << raster.transparentParts << " transparent)\n";
   s << "  fragments          " << raster.fragments << " transparent\n";
+  if (volumes.rays) s << "  volumes            " << volumes.rays << " ray segments marched, " << volumes.steps << " density lookups\n";
   s << "  parts              " << partsFetched << " fetched, " << partsDecoded << " decoded, " << partsWaited
     << " waited for (another thread was decoding them)\n";
   s << "  time (thread-sum)  set-up " << setupSeconds << " s, parts " << partsSeconds << " s (decode, or wait for another thread's), rasterize "
@@ -340,6 +341,7 @@ std::unique_ptr<DeepFormer> setUpDeep(const Plan& plan, DeepImage& deep) {
   const Window& w = plan.win;
   deep.reset(w.x0, w.y0, w.x1 - w.x0, w.y1 - w.y0, w.W, w.H, deepLayoutOf(plan.aovs, plan.meta0.schema), plan.buckets.size());
   deep.objectNames = plan.spec.objectNames.empty() ? objectNamesFromProvenance(plan.meta0.provenance) : plan.spec.objectNames;
+  if (plan.spec.volumes && !deep.objectNames.empty()) deep.objectNames[kVolumeObjectId] = "volumes";
   return std::make_unique<DeepFormer>(deep, plan.mainTable, plan.pattern, plan.spec.deepOptions);
 }
 
@@ -357,6 +359,7 @@ struct Region {
 
 struct ThreadState {
   std::unique_ptr<BucketRasterizer> raster;
+  std::unique_ptr<VolumeTracer> volumes;  // when the render has volumes
   RenderStats stats;
   std::vector<int> patterns;
   std::vector<std::pair<size_t, size_t>> parts;              // (source, entry)
@@ -365,7 +368,18 @@ struct ThreadState {
   std::vector<size_t> tapOffsets;
 
   BucketRasterizer& rasterizer(const Plan& plan) {
-    if (!raster) raster = std::make_unique<BucketRasterizer>(plan.pattern, plan.shutter, plan.view, plan.aovs, plan.rasterOptions);
+    if (!raster) {
+      raster = std::make_unique<BucketRasterizer>(plan.pattern, plan.shutter, plan.view, plan.aovs, plan.rasterOptions);
+      if (plan.spec.volumes) {
+        VolumeCamera vc;
+        vc.ax = plan.view.ax, vc.bx = plan.view.bx, vc.ay = plan.view.ay, vc.by = plan.view.by, vc.perspective = plan.view.perspective;
+        vc.worldToCamera = plan.cam.worldToCamera;
+        vc.framesPerSecond = double(plan.meta0.fps.num) / double(plan.meta0.fps.den);
+        vc.referenceFrame = double(plan.spec.sources[0].frame);
+        volumes = std::make_unique<VolumeTracer>(*plan.spec.volumes, vc, plan.shutter.earliest(), plan.shutter.latest());
+        raster->setVolumes(volumes.get(), 1.0 + std::max(1e-4, double(plan.spec.deepOptions.tolerance)));
+      }
+    }
     return *raster;
   }
 };
@@ -443,7 +457,7 @@ class PartUses {
 
  private:
   static constexpr size_t kKept = ~size_t(0);             // a store in RenderSpec::keepDecoded
-  std::vector<size_t> storeOf_;                          // per source, its store's index in left_ (or kKept)
+  std::vector<size_t> storeOf_;                           // per source, its store's index in left_ (or kKept)
   std::vector<std::vector<std::atomic<uint32_t>>> left_;  // per store, per entry
 };
 
@@ -631,6 +645,7 @@ void addThreadStats(const tbb::enumerable_thread_specific<ThreadState>& threads,
     total.rasterSeconds += ts.stats.rasterSeconds;
     total.resolveSeconds += ts.stats.resolveSeconds;
     total.filterSeconds += ts.stats.filterSeconds;
+    if (ts.volumes) total.volumes.add(ts.volumes->stats());
   }
 }
 

@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <functional>
 #include <map>
+#include <memory>
 #include <optional>
 #include <string>
 #include <vector>
@@ -18,6 +19,7 @@
 #include "resample/image.h"
 #include "resample/raster.h"
 #include "resample/shutter.h"
+#include "resample/volume.h"
 
 namespace reshutter::resample {
 
@@ -56,6 +58,9 @@ struct RenderSpec {
   bool deep = false;
   DeepFormOptions deepOptions;
   std::map<uint32_t, std::string> objectNames;  // object id → name, for the deep idManifest
+  /// Volumes to render in front of and between the stores' surfaces (resample/volume.h), placed
+  /// in the world of sources[0]'s camera at sources[0]'s frame; null: none, at no cost.
+  std::shared_ptr<const VolumeScene> volumes;
 };
 
 struct RenderStats {
@@ -66,6 +71,7 @@ struct RenderStats {
   double setupSeconds = 0, partsSeconds = 0, rasterSeconds = 0, resolveSeconds = 0, filterSeconds = 0;
   uint64_t partsFetched = 0, partsDecoded = 0;  // decoded: the store caches' misses during the render
   uint64_t partsWaited = 0;                     // fetches that waited for another thread's decode
+  VolumeStats volumes;
   double wallSeconds = 0;
   uint64_t samples = 0;
   std::string report() const;  // the --stats text

@@ -9,6 +9,7 @@ packages=(
   openimageio-tools gnuplot-nox jq time
   slurm-wlm iproute2
   libopenimageio-dev libembree-dev
+  libopenvdb-dev libboost-dev
 )
 missing=()
 for p in "${packages[@]}"; do

@@ -1,0 +1,134 @@
+// Volumes at re-sample time: OpenVDB fog volumes (a density grid, optional emission and
+// velocity grids) placed in world space and integrated along each sample's ray, at the sample's
+// own time, up to the surfaces it saw. Owns loading and checking the files, their placement, and
+// the ray integration (absorption and emission; OpenVDB's VolumeRayIntersector skips empty
+// space, its samplers interpolate). The resolve (hit_buffer.cpp) composites the segments it
+// returns between a sample's surfaces, and deep output keeps them as volume samples.
+//
+// Only OpenVDB's own headers see OpenVDB: this header keeps it behind pointers, so the rest of
+// the re-sampler compiles without it.
+#pragma once
+
+#include <cstdint>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include <glm/mat4x4.hpp>
+#include <glm/vec3.hpp>
+
+namespace reshutter::resample {
+
+/// One volume as the user asks for it:
+/// "smoke.vdb[,density=GRID][,emission=GRID][,velocity=GRID][,scale=S][,translate=X:Y:Z]
+///  [,density-scale=K][,emission-color=R:G:B]".
+struct VolumeSpec {
+  std::string path;
+  std::string density = "density";
+  std::string emission;  // float grid (times emissionColour) or vec3 grid; empty = none
+  std::string velocity;  // vec3 grid, world units per second; empty = "vel" or "v" if the file has one
+  double scale = 1;      // placement: world = translate + scale · (the file's own world position)
+  glm::dvec3 translate{0.0};
+  float densityScale = 1;  // extinction per world unit = densityScale · density
+  glm::vec3 emissionColour{1.f, 1.f, 1.f};
+  /// Parses the text above; throws Error naming `where` (an option) on a bad key or value.
+  static VolumeSpec parse(const std::string& text, const std::string& where);
+};
+
+/// The integration's accuracy knob.
+struct VolumeOptions {
+  /// Ray-march step in voxels of each volume's density grid: the step's optical depth error is
+  /// what the density changes across it (0.5 voxel resolves trilinear interpolation's ramps).
+  float step = 0.5f;
+  /// Skip empty space with OpenVDB's hierarchical DDA; off: step through each volume's whole
+  /// bounding box (the same image to the step's sampling, only slower: to measure what it saves).
+  bool skipEmpty = true;
+};
+
+/// What a volume adds over a stretch of a ray: the light it emits toward the camera
+/// (premultiplied, as `over` composites it) and its transmittance.
+struct VolumeSegment {
+  float radiance[3] = {0.f, 0.f, 0.f};
+  float transmittance = 1.f;
+};
+
+/// One stretch of a volume segment for deep output: the steps whose midpoints fall in depth slice
+/// `slice` (camera depths [ratio^slice, ratio^(slice+1)), the deep tolerance's ratio), with what
+/// they add over their own extent [zFront, zBack] (radiance premultiplied, relative to the slice's
+/// front). Slices are the same for every sample of a render, so the deep image can merge a
+/// pixel's samples slice by slice.
+struct VolumeSlice {
+  int32_t slice = 0;
+  float zFront = 0, zBack = 0;
+  VolumeSegment segment;
+};
+
+/// Object id of volume samples in deep output (their idManifest name is "volumes").
+inline constexpr uint32_t kVolumeObjectId = 0xFFFFFFFEu;
+
+/// Loaded volumes, shared read-only by every thread of every render that uses them.
+class VolumeScene {
+ public:
+  /// Loads and checks every volume; throws Error naming the file (and grid) on a missing file or
+  /// grid, a grid of the wrong type, or non-uniform voxels.
+  VolumeScene(const std::vector<VolumeSpec>& specs, const VolumeOptions& options);
+  ~VolumeScene();
+  VolumeScene(const VolumeScene&) = delete;
+  VolumeScene& operator=(const VolumeScene&) = delete;
+
+  const VolumeOptions& options() const { return options_; }
+  size_t size() const;
+  /// Warnings found while loading (NaN densities set to zero, an empty grid), one line each.
+  const std::vector<std::string>& warnings() const { return warnings_; }
+
+  struct Impl;
+  const Impl& impl() const { return *impl_; }
+
+ private:
+  VolumeOptions options_;
+  std::vector<std::string> warnings_;
+  std::unique_ptr<Impl> impl_;
+};
+
+/// The camera a render looks through, as volume tracing needs it: raster position → camera-space
+/// ray, camera → world, and the clock (velocity grids are per second; the volume is where the
+/// file puts it at `referenceFrame`).
+struct VolumeCamera {
+  double ax = 1, bx = 0, ay = 1, by = 0;  // raster = a·(x/z) + b (perspective) or a·x + b
+  bool perspective = true;
+  glm::dmat4 worldToCamera{1.0};
+  double framesPerSecond = 24;
+  double referenceFrame = 0;  // absolute frames
+};
+
+/// Counters for --stats.
+struct VolumeStats {
+  uint64_t rays = 0;   // ray segments that reached a volume's bounds
+  uint64_t steps = 0;  // density lookups
+  void add(const VolumeStats& o) { rays += o.rays, steps += o.steps; }
+};
+
+/// Traces one thread's rays through a VolumeScene (it holds per-thread accessors and intersector
+/// copies, so each thread makes its own).
+class VolumeTracer {
+ public:
+  VolumeTracer(const VolumeScene& scene, const VolumeCamera& camera, double earliest, double latest);
+  ~VolumeTracer();
+  /// Whether any volume may lie behind raster region [x0, x1] × [y0, y1] between the render's
+  /// earliest and latest time (conservative: a volume that reaches the eye plane touches all).
+  bool touches(double x0, double y0, double x1, double y1) const;
+  /// Integrates the ray through raster (x, y) at absolute time t over camera depths [z0, z1]
+  /// (z1 may be infinite: the volumes' far side).
+  void integrate(double x, double y, double t, double z0, double z1, VolumeSegment& out) { integrate(x, y, t, z0, z1, out, nullptr, 0.0); }
+  /// The same, also appending the segment's depth slices (ratio > 1) to `slices` (deep output);
+  /// `out` is bit for bit what the call without slices gives.
+  void integrate(double x, double y, double t, double z0, double z1, VolumeSegment& out, std::vector<VolumeSlice>* slices, double ratio);
+  const VolumeStats& stats() const { return stats_; }
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+  VolumeStats stats_;
+};
+
+}  // namespace reshutter::resample
