@@ -62,11 +62,18 @@ void RenderOptions::addTo(CLI::App* app) {
       ->group("Performance");
   app->add_option("--volume", volumes,
                   "Add an OpenVDB fog volume in front of and between the surfaces, integrated per sample at its own time: "
-                  "FILE.vdb[,density=GRID][,emission=GRID][,velocity=GRID][,scale=S][,translate=X:Y:Z][,density-scale=K][,emission-color=R:G:B] "
-                  "(world units of the store's camera; velocity 'vel' or 'v' is used when present). Repeatable")
+                  "FILE.vdb[,density=GRID][,emission=GRID][,velocity=GRID][,scale=S][,translate=X:Y:Z][,density-scale=K][,emission-color=R:G:B]"
+                  "[,albedo=R:G:B][,anisotropy=G] (world units of the store's camera; velocity 'vel' or 'v' is used when present; lit by the "
+                  "lights the store recorded, with self-shadowing). Repeatable")
       ->group("Volumes");
   app->add_option("--volume-step", volumeStep, "Ray-march step in voxels: smaller is more accurate and slower (docs/accuracy.md)")
       ->capture_default_str()
+      ->group("Volumes");
+  app->add_option("--volume-shadow-step", volumeShadowStep, "Step of the volumes' shadow rays toward each light, in voxels")
+      ->capture_default_str()
+      ->group("Volumes");
+  app->add_flag("--volume-exact-shadows", volumeExactShadows,
+                "March a shadow ray toward each light from every step instead of looking shadows up in the per-render cache (slower)")
       ->group("Volumes");
   app->add_flag("--volume-no-skip", volumeNoSkip, "March through each volume's whole bounding box instead of skipping empty space (to measure it)")
       ->group("Volumes");
@@ -142,6 +149,8 @@ void RenderOptions::applyTo(resample::RenderSpec& spec) const {
       resample::VolumeOptions vo;
       vo.step = float(volumeStep);
       vo.skipEmpty = !volumeNoSkip;
+      vo.shadowStep = float(volumeShadowStep);
+      vo.cacheShadows = !volumeExactShadows;
       loadedVolumes = std::make_shared<const resample::VolumeScene>(specs, vo);
       for (const auto& w : loadedVolumes->warnings()) warn(w);
     }

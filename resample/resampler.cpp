@@ -43,7 +43,9 @@ std::string RenderStats::report() const {
     << " bounded from their interval ends, " << raster.chunkGatheredMicropolygons << " of those gathered by chunk, " << raster.chunkCulledMicropolygons
     << " skipped with their chunk), " << raster.parts << " parts (" << raster.transparentParts << " transparent)\n";
   s << "  fragments          " << raster.fragments << " transparent\n";
-  if (volumes.rays) s << "  volumes            " << volumes.rays << " ray segments marched, " << volumes.steps << " density lookups\n";
+  if (volumes.rays)
+    s << "  volumes            " << volumes.rays << " ray segments marched, " << volumes.steps << " density lookups, " << volumes.shadowSteps
+      << " on shadow rays, " << volumes.cachedShadows << " shadows from the cache\n";
   s << "  parts              " << partsFetched << " fetched, " << partsDecoded << " decoded, " << partsWaited
     << " waited for (another thread was decoding them)\n";
   s << "  time (thread-sum)  set-up " << setupSeconds << " s, parts " << partsSeconds << " s (decode, or wait for another thread's), rasterize "
@@ -283,7 +285,18 @@ struct Plan {
     for (const auto& t : aovTables) margin = std::max(margin, t->margin());
     rasterOptions = spec.raster;
     rasterOptions.surfaceIds = spec.deep;  // only deep output reads them back
+    if (spec.volumes) {
+      volumeCamera.ax = view.ax, volumeCamera.bx = view.bx, volumeCamera.ay = view.ay, volumeCamera.by = view.by;
+      volumeCamera.perspective = view.perspective;
+      volumeCamera.worldToCamera = cam.worldToCamera;
+      volumeCamera.framesPerSecond = double(meta0.fps.num) / double(meta0.fps.den);
+      volumeCamera.referenceFrame = double(spec.sources[0].frame);
+      volumeCamera.lights = meta0.lights;
+      if (!meta0.lights.empty() && spec.volumes->options().cacheShadows) volumeLighting = std::make_unique<const VolumeLighting>(*spec.volumes, volumeCamera);
+    }
   }
+  VolumeCamera volumeCamera;                             // with spec.volumes
+  std::unique_ptr<const VolumeLighting> volumeLighting;  // with spec.volumes and lights
 
   const RenderSpec& spec;
   const std::vector<Source> sources;  // spec.sources, with the ends they share marked
@@ -371,12 +384,8 @@ struct ThreadState {
     if (!raster) {
       raster = std::make_unique<BucketRasterizer>(plan.pattern, plan.shutter, plan.view, plan.aovs, plan.rasterOptions);
       if (plan.spec.volumes) {
-        VolumeCamera vc;
-        vc.ax = plan.view.ax, vc.bx = plan.view.bx, vc.ay = plan.view.ay, vc.by = plan.view.by, vc.perspective = plan.view.perspective;
-        vc.worldToCamera = plan.cam.worldToCamera;
-        vc.framesPerSecond = double(plan.meta0.fps.num) / double(plan.meta0.fps.den);
-        vc.referenceFrame = double(plan.spec.sources[0].frame);
-        volumes = std::make_unique<VolumeTracer>(*plan.spec.volumes, vc, plan.shutter.earliest(), plan.shutter.latest());
+        volumes =
+            std::make_unique<VolumeTracer>(*plan.spec.volumes, plan.volumeCamera, plan.shutter.earliest(), plan.shutter.latest(), plan.volumeLighting.get());
         raster->setVolumes(volumes.get(), 1.0 + std::max(1e-4, double(plan.spec.deepOptions.tolerance)));
       }
     }
@@ -715,6 +724,7 @@ RenderResult render(const RenderSpec& spec) {
   progress.finish();
 
   addThreadStats(threads, result.stats);
+  if (plan.volumeLighting) result.stats.volumes.shadowSteps += plan.volumeLighting->buildSteps();
   result.stats.wallSeconds = secondsBetween(wallStart, Clock::now());
   addCacheStats(cacheBefore, result.stats);
   result.provenance = provenanceOf(plan);

@@ -1,6 +1,7 @@
 #include "resample/volume.h"
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <filesystem>
 #include <mutex>
@@ -10,6 +11,9 @@
 #include <openvdb/openvdb.h>
 #include <openvdb/tools/Interpolation.h>
 #include <openvdb/tools/RayIntersector.h>
+#include <openvdb/tree/LeafManager.h>
+#include <tbb/enumerable_thread_specific.h>
+#include <tbb/parallel_for.h>
 #include <glm/geometric.hpp>
 #include <glm/mat4x4.hpp>
 
@@ -45,6 +49,18 @@ glm::dvec3 parseTriple(const std::string& text, const std::string& where, const 
 glm::dvec3 toGlm(const openvdb::Vec3d& v) { return {v.x(), v.y(), v.z()}; }
 openvdb::Vec3d toVdb(const glm::dvec3& v) { return {v.x, v.y, v.z}; }
 
+// A linear grid's world → index map as a glm matrix (column vectors): OpenVDB's matrices act on
+// row vectors, world = index · M, so glm's m[i][j] = M(i, j) is M transposed into glm's
+// column-major storage, and its inverse maps world to index.
+glm::dmat4 indexFromWorld(const openvdb::GridBase& grid) {
+  const openvdb::Mat4d M = grid.transform().baseMap()->getAffineMap()->getMat4();
+  glm::dmat4 g;
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) g[i][j] = M(i, j);
+  return glm::inverse(g);
+}
+openvdb::Vec3d apply(const glm::dmat4& m, const glm::dvec3& p) { return toVdb(glm::dvec3(m * glm::dvec4(p, 1.0))); }
+
 }  // namespace
 
 VolumeSpec VolumeSpec::parse(const std::string& text, const std::string& where) {
@@ -65,11 +81,16 @@ VolumeSpec VolumeSpec::parse(const std::string& text, const std::string& where) 
     else if (key == "translate") s.translate = parseTriple(value, where, key);
     else if (key == "density-scale") s.densityScale = float(parseNumber(value, where, key));
     else if (key == "emission-color") s.emissionColour = glm::vec3(parseTriple(value, where, key));
-    else fail(where, "unknown volume key '", key, "' (density emission velocity scale translate density-scale emission-color)");
+    else if (key == "albedo") s.albedo = glm::vec3(parseTriple(value, where, key));
+    else if (key == "anisotropy") s.anisotropy = float(parseNumber(value, where, key));
+    else fail(where, "unknown volume key '", key, "' (density emission velocity scale translate density-scale emission-color albedo anisotropy)");
   }
   if (s.density.empty()) fail(where, "a volume needs a density grid");
   if (!(s.scale > 0)) fail(where, "'scale' must be positive");
   if (!(s.densityScale >= 0)) fail(where, "'density-scale' must not be negative");
+  if (!(s.albedo.x >= 0 && s.albedo.y >= 0 && s.albedo.z >= 0 && s.albedo.x <= 1 && s.albedo.y <= 1 && s.albedo.z <= 1))
+    fail(where, "'albedo' must lie in [0, 1]");
+  if (!(s.anisotropy > -1 && s.anisotropy < 1)) fail(where, "'anisotropy' must lie in (-1, 1)");
   return s;
 }
 
@@ -86,7 +107,9 @@ struct VolumeScene::Impl {
     std::unique_ptr<Intersector> intersector;  // the master the tracers copy (shallowly)
     // The active voxels' bounds (dilated by the interpolation's reach) in the file's world space.
     glm::dvec3 fileLo{0.0}, fileHi{0.0};
-    double maxSpeed = 0;  // file world units per second
+    double maxSpeed = 0;                                                   // file world units per second
+    double voxelSize = 1;                                                  // file world units
+    glm::dmat4 densityIndex{1.0}, emissionIndex{1.0}, velocityIndex{1.0};  // file world → each grid's index space
   };
   std::vector<Volume> volumes;
 };
@@ -123,6 +146,7 @@ size_t zeroNonFinite(FloatGrid& grid) {
 VolumeScene::VolumeScene(const std::vector<VolumeSpec>& specs, const VolumeOptions& options) : options_(options), impl_(std::make_unique<Impl>()) {
   std::call_once(vdbInitialised, [] { openvdb::initialize(); });
   if (!(options_.step > 0)) fail("--volume-step", "the step must be positive");
+  if (!(options_.shadowStep > 0)) fail("--volume-shadow-step", "the step must be positive");
   for (const VolumeSpec& spec : specs) {
     const std::string& path = spec.path;
     if (!std::filesystem::exists(path)) fail(path, "no such file");
@@ -170,6 +194,11 @@ VolumeScene::VolumeScene(const std::vector<VolumeSpec>& specs, const VolumeOptio
       lo = glm::min(lo, w), hi = glm::max(hi, w);
     }
     v.fileLo = lo, v.fileHi = hi;
+    v.voxelSize = v.density->voxelSize()[0];
+    v.densityIndex = indexFromWorld(*v.density);
+    if (v.emissionScalar) v.emissionIndex = indexFromWorld(*v.emissionScalar);
+    if (v.emissionColour) v.emissionIndex = indexFromWorld(*v.emissionColour);
+    if (v.velocity) v.velocityIndex = indexFromWorld(*v.velocity);
     if (v.velocity)
       for (auto it = v.velocity->cbeginValueOn(); it; ++it) {
         const double s = double(it->length());
@@ -194,21 +223,108 @@ struct VolumeTracer::Impl {
     std::optional<Vec3SGrid::ConstAccessor> emissionColour, velocity;
     // Camera space → the file's index space, affine: index = cameraToIndex · camera point.
     glm::dmat4 cameraToFile{1.0};
+    double voxelInCamera = 1;     // a voxel's size in camera-space units
     double reach = 0;             // file world units the velocity can carry density over the render's times
     bool hdda = true;             // the intersector's dilation covers the reach
     glm::dvec3 lo{0.0}, hi{0.0};  // file world bounds widened by the reach
   };
   Impl(const VolumeScene& s, const VolumeCamera& c) : scene(s), camera(c) {}
+  // Cached transmittance toward light l: shadowCache[l][volume], null where not cached.
+  struct ShadowLookup {
+    const FloatGrid* grid = nullptr;
+    std::optional<FloatGrid::ConstAccessor> acc;
+    glm::dmat4 index{1.0};  // file world → the cache's index space
+  };
+  std::vector<std::vector<ShadowLookup>> shadowCache;
+  void cacheShadows(const VolumeLighting& lighting);
+  // The cached transmittance toward light l at camera point p (false: none cached there).
+  bool cachedShadow(size_t l, const glm::dvec3& p, double& T) {
+    if (l >= shadowCache.size()) return false;
+    for (size_t i = 0; i < volumes.size(); ++i) {
+      ShadowLookup& c = shadowCache[l][i];
+      if (!c.grid) continue;
+      const PerVolume& pv = volumes[i];
+      const glm::dvec3 f = glm::dvec3(pv.cameraToFile * glm::dvec4(p, 1.0));
+      if (f.x < pv.lo.x || f.y < pv.lo.y || f.z < pv.lo.z || f.x > pv.hi.x || f.y > pv.hi.y || f.z > pv.hi.z) continue;
+      T = double(openvdb::tools::BoxSampler::sample(*c.acc, apply(c.index, f)));
+      return true;
+    }
+    return false;
+  }
   const VolumeScene& scene;
   VolumeCamera camera;
   glm::dmat4 cameraToWorld{1.0};
   std::vector<PerVolume> volumes;
   std::vector<std::pair<double, double>> spans;  // scratch: a ray's intervals in camera depth
+
+  // The medium at camera-space point p, `seconds` after the reference frame: extinction σ (per
+  // world unit), emission e, scattering σ_s = albedo · σ per channel, and the σ-weighted
+  // anisotropy of the volumes there.
+  void medium(const glm::dvec3& p, double seconds, double& sigma, double e[3], double scatter[3], double& g, uint64_t& lookups) {
+    double gw = 0;
+    for (auto& pv : volumes) {
+      glm::dvec3 f = glm::dvec3(pv.cameraToFile * glm::dvec4(p, 1.0));
+      if (f.x < pv.lo.x || f.y < pv.lo.y || f.z < pv.lo.z || f.x > pv.hi.x || f.y > pv.hi.y || f.z > pv.hi.z) continue;
+      const auto& v = *pv.v;
+      if (pv.velocity && seconds != 0.0) {
+        // Semi-Lagrangian: the density here at this time is the file's density where the flow
+        // carried it from (velocity sampled here).
+        const openvdb::Vec3s vel = openvdb::tools::BoxSampler::sample(*pv.velocity, apply(v.velocityIndex, f));
+        f -= glm::dvec3(vel.x(), vel.y(), vel.z()) * seconds;
+      }
+      ++lookups;
+      const float d = openvdb::tools::BoxSampler::sample(pv.density, apply(v.densityIndex, f));
+      if (d > 0.f) {
+        const double s = double(d) * v.spec.densityScale;
+        sigma += s, gw += s * v.spec.anisotropy;
+        for (int k = 0; k < 3; ++k) scatter[k] += s * v.spec.albedo[k];
+      }
+      if (pv.emissionScalar) {
+        const float em = openvdb::tools::BoxSampler::sample(*pv.emissionScalar, apply(v.emissionIndex, f));
+        for (int k = 0; k < 3; ++k) e[k] += double(em) * v.spec.emissionColour[k];
+      } else if (pv.emissionColour) {
+        const openvdb::Vec3s em = openvdb::tools::BoxSampler::sample(*pv.emissionColour, apply(v.emissionIndex, f));
+        for (int k = 0; k < 3; ++k) e[k] += double(em[k]) * v.spec.emissionColour[k];
+      }
+    }
+    g = sigma > 0 ? gw / sigma : 0.0;
+  }
+
+  // Transmittance from camera-space point p a distance `dist` along unit direction l (to a
+  // light): the medium sampled at midpoints of steps of the shadow step, within the volumes' bounds.
+  double transmittance(const glm::dvec3& p, const glm::dvec3& l, double dist, double seconds, uint64_t& lookups) {
+    double s0 = INFINITY, s1 = 0, step = INFINITY;
+    for (const auto& pv : volumes) {
+      const glm::dvec3 f0 = glm::dvec3(pv.cameraToFile * glm::dvec4(p, 1.0)), fd = glm::dvec3(pv.cameraToFile * glm::dvec4(l, 0.0));
+      double a = 0, b = dist;
+      for (int k = 0; k < 3 && a <= b; ++k) {
+        if (fd[k] == 0.0) {
+          if (f0[k] < pv.lo[k] || f0[k] > pv.hi[k]) a = INFINITY;
+          continue;
+        }
+        double ta = (pv.lo[k] - f0[k]) / fd[k], tb = (pv.hi[k] - f0[k]) / fd[k];
+        if (ta > tb) std::swap(ta, tb);
+        a = std::max(a, ta), b = std::min(b, tb);
+      }
+      if (a < b) s0 = std::min(s0, a), s1 = std::max(s1, b), step = std::min(step, double(scene.options().shadowStep) * pv.voxelInCamera);
+    }
+    if (!(s1 > s0)) return 1.0;
+    const int n = int(std::min(1e5, std::ceil((s1 - s0) / step)));
+    const double ds = (s1 - s0) / n;
+    double tau = 0;
+    for (int i = 0; i < n && tau < 20; ++i) {
+      double sigma = 0, e[3] = {0, 0, 0}, sc[3] = {0, 0, 0}, g;
+      medium(p + l * (s0 + (i + 0.5) * ds), seconds, sigma, e, sc, g, lookups);
+      tau += sigma * ds;
+    }
+    return std::exp(-tau);
+  }
 };
 
-VolumeTracer::VolumeTracer(const VolumeScene& scene, const VolumeCamera& camera, double earliest, double latest)
+VolumeTracer::VolumeTracer(const VolumeScene& scene, const VolumeCamera& camera, double earliest, double latest, const VolumeLighting* lighting)
     : impl_(std::make_unique<Impl>(scene, camera)) {
   Impl& m = *impl_;
+  if (lighting) m.cacheShadows(*lighting);
   m.cameraToWorld = glm::inverse(camera.worldToCamera);
   const double maxSeconds = std::max(std::abs(earliest - camera.referenceFrame), std::abs(latest - camera.referenceFrame)) / camera.framesPerSecond;
   m.volumes.reserve(scene.impl().volumes.size());
@@ -221,6 +337,7 @@ VolumeTracer::VolumeTracer(const VolumeScene& scene, const VolumeCamera& camera,
     glm::dmat4 worldToFile(1.0 / v.spec.scale);
     worldToFile[3] = glm::dvec4(-v.spec.translate / v.spec.scale, 1.0);
     pv.cameraToFile = worldToFile * m.cameraToWorld;
+    pv.voxelInCamera = v.voxelSize / glm::length(glm::dvec3(pv.cameraToFile[0]));
     pv.reach = v.maxSpeed * maxSeconds;
     // A moving volume's density comes from up to `reach` away: the dilated intersector covers
     // one voxel; beyond that the march steps through the (widened) bounds instead.
@@ -341,38 +458,48 @@ void VolumeTracer::integrate(double x, double y, double t, double z0, double z1,
         }
       }
       const glm::dvec3 p = origin + dir * z;
-      double sigma = 0, e[3] = {0, 0, 0};
-      for (auto& pv : m.volumes) {
-        glm::dvec3 f = glm::dvec3(pv.cameraToFile * glm::dvec4(p, 1.0));
-        if (pv.velocity && seconds != 0.0) {
-          // Semi-Lagrangian: the density here at this time is the file's density where the
-          // flow carried it from (velocity sampled here).
-          const openvdb::Vec3s vel = openvdb::tools::BoxSampler::sample(*pv.velocity, pv.v->velocity->worldToIndex(toVdb(f)));
-          f -= glm::dvec3(vel.x(), vel.y(), vel.z()) * seconds;
+      double sigma = 0, e[3] = {0, 0, 0}, scatter[3] = {0, 0, 0}, phaseG = 0;
+      m.medium(p, seconds, sigma, e, scatter, phaseG, stats_.steps);
+      if (sigma > 0 && !m.camera.lights.empty()) {
+        // Single scattering: each light's colour here, through the medium toward it, by the
+        // phase function (normalised so that isotropic scattering is 1, as RenderMan's volume
+        // shaders light), times the albedo-weighted extinction below.
+        const glm::dvec3 toEye = -glm::normalize(dir);
+        double inScatter[3] = {0, 0, 0};
+        for (const store::StoredLight& light : m.camera.lights) {
+          if (light.kind == store::StoredLight::Kind::Ambient) {
+            for (int k = 0; k < 3; ++k) inScatter[k] += light.colour[k];
+            continue;
+          }
+          glm::dvec3 L, Cl;
+          if (!light.illuminate(p, L, Cl)) continue;
+          const double dist = light.kind == store::StoredLight::Kind::Distant ? INFINITY : glm::length(L);
+          const glm::dvec3 l = glm::normalize(L);
+          const double g = phaseG, cosTheta = -glm::dot(l, toEye);
+          const double phase = g == 0 ? 1.0 : (1 - g * g) / std::pow(1 + g * g - 2 * g * cosTheta, 1.5);
+          double shadow;
+          if (m.cachedShadow(size_t(&light - m.camera.lights.data()), p, shadow)) ++stats_.cachedShadows;
+          else shadow = m.transmittance(p, l, dist, seconds, stats_.shadowSteps);
+          for (int k = 0; k < 3; ++k) inScatter[k] += Cl[k] * phase * shadow;
         }
-        if (f.x < pv.lo.x || f.y < pv.lo.y || f.z < pv.lo.z || f.x > pv.hi.x || f.y > pv.hi.y || f.z > pv.hi.z) continue;
-        const openvdb::Vec3d ip = pv.v->density->worldToIndex(toVdb(f));
-        ++stats_.steps;
-        const float d = openvdb::tools::BoxSampler::sample(pv.density, ip);
-        if (d > 0.f) sigma += double(d) * pv.v->spec.densityScale;
-        if (pv.emissionScalar) {
-          const float em = openvdb::tools::BoxSampler::sample(*pv.emissionScalar, pv.v->emissionScalar->worldToIndex(toVdb(f)));
-          for (int k = 0; k < 3; ++k) e[k] += double(em) * pv.v->spec.emissionColour[k];
-        } else if (pv.emissionColour) {
-          const openvdb::Vec3s em = openvdb::tools::BoxSampler::sample(*pv.emissionColour, pv.v->emissionColour->worldToIndex(toVdb(f)));
-          for (int k = 0; k < 3; ++k) e[k] += double(em[k]) * pv.v->spec.emissionColour[k];
-        }
+        for (int k = 0; k < 3; ++k) scatter[k] = scatter[k] / sigma * inScatter[k];
+      } else {
+        scatter[0] = scatter[1] = scatter[2] = 0;
       }
       // Over the step the medium is taken as constant: transmittance e^{-σ ds}, and the
       // emission it adds toward the eye ∫ e^{-σ s} E ds = E (1 - e^{-σ ds}) / σ.
+      // The scattered light: the albedo-weighted extinction times the in-scattered light, whose
+      // σ cancels the gain's division: albedo · S · (1 - e^{-σ ds}).
       const double tau = sigma * ds;
       const double stepT = std::exp(-tau);
       const double gain = tau > 1e-9 ? (1.0 - stepT) / sigma : ds;
-      for (int k = 0; k < 3; ++k) L[k] += T * e[k] * gain;
+      double add[3];
+      for (int k = 0; k < 3; ++k) add[k] = e[k] * gain + scatter[k] * (1.0 - stepT);
+      for (int k = 0; k < 3; ++k) L[k] += T * add[k];
       T *= stepT;
       if (slices && (tau > 0.0 || e[0] != 0.0 || e[1] != 0.0 || e[2] != 0.0)) {
         // The slice spans the steps that hold medium, so deep samples hug it.
-        for (int k = 0; k < 3; ++k) sliceL[k] += sliceT * e[k] * gain;
+        for (int k = 0; k < 3; ++k) sliceL[k] += sliceT * add[k];
         sliceT *= stepT;
         cur.zFront = std::min(cur.zFront, float(z - 0.5 * dz)), cur.zBack = float(z + 0.5 * dz);
       }
@@ -381,6 +508,92 @@ void VolumeTracer::integrate(double x, double y, double t, double z0, double z1,
   if (slices) closeSlice();
   for (int k = 0; k < 3; ++k) out.radiance[k] = float(L[k]);
   out.transmittance = float(T);
+}
+
+// ------------------------------------------------------------------------------------------
+// Lighting: cached shadows
+
+struct VolumeLighting::Impl {
+  // grids[l][v]: light l's transmittance over volume v's cache lattice (null: not cached).
+  std::vector<std::vector<FloatGrid::Ptr>> grids;
+  uint64_t steps = 0;
+};
+
+VolumeLighting::VolumeLighting(const VolumeScene& scene, const VolumeCamera& camera) : impl_(std::make_unique<Impl>()) {
+  const auto& volumes = scene.impl().volumes;
+  impl_->grids.assign(camera.lights.size(), std::vector<FloatGrid::Ptr>(volumes.size()));
+  // Shadow rays are marched by tracers of their own, one per thread; time = the reference frame.
+  tbb::enumerable_thread_specific<std::unique_ptr<VolumeTracer>> tracers;
+  std::atomic<uint64_t> steps{0};
+  for (size_t v = 0; v < volumes.size(); ++v) {
+    const auto& vol = volumes[v];
+    if (vol.velocity) continue;  // its shadows move with it: marched per step instead
+    // The lattice: twice the voxel size, over every active voxel (or tile) dilated by the
+    // interpolation's reach.
+    openvdb::math::Transform::Ptr xform = vol.density->transform().copy();
+    xform->preScale(2.0);
+    FloatGrid::Ptr lattice = FloatGrid::create(1.f);
+    lattice->setTransform(xform);
+    {
+      auto acc = lattice->getAccessor();
+      for (auto it = vol.density->cbeginValueOn(); it; ++it) {
+        openvdb::CoordBBox box;
+        it.getBoundingBox(box);
+        const openvdb::Coord lo((box.min().x() - 2) >> 1, (box.min().y() - 2) >> 1, (box.min().z() - 2) >> 1);
+        const openvdb::Coord hi((box.max().x() + 2) >> 1, (box.max().y() + 2) >> 1, (box.max().z() + 2) >> 1);
+        for (int x = lo.x(); x <= hi.x(); ++x)
+          for (int y = lo.y(); y <= hi.y(); ++y)
+            for (int z = lo.z(); z <= hi.z(); ++z) acc.setValueOn(openvdb::Coord(x, y, z), 1.f);
+      }
+    }
+    // World (file) → camera for this volume: the tracer's own placement, inverted.
+    VolumeTracer probe(scene, camera, camera.referenceFrame, camera.referenceFrame);
+    const glm::dmat4 fileToCamera = glm::inverse(probe.impl_->volumes[v].cameraToFile);
+    for (size_t l = 0; l < camera.lights.size(); ++l) {
+      const store::StoredLight& light = camera.lights[l];
+      if (light.kind == store::StoredLight::Kind::Ambient) continue;
+      FloatGrid::Ptr grid = lattice->deepCopy();
+      openvdb::tree::LeafManager<openvdb::FloatTree> leaves(grid->tree());
+      tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves.leafCount()), [&](const tbb::blocked_range<size_t>& range) {
+        auto& tracer = tracers.local();
+        if (!tracer) tracer = std::make_unique<VolumeTracer>(scene, camera, camera.referenceFrame, camera.referenceFrame);
+        uint64_t lookups = 0;
+        for (size_t i = range.begin(); i != range.end(); ++i)
+          for (auto it = leaves.leaf(i).beginValueOn(); it; ++it) {
+            const glm::dvec3 f = toGlm(grid->indexToWorld(it.getCoord()));
+            const glm::dvec3 p = glm::dvec3(fileToCamera * glm::dvec4(f, 1.0));
+            glm::dvec3 L, Cl;
+            float T = 1.f;
+            if (light.illuminate(p, L, Cl)) {
+              const double dist = light.kind == store::StoredLight::Kind::Distant ? INFINITY : glm::length(L);
+              T = float(tracer->impl_->transmittance(p, glm::normalize(L), dist, 0.0, lookups));
+            }
+            it.setValue(T);
+          }
+        steps += lookups;
+      });
+      impl_->grids[l][v] = grid;
+    }
+  }
+  impl_->steps = steps;
+}
+
+VolumeLighting::~VolumeLighting() = default;
+uint64_t VolumeLighting::buildSteps() const { return impl_->steps; }
+
+void VolumeTracer::Impl::cacheShadows(const VolumeLighting& lighting) {
+  const auto& grids = lighting.impl().grids;
+  shadowCache.resize(grids.size());
+  for (size_t l = 0; l < grids.size(); ++l) {
+    shadowCache[l].resize(grids[l].size());
+    for (size_t v = 0; v < grids[l].size(); ++v)
+      if (const FloatGrid::Ptr& g = grids[l][v]) {
+        ShadowLookup& c = shadowCache[l][v];
+        c.grid = g.get();
+        c.acc.emplace(g->getConstAccessor());
+        c.index = indexFromWorld(*g);
+      }
+  }
 }
 
 }  // namespace reshutter::resample

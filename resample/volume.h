@@ -17,11 +17,13 @@
 #include <glm/mat4x4.hpp>
 #include <glm/vec3.hpp>
 
+#include "store/model.h"
+
 namespace reshutter::resample {
 
 /// One volume as the user asks for it:
 /// "smoke.vdb[,density=GRID][,emission=GRID][,velocity=GRID][,scale=S][,translate=X:Y:Z]
-///  [,density-scale=K][,emission-color=R:G:B]".
+///  [,density-scale=K][,emission-color=R:G:B][,albedo=R:G:B][,anisotropy=G]".
 struct VolumeSpec {
   std::string path;
   std::string density = "density";
@@ -31,6 +33,8 @@ struct VolumeSpec {
   glm::dvec3 translate{0.0};
   float densityScale = 1;  // extinction per world unit = densityScale · density
   glm::vec3 emissionColour{1.f, 1.f, 1.f};
+  glm::vec3 albedo{1.f, 1.f, 1.f};  // scattering / extinction, per channel
+  float anisotropy = 0;             // Henyey-Greenstein g: > 0 scatters forward
   /// Parses the text above; throws Error naming `where` (an option) on a bad key or value.
   static VolumeSpec parse(const std::string& text, const std::string& where);
 };
@@ -43,6 +47,11 @@ struct VolumeOptions {
   /// Skip empty space with OpenVDB's hierarchical DDA; off: step through each volume's whole
   /// bounding box (the same image to the step's sampling, only slower: to measure what it saves).
   bool skipEmpty = true;
+  /// Step of the shadow rays toward each light (single scattering's self-shadowing), in voxels.
+  float shadowStep = 1.0f;
+  /// Look shadows up in a per-render cache (VolumeLighting) rather than marching a shadow ray
+  /// from every step: about 7x faster, and within the cache's interpolation of the exact rays.
+  bool cacheShadows = true;
 };
 
 /// What a volume adds over a stretch of a ray: the light it emits toward the camera
@@ -95,6 +104,8 @@ class VolumeScene {
 /// file puts it at `referenceFrame`).
 struct VolumeCamera {
   double ax = 1, bx = 0, ay = 1, by = 0;  // raster = a·(x/z) + b (perspective) or a·x + b
+  /// The lights the store recorded (camera space), for single scattering.
+  std::vector<store::StoredLight> lights;
   bool perspective = true;
   glm::dmat4 worldToCamera{1.0};
   double framesPerSecond = 24;
@@ -103,16 +114,37 @@ struct VolumeCamera {
 
 /// Counters for --stats.
 struct VolumeStats {
-  uint64_t rays = 0;   // ray segments that reached a volume's bounds
-  uint64_t steps = 0;  // density lookups
-  void add(const VolumeStats& o) { rays += o.rays, steps += o.steps; }
+  uint64_t rays = 0;           // ray segments that reached a volume's bounds
+  uint64_t steps = 0;          // density lookups along them
+  uint64_t shadowSteps = 0;    // density lookups along shadow rays (the shadow cache's included)
+  uint64_t cachedShadows = 0;  // shadows looked up in the cache (VolumeLighting) instead
+  void add(const VolumeStats& o) { rays += o.rays, steps += o.steps, shadowSteps += o.shadowSteps, cachedShadows += o.cachedShadows; }
+};
+
+/// One render's lighting of its volumes: each light's transmittance through the medium, cached
+/// on a lattice of twice each volume's voxel size over its active voxels, so that single
+/// scattering looks it up instead of marching a shadow ray from every step. Built once per render
+/// (in parallel); volumes that move with a velocity grid are not cached (their shadows move with
+/// them: their steps march shadow rays).
+class VolumeLighting {
+ public:
+  VolumeLighting(const VolumeScene& scene, const VolumeCamera& camera);
+  ~VolumeLighting();
+  struct Impl;
+  const Impl& impl() const { return *impl_; }
+  /// Density lookups the cache took to build.
+  uint64_t buildSteps() const;
+
+ private:
+  std::unique_ptr<Impl> impl_;
 };
 
 /// Traces one thread's rays through a VolumeScene (it holds per-thread accessors and intersector
 /// copies, so each thread makes its own).
 class VolumeTracer {
  public:
-  VolumeTracer(const VolumeScene& scene, const VolumeCamera& camera, double earliest, double latest);
+  /// `lighting` (may be null: shadow rays are marched) must outlive the tracer.
+  VolumeTracer(const VolumeScene& scene, const VolumeCamera& camera, double earliest, double latest, const VolumeLighting* lighting = nullptr);
   ~VolumeTracer();
   /// Whether any volume may lie behind raster region [x0, x1] × [y0, y1] between the render's
   /// earliest and latest time (conservative: a volume that reaches the eye plane touches all).
@@ -126,6 +158,7 @@ class VolumeTracer {
   const VolumeStats& stats() const { return stats_; }
 
  private:
+  friend class VolumeLighting;  // marches its shadow rays with a tracer
   struct Impl;
   std::unique_ptr<Impl> impl_;
   VolumeStats stats_;

@@ -104,6 +104,21 @@ store::StoreMeta storeMeta(const FrameScene& scene, const ShadeOptions& o) {
     for (size_t i = 0; i < scene.objectNames.size(); ++i) prov += cat(" ", i + 1, "=\"", scene.objectNames[i], "\"");
   }
   m.provenance = prov;
+  // The lights, as volumes added at re-sample time will see them.
+  for (const Light& light : scene.lights) {
+    const LitLight l = resolveLight(light, iv.shadeAt);
+    store::StoredLight sl;
+    using K = store::StoredLight::Kind;
+    sl.kind = l.kind == LightKind::Ambient   ? K::Ambient
+              : l.kind == LightKind::Distant ? K::Distant
+              : l.kind == LightKind::Spot    ? K::Spot
+              : l.kind == LightKind::Face    ? K::Face
+                                             : K::Point;
+    sl.position = l.position, sl.axis = l.axis, sl.colour = l.Cl0;
+    sl.cosOuter = l.cosOuter, sl.cosInner = l.cosInner, sl.beam = l.beam;
+    if (l.kind == LightKind::Uber) sl.position = glm::dvec3(glm::inverse(l.toLight) * glm::dvec4(0, 0, 0, 1));
+    m.lights.push_back(sl);
+  }
   m.validate("store metadata");
   return m;
 }

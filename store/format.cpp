@@ -176,14 +176,37 @@ void writeMeta(const StoreMeta& m, ByteWriter& w) {
   }
   w.put<int32_t>(m.tileSize);
   w.putString(m.provenance);
-  if (formatVersionFor(m) >= 2) {
+  const uint32_t version = formatVersionFor(m);
+  if (version >= 2) {
     w.put<uint32_t>(uint32_t(m.shadingTimes.size()));
     for (double t : m.shadingTimes) w.put<double>(t);
     w.put<uint64_t>(m.shadedInTimeGrids);
   }
+  if (version >= 3) {
+    auto put3 = [&](const glm::dvec3& v) { w.put<double>(v.x), w.put<double>(v.y), w.put<double>(v.z); };
+    w.put<uint32_t>(uint32_t(m.lights.size()));
+    for (const StoredLight& l : m.lights) {
+      w.put<uint8_t>(uint8_t(l.kind));
+      put3(l.position), put3(l.axis), put3(l.colour);
+      w.put<double>(l.cosOuter), w.put<double>(l.cosInner), w.put<double>(l.beam);
+    }
+    w.put<uint32_t>(uint32_t(m.volumes.size()));
+    for (const StoredVolume& v : m.volumes) {
+      w.putString(v.path), w.putString(v.density);
+      w.put<uint32_t>(uint32_t(v.times.size()));
+      for (size_t k = 0; k < v.times.size(); ++k) {
+        w.put<double>(v.times[k]);
+        for (int i = 0; i < 4; ++i)
+          for (int j = 0; j < 4; ++j) w.put<double>(v.fileToCamera[k][i][j]);
+      }
+    }
+  }
 }
 
-uint32_t formatVersionFor(const StoreMeta& m) { return m.shadingTimes.empty() ? 1 : 2; }
+uint32_t formatVersionFor(const StoreMeta& m) {
+  if (!m.lights.empty() || !m.volumes.empty()) return 3;
+  return m.shadingTimes.empty() ? 1 : 2;
+}
 
 StoreMeta readMeta(ByteReader& r, uint32_t version) {
   StoreMeta m;
@@ -226,7 +249,33 @@ StoreMeta readMeta(ByteReader& r, uint32_t version) {
     m.shadingTimes.resize(r.getCount(8));
     for (double& t : m.shadingTimes) t = r.get<double>();
     m.shadedInTimeGrids = r.get<uint64_t>();
-    if (m.shadingTimes.empty()) fail(r.context(), "format version 2 without shading times");
+    if (version == 2 && m.shadingTimes.empty()) fail(r.context(), "format version 2 without shading times");
+  }
+  if (version >= 3) {
+    auto get3 = [&] {
+      glm::dvec3 v;
+      v.x = r.get<double>(), v.y = r.get<double>(), v.z = r.get<double>();
+      return v;
+    };
+    m.lights.resize(r.getCount(73));
+    for (StoredLight& l : m.lights) {
+      const uint8_t kind = r.get<uint8_t>();
+      if (kind > uint8_t(StoredLight::Kind::Face)) fail(r.context(), "light of unknown kind ", int(kind));
+      l.kind = StoredLight::Kind(kind);
+      l.position = get3(), l.axis = get3(), l.colour = get3();
+      l.cosOuter = r.get<double>(), l.cosInner = r.get<double>(), l.beam = r.get<double>();
+    }
+    m.volumes.resize(r.getCount(12));
+    for (StoredVolume& v : m.volumes) {
+      v.path = r.getString(4096), v.density = r.getString(4096);
+      const size_t n = r.getCount(136);
+      v.times.resize(n), v.fileToCamera.resize(n);
+      for (size_t k = 0; k < n; ++k) {
+        v.times[k] = r.get<double>();
+        for (int i = 0; i < 4; ++i)
+          for (int j = 0; j < 4; ++j) v.fileToCamera[k][i][j] = r.get<double>();
+      }
+    }
   }
   if (!r.atEnd()) fail(r.context(), "unexpected bytes after the metadata");
   m.validate(r.context());

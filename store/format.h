@@ -27,9 +27,10 @@ namespace reshutter::store {
 
 constexpr char kHeaderMagic[8] = {'R', 'S', 'H', 'U', 'T', 'M', 'P', 'S'};
 constexpr char kFooterMagic[8] = {'R', 'S', 'H', 'U', 'T', 'E', 'N', 'D'};
-/// Version 2 adds StoreMeta::shadingTimes; a store without them is written as version 1, so
-/// stores that do not shade in time stay readable by older builds, byte for byte as before.
-constexpr uint32_t kFormatVersion = 2;
+/// Version 2 adds StoreMeta::shadingTimes, version 3 the lights and the scene's volumes; a store
+/// is written as the lowest version that holds its metadata, so stores without them stay readable
+/// by older builds, byte for byte as before.
+constexpr uint32_t kFormatVersion = 3;
 constexpr size_t kHeaderSize = 16;
 constexpr size_t kFooterSize = 64;
 /// Tile coordinate of micropolygons that never lie in front of the primary camera's near plane

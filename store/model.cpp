@@ -133,6 +133,34 @@ bool parseRational(const std::string& s, Rational& out) {
   }
 }
 
+bool StoredLight::illuminate(const glm::dvec3& P, glm::dvec3& L, glm::dvec3& Cl) const {
+  switch (kind) {
+    case Kind::Ambient: return false;
+    case Kind::Distant: L = -axis, Cl = colour; return true;
+    case Kind::Point:
+    case Kind::Face:
+    case Kind::Spot: {
+      L = position - P;
+      const double d2 = glm::dot(L, L);
+      if (!(d2 > 0)) return false;
+      const double cosine = -glm::dot(L, axis) / std::sqrt(d2);
+      double atten = 1 / d2;
+      if (kind == Kind::Face) {
+        if (!(cosine > 0)) return false;
+        atten *= cosine;
+      } else if (kind == Kind::Spot) {
+        // spotlight.sl's cone: smoothstep between the outer and inner cosines, cos^beam inside.
+        if (cosine < cosOuter) return false;
+        const double c = std::max(cosine, 0.0), u = std::clamp((cosine - cosOuter) / std::max(cosInner - cosOuter, 1e-12), 0.0, 1.0);
+        atten *= std::pow(c, beam) * u * u * (3 - 2 * u);
+      }
+      Cl = colour * atten;
+      return true;
+    }
+  }
+  return false;
+}
+
 void StoreMeta::validate(const std::string& where) const {
   if (!std::isfinite(shutterOpen) || !std::isfinite(shutterClose) || shutterClose < shutterOpen)
     fail(where, "shutter [", shutterOpen, ", ", shutterClose, "] is not an interval");
@@ -181,7 +209,8 @@ void StoreMeta::validate(const std::string& where) const {
   if (shadingTimes.size() > kMaxShadingTimes) fail(where, shadingTimes.size(), " shading times (at most ", kMaxShadingTimes, ")");
   for (size_t k = 0; k < shadingTimes.size(); ++k) {
     if (!std::isfinite(shadingTimes[k])) fail(where, "shading time ", k, " is not finite");
-    if (k > 0 && !(shadingTimes[k] > shadingTimes[k - 1])) fail(where, "shading times not strictly increasing (", shadingTimes[k - 1], " then ", shadingTimes[k], ")");
+    if (k > 0 && !(shadingTimes[k] > shadingTimes[k - 1]))
+      fail(where, "shading times not strictly increasing (", shadingTimes[k - 1], " then ", shadingTimes[k], ")");
     for (const char* base : {"Ci", "Oi"}) {
       if (k == 0) continue;
       const int i = schema.find(timedName(base, k));
@@ -203,6 +232,25 @@ void StoreMeta::validate(const std::string& where) const {
     if (a.type != b.type || a.rate != b.rate || a.codec != b.codec) fail(where, "'", a.name, "' must be declared as '", base, "' is");
     for (size_t j = 1; j < shadingTimes.size(); ++j)
       if (schema.find(timedName(base, j)) < 0) fail(where, "'", base, "' is given at shading time ", k, " but not at ", j);
+  }
+  auto finite3 = [](const glm::dvec3& v) { return std::isfinite(v.x) && std::isfinite(v.y) && std::isfinite(v.z); };
+  for (size_t i = 0; i < lights.size(); ++i) {
+    const StoredLight& l = lights[i];
+    if (uint8_t(l.kind) > uint8_t(StoredLight::Kind::Face)) fail(where, "light ", i, " is of an unknown kind");
+    if (!finite3(l.position) || !finite3(l.axis) || !finite3(l.colour) || !std::isfinite(l.cosOuter) || !std::isfinite(l.cosInner) || !std::isfinite(l.beam))
+      fail(where, "light ", i, " has a value that is not finite");
+  }
+  for (size_t i = 0; i < volumes.size(); ++i) {
+    const StoredVolume& v = volumes[i];
+    if (v.path.empty() || v.density.empty()) fail(where, "volume ", i, " has no file or no density grid");
+    if (v.times.empty() || v.times.size() != v.fileToCamera.size() || v.times.size() > 64)
+      fail(where, "volume ", i, " has ", v.times.size(), " times and ", v.fileToCamera.size(), " transforms");
+    for (size_t k = 0; k < v.times.size(); ++k) {
+      if (!std::isfinite(v.times[k]) || (k > 0 && !(v.times[k] > v.times[k - 1]))) fail(where, "volume ", i, ": its times are not finite and increasing");
+      for (int a = 0; a < 4; ++a)
+        for (int b = 0; b < 4; ++b)
+          if (!std::isfinite(v.fileToCamera[k][a][b])) fail(where, "volume ", i, ": a transform is not finite");
+    }
   }
 }
 

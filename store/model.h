@@ -111,6 +111,32 @@ using Schedule = std::vector<double>;
 // ---------------------------------------------------------------------------------------------
 // Store metadata
 
+/// A light the shading pass used, as a volume rendered at re-sample time sees it: camera space at
+/// the shading time, RenderMan's point / distant / spot / ambient terms (area lights as a point
+/// at their centre, the one-sided ones with their emitter's cosine; uberlight as a point).
+struct StoredLight {
+  enum class Kind : uint8_t { Ambient, Distant, Point, Spot, Face };
+  Kind kind = Kind::Point;
+  glm::dvec3 position{0.0};
+  glm::dvec3 axis{0.0, 0.0, 1.0};  // distant: the direction light travels; spot, face: the cone / emitter axis (unit)
+  glm::dvec3 colour{1.0};          // intensity · lightcolor
+  double cosOuter = 0, cosInner = 0, beam = 2;
+  /// Light arriving at camera-space point P: `L` towards the light (unnormalised; unit for a
+  /// distant light), `Cl` its colour there. False for ambient lights and points outside a cone.
+  bool illuminate(const glm::dvec3& P, glm::dvec3& L, glm::dvec3& Cl) const;
+  bool operator==(const StoredLight&) const = default;
+};
+
+/// A volume the scene itself holds (RIB `Volume "blobbydso:impl_openvdb"`): the OpenVDB file and
+/// its density grid, placed by the object's transform (the file's world space → camera space) at
+/// each of `times` (frame-relative; one entry when it does not move).
+struct StoredVolume {
+  std::string path, density = "density";
+  std::vector<double> times{0.0};
+  std::vector<glm::dmat4> fileToCamera{glm::dmat4(1.0)};
+  bool operator==(const StoredVolume&) const = default;
+};
+
 struct StoreMeta {
   int64_t frame = 1;
   Rational fps{24, 1};
@@ -128,6 +154,10 @@ struct StoreMeta {
   std::vector<double> shadingTimes;
   uint64_t shadedInTimeGrids = 0;  // grids that carry shading at every time (counted by the writer)
   static constexpr size_t kMaxShadingTimes = 16;
+  /// The lights the shading pass used and the scene's own volumes (format version 3), for volumes
+  /// rendered at re-sample time.
+  std::vector<StoredLight> lights;
+  std::vector<StoredVolume> volumes;
   /// The schema name of attribute `base` ("Ci", "Oi", "N") at shading time k (k = 0: base itself).
   static std::string timedName(const std::string& base, size_t k);
   /// k for a name timedName() makes for k >= 1 ("Ci@2" → 2, "N@3" → 3), 0 for any other name.

@@ -320,3 +320,38 @@ TEST(StoreRational, RatesParseExactlyAndNonRatesAreRefused) {
     EXPECT_GT(r.num, 0) << text << ": a refused rate must not be left as 0/N";
   }
 }
+
+TEST(StoreRoundTrip, LightsAndSceneVolumesRoundTripAsFormatVersion3) {
+  test::ScratchDir dir;
+  const Schema schema = test::fullSchema();
+  test::GridSpec spec;
+  StoreMeta meta = test::testMeta(schema);
+  writeRandomStore(dir.path("plain.mps"), meta, {spec}, 10);
+  EXPECT_EQ(test::readBytes(dir.path("plain.mps")).at(8), 1u) << "no lights, no volumes, no shading times: version 1, as older builds wrote it";
+  StoredLight spot;
+  spot.kind = StoredLight::Kind::Spot;
+  spot.position = {1, 2, -3}, spot.axis = glm::normalize(glm::dvec3(0, -1, 1)), spot.colour = {5, 4, 3};
+  spot.cosOuter = 0.8, spot.cosInner = 0.9, spot.beam = 3;
+  StoredLight sun;
+  sun.kind = StoredLight::Kind::Distant;
+  meta.lights = {spot, sun};
+  StoredVolume smoke;
+  smoke.path = "smoke.0001.vdb", smoke.density = "density";
+  smoke.times = {0.0, 0.5};
+  smoke.fileToCamera = {glm::dmat4(1.0), glm::dmat4(2.0)};
+  meta.volumes = {smoke};
+  writeRandomStore(dir.path("lit.mps"), meta, {spec}, 10);
+  EXPECT_EQ(test::readBytes(dir.path("lit.mps")).at(8), 3u);
+  const StoreReader reader(dir.path("lit.mps"));
+  EXPECT_EQ(reader.meta().lights, meta.lights);
+  EXPECT_EQ(reader.meta().volumes, meta.volumes);
+  EXPECT_TRUE(reader.meta().shadingTimes.empty());
+  // A light's terms: RenderMan's point falloff and spot cone.
+  glm::dvec3 L, Cl;
+  ASSERT_TRUE(spot.illuminate(spot.position + 2.0 * spot.axis, L, Cl));
+  EXPECT_NEAR(Cl.x, 5.0 / 4.0, 1e-12);                                        // on the axis: full cone, cos^beam = 1, 1/d²
+  EXPECT_FALSE(spot.illuminate(spot.position + glm::dvec3(0, 1, 0), L, Cl));  // outside the cone
+  // A light that is not finite is refused when the store is written.
+  meta.lights[0].colour.x = NAN;
+  EXPECT_THROW(meta.validate("test"), Error);
+}
