@@ -1,7 +1,8 @@
 // `reshutter demo`: the main job on built-in content, no files needed. Shades the built-in demo
 // scene (shade/demo_scene.h) once into a store, re-samples that store into a progressive frame
-// (flat and deep OpenEXR, PNG preview) and an interlaced frame (two fields, one pass, no
-// re-shading), and reports where the outputs are and how long each stage took.
+// (flat and deep OpenEXR, PNG preview, with a procedural smoke volume added at re-sample time)
+// and an interlaced frame (two fields, one pass, no re-shading), and reports where the outputs are
+// and how long each stage took.
 #include <chrono>
 #include <cstdio>
 #include <filesystem>
@@ -9,12 +10,16 @@
 #include "cli/commands.h"
 #include "cli/render_options.h"
 #include "common/error.h"
+#include "resample/volume.h"
 #include "shade/demo_scene.h"
 #include "shade/shading_pass.h"
 #include "store/reader.h"
 
 namespace reshutter::cli {
 namespace {
+
+// World position of the demo's smoke puff: in front of the objects, left of centre.
+constexpr double kSmokeCentre[3] = {-2.2, 1.1, 1.2};
 
 struct DemoCommand {
   std::string outDir = "demo-output";
@@ -43,6 +48,13 @@ struct DemoCommand {
     std::printf("  shading   %.2f s (one pass, every motion knot kept; %s of %s grids whose lighting changes over the shutter shaded at %zu times)\n",
                 r.shade.seconds, grouped(r.shade.timedGrids).c_str(), grouped(r.shade.timeCandidateGrids).c_str(), r.shade.shadingTimes.size());
 
+    // A puff of smoke made now, added at re-sample time: lit by the lights the store recorded,
+    // cut by the surfaces, kept as volume samples in the deep image.
+    const std::string smokePath = outDir + "/smoke.vdb";
+    resample::SmokePuff puff;
+    puff.centre = {kSmokeCentre[0], kSmokeCentre[1], kSmokeCentre[2]}, puff.radius = 0.75, puff.voxelSize = 0.04;
+    resample::writeSmokePuff(smokePath, puff);
+
     // Re-sample the one shading pass: no shading from here on.
     auto reader = std::make_shared<const store::StoreReader>(storePath);
     const auto& meta = reader->meta();
@@ -52,6 +64,7 @@ struct DemoCommand {
       RenderOptions o;
       o.spp = "16";
       o.filter = filter;
+      if (deep) o.volumes = {smokePath + ",density-scale=3,albedo=0.9:0.9:0.9"};
       o.previews = {outDir + "/" + name + ".png"};
       if (deep) o.deep = outDir + "/" + name + "_deep.exr";
       resample::RenderSpec spec;
@@ -68,8 +81,8 @@ struct DemoCommand {
     // The reference workflow's fields: Shutter 0 0.25 and 0.5 0.75 of the frame, rows alternating.
     const double interlaced = renderWith(resample::ShutterModel::fields(resample::ShutterGroup{F, F + 0.25}, resample::ShutterGroup{F + 0.5, F + 0.75}, 0),
                                          "gaussian:2x1", "interlaced", false, false);
-    std::printf("  resample  progressive frame [%g, %g]: %.2f s -> %s/progressive.exr, progressive_deep.exr, progressive.png\n", meta.shutterOpen,
-                meta.shutterClose, progressive, outDir.c_str());
+    std::printf("  resample  progressive frame [%g, %g] with a smoke volume (%s): %.2f s -> %s/progressive.exr, progressive_deep.exr, progressive.png\n",
+                meta.shutterOpen, meta.shutterClose, smokePath.c_str(), progressive, outDir.c_str());
     std::printf("            interlaced frame, fields [0, 0.25] + [0.5, 0.75], one pass: %.2f s -> %s/interlaced.exr, interlaced.png\n", interlaced,
                 outDir.c_str());
     std::printf("  next      reshutter info %s\n", storePath.c_str());

@@ -38,6 +38,7 @@ void HitBuffer::reset(size_t slots) {
   fragSeq = 0;
   anyFragments = false;
   fragmentsGrouped = false;
+  slicesKept = false;
   timedSlots.meta = nullptr;  // a bucket's stores outlive it; the next bucket's may not be these
 }
 
@@ -260,6 +261,10 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
   const float stopT = 1.f - opacityThreshold;
   groupFragments(samples);
   std::vector<const Fragment*> list;
+  const bool keepSlices = volumesHere && surfaceIds;  // deep output follows
+  keptSlices.clear();
+  if (keepSlices) keptSliceStart.assign(slots + 1, 0);
+  slicesKept = keepSlices;
   for (size_t slot = 0; slot < slots; ++slot) {
     prefetchSample(idxOf, slot + kPrefetchAhead, slots);
     const size_t k = idxOf[slot];  // the rasterizer keeps samples stratum-major
@@ -283,6 +288,7 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
       if ((s & kHitMatte)) zeroCompositedAovs(slot);
       continue;
     }
+    if (keepSlices) keptSliceStart[slot] = uint32_t(keptSlices.size());
     // Transparent surfaces in front of the nearest opaque one, front to back.
     if (anyFragments) nearerFragments(k, zo, list);
     else list.clear();
@@ -293,7 +299,17 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
     auto throughVolumes = [&](float z) {
       if (!volumesHere) return false;
       VolumeSegment v;
-      volumes->integrate(double(samples.sx[k]), double(samples.sy[k]), samples.tBase + double(samples.st[k]), double(zPrev), double(z), v);
+      if (keepSlices) {
+        // Deep output will want this segment's slices: kept, ended by a marker holding the
+        // whole segment, so visitFragments() need not march the ray again.
+        volumes->integrate(double(samples.sx[k]), double(samples.sy[k]), samples.tBase + double(samples.st[k]), double(zPrev), double(z), v, &keptSlices,
+                           volumeSliceRatio);
+        VolumeSlice end;
+        end.slice = kSegmentEnd, end.segment = v;
+        keptSlices.push_back(end);
+      } else {
+        volumes->integrate(double(samples.sx[k]), double(samples.sy[k]), samples.tBase + double(samples.st[k]), double(zPrev), double(z), v);
+      }
       zPrev = z;
       for (int c = 0; c < 3; ++c) C[c] += T[c] * v.radiance[c], A[c] += T[c] * (1.f - v.transmittance), T[c] *= v.transmittance;
       return T[0] <= stopT && T[1] <= stopT && T[2] <= stopT;
@@ -353,6 +369,7 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
         takeSingle(fv, uv, zo);
       }
     }
+    if (keepSlices) keptSliceStart[slot + 1] = uint32_t(keptSlices.size());
     out.r[slot] = C[0], out.g[slot] = C[1], out.b[slot] = C[2];
     out.a[slot] = (A[0] + A[1] + A[2]) / 3.f;
     out.z[slot] = closestChosen ? closestZ : far;
@@ -391,12 +408,19 @@ void HitBuffer::visitFragments(const BucketSamples& samples, const std::function
     // The volumes between the previous surface (or the near plane) and depth z, as volume
     // fragments of depth slices; true once the sample is opaque.
     float zPrev = 0.f;
+    size_t cursor = slicesKept ? keptSliceStart[slot] : 0, cursorEnd = slicesKept ? keptSliceStart[slot + 1] : 0;
     auto throughVolumes = [&](float z) {
       if (!volumesHere) return false;
       VolumeSegment v;
       slices.clear();
-      volumes->integrate(double(samples.sx[k]), double(samples.sy[k]), samples.tBase + double(samples.st[k]), double(zPrev), double(z), v, &slices,
-                         volumeSliceRatio);
+      if (cursor < cursorEnd) {
+        // The segment resolve() marched: its slices up to the marker.
+        for (; keptSlices[cursor].slice != kSegmentEnd; ++cursor) slices.push_back(keptSlices[cursor]);
+        v = keptSlices[cursor++].segment;
+      } else {
+        volumes->integrate(double(samples.sx[k]), double(samples.sy[k]), samples.tBase + double(samples.st[k]), double(zPrev), double(z), v, &slices,
+                           volumeSliceRatio);
+      }
       zPrev = z;
       for (const VolumeSlice& vs : slices) {
         SampleFragment sf;
@@ -405,8 +429,8 @@ void HitBuffer::visitFragments(const BucketSamples& samples, const std::function
         sf.objectId = kVolumeObjectId;
         sf.aov = noAov.data(), sf.aovU = noAovU.data();
         outList.push_back(sf);
-        for (int c = 0; c < 3; ++c) T[c] *= vs.segment.transmittance;
       }
+      for (int c = 0; c < 3; ++c) T[c] *= v.transmittance;  // as resolve() composites it
       return T[0] <= stopT && T[1] <= stopT && T[2] <= stopT;
     };
     for (const Fragment* f : list) {

@@ -98,6 +98,12 @@ struct HitBuffer {
   VolumeTracer* volumes = nullptr;
   bool volumesHere = false;
   double volumeSliceRatio = 1.01;  // deep output's depth slices (VolumeSlice)
+  // With deep output, resolve() keeps each sample's volume slices for visitFragments(): the
+  // sample's segments in order, each ended by a marker (slice kSegmentEnd) holding the whole.
+  static constexpr int32_t kSegmentEnd = INT32_MIN;
+  std::vector<VolumeSlice> keptSlices;
+  std::vector<uint32_t> keptSliceStart;  // per slot, and the end
+  bool slicesKept = false;
 
  private:
   // A transparent surface in front of a sample's nearest opaque one.

@@ -386,7 +386,9 @@ struct ThreadState {
       if (plan.spec.volumes) {
         volumes =
             std::make_unique<VolumeTracer>(*plan.spec.volumes, plan.volumeCamera, plan.shutter.earliest(), plan.shutter.latest(), plan.volumeLighting.get());
-        raster->setVolumes(volumes.get(), 1.0 + std::max(1e-4, double(plan.spec.deepOptions.tolerance)));
+        // Deep volume samples: depth slices four deep tolerances thick (4 % of the depth by
+        // default) - enough for holdouts inside the medium, few enough to keep pixels small.
+        raster->setVolumes(volumes.get(), 1.0 + 4.0 * std::max(1e-4, double(plan.spec.deepOptions.tolerance)));
       }
     }
     return *raster;

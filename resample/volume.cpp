@@ -17,7 +17,9 @@
 #include <glm/geometric.hpp>
 #include <glm/mat4x4.hpp>
 
+#include "common/atomic_file.h"
 #include "common/error.h"
+#include "common/random.h"
 
 namespace reshutter::resample {
 
@@ -60,6 +62,16 @@ glm::dmat4 indexFromWorld(const openvdb::GridBase& grid) {
   return glm::inverse(g);
 }
 openvdb::Vec3d apply(const glm::dmat4& m, const glm::dvec3& p) { return toVdb(glm::dvec3(m * glm::dvec4(p, 1.0))); }
+
+// An affine map written out, so that the per-step transforms inline (glm's 4×4 product is a call
+// at -O2, and a tenth of a march's time).
+struct Affine {
+  glm::dvec3 x{1, 0, 0}, y{0, 1, 0}, z{0, 0, 1}, t{0.0};
+  Affine() = default;
+  explicit Affine(const glm::dmat4& m) : x(m[0]), y(m[1]), z(m[2]), t(m[3]) {}
+  glm::dvec3 operator()(const glm::dvec3& p) const { return x * p.x + y * p.y + z * p.z + t; }
+  openvdb::Vec3d vdb(const glm::dvec3& p) const { return toVdb((*this)(p)); }
+};
 
 }  // namespace
 
@@ -223,33 +235,54 @@ struct VolumeTracer::Impl {
     std::optional<Vec3SGrid::ConstAccessor> emissionColour, velocity;
     // Camera space → the file's index space, affine: index = cameraToIndex · camera point.
     glm::dmat4 cameraToFile{1.0};
+    Affine toFile, toDensity, toEmission;  // camera space → file world, density and emission index space
+    Affine fileToDensity, fileToVelocity;  // file world → index space (after a velocity's backtrace)
     double voxelInCamera = 1;     // a voxel's size in camera-space units
     double reach = 0;             // file world units the velocity can carry density over the render's times
     bool hdda = true;             // the intersector's dilation covers the reach
     glm::dvec3 lo{0.0}, hi{0.0};  // file world bounds widened by the reach
   };
   Impl(const VolumeScene& s, const VolumeCamera& c) : scene(s), camera(c) {}
-  // Cached transmittance toward light l: shadowCache[l][volume], null where not cached.
-  struct ShadowLookup {
-    const FloatGrid* grid = nullptr;
-    std::optional<FloatGrid::ConstAccessor> acc;
-    glm::dmat4 index{1.0};  // file world → the cache's index space
+  // The in-scattered light cached per volume (VolumeLighting), null where not cached.
+  struct LightLookup {
+    const Vec3SGrid* grid = nullptr;
+    std::optional<Vec3SGrid::ConstAccessor> acc;
+    Affine index;  // camera space → the cache's index space
   };
-  std::vector<std::vector<ShadowLookup>> shadowCache;
-  void cacheShadows(const VolumeLighting& lighting);
-  // The cached transmittance toward light l at camera point p (false: none cached there).
-  bool cachedShadow(size_t l, const glm::dvec3& p, double& T) {
-    if (l >= shadowCache.size()) return false;
-    for (size_t i = 0; i < volumes.size(); ++i) {
-      ShadowLookup& c = shadowCache[l][i];
+  std::vector<LightLookup> lightCache;
+  void cacheLighting(const VolumeLighting& lighting);
+  // The cached in-scattered light at camera point p (false: none cached there).
+  bool cachedLight(const glm::dvec3& p, double S[3]) {
+    for (size_t i = 0; i < lightCache.size(); ++i) {
+      LightLookup& c = lightCache[i];
       if (!c.grid) continue;
       const PerVolume& pv = volumes[i];
-      const glm::dvec3 f = glm::dvec3(pv.cameraToFile * glm::dvec4(p, 1.0));
+      const glm::dvec3 f = pv.toFile(p);
       if (f.x < pv.lo.x || f.y < pv.lo.y || f.z < pv.lo.z || f.x > pv.hi.x || f.y > pv.hi.y || f.z > pv.hi.z) continue;
-      T = double(openvdb::tools::BoxSampler::sample(*c.acc, apply(c.index, f)));
+      const openvdb::Vec3s v = openvdb::tools::BoxSampler::sample(*c.acc, c.index.vdb(p));
+      S[0] = v.x(), S[1] = v.y(), S[2] = v.z();
       return true;
     }
     return false;
+  }
+  // The light arriving at camera point p and scattered toward the eye (direction toEye), over
+  // every light: Σ Cl · T(to the light) · phase, with the ambient lights' colour unshadowed.
+  void inScattered(const glm::dvec3& p, const glm::dvec3& toEye, double g, double seconds, double S[3], uint64_t& lookups) {
+    S[0] = S[1] = S[2] = 0;
+    for (const store::StoredLight& light : camera.lights) {
+      if (light.kind == store::StoredLight::Kind::Ambient) {
+        for (int k = 0; k < 3; ++k) S[k] += light.colour[k];
+        continue;
+      }
+      glm::dvec3 L, Cl;
+      if (!light.illuminate(p, L, Cl)) continue;
+      const double dist = light.kind == store::StoredLight::Kind::Distant ? INFINITY : glm::length(L);
+      const glm::dvec3 l = glm::normalize(L);
+      const double cosTheta = -glm::dot(l, toEye);
+      const double phase = g == 0 ? 1.0 : (1 - g * g) / std::pow(1 + g * g - 2 * g * cosTheta, 1.5);
+      const double T = transmittance(p, l, dist, seconds, lookups);
+      for (int k = 0; k < 3; ++k) S[k] += Cl[k] * phase * T;
+    }
   }
   const VolumeScene& scene;
   VolumeCamera camera;
@@ -263,27 +296,28 @@ struct VolumeTracer::Impl {
   void medium(const glm::dvec3& p, double seconds, double& sigma, double e[3], double scatter[3], double& g, uint64_t& lookups) {
     double gw = 0;
     for (auto& pv : volumes) {
-      glm::dvec3 f = glm::dvec3(pv.cameraToFile * glm::dvec4(p, 1.0));
+      glm::dvec3 f = pv.toFile(p);
       if (f.x < pv.lo.x || f.y < pv.lo.y || f.z < pv.lo.z || f.x > pv.hi.x || f.y > pv.hi.y || f.z > pv.hi.z) continue;
       const auto& v = *pv.v;
-      if (pv.velocity && seconds != 0.0) {
+      const bool advected = pv.velocity && seconds != 0.0;
+      if (advected) {
         // Semi-Lagrangian: the density here at this time is the file's density where the flow
         // carried it from (velocity sampled here).
-        const openvdb::Vec3s vel = openvdb::tools::BoxSampler::sample(*pv.velocity, apply(v.velocityIndex, f));
+        const openvdb::Vec3s vel = openvdb::tools::BoxSampler::sample(*pv.velocity, pv.fileToVelocity.vdb(f));
         f -= glm::dvec3(vel.x(), vel.y(), vel.z()) * seconds;
       }
       ++lookups;
-      const float d = openvdb::tools::BoxSampler::sample(pv.density, apply(v.densityIndex, f));
+      const float d = openvdb::tools::BoxSampler::sample(pv.density, advected ? pv.fileToDensity.vdb(f) : pv.toDensity.vdb(p));
       if (d > 0.f) {
         const double s = double(d) * v.spec.densityScale;
         sigma += s, gw += s * v.spec.anisotropy;
         for (int k = 0; k < 3; ++k) scatter[k] += s * v.spec.albedo[k];
       }
       if (pv.emissionScalar) {
-        const float em = openvdb::tools::BoxSampler::sample(*pv.emissionScalar, apply(v.emissionIndex, f));
+        const float em = openvdb::tools::BoxSampler::sample(*pv.emissionScalar, advected ? apply(v.emissionIndex, f) : pv.toEmission.vdb(p));
         for (int k = 0; k < 3; ++k) e[k] += double(em) * v.spec.emissionColour[k];
       } else if (pv.emissionColour) {
-        const openvdb::Vec3s em = openvdb::tools::BoxSampler::sample(*pv.emissionColour, apply(v.emissionIndex, f));
+        const openvdb::Vec3s em = openvdb::tools::BoxSampler::sample(*pv.emissionColour, advected ? apply(v.emissionIndex, f) : pv.toEmission.vdb(p));
         for (int k = 0; k < 3; ++k) e[k] += double(em[k]) * v.spec.emissionColour[k];
       }
     }
@@ -324,7 +358,6 @@ struct VolumeTracer::Impl {
 VolumeTracer::VolumeTracer(const VolumeScene& scene, const VolumeCamera& camera, double earliest, double latest, const VolumeLighting* lighting)
     : impl_(std::make_unique<Impl>(scene, camera)) {
   Impl& m = *impl_;
-  if (lighting) m.cacheShadows(*lighting);
   m.cameraToWorld = glm::inverse(camera.worldToCamera);
   const double maxSeconds = std::max(std::abs(earliest - camera.referenceFrame), std::abs(latest - camera.referenceFrame)) / camera.framesPerSecond;
   m.volumes.reserve(scene.impl().volumes.size());
@@ -338,6 +371,8 @@ VolumeTracer::VolumeTracer(const VolumeScene& scene, const VolumeCamera& camera,
     worldToFile[3] = glm::dvec4(-v.spec.translate / v.spec.scale, 1.0);
     pv.cameraToFile = worldToFile * m.cameraToWorld;
     pv.voxelInCamera = v.voxelSize / glm::length(glm::dvec3(pv.cameraToFile[0]));
+    pv.toFile = Affine(pv.cameraToFile), pv.toDensity = Affine(v.densityIndex * pv.cameraToFile), pv.toEmission = Affine(v.emissionIndex * pv.cameraToFile);
+    pv.fileToDensity = Affine(v.densityIndex), pv.fileToVelocity = Affine(v.velocityIndex);
     pv.reach = v.maxSpeed * maxSeconds;
     // A moving volume's density comes from up to `reach` away: the dilated intersector covers
     // one voxel; beyond that the march steps through the (widened) bounds instead.
@@ -345,6 +380,7 @@ VolumeTracer::VolumeTracer(const VolumeScene& scene, const VolumeCamera& camera,
     pv.lo = v.fileLo - glm::dvec3(pv.reach), pv.hi = v.fileHi + glm::dvec3(pv.reach);
     m.volumes.push_back(std::move(pv));
   }
+  if (lighting) m.cacheLighting(*lighting);  // needs the volumes' placement
 }
 
 VolumeTracer::~VolumeTracer() = default;
@@ -461,33 +497,16 @@ void VolumeTracer::integrate(double x, double y, double t, double z0, double z1,
       double sigma = 0, e[3] = {0, 0, 0}, scatter[3] = {0, 0, 0}, phaseG = 0;
       m.medium(p, seconds, sigma, e, scatter, phaseG, stats_.steps);
       if (sigma > 0 && !m.camera.lights.empty()) {
-        // Single scattering: each light's colour here, through the medium toward it, by the
+        // Single scattering: the lights' colour here, through the medium toward each, by the
         // phase function (normalised so that isotropic scattering is 1, as RenderMan's volume
         // shaders light), times the albedo-weighted extinction below.
-        const glm::dvec3 toEye = -glm::normalize(dir);
-        double inScatter[3] = {0, 0, 0};
-        for (const store::StoredLight& light : m.camera.lights) {
-          if (light.kind == store::StoredLight::Kind::Ambient) {
-            for (int k = 0; k < 3; ++k) inScatter[k] += light.colour[k];
-            continue;
-          }
-          glm::dvec3 L, Cl;
-          if (!light.illuminate(p, L, Cl)) continue;
-          const double dist = light.kind == store::StoredLight::Kind::Distant ? INFINITY : glm::length(L);
-          const glm::dvec3 l = glm::normalize(L);
-          const double g = phaseG, cosTheta = -glm::dot(l, toEye);
-          const double phase = g == 0 ? 1.0 : (1 - g * g) / std::pow(1 + g * g - 2 * g * cosTheta, 1.5);
-          double shadow;
-          if (m.cachedShadow(size_t(&light - m.camera.lights.data()), p, shadow)) ++stats_.cachedShadows;
-          else shadow = m.transmittance(p, l, dist, seconds, stats_.shadowSteps);
-          for (int k = 0; k < 3; ++k) inScatter[k] += Cl[k] * phase * shadow;
-        }
-        for (int k = 0; k < 3; ++k) scatter[k] = scatter[k] / sigma * inScatter[k];
+        double S[3];
+        if (m.cachedLight(p, S)) ++stats_.cachedShadows;
+        else m.inScattered(p, -glm::normalize(dir), phaseG, seconds, S, stats_.shadowSteps);
+        for (int k = 0; k < 3; ++k) scatter[k] = scatter[k] / sigma * S[k];
       } else {
         scatter[0] = scatter[1] = scatter[2] = 0;
       }
-      // Over the step the medium is taken as constant: transmittance e^{-σ ds}, and the
-      // emission it adds toward the eye ∫ e^{-σ s} E ds = E (1 - e^{-σ ds}) / σ.
       // The scattered light: the albedo-weighted extinction times the in-scattered light, whose
       // σ cancels the gain's division: albedo · S · (1 - e^{-σ ds}).
       const double tau = sigma * ds;
@@ -514,28 +533,27 @@ void VolumeTracer::integrate(double x, double y, double t, double z0, double z1,
 // Lighting: cached shadows
 
 struct VolumeLighting::Impl {
-  // grids[l][v]: light l's transmittance over volume v's cache lattice (null: not cached).
-  std::vector<std::vector<FloatGrid::Ptr>> grids;
+  std::vector<Vec3SGrid::Ptr> grids;  // per volume: the in-scattered light on its lattice (null: not cached)
   uint64_t steps = 0;
 };
 
 VolumeLighting::VolumeLighting(const VolumeScene& scene, const VolumeCamera& camera) : impl_(std::make_unique<Impl>()) {
   const auto& volumes = scene.impl().volumes;
-  impl_->grids.assign(camera.lights.size(), std::vector<FloatGrid::Ptr>(volumes.size()));
-  // Shadow rays are marched by tracers of their own, one per thread; time = the reference frame.
+  impl_->grids.resize(volumes.size());
+  // Shadow rays are marched by tracers of their own, one per thread, at the reference frame.
   tbb::enumerable_thread_specific<std::unique_ptr<VolumeTracer>> tracers;
   std::atomic<uint64_t> steps{0};
   for (size_t v = 0; v < volumes.size(); ++v) {
     const auto& vol = volumes[v];
-    if (vol.velocity) continue;  // its shadows move with it: marched per step instead
+    if (vol.velocity) continue;  // its light moves with it: lit per step instead
     // The lattice: twice the voxel size, over every active voxel (or tile) dilated by the
     // interpolation's reach.
     openvdb::math::Transform::Ptr xform = vol.density->transform().copy();
     xform->preScale(2.0);
-    FloatGrid::Ptr lattice = FloatGrid::create(1.f);
-    lattice->setTransform(xform);
+    Vec3SGrid::Ptr grid = Vec3SGrid::create(openvdb::Vec3s(0.f));
+    grid->setTransform(xform);
     {
-      auto acc = lattice->getAccessor();
+      auto acc = grid->getAccessor();
       for (auto it = vol.density->cbeginValueOn(); it; ++it) {
         openvdb::CoordBBox box;
         it.getBoundingBox(box);
@@ -543,37 +561,32 @@ VolumeLighting::VolumeLighting(const VolumeScene& scene, const VolumeCamera& cam
         const openvdb::Coord hi((box.max().x() + 2) >> 1, (box.max().y() + 2) >> 1, (box.max().z() + 2) >> 1);
         for (int x = lo.x(); x <= hi.x(); ++x)
           for (int y = lo.y(); y <= hi.y(); ++y)
-            for (int z = lo.z(); z <= hi.z(); ++z) acc.setValueOn(openvdb::Coord(x, y, z), 1.f);
+            for (int z = lo.z(); z <= hi.z(); ++z) acc.setValueOn(openvdb::Coord(x, y, z));
       }
     }
-    // World (file) → camera for this volume: the tracer's own placement, inverted.
+    // File world → camera for this volume: the tracer's placement, inverted.
     VolumeTracer probe(scene, camera, camera.referenceFrame, camera.referenceFrame);
     const glm::dmat4 fileToCamera = glm::inverse(probe.impl_->volumes[v].cameraToFile);
-    for (size_t l = 0; l < camera.lights.size(); ++l) {
-      const store::StoredLight& light = camera.lights[l];
-      if (light.kind == store::StoredLight::Kind::Ambient) continue;
-      FloatGrid::Ptr grid = lattice->deepCopy();
-      openvdb::tree::LeafManager<openvdb::FloatTree> leaves(grid->tree());
-      tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves.leafCount()), [&](const tbb::blocked_range<size_t>& range) {
-        auto& tracer = tracers.local();
-        if (!tracer) tracer = std::make_unique<VolumeTracer>(scene, camera, camera.referenceFrame, camera.referenceFrame);
-        uint64_t lookups = 0;
-        for (size_t i = range.begin(); i != range.end(); ++i)
-          for (auto it = leaves.leaf(i).beginValueOn(); it; ++it) {
-            const glm::dvec3 f = toGlm(grid->indexToWorld(it.getCoord()));
-            const glm::dvec3 p = glm::dvec3(fileToCamera * glm::dvec4(f, 1.0));
-            glm::dvec3 L, Cl;
-            float T = 1.f;
-            if (light.illuminate(p, L, Cl)) {
-              const double dist = light.kind == store::StoredLight::Kind::Distant ? INFINITY : glm::length(L);
-              T = float(tracer->impl_->transmittance(p, glm::normalize(L), dist, 0.0, lookups));
-            }
-            it.setValue(T);
-          }
-        steps += lookups;
-      });
-      impl_->grids[l][v] = grid;
-    }
+    const double g = vol.spec.anisotropy;
+    openvdb::tree::LeafManager<openvdb::Vec3STree> leaves(grid->tree());
+    tbb::parallel_for(tbb::blocked_range<size_t>(0, leaves.leafCount()), [&](const tbb::blocked_range<size_t>& range) {
+      auto& tracer = tracers.local();
+      if (!tracer) tracer = std::make_unique<VolumeTracer>(scene, camera, camera.referenceFrame, camera.referenceFrame);
+      uint64_t lookups = 0;
+      for (size_t i = range.begin(); i != range.end(); ++i)
+        for (auto it = leaves.leaf(i).beginValueOn(); it; ++it) {
+          const glm::dvec3 f = toGlm(grid->indexToWorld(it.getCoord()));
+          const glm::dvec3 p = glm::dvec3(fileToCamera * glm::dvec4(f, 1.0));
+          // Toward the eye: exact for a perspective camera (the eye is the origin), the view
+          // axis for an orthographic one.
+          const glm::dvec3 toEye = camera.perspective ? -glm::normalize(p) : glm::dvec3(0, 0, -1);
+          double S[3];
+          tracer->impl_->inScattered(p, toEye, g, 0.0, S, lookups);
+          it.setValue(openvdb::Vec3s(float(S[0]), float(S[1]), float(S[2])));
+        }
+      steps += lookups;
+    });
+    impl_->grids[v] = grid;
   }
   impl_->steps = steps;
 }
@@ -581,19 +594,71 @@ VolumeLighting::VolumeLighting(const VolumeScene& scene, const VolumeCamera& cam
 VolumeLighting::~VolumeLighting() = default;
 uint64_t VolumeLighting::buildSteps() const { return impl_->steps; }
 
-void VolumeTracer::Impl::cacheShadows(const VolumeLighting& lighting) {
+void VolumeTracer::Impl::cacheLighting(const VolumeLighting& lighting) {
   const auto& grids = lighting.impl().grids;
-  shadowCache.resize(grids.size());
-  for (size_t l = 0; l < grids.size(); ++l) {
-    shadowCache[l].resize(grids[l].size());
-    for (size_t v = 0; v < grids[l].size(); ++v)
-      if (const FloatGrid::Ptr& g = grids[l][v]) {
-        ShadowLookup& c = shadowCache[l][v];
-        c.grid = g.get();
-        c.acc.emplace(g->getConstAccessor());
-        c.index = indexFromWorld(*g);
+  lightCache.resize(grids.size());
+  for (size_t v = 0; v < grids.size(); ++v)
+    if (const Vec3SGrid::Ptr& g = grids[v]) {
+      LightLookup& c = lightCache[v];
+      c.grid = g.get();
+      c.acc.emplace(g->getConstAccessor());
+      c.index = Affine(indexFromWorld(*g) * volumes[v].cameraToFile);
+    }
+}
+
+// ------------------------------------------------------------------------------------------
+// A procedural puff
+
+namespace {
+
+// Value noise in [0, 1] on the integer lattice, trilinear with a smoothstep fade.
+double valueNoise(const glm::dvec3& p, uint64_t seed) {
+  const glm::dvec3 fl = glm::floor(p), f = p - fl;
+  const glm::dvec3 u = f * f * (3.0 - 2.0 * f);
+  auto at = [&](int dx, int dy, int dz) {
+    const uint64_t key = seed ^ (uint64_t(int64_t(fl.x) + dx) * 0x9E3779B97F4A7C15ull) ^ (uint64_t(int64_t(fl.y) + dy) * 0xC2B2AE3D27D4EB4Full) ^
+                         (uint64_t(int64_t(fl.z) + dz) * 0x165667B19E3779F9ull);
+    return toUnitDouble(mix64(key));
+  };
+  double x00 = at(0, 0, 0) + u.x * (at(1, 0, 0) - at(0, 0, 0)), x10 = at(0, 1, 0) + u.x * (at(1, 1, 0) - at(0, 1, 0));
+  double x01 = at(0, 0, 1) + u.x * (at(1, 0, 1) - at(0, 0, 1)), x11 = at(0, 1, 1) + u.x * (at(1, 1, 1) - at(0, 1, 1));
+  const double y0 = x00 + u.y * (x10 - x00), y1 = x01 + u.y * (x11 - x01);
+  return y0 + u.z * (y1 - y0);
+}
+
+}  // namespace
+
+void writeSmokePuff(const std::string& path, const SmokePuff& puff) {
+  std::call_once(vdbInitialised, [] { openvdb::initialize(); });
+  FloatGrid::Ptr grid = FloatGrid::create(0.f);
+  grid->setTransform(openvdb::math::Transform::createLinearTransform(puff.voxelSize));
+  grid->setName("density");
+  grid->setGridClass(openvdb::GRID_FOG_VOLUME);
+  auto acc = grid->getAccessor();
+  const double reach = puff.radius * 1.35;
+  const int n = int(std::ceil(reach / puff.voxelSize));
+  const openvdb::Coord c(int(std::lround(puff.centre.x / puff.voxelSize)), int(std::lround(puff.centre.y / puff.voxelSize)),
+                         int(std::lround(puff.centre.z / puff.voxelSize)));
+  for (int i = -n; i <= n; ++i)
+    for (int j = -n; j <= n; ++j)
+      for (int k = -n; k <= n; ++k) {
+        const glm::dvec3 q = glm::dvec3(i, j, k) * puff.voxelSize;  // from the centre
+        const double r = glm::length(q) / puff.radius;
+        if (r > 1.35) continue;
+        // Three octaves of noise push the surface in and out by up to a third of the radius.
+        const glm::dvec3 at = (puff.centre + q) / puff.radius;
+        const double fbm = (valueNoise(at * 2.0, puff.seed) * 4 + valueNoise(at * 4.0, puff.seed + 1) * 2 + valueNoise(at * 8.0, puff.seed + 2)) / 7;
+        const double edge = 1.0 - r + 0.35 * (fbm - 0.5) * 2;
+        const double d = std::clamp(edge / 0.3, 0.0, 1.0);
+        if (d > 1e-3) acc.setValue(c.offsetBy(i, j, k), float(d * d * (3 - 2 * d)));
       }
+  AtomicFile file(path);
+  try {
+    openvdb::io::File(file.tempPath()).write({grid});
+  } catch (const std::exception& e) {
+    fail(path, "writing the OpenVDB file failed: ", e.what());
   }
+  file.commit();
 }
 
 }  // namespace reshutter::resample

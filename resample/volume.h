@@ -49,8 +49,8 @@ struct VolumeOptions {
   bool skipEmpty = true;
   /// Step of the shadow rays toward each light (single scattering's self-shadowing), in voxels.
   float shadowStep = 1.0f;
-  /// Look shadows up in a per-render cache (VolumeLighting) rather than marching a shadow ray
-  /// from every step: about 7x faster, and within the cache's interpolation of the exact rays.
+  /// Look the in-scattered light up in a per-render cache (VolumeLighting) rather than marching a
+  /// shadow ray per light from every step: within the cache's interpolation of the exact rays.
   bool cacheShadows = true;
 };
 
@@ -117,15 +117,17 @@ struct VolumeStats {
   uint64_t rays = 0;           // ray segments that reached a volume's bounds
   uint64_t steps = 0;          // density lookups along them
   uint64_t shadowSteps = 0;    // density lookups along shadow rays (the shadow cache's included)
-  uint64_t cachedShadows = 0;  // shadows looked up in the cache (VolumeLighting) instead
+  uint64_t cachedShadows = 0;  // steps whose in-scattered light came from the cache (VolumeLighting)
   void add(const VolumeStats& o) { rays += o.rays, steps += o.steps, shadowSteps += o.shadowSteps, cachedShadows += o.cachedShadows; }
 };
 
-/// One render's lighting of its volumes: each light's transmittance through the medium, cached
-/// on a lattice of twice each volume's voxel size over its active voxels, so that single
-/// scattering looks it up instead of marching a shadow ray from every step. Built once per render
-/// (in parallel); volumes that move with a velocity grid are not cached (their shadows move with
-/// them: their steps march shadow rays).
+/// One render's lighting of its volumes: the light every light sends through the medium and
+/// scatters toward the eye (shadowed, by the phase function), cached on a lattice of twice each
+/// volume's voxel size over its active voxels, so that single scattering looks it up instead of
+/// marching a shadow ray per light from every step. The direction to the eye is exact for a
+/// perspective camera (the eye is camera space's origin). Built once per render, in parallel;
+/// volumes that move with a velocity grid are not cached (their light moves with them: their
+/// steps march shadow rays).
 class VolumeLighting {
  public:
   VolumeLighting(const VolumeScene& scene, const VolumeCamera& camera);
@@ -163,5 +165,17 @@ class VolumeTracer {
   std::unique_ptr<Impl> impl_;
   VolumeStats stats_;
 };
+
+/// A procedural smoke puff, for the demo and the benchmarks: density 1 inside a sphere whose
+/// surface is pushed in and out by fractal value noise, falling off smoothly over its rim;
+/// written as an OpenVDB file with one `density` grid (the file's world = the caller's world).
+struct SmokePuff {
+  glm::dvec3 centre{0.0};
+  double radius = 1;
+  double voxelSize = 0.05;
+  uint64_t seed = 1;
+};
+/// Throws Error naming the file if it cannot be written.
+void writeSmokePuff(const std::string& path, const SmokePuff& puff);
 
 }  // namespace reshutter::resample
