@@ -37,7 +37,7 @@ struct RenderOptions {
   double deepTolerance = 0.01;
   bool deepAllChannels = false;  // ZBack and AR AG AB even where no sample needs them (farm tiles)
   std::vector<std::string> volumes;  // --volume specs (resample/volume.h)
-  double volumeStep = 0.5;           // voxels
+  double volumeStep = 1.0;           // voxels
   double volumeShadowStep = 1.0;     // voxels
   bool volumeNoSkip = false;         // march through whole bounding boxes (to measure empty-space skipping)
   bool volumeExactShadows = false;   // shadow rays from every step, not the per-render cache
