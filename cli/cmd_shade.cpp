@@ -75,7 +75,7 @@ struct ShadeCommand {
       frame.source = scene;
       std::string skipped;
       for (const auto& [request, count] : frame.skipped) skipped += cat(skipped.empty() ? "" : ", ", grouped(count), " ", request);
-      if (frame.prims.empty() && !skipped.empty()) fail(scene, "frame ", n, ": every primitive was skipped (", skipped, "); nothing to shade");
+      if (frame.prims.empty() && frame.volumes.empty() && !skipped.empty()) fail(scene, "frame ", n, ": every primitive was skipped (", skipped, "); nothing to shade");
       const std::string path = expandFramePattern(output, n);
       shade::StoreResult r = shade::shadeToStore(frame, opt, path);
       ++written;

@@ -43,7 +43,7 @@ using namespace store;
 struct Summary {
   uint64_t micropolygons = 0, vertices = 0, parts = 0, tiles = 0, behindCamera = 0;
   uint64_t timedMicropolygons = 0, timedParts = 0, timedBytes = 0, timedColourBytes = 0;  // parts shaded in time
-  std::map<std::string, uint64_t> effectParts;  // effect name → parts
+  std::map<std::string, uint64_t> effectParts;                                            // effect name → parts
   RasterRect screen;
 };
 
@@ -126,6 +126,9 @@ int runInfo(const std::string& path, bool json) {
     for (double t : m.shadingTimes) j.value(nullptr, t);
     j.endArray().value("grids", m.shadedInTimeGrids).value("micropolygons", s.timedMicropolygons).value("parts", s.timedParts);
     j.value("part_bytes", s.timedBytes).value("raw_colour_bytes", s.timedColourBytes).endObject();
+    j.value("lights", uint64_t(m.lights.size())).beginArray("volumes");
+    for (const auto& v : m.volumes) j.beginObject().value("path", v.path).value("density", v.density).value("knots", uint64_t(v.times.size())).endObject();
+    j.endArray();
     j.value("provenance", m.provenance).endObject();
     std::printf("%s\n", j.str().c_str());
     return 0;
@@ -152,6 +155,13 @@ int runInfo(const std::string& path, bool json) {
                 knotList(m.shadingTimes).c_str(), grouped(m.shadedInTimeGrids).c_str(), grouped(s.timedMicropolygons).c_str(), grouped(s.timedParts).c_str(),
                 humanBytes(double(s.timedBytes)).c_str());
   }
+  static const char* const kLightKinds[] = {"ambient", "distant", "point", "spot", "area"};
+  std::string lights;
+  for (const auto& l : m.lights) lights += cat(lights.empty() ? "" : ", ", kLightKinds[size_t(l.kind)]);
+  std::printf("  lights         %s\n", lights.empty() ? "none recorded (volumes added at re-sample time only absorb and emit)" : lights.c_str());
+  for (size_t i = 0; i < m.volumes.size(); ++i)
+    std::printf("  %-14s %s (grid '%s'%s)\n", i == 0 ? "volumes" : "", m.volumes[i].path.c_str(), m.volumes[i].density.c_str(),
+                m.volumes[i].times.size() > 1 ? cat(", moving: ", m.volumes[i].times.size(), " knots").c_str() : "");
   if (!s.screen.empty) std::printf("  screen bounds  x [%.1f, %.1f]  y [%.1f, %.1f] over the shutter\n", s.screen.x0, s.screen.x1, s.screen.y0, s.screen.y1);
   std::string eff;
   for (const auto& [name, n] : s.effectParts) eff += cat(eff.empty() ? "" : ", ", name, " ", n);

@@ -75,6 +75,7 @@ void RenderOptions::addTo(CLI::App* app) {
   app->add_flag("--volume-exact-shadows", volumeExactShadows,
                 "March a shadow ray toward each light from every step instead of looking shadows up in the per-render cache (slower)")
       ->group("Volumes");
+  app->add_flag("--no-scene-volumes", noSceneVolumes, "Leave out the volumes the scene itself holds (RIB Volume requests the store records)")->group("Volumes");
   app->add_flag("--volume-no-skip", volumeNoSkip, "March through each volume's whole bounding box instead of skipping empty space (to measure it)")
       ->group("Volumes");
   app->add_flag("--stats", stats, "Print sample tests, hits, efficiency and time per phase")->group("Performance");
@@ -142,6 +143,7 @@ void RenderOptions::applyTo(resample::RenderSpec& spec) const {
   spec.deepOptions.tolerance = float(deepTolerance);
   resample::parseDeepCompression(deepCompression, "--deep-compression");
   parseQuantize(quantize, dither);
+  spec.sceneVolumes = !noSceneVolumes;
   if (!volumes.empty()) {
     if (!loadedVolumes) {
       std::vector<resample::VolumeSpec> specs;

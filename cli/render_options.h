@@ -41,6 +41,7 @@ struct RenderOptions {
   double volumeShadowStep = 1.0;     // voxels
   bool volumeNoSkip = false;         // march through whole bounding boxes (to measure empty-space skipping)
   bool volumeExactShadows = false;   // shadow rays from every step, not the per-render cache
+  bool noSceneVolumes = false;       // leave out the store's own volumes
   mutable std::shared_ptr<const resample::VolumeScene> loadedVolumes;  // loaded once, by the first applyTo()
 
   void addTo(CLI::App* app);

@@ -17,6 +17,7 @@
 
 #include "common/check.h"
 #include "common/error.h"
+#include "common/log.h"
 #include "common/progress.h"
 
 namespace reshutter::resample {
@@ -285,18 +286,29 @@ struct Plan {
     for (const auto& t : aovTables) margin = std::max(margin, t->margin());
     rasterOptions = spec.raster;
     rasterOptions.surfaceIds = spec.deep;  // only deep output reads them back
-    if (spec.volumes) {
+    // The volumes: those the caller adds, and the scene's own the store records.
+    volumes = spec.volumes;
+    if (!meta0.volumes.empty() && spec.sceneVolumes) {
+      std::vector<VolumeSpec> fromStore;
+      for (const store::StoredVolume& v : meta0.volumes) fromStore.push_back(VolumeSpec::fromStore(v));
+      auto scene =
+          spec.volumes ? std::make_shared<const VolumeScene>(*spec.volumes, fromStore) : std::make_shared<const VolumeScene>(fromStore, VolumeOptions{});
+      for (size_t w = spec.volumes ? spec.volumes->warnings().size() : 0; w < scene->warnings().size(); ++w) warnOnce("store-volume", scene->warnings()[w]);
+      volumes = std::move(scene);
+    }
+    if (volumes) {
       volumeCamera.ax = view.ax, volumeCamera.bx = view.bx, volumeCamera.ay = view.ay, volumeCamera.by = view.by;
       volumeCamera.perspective = view.perspective;
       volumeCamera.worldToCamera = cam.worldToCamera;
       volumeCamera.framesPerSecond = double(meta0.fps.num) / double(meta0.fps.den);
       volumeCamera.referenceFrame = double(spec.sources[0].frame);
       volumeCamera.lights = meta0.lights;
-      if (!meta0.lights.empty() && spec.volumes->options().cacheShadows) volumeLighting = std::make_unique<const VolumeLighting>(*spec.volumes, volumeCamera);
+      if (!meta0.lights.empty() && volumes->options().cacheShadows) volumeLighting = std::make_unique<const VolumeLighting>(*volumes, volumeCamera);
     }
   }
-  VolumeCamera volumeCamera;                             // with spec.volumes
-  std::unique_ptr<const VolumeLighting> volumeLighting;  // with spec.volumes and lights
+  std::shared_ptr<const VolumeScene> volumes;            // spec.volumes and the store's own
+  VolumeCamera volumeCamera;                             // with volumes
+  std::unique_ptr<const VolumeLighting> volumeLighting;  // with volumes and lights
 
   const RenderSpec& spec;
   const std::vector<Source> sources;  // spec.sources, with the ends they share marked
@@ -354,7 +366,7 @@ std::unique_ptr<DeepFormer> setUpDeep(const Plan& plan, DeepImage& deep) {
   const Window& w = plan.win;
   deep.reset(w.x0, w.y0, w.x1 - w.x0, w.y1 - w.y0, w.W, w.H, deepLayoutOf(plan.aovs, plan.meta0.schema), plan.buckets.size());
   deep.objectNames = plan.spec.objectNames.empty() ? objectNamesFromProvenance(plan.meta0.provenance) : plan.spec.objectNames;
-  if (plan.spec.volumes && !deep.objectNames.empty()) deep.objectNames[kVolumeObjectId] = "volumes";
+  if (plan.volumes && !deep.objectNames.empty()) deep.objectNames[kVolumeObjectId] = "volumes";
   return std::make_unique<DeepFormer>(deep, plan.mainTable, plan.pattern, plan.spec.deepOptions);
 }
 
@@ -383,9 +395,8 @@ struct ThreadState {
   BucketRasterizer& rasterizer(const Plan& plan) {
     if (!raster) {
       raster = std::make_unique<BucketRasterizer>(plan.pattern, plan.shutter, plan.view, plan.aovs, plan.rasterOptions);
-      if (plan.spec.volumes) {
-        volumes =
-            std::make_unique<VolumeTracer>(*plan.spec.volumes, plan.volumeCamera, plan.shutter.earliest(), plan.shutter.latest(), plan.volumeLighting.get());
+      if (plan.volumes) {
+        volumes = std::make_unique<VolumeTracer>(*plan.volumes, plan.volumeCamera, plan.shutter.earliest(), plan.shutter.latest(), plan.volumeLighting.get());
         // Deep volume samples: depth slices four deep tolerances thick (4 % of the depth by
         // default) - enough for holdouts inside the medium, few enough to keep pixels small.
         raster->setVolumes(volumes.get(), 1.0 + 4.0 * std::max(1e-4, double(plan.spec.deepOptions.tolerance)));

@@ -61,6 +61,8 @@ struct RenderSpec {
   /// Volumes to render in front of and between the stores' surfaces (resample/volume.h), placed
   /// in the world of sources[0]'s camera at sources[0]'s frame; null: none, at no cost.
   std::shared_ptr<const VolumeScene> volumes;
+  /// Render the scene's own volumes the store records (RIB `Volume` requests) too.
+  bool sceneVolumes = true;
 };
 
 struct RenderStats {

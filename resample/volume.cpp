@@ -116,7 +116,7 @@ struct VolumeScene::Impl {
     FloatGrid::Ptr emissionScalar;
     Vec3SGrid::Ptr emissionColour;
     Vec3SGrid::Ptr velocity;
-    std::unique_ptr<Intersector> intersector;  // the master the tracers copy (shallowly)
+    std::shared_ptr<const Intersector> intersector;  // the master the tracers copy (shallowly)
     // The active voxels' bounds (dilated by the interpolation's reach) in the file's world space.
     glm::dvec3 fileLo{0.0}, fileHi{0.0};
     double maxSpeed = 0;                                                   // file world units per second
@@ -197,7 +197,7 @@ VolumeScene::VolumeScene(const std::vector<VolumeSpec>& specs, const VolumeOptio
       continue;
     }
     // Dilated by one voxel: trilinear interpolation reaches one voxel beyond the active ones.
-    v.intersector = std::make_unique<Intersector>(*v.density, 1);
+    v.intersector = std::make_shared<const Intersector>(*v.density, 1);
     const openvdb::CoordBBox box = v.intersector->bbox();
     glm::dvec3 lo(INFINITY), hi(-INFINITY);
     for (int c = 0; c < 8; ++c) {
@@ -220,6 +220,18 @@ VolumeScene::VolumeScene(const std::vector<VolumeSpec>& specs, const VolumeOptio
   }
 }
 
+VolumeScene::VolumeScene(const VolumeScene& base, const std::vector<VolumeSpec>& more) : VolumeScene(more, base.options()) {
+  impl_->volumes.insert(impl_->volumes.begin(), base.impl_->volumes.begin(), base.impl_->volumes.end());
+  warnings_.insert(warnings_.begin(), base.warnings_.begin(), base.warnings_.end());
+}
+
+VolumeSpec VolumeSpec::fromStore(const store::StoredVolume& v) {
+  VolumeSpec s;
+  s.path = v.path, s.density = v.density;
+  s.times = v.times, s.fileToCamera = v.fileToCamera;
+  return s;
+}
+
 VolumeScene::~VolumeScene() = default;
 size_t VolumeScene::size() const { return impl_->volumes.size(); }
 
@@ -237,10 +249,11 @@ struct VolumeTracer::Impl {
     glm::dmat4 cameraToFile{1.0};
     Affine toFile, toDensity, toEmission;  // camera space → file world, density and emission index space
     Affine fileToDensity, fileToVelocity;  // file world → index space (after a velocity's backtrace)
-    double voxelInCamera = 1;     // a voxel's size in camera-space units
-    double reach = 0;             // file world units the velocity can carry density over the render's times
-    bool hdda = true;             // the intersector's dilation covers the reach
-    glm::dvec3 lo{0.0}, hi{0.0};  // file world bounds widened by the reach
+    double voxelInCamera = 1;              // a voxel's size in camera-space units
+    double reach = 0;                      // file world units the velocity can carry density over the render's times
+    bool hdda = true;                      // the intersector's dilation covers the reach
+    glm::dvec3 lo{0.0}, hi{0.0};           // file world bounds widened by the reach
+    bool moving = false;                   // placed by a moving transform: placed again per ray (placeAt)
   };
   Impl(const VolumeScene& s, const VolumeCamera& c) : scene(s), camera(c) {}
   // The in-scattered light cached per volume (VolumeLighting), null where not cached.
@@ -283,6 +296,28 @@ struct VolumeTracer::Impl {
       const double T = transmittance(p, l, dist, seconds, lookups);
       for (int k = 0; k < 3; ++k) S[k] += Cl[k] * phase * T;
     }
+  }
+  // Places a volume: camera space → its file's world space, and the maps derived from it.
+  void place(PerVolume& pv, const glm::dmat4& cameraToFile) {
+    const auto& v = *pv.v;
+    pv.cameraToFile = cameraToFile;
+    pv.voxelInCamera = v.voxelSize / glm::length(glm::dvec3(cameraToFile[0]));
+    pv.toFile = Affine(cameraToFile), pv.toDensity = Affine(v.densityIndex * cameraToFile), pv.toEmission = Affine(v.emissionIndex * cameraToFile);
+  }
+  // A moving scene volume's transform at frame-relative time tau: linear between its knots,
+  // held outside them.
+  static glm::dmat4 fileToCameraAt(const VolumeSpec& s, double tau) {
+    if (tau <= s.times.front()) return s.fileToCamera.front();
+    if (tau >= s.times.back()) return s.fileToCamera.back();
+    size_t k = 0;
+    while (k + 2 < s.times.size() && s.times[k + 1] <= tau) ++k;
+    const double w = (tau - s.times[k]) / (s.times[k + 1] - s.times[k]);
+    return s.fileToCamera[k] + (s.fileToCamera[k + 1] - s.fileToCamera[k]) * w;
+  }
+  // Moving volumes placed where they are at absolute time t.
+  void placeAt(double t) {
+    for (auto& pv : volumes)
+      if (pv.moving) place(pv, glm::inverse(fileToCameraAt(pv.v->spec, t - camera.referenceFrame)));
   }
   const VolumeScene& scene;
   VolumeCamera camera;
@@ -366,12 +401,16 @@ VolumeTracer::VolumeTracer(const VolumeScene& scene, const VolumeCamera& camera,
     if (v.emissionScalar) pv.emissionScalar.emplace(v.emissionScalar->getConstAccessor());
     if (v.emissionColour) pv.emissionColour.emplace(v.emissionColour->getConstAccessor());
     if (v.velocity) pv.velocity.emplace(v.velocity->getConstAccessor());
-    // world = translate + scale · file world  ⇒  file world = (world - translate) / scale.
-    glm::dmat4 worldToFile(1.0 / v.spec.scale);
-    worldToFile[3] = glm::dvec4(-v.spec.translate / v.spec.scale, 1.0);
-    pv.cameraToFile = worldToFile * m.cameraToWorld;
-    pv.voxelInCamera = v.voxelSize / glm::length(glm::dvec3(pv.cameraToFile[0]));
-    pv.toFile = Affine(pv.cameraToFile), pv.toDensity = Affine(v.densityIndex * pv.cameraToFile), pv.toEmission = Affine(v.emissionIndex * pv.cameraToFile);
+    if (!v.spec.fileToCamera.empty()) {
+      // A scene volume: placed in camera space (where it is at its first knot, if it moves).
+      pv.moving = v.spec.fileToCamera.size() > 1;
+      m.place(pv, glm::inverse(v.spec.fileToCamera[0]));
+    } else {
+      // world = translate + scale · file world  ⇒  file world = (world - translate) / scale.
+      glm::dmat4 worldToFile(1.0 / v.spec.scale);
+      worldToFile[3] = glm::dvec4(-v.spec.translate / v.spec.scale, 1.0);
+      m.place(pv, worldToFile * m.cameraToWorld);
+    }
     pv.fileToDensity = Affine(v.densityIndex), pv.fileToVelocity = Affine(v.velocityIndex);
     pv.reach = v.maxSpeed * maxSeconds;
     // A moving volume's density comes from up to `reach` away: the dilated intersector covers
@@ -390,11 +429,15 @@ bool VolumeTracer::touches(double x0, double y0, double x1, double y1) const {
   const VolumeCamera& c = m.camera;
   for (const auto& pv : m.volumes) {
     // The bounds' corners in camera space, projected; a corner at or behind the eye plane makes
-    // the projection unbounded.
-    const glm::dmat4 fileToCamera = glm::inverse(pv.cameraToFile);
+    // the projection unbounded. A moving scene volume's corners move straight between its knots
+    // (the transforms are blended linearly), and so do their projections: the knots bound them.
+    std::vector<glm::dmat4> placements{glm::inverse(pv.cameraToFile)};
+    if (pv.moving) placements = pv.v->spec.fileToCamera;
     double lx = INFINITY, ly = INFINITY, hx = -INFINITY, hy = -INFINITY;
     bool unbounded = false;
-    for (int k = 0; k < 8; ++k) {
+    for (size_t k8 = 0; k8 < 8 * placements.size(); ++k8) {
+      const int k = int(k8 % 8);
+      const glm::dmat4& fileToCamera = placements[k8 / 8];
       const glm::dvec3 f((k & 1) ? pv.hi.x : pv.lo.x, (k & 2) ? pv.hi.y : pv.lo.y, (k & 4) ? pv.hi.z : pv.lo.z);
       const glm::dvec3 p = glm::dvec3(fileToCamera * glm::dvec4(f, 1.0));
       if (c.perspective && !(p.z > 1e-9)) {
@@ -417,6 +460,7 @@ void VolumeTracer::integrate(double x, double y, double t, double z0, double z1,
   out = VolumeSegment{};
   if (!(z1 > z0)) return;
   const VolumeCamera& c = m.camera;
+  m.placeAt(t);
   // Camera-space ray: point(z) = origin + dir · z.
   glm::dvec3 origin(0.0), dir(0.0, 0.0, 1.0);
   if (c.perspective) dir = {(x - c.bx) / c.ax, (y - c.by) / c.ay, 1.0};
@@ -545,7 +589,7 @@ VolumeLighting::VolumeLighting(const VolumeScene& scene, const VolumeCamera& cam
   std::atomic<uint64_t> steps{0};
   for (size_t v = 0; v < volumes.size(); ++v) {
     const auto& vol = volumes[v];
-    if (vol.velocity) continue;  // its light moves with it: lit per step instead
+    if (vol.velocity || vol.spec.fileToCamera.size() > 1) continue;  // its light moves with it: lit per step instead
     // The lattice: twice the voxel size, over every active voxel (or tile) dilated by the
     // interpolation's reach.
     openvdb::math::Transform::Ptr xform = vol.density->transform().copy();

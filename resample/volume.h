@@ -35,6 +35,13 @@ struct VolumeSpec {
   glm::vec3 emissionColour{1.f, 1.f, 1.f};
   glm::vec3 albedo{1.f, 1.f, 1.f};  // scattering / extinction, per channel
   float anisotropy = 0;             // Henyey-Greenstein g: > 0 scatters forward
+  /// A volume of the scene (StoredVolume): placed straight into camera space by these transforms
+  /// at these frame-relative times (linear between them, held outside), instead of the world
+  /// placement above. Empty: placed in the world.
+  std::vector<double> times;
+  std::vector<glm::dmat4> fileToCamera;
+  /// The store's record of a scene volume, as a spec.
+  static VolumeSpec fromStore(const store::StoredVolume& v);
   /// Parses the text above; throws Error naming `where` (an option) on a bad key or value.
   static VolumeSpec parse(const std::string& text, const std::string& where);
 };
@@ -82,6 +89,8 @@ class VolumeScene {
   /// Loads and checks every volume; throws Error naming the file (and grid) on a missing file or
   /// grid, a grid of the wrong type, or non-uniform voxels.
   VolumeScene(const std::vector<VolumeSpec>& specs, const VolumeOptions& options);
+  /// `base`'s volumes (shared, not loaded again) followed by those of `more`, with base's options.
+  VolumeScene(const VolumeScene& base, const std::vector<VolumeSpec>& more);
   ~VolumeScene();
   VolumeScene(const VolumeScene&) = delete;
   VolumeScene& operator=(const VolumeScene&) = delete;

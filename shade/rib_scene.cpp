@@ -328,6 +328,18 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
   }
 
   // Primitives
+  if (n == "Volume" && a.count() >= 1 && a.string(0) == "blobbydso:impl_openvdb") {
+    // Volume "blobbydso:impl_openvdb" [bounds] [nx ny nz] "constant string[2] blobbydso:stringargs"
+    // ["file.vdb" "density"]: the bounds and voxel counts are the file's own business.
+    std::string file, grid = "density";
+    for (const Param& p : a.params(3))
+      if (p.decl.name == "blobbydso:stringargs" && p.value && p.value->kind == Value::Kind::StringArray) {
+        if (!p.value->strings.empty()) file = p.value->strings[0];
+        if (p.value->strings.size() > 1 && !p.value->strings[1].empty()) grid = p.value->strings[1];
+      }
+    if (file.empty()) a.fail("an OpenVDB Volume needs \"blobbydso:stringargs\" [\"file.vdb\" \"grid\"]");
+    return s.volume(file, grid), true;
+  }
   if (n == "Sphere") return s.sphere(a.number(0), a.number(1), a.number(2), a.number(3)), true;
   if (n == "Cylinder") return s.cylinder(a.number(0), a.number(1), a.number(2), a.number(3)), true;
   if (n == "Cone") return s.cone(a.number(0), a.number(1), a.number(2)), true;

@@ -47,7 +47,6 @@ void locate(const std::vector<double>& times, double t, size_t& i, double& w) {
   w = (t - times[i]) / (times[i + 1] - times[i]);
 }
 
-
 // ---------------------------------------------------------------------------------------------
 
 glm::dmat4 MotionXform::at(double t) const {
@@ -576,6 +575,17 @@ void Scene::ris(RisNode node) {
 void Scene::skippedPrimitive(std::string_view request) {
   if (recording_) ++recording_->skipped[std::string(request)];
   else if (inWorld_) ++frame_.skipped[std::string(request)];
+}
+
+void Scene::volume(const std::string& path, const std::string& grid) {
+  if (!inWorld_) error("Volume outside a world block");
+  if (path.empty()) error("Volume without an OpenVDB file");
+  if (recording_) {
+    warnOnce("volume-instance", cat(where, ": a Volume inside an object definition is not instanced; skipped"));
+    ++recording_->skipped["Volume"];
+    return;
+  }
+  frame_.volumes.push_back({path, grid.empty() ? "density" : grid, cur_.ctm});
 }
 
 void Scene::identifier(const std::string& name) {

@@ -264,12 +264,22 @@ struct FrameOptions {
   std::string textureSearchPath;
 };
 
+/// A volume the scene holds (RIB `Volume "blobbydso:impl_openvdb"`, as RenderMan writes OpenVDB
+/// volumes): its file (as given: relative paths are the RIB file's directory's) and density
+/// grid, placed by the transform current at the request - the file's world space is the object's
+/// space. The shading pass records it in the store; the re-sampler renders it.
+struct SceneVolume {
+  std::string path, grid = "density";
+  MotionXform objectToCamera;
+};
+
 /// Everything WorldEnd hands to the shading pass.
 struct FrameScene {
   FrameOptions options;
   MotionXform worldToCamera;
   std::vector<Light> lights;
   std::vector<Primitive> prims;
+  std::vector<SceneVolume> volumes;
   std::vector<std::string> objectNames;
   std::vector<RisNode> risNodes;       // Bxdf, Light, Pattern of the world block
   std::vector<uint32_t> globalLights;  // lights that illuminate every primitive (RIS lights)
@@ -344,6 +354,8 @@ class Scene {
   void ris(RisNode node);
   /// Counts a primitive request the shading pass cannot make (reported per frame).
   void skippedPrimitive(std::string_view request);
+  /// An OpenVDB volume under the current transform (SceneVolume).
+  void volume(const std::string& path, const std::string& grid);
   /// Counts a delayed archive whose bound was culled (never read).
   void archiveCulled() { ++frame_.culledArchives; }
 

@@ -119,6 +119,18 @@ store::StoreMeta storeMeta(const FrameScene& scene, const ShadeOptions& o) {
     if (l.kind == LightKind::Uber) sl.position = glm::dvec3(glm::inverse(l.toLight) * glm::dvec4(0, 0, 0, 1));
     m.lights.push_back(sl);
   }
+  // The scene's volumes, placed in camera space at their transform's times; paths relative to
+  // the RIB file's directory become absolute, so the store finds them wherever it is read.
+  for (const SceneVolume& v : scene.volumes) {
+    store::StoredVolume sv;
+    std::filesystem::path path(v.path);
+    if (path.is_relative()) path = std::filesystem::path(scene.source).parent_path() / path;
+    sv.path = std::filesystem::absolute(path).lexically_normal().string();
+    sv.density = v.grid;
+    if (v.objectToCamera.moving()) sv.times = v.objectToCamera.times, sv.fileToCamera = v.objectToCamera.mats;
+    else sv.times = {iv.open}, sv.fileToCamera = {v.objectToCamera.mats[0]};
+    m.volumes.push_back(std::move(sv));
+  }
   m.validate("store metadata");
   return m;
 }
