@@ -9,6 +9,7 @@
 #include "common/error.h"
 #include "common/log.h"
 #include "common/progress.h"
+#include "resample/volume.h"
 #include "store/reader.h"
 #include "store/synthetic.h"
 #include "store/writer.h"
@@ -240,6 +241,27 @@ void addStoreCommands(CLI::App& app, Registry& registry) {
       double secs = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
       note(cat("wrote ", *out, ": ", grouped(n), " micropolygons, ", humanBytes(double(st.fileBytes)), " (", double(st.fileBytes) / double(n),
                " bytes/micropolygon) in ", secs, " s"));
+      return 0;
+    });
+  }
+  {
+    auto* sub = app.add_subcommand("smoke", "Write a procedural smoke puff as an OpenVDB file (benchmarks, demos): a noisy sphere of density 1");
+    auto puff = std::make_shared<resample::SmokePuff>();
+    auto out = std::make_shared<std::string>();
+    auto centre = std::make_shared<std::vector<double>>(std::vector<double>{0, 0, 0});
+    auto resolution = std::make_shared<int>(64);
+    sub->add_option("-o,--output", *out, "Output .vdb")->required();
+    sub->add_option("--center", *centre, "Centre X Y Z (world units)")->expected(3)->capture_default_str();
+    sub->add_option("--radius", puff->radius, "Radius (world units)")->capture_default_str()->check(CLI::PositiveNumber);
+    sub->add_option("--resolution", *resolution, "Voxels across the puff's bounding box")->capture_default_str()->check(CLI::Range(4, 2048));
+    sub->add_option("--seed", puff->seed, "Noise seed")->capture_default_str();
+    sub->footer("Example:\n  reshutter smoke -o smoke.vdb --center 0 0 20 --radius 3 --resolution 256\n"
+                "  reshutter resample frame.mps --volume smoke.vdb,density-scale=2 -o out.exr");
+    registry.add(sub, [=] {
+      puff->centre = {(*centre)[0], (*centre)[1], (*centre)[2]};
+      puff->voxelSize = 2.7 * puff->radius / *resolution;  // the puff reaches 1.35 radii
+      resample::writeSmokePuff(*out, *puff);
+      note(cat("wrote ", *out, ": a smoke puff of radius ", puff->radius, " in voxels of ", puff->voxelSize));
       return 0;
     });
   }
