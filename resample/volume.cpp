@@ -70,6 +70,7 @@ struct Affine {
   Affine() = default;
   explicit Affine(const glm::dmat4& m) : x(m[0]), y(m[1]), z(m[2]), t(m[3]) {}
   glm::dvec3 operator()(const glm::dvec3& p) const { return x * p.x + y * p.y + z * p.z + t; }
+  glm::dvec3 linear(const glm::dvec3& d) const { return x * d.x + y * d.y + z * d.z; }  // a direction
   openvdb::Vec3d vdb(const glm::dvec3& p) const { return toVdb((*this)(p)); }
 };
 
@@ -297,6 +298,20 @@ struct VolumeTracer::Impl {
       for (int k = 0; k < 3; ++k) S[k] += Cl[k] * phase * T;
     }
   }
+  // Narrows [a, b] to the parameters s at which camera-space point p + s·d lies inside the
+  // volume's (widened) bounds in its file's world space: the slab test. Empty: a >= b.
+  static void clipToBounds(const PerVolume& pv, const glm::dvec3& p, const glm::dvec3& d, double& a, double& b) {
+    const glm::dvec3 f0 = pv.toFile(p), fd = pv.toFile.linear(d);
+    for (int k = 0; k < 3 && a <= b; ++k) {
+      if (fd[k] == 0.0) {
+        if (f0[k] < pv.lo[k] || f0[k] > pv.hi[k]) a = INFINITY;
+        continue;
+      }
+      double ta = (pv.lo[k] - f0[k]) / fd[k], tb = (pv.hi[k] - f0[k]) / fd[k];
+      if (ta > tb) std::swap(ta, tb);
+      a = std::max(a, ta), b = std::min(b, tb);
+    }
+  }
   // Places a volume: camera space → its file's world space, and the maps derived from it.
   void place(PerVolume& pv, const glm::dmat4& cameraToFile) {
     const auto& v = *pv.v;
@@ -364,17 +379,8 @@ struct VolumeTracer::Impl {
   double transmittance(const glm::dvec3& p, const glm::dvec3& l, double dist, double seconds, uint64_t& lookups) {
     double s0 = INFINITY, s1 = 0, step = INFINITY;
     for (const auto& pv : volumes) {
-      const glm::dvec3 f0 = glm::dvec3(pv.cameraToFile * glm::dvec4(p, 1.0)), fd = glm::dvec3(pv.cameraToFile * glm::dvec4(l, 0.0));
       double a = 0, b = dist;
-      for (int k = 0; k < 3 && a <= b; ++k) {
-        if (fd[k] == 0.0) {
-          if (f0[k] < pv.lo[k] || f0[k] > pv.hi[k]) a = INFINITY;
-          continue;
-        }
-        double ta = (pv.lo[k] - f0[k]) / fd[k], tb = (pv.hi[k] - f0[k]) / fd[k];
-        if (ta > tb) std::swap(ta, tb);
-        a = std::max(a, ta), b = std::min(b, tb);
-      }
+      clipToBounds(pv, p, l, a, b);
       if (a < b) s0 = std::min(s0, a), s1 = std::max(s1, b), step = std::min(step, double(scene.options().shadowStep) * pv.voxelInCamera);
     }
     if (!(s1 > s0)) return 1.0;
@@ -474,17 +480,8 @@ void VolumeTracer::integrate(double x, double y, double t, double z0, double z1,
   double stepZ = INFINITY;
   for (auto& pv : m.volumes) {
     const glm::dvec3 f0 = glm::dvec3(pv.cameraToFile * glm::dvec4(origin, 1.0)), fd = glm::dvec3(pv.cameraToFile * glm::dvec4(dir, 0.0));
-    // Clip to the (widened) bounds in the file's world space: the slab test.
     double a = z0, b = zFar;
-    for (int k = 0; k < 3 && a <= b; ++k) {
-      if (fd[k] == 0.0) {
-        if (f0[k] < pv.lo[k] || f0[k] > pv.hi[k]) a = INFINITY;
-        continue;
-      }
-      double ta = (pv.lo[k] - f0[k]) / fd[k], tb = (pv.hi[k] - f0[k]) / fd[k];
-      if (ta > tb) std::swap(ta, tb);
-      a = std::max(a, ta), b = std::min(b, tb);
-    }
+    m.clipToBounds(pv, origin, dir, a, b);
     if (!(a < b)) continue;
     ++stats_.rays;
     const FloatGrid& grid = *pv.v->density;
