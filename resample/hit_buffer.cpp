@@ -299,16 +299,14 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
     auto throughVolumes = [&](float z) {
       if (!volumesHere) return false;
       VolumeSegment v;
+      // Deep output will want this segment's slices: kept, ended by a marker holding the whole
+      // segment, so visitFragments() need not march the ray again.
+      volumes->integrate(double(samples.sx[k]), double(samples.sy[k]), samples.tBase + double(samples.st[k]), double(zPrev), double(z), v,
+                         keepSlices ? &keptSlices : nullptr, volumeSliceRatio);
       if (keepSlices) {
-        // Deep output will want this segment's slices: kept, ended by a marker holding the
-        // whole segment, so visitFragments() need not march the ray again.
-        volumes->integrate(double(samples.sx[k]), double(samples.sy[k]), samples.tBase + double(samples.st[k]), double(zPrev), double(z), v, &keptSlices,
-                           volumeSliceRatio);
         VolumeSlice end;
         end.slice = kSegmentEnd, end.segment = v;
         keptSlices.push_back(end);
-      } else {
-        volumes->integrate(double(samples.sx[k]), double(samples.sy[k]), samples.tBase + double(samples.st[k]), double(zPrev), double(z), v);
       }
       zPrev = z;
       for (int c = 0; c < 3; ++c) C[c] += T[c] * v.radiance[c], A[c] += T[c] * (1.f - v.transmittance), T[c] *= v.transmittance;

@@ -479,21 +479,20 @@ void VolumeTracer::integrate(double x, double y, double t, double z0, double z1,
   m.spans.clear();
   double stepZ = INFINITY;
   for (auto& pv : m.volumes) {
-    const glm::dvec3 f0 = glm::dvec3(pv.cameraToFile * glm::dvec4(origin, 1.0)), fd = glm::dvec3(pv.cameraToFile * glm::dvec4(dir, 0.0));
     double a = z0, b = zFar;
     m.clipToBounds(pv, origin, dir, a, b);
     if (!(a < b)) continue;
     ++stats_.rays;
-    const FloatGrid& grid = *pv.v->density;
-    const glm::dvec3 i0 = toGlm(grid.worldToIndex(toVdb(f0))), i1 = toGlm(grid.worldToIndex(toVdb(f0 + fd)));
-    const double indexPerZ = glm::length(i1 - i0);
+    // The ray in the density grid's index space, parametrised by camera depth.
+    const glm::dvec3 i0 = pv.toDensity(origin), id = pv.toDensity.linear(dir);
+    const double indexPerZ = glm::length(id);
     if (!(indexPerZ > 0)) continue;
     stepZ = std::min(stepZ, double(m.scene.options().step) / indexPerZ);
     if (!pv.hdda) {
       m.spans.emplace_back(a, b);
       continue;
     }
-    IndexRay ray(toVdb(i0), toVdb(i1 - i0), a, b);
+    IndexRay ray(toVdb(i0), toVdb(id), a, b);
     if (!pv.intersector.setIndexRay(ray)) continue;
     double s0, s1;
     while (pv.intersector.march(s0, s1)) m.spans.emplace_back(std::max(s0, a), std::min(s1, b));
