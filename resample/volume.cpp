@@ -241,6 +241,8 @@ size_t VolumeScene::size() const { return impl_->volumes.size(); }
 
 struct VolumeTracer::Impl {
   struct PerVolume {
+    explicit PerVolume(const VolumeScene::Impl::Volume& volume)
+        : v(&volume), intersector(*volume.intersector), density(volume.density->getConstAccessor()) {}
     const VolumeScene::Impl::Volume* v;
     Intersector intersector;  // shallow copy of the master: its own ray and accessor
     FloatGrid::ConstAccessor density;
@@ -403,7 +405,7 @@ VolumeTracer::VolumeTracer(const VolumeScene& scene, const VolumeCamera& camera,
   const double maxSeconds = std::max(std::abs(earliest - camera.referenceFrame), std::abs(latest - camera.referenceFrame)) / camera.framesPerSecond;
   m.volumes.reserve(scene.impl().volumes.size());
   for (const auto& v : scene.impl().volumes) {
-    Impl::PerVolume pv{&v, Intersector(*v.intersector), FloatGrid::ConstAccessor(v.density->getConstAccessor()), {}, {}, {}};
+    Impl::PerVolume pv(v);
     if (v.emissionScalar) pv.emissionScalar.emplace(v.emissionScalar->getConstAccessor());
     if (v.emissionColour) pv.emissionColour.emplace(v.emissionColour->getConstAccessor());
     if (v.velocity) pv.velocity.emplace(v.velocity->getConstAccessor());
