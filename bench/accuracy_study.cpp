@@ -841,35 +841,43 @@ void studyVolumeStep(const std::string& out) {
   resample::SmokePuff puff;
   puff.centre = {-2.2, 1.1, 1.2}, puff.radius = 0.75, puff.voxelSize = 0.04;
   writeSmokePuff(vdb, puff);
-  auto volumes = [&](double step, bool skip) {
+  auto volumes = [&](double step, bool skip, double spacing) {
     VolumeOptions o;
-    o.step = float(step), o.skipEmpty = skip;
+    o.step = float(step), o.skipEmpty = skip, o.raySpacing = float(spacing);
     return std::make_shared<const VolumeScene>(std::vector<VolumeSpec>{VolumeSpec::parse(vdb + ",density-scale=3,albedo=0.9:0.9:0.9", "study")}, o);
   };
-  auto specWith = [&](double step, bool skip) {
-    return [&, step, skip](uint64_t) {
+  auto specWith = [&](double step, bool skip, double spacing) {
+    return [&, step, skip, spacing](uint64_t) {
       RenderSpec spec = demoSpec({st}, ShutterModel::progressive(F, F + 1), 4, 1);
-      spec.volumes = volumes(step, skip);
+      spec.volumes = volumes(step, skip, spacing);
       return spec;
     };
   };
-  // Reference: a sixteenth of a voxel, with the same pixel samples: the march's error alone.
-  const Img ref = toImg(render(specWith(1.0 / 16, true)(1)));
-  for (double step : {0.25, 0.5, 1.0, 2.0, 4.0}) measure("volumestep", "empty space skipped (OpenVDB HDDA)", step, specWith(step, true), ref, 1);
-  for (double step : {0.5, 1.0, 2.0}) measure("volumestep", "whole bounds marched", step, specWith(step, false), ref, 1);
+  // Reference: a sixteenth of a voxel, every sample marching its own ray, with the same pixel
+  // samples: the march's error alone.
+  const Img ref = toImg(render(specWith(1.0 / 16, true, 0)(1)));
+  for (double step : {0.25, 0.5, 1.0, 2.0, 4.0}) measure("volumestep", "a ray per sample, empty space skipped (OpenVDB HDDA)", step, specWith(step, true, 0), ref, 1);
+  for (double step : {0.5, 1.0, 2.0}) measure("volumestep", "a ray per sample, whole bounds marched", step, specWith(step, false, 0), ref, 1);
+  for (double step : {0.25, 0.5, 1.0, 2.0}) measure("volumestep", "shared rays, one per pixel (the default)", step, specWith(step, true, 1), ref, 1);
+  for (double spacing : {0.5, 1.0, 2.0, 4.0}) measure("volumespacing", "shared rays, step 1 voxel", spacing, specWith(1.0, true, spacing), ref, 1);
   const double tNone = [&] {
     bench::Stopwatch sw;
     render(demoSpec({st}, ShutterModel::progressive(F, F + 1), 4, 1));
     return sw.seconds();
   }();
   plot(out, "volumestep", "Volume ray-march step (demo + smoke puff, 16 spp): render time vs error");
+  plot(out, "volumespacing", "Volume shared-ray spacing (demo + smoke puff, 16 spp): render time vs error");
   gTables << "### Volume step\n\nScene: the demo at " << kDW << "×" << kDH
           << " shaded once, with the demo's procedural smoke puff (radius 0.75, voxel 0.04, density × 3, albedo 0.9) lit by the store's "
              "lights, gaussian 2×2, 16 spp, one seed. Knob: the ray-march step in voxels (`--volume-step`), with OpenVDB's empty-space "
-             "skipping and without it (`--volume-no-skip`). Error: against a 1/16-voxel step with the same pixel samples (the march's "
-             "error alone). The same frame without the volume renders in "
+             "skipping and without it (`--volume-no-skip`), each sample marching its own ray (`--volume-ray-spacing 0`) or sharing "
+             "rays one per pixel (the default). Error: against a 1/16-voxel step, a ray per sample, with the same pixel samples (the "
+             "march's error alone). The same frame without the volume renders in "
           << fmt(tNone, "%.3f") << " s.\n\n";
   table("volumestep", "step (voxels)");
+  gTables << "### Volume ray sharing\n\nThe same scene and reference; knob: pixels between the shared rays (`--volume-ray-spacing`; "
+             "each sample blends the four rays around it), at the default one-voxel step.\n\n";
+  table("volumespacing", "spacing (pixels)");
 }
 
 void studyDeep(const std::string& out) {
@@ -923,13 +931,16 @@ const Point* find(const std::string& study, const std::string& curvePrefix, int 
 /// One line per study with its figure to quote (README, RESULTS).
 std::string headlines() {
   std::ostringstream h;
-  if (auto a = find("volumestep", "empty space skipped (OpenVDB HDDA)", 16, 0.5), b = find("volumestep", "empty space skipped (OpenVDB HDDA)", 16, 1.0),
-      c = find("volumestep", "empty space skipped (OpenVDB HDDA)", 16, 4.0), d = find("volumestep", "whole bounds marched", 16, 1.0);
-      a && b && c && d)
-    h << "- **Volume step** (demo + smoke puff, 16 spp): half a voxel " << fmt(a->seconds, "%.2f") << " s, RMSE " << fmt(a->rmse, "%.1e")
-      << "; one voxel (the default) " << fmt(b->seconds, "%.2f") << " s, RMSE " << fmt(b->rmse, "%.1e") << " (max " << fmt(b->max, "%.1e") << "); four voxels "
-      << fmt(c->seconds, "%.2f") << " s, RMSE " << fmt(c->rmse, "%.1e") << " (max " << fmt(c->max, "%.2f")
-      << "); marching the whole bounds instead of skipping empty space: " << fmt(d->seconds, "%.2f") << " s at one voxel.\n";
+  if (auto a = find("volumestep", "a ray per sample, empty space skipped", 16, 0.5), b = find("volumestep", "a ray per sample, empty space skipped", 16, 1.0),
+      c = find("volumestep", "a ray per sample, empty space skipped", 16, 4.0), d = find("volumestep", "a ray per sample, whole bounds", 16, 1.0),
+      e = find("volumestep", "shared rays", 16, 1.0), f = find("volumespacing", "shared rays", 16, 2.0);
+      a && b && c && d && e && f)
+    h << "- **Volume step and shared rays** (demo + smoke puff, 16 spp): a ray per sample, half a voxel " << fmt(a->seconds, "%.2f") << " s, RMSE "
+      << fmt(a->rmse, "%.1e") << "; one voxel " << fmt(b->seconds, "%.2f") << " s, RMSE " << fmt(b->rmse, "%.1e") << " (max " << fmt(b->max, "%.1e")
+      << "); four voxels " << fmt(c->seconds, "%.2f") << " s, RMSE " << fmt(c->rmse, "%.1e") << " (max " << fmt(c->max, "%.2f")
+      << "); the whole bounds marched instead of skipping empty space: " << fmt(d->seconds, "%.2f") << " s at one voxel. Shared rays, one per pixel "
+      << "(the default), one voxel: " << fmt(e->seconds, "%.2f") << " s, RMSE " << fmt(e->rmse, "%.1e") << " (max " << fmt(e->max, "%.1e")
+      << "); one per 2 pixels " << fmt(f->seconds, "%.2f") << " s, RMSE " << fmt(f->rmse, "%.1e") << ".\n";
   if (auto a = find("fields", "shade once", 16), b = find("fields", "re-shade", 16), c = find("fields", "shade in time, 3", 16, 0.01),
       d = find("fields", "shade in time, 5", 16, 0.01);
       a && b && c && d)

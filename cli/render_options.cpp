@@ -69,6 +69,13 @@ void RenderOptions::addTo(CLI::App* app) {
   app->add_option("--volume-step", volumeStep, "Ray-march step in voxels: smaller is more accurate and slower (docs/accuracy.md)")
       ->capture_default_str()
       ->group("Volumes");
+  app->add_option("--volume-ray-spacing", volumeRaySpacing,
+                  "Share volume rays between samples: one ray per lattice point this many pixels apart, marched once and blended "
+                  "bilinearly for every sample around it (0: each sample marches its own ray, exact to the step; volumes that move "
+                  "always march per sample). Error against time: docs/accuracy.md")
+      ->capture_default_str()
+      ->check(CLI::Range(0.0, 64.0))
+      ->group("Volumes");
   app->add_option("--volume-shadow-step", volumeShadowStep, "Step of the volumes' shadow rays toward each light, in voxels")
       ->capture_default_str()
       ->group("Volumes");
@@ -144,15 +151,16 @@ void RenderOptions::applyTo(resample::RenderSpec& spec) const {
   resample::parseDeepCompression(deepCompression, "--deep-compression");
   parseQuantize(quantize, dither);
   spec.sceneVolumes = !noSceneVolumes;
+  resample::VolumeOptions& vo = spec.volumeOptions;
+  vo.step = float(volumeStep);
+  vo.skipEmpty = !volumeNoSkip;
+  vo.shadowStep = float(volumeShadowStep);
+  vo.cacheShadows = !volumeExactShadows;
+  vo.raySpacing = float(volumeRaySpacing);
   if (!volumes.empty()) {
     if (!loadedVolumes) {
       std::vector<resample::VolumeSpec> specs;
       for (const auto& v : volumes) specs.push_back(resample::VolumeSpec::parse(v, "--volume"));
-      resample::VolumeOptions vo;
-      vo.step = float(volumeStep);
-      vo.skipEmpty = !volumeNoSkip;
-      vo.shadowStep = float(volumeShadowStep);
-      vo.cacheShadows = !volumeExactShadows;
       loadedVolumes = std::make_shared<const resample::VolumeScene>(specs, vo);
       for (const auto& w : loadedVolumes->warnings()) warn(w);
     }

@@ -39,6 +39,7 @@ struct RenderOptions {
   std::vector<std::string> volumes;  // --volume specs (resample/volume.h)
   double volumeStep = 1.0;           // voxels
   double volumeShadowStep = 1.0;     // voxels
+  double volumeRaySpacing = 1.0;     // pixels between shared rays (0: a ray per sample)
   bool volumeNoSkip = false;         // march through whole bounding boxes (to measure empty-space skipping)
   bool volumeExactShadows = false;   // shadow rays from every step, not the per-render cache
   bool noSceneVolumes = false;       // leave out the store's own volumes

@@ -66,6 +66,7 @@ void BucketRasterizer::Impl::begin(int rx0, int ry0, int rw, int rh) {
   reset(slots);
   stats = RasterStats{};
   volumesHere = volumes && volumes->touches(double(x0), double(y0), double(x0 + w), double(y0 + h));
+  if (volumesHere) volumes->beginRegion(x0, y0, w, h);
   queued.clear(), chunks.clear(), movingTimes.clear();
 }
 

@@ -46,7 +46,8 @@ std::string RenderStats::report() const {
   s << "  fragments          " << raster.fragments << " transparent\n";
   if (volumes.rays)
     s << "  volumes            " << volumes.rays << " ray segments marched, " << volumes.steps << " density lookups, " << volumes.shadowSteps
-      << " on shadow rays, " << volumes.cachedShadows << " shadows from the cache\n";
+      << " on shadow rays, " << volumes.cachedShadows << " shadows from the cache, " << volumes.sharedSegments << " segments blended from "
+      << volumes.sharedRays << " shared rays\n";
   s << "  parts              " << partsFetched << " fetched, " << partsDecoded << " decoded, " << partsWaited
     << " waited for (another thread was decoding them)\n";
   s << "  time (thread-sum)  set-up " << setupSeconds << " s, parts " << partsSeconds << " s (decode, or wait for another thread's), rasterize "
@@ -292,7 +293,7 @@ struct Plan {
       std::vector<VolumeSpec> fromStore;
       for (const store::StoredVolume& v : meta0.volumes) fromStore.push_back(VolumeSpec::fromStore(v));
       auto scene =
-          spec.volumes ? std::make_shared<const VolumeScene>(*spec.volumes, fromStore) : std::make_shared<const VolumeScene>(fromStore, VolumeOptions{});
+          spec.volumes ? std::make_shared<const VolumeScene>(*spec.volumes, fromStore) : std::make_shared<const VolumeScene>(fromStore, spec.volumeOptions);
       for (size_t w = spec.volumes ? spec.volumes->warnings().size() : 0; w < scene->warnings().size(); ++w) warnOnce("store-volume", scene->warnings()[w]);
       volumes = std::move(scene);
     }

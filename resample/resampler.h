@@ -63,6 +63,8 @@ struct RenderSpec {
   std::shared_ptr<const VolumeScene> volumes;
   /// Render the scene's own volumes the store records (RIB `Volume` requests) too.
   bool sceneVolumes = true;
+  /// How the store's own volumes are integrated when `volumes` is null (else `volumes`' options).
+  VolumeOptions volumeOptions;
 };
 
 struct RenderStats {

@@ -1,6 +1,7 @@
 #include "resample/volume.h"
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <cmath>
 #include <filesystem>
@@ -342,6 +343,159 @@ struct VolumeTracer::Impl {
   std::vector<PerVolume> volumes;
   std::vector<std::pair<double, double>> spans;  // scratch: a ray's intervals in camera depth
 
+  // Camera-space ray through raster (x, y): point(z) = origin + dir · z.
+  void rayThrough(double x, double y, glm::dvec3& origin, glm::dvec3& dir) const {
+    origin = glm::dvec3(0.0), dir = glm::dvec3(0.0, 0.0, 1.0);
+    if (camera.perspective) dir = {(x - camera.bx) / camera.ax, (y - camera.by) / camera.ay, 1.0};
+    else origin = {(x - camera.bx) / camera.ax, (y - camera.by) / camera.ay, 0.0};
+  }
+  // Each volume's intervals of camera depth in [z0, zFar] that may hold density, merged and
+  // sorted into `spans`; returns the march's step in camera depth (INFINITY: nothing to march).
+  double collectSpans(const glm::dvec3& origin, const glm::dvec3& dir, double z0, double zFar, VolumeStats& stats) {
+    spans.clear();
+    double stepZ = INFINITY;
+    for (auto& pv : volumes) {
+      double a = z0, b = zFar;
+      clipToBounds(pv, origin, dir, a, b);
+      if (!(a < b)) continue;
+      ++stats.rays;
+      // The ray in the density grid's index space, parametrised by camera depth.
+      const glm::dvec3 i0 = pv.toDensity(origin), id = pv.toDensity.linear(dir);
+      const double indexPerZ = glm::length(id);
+      if (!(indexPerZ > 0)) continue;
+      stepZ = std::min(stepZ, double(scene.options().step) / indexPerZ);
+      if (!pv.hdda) {
+        spans.emplace_back(a, b);
+        continue;
+      }
+      IndexRay ray(toVdb(i0), toVdb(id), a, b);
+      if (!pv.intersector.setIndexRay(ray)) continue;
+      double s0, s1;
+      while (pv.intersector.march(s0, s1)) spans.emplace_back(std::max(s0, a), std::min(s1, b));
+    }
+    if (spans.empty()) return INFINITY;
+    std::sort(spans.begin(), spans.end());
+    // Merge overlapping intervals in place.
+    size_t n = 0;
+    for (size_t i = 1; i < spans.size(); ++i)
+      if (spans[i].first <= spans[n].second) spans[n].second = std::max(spans[n].second, spans[i].second);
+      else spans[++n] = spans[i];
+    spans.resize(n + 1);
+    return stepZ;
+  }
+  // One step of the march, at camera point p (ray direction dir), ds world units long: the light
+  // it sends toward the eye (relative to its front: add) and its optical depth (returned).
+  double step(const glm::dvec3& p, const glm::dvec3& dir, double ds, double seconds, double add[3], bool& emits, VolumeStats& stats) {
+    double sigma = 0, e[3] = {0, 0, 0}, scatter[3] = {0, 0, 0}, phaseG = 0;
+    medium(p, seconds, sigma, e, scatter, phaseG, stats.steps);
+    if (sigma > 0 && !camera.lights.empty()) {
+      // Single scattering: the lights' colour here, through the medium toward each, by the
+      // phase function (normalised so that isotropic scattering is 1, as RenderMan's volume
+      // shaders light), times the albedo-weighted extinction below.
+      double S[3];
+      if (cachedLight(p, S)) ++stats.cachedShadows;
+      else inScattered(p, -glm::normalize(dir), phaseG, seconds, S, stats.shadowSteps);
+      for (int k = 0; k < 3; ++k) scatter[k] = scatter[k] / sigma * S[k];
+    } else {
+      scatter[0] = scatter[1] = scatter[2] = 0;
+    }
+    // The scattered light: the albedo-weighted extinction times the in-scattered light, whose
+    // σ cancels the gain's division: albedo · S · (1 - e^{-σ ds}).
+    const double tau = sigma * ds;
+    const double stepT = std::exp(-tau);
+    const double gain = tau > 1e-9 ? (1.0 - stepT) / sigma : ds;
+    for (int k = 0; k < 3; ++k) add[k] = e[k] * gain + scatter[k] * (1.0 - stepT);
+    emits = e[0] != 0.0 || e[1] != 0.0 || e[2] != 0.0;
+    return tau;
+  }
+
+  // ----------------------------------------------------------------------------------------
+  // Shared rays (VolumeOptions::raySpacing): rays on a screen lattice, each marched once from
+  // the eye to the volumes' far side and tabulated; every sample's segment interpolates the four
+  // around it. A ray depends only on its lattice point, so images do not depend on buckets or
+  // threads.
+
+  // A tabulated ray: at depth z, the optical depth and the radiance (premultiplied, toward the
+  // eye) accumulated from the eye. Entries bracket the steps that hold medium; between entries
+  // both are linear in depth, outside them constant.
+  struct TableEntry {
+    float z, tau, L[3];
+  };
+  struct SharedRay {
+    bool made = false;
+    std::vector<TableEntry> entries;
+  };
+  struct LatticeRow {
+    int64_t j = INT64_MIN;
+    std::vector<SharedRay> rays;  // lattice columns [iLo, iHi]
+  };
+  bool shareRays = false;
+  double spacing = 1;           // pixels between lattice points; point (i, j) at ((i + ½) s, (j + ½) s)
+  double rayTime = 0;           // the render's earliest time: shared rays are for unmoving volumes
+  int64_t iLo = 0, iHi = -1;    // the region's lattice columns (beginRegion)
+  std::array<LatticeRow, 4> rows;  // the rows a pixel-major walk needs, by j mod 4
+
+  void traceShared(int64_t i, int64_t j, SharedRay& ray, VolumeStats& stats) {
+    ray.made = true;
+    ray.entries.clear();
+    ++stats.sharedRays;
+    glm::dvec3 origin, dir;
+    rayThrough((double(i) + 0.5) * spacing, (double(j) + 0.5) * spacing, origin, dir);
+    const double worldPerZ = glm::length(glm::dvec3(cameraToWorld * glm::dvec4(dir, 0.0)));
+    const double seconds = (rayTime - camera.referenceFrame) / camera.framesPerSecond;
+    const double stepZ = collectSpans(origin, dir, 0.0, 1e30, stats);
+    if (!std::isfinite(stepZ)) return;
+    double T = 1.0, tau = 0.0, L[3] = {0, 0, 0};
+    for (const auto& [a, b] : spans) {
+      if (!(b > a)) continue;
+      const int steps = int(std::min(1e6, std::ceil((b - a) / stepZ)));
+      const double dz = (b - a) / steps, ds = dz * worldPerZ;
+      for (int n = 0; n < steps && T > 1e-7; ++n) {
+        const double z = a + (n + 0.5) * dz;
+        double add[3];
+        bool emits;
+        const double stepTau = step(origin + dir * z, dir, ds, seconds, add, emits, stats);
+        if (!(stepTau > 0.0) && !emits) continue;
+        const float zFront = float(z - 0.5 * dz);
+        if (ray.entries.empty() || ray.entries.back().z < zFront)
+          ray.entries.push_back({zFront, float(tau), {float(L[0]), float(L[1]), float(L[2])}});
+        for (int k = 0; k < 3; ++k) L[k] += T * add[k];
+        T *= std::exp(-stepTau), tau += stepTau;
+        ray.entries.push_back({float(z + 0.5 * dz), float(tau), {float(L[0]), float(L[1]), float(L[2])}});
+      }
+    }
+  }
+  SharedRay& sharedRay(int64_t i, int64_t j, VolumeStats& stats) {
+    LatticeRow& row = rows[size_t(j & 3)];
+    if (row.j != j) {
+      row.j = j;
+      row.rays.resize(size_t(iHi - iLo + 1));
+      for (SharedRay& r : row.rays) r.made = false;
+    }
+    SharedRay& ray = row.rays[size_t(std::clamp(i, iLo, iHi) - iLo)];
+    if (!ray.made) traceShared(std::clamp(i, iLo, iHi), j, ray, stats);
+    return ray;
+  }
+  // A tabulated ray's optical depth and radiance at depth z.
+  static void lookup(const SharedRay& ray, double z, double& tau, double L[3]) {
+    const auto& e = ray.entries;
+    const auto it = std::upper_bound(e.begin(), e.end(), z, [](double v, const TableEntry& x) { return v < double(x.z); });
+    if (it == e.begin()) {
+      tau = 0, L[0] = L[1] = L[2] = 0;
+      return;
+    }
+    const TableEntry& a = *(it - 1);
+    if (it == e.end()) {
+      tau = a.tau;
+      for (int k = 0; k < 3; ++k) L[k] = a.L[k];
+      return;
+    }
+    const TableEntry& b = *it;
+    const double f = (z - double(a.z)) / (double(b.z) - double(a.z));
+    tau = a.tau + f * (double(b.tau) - double(a.tau));
+    for (int k = 0; k < 3; ++k) L[k] = a.L[k] + f * (double(b.L[k]) - double(a.L[k]));
+  }
+
   // The medium at camera-space point p, `seconds` after the reference frame: extinction σ (per
   // world unit), emission e, scattering σ_s = albedo · σ per channel, and the σ-weighted
   // anisotropy of the volumes there.
@@ -428,6 +582,10 @@ VolumeTracer::VolumeTracer(const VolumeScene& scene, const VolumeCamera& camera,
     m.volumes.push_back(std::move(pv));
   }
   if (lighting) m.cacheLighting(*lighting);  // needs the volumes' placement
+  // Shared rays serve volumes that stay put over the render: their rays do not depend on time.
+  m.spacing = scene.options().raySpacing;
+  m.shareRays = m.spacing > 0 && std::none_of(m.volumes.begin(), m.volumes.end(), [](const Impl::PerVolume& pv) { return pv.moving || pv.velocity; });
+  m.rayTime = earliest;
 }
 
 VolumeTracer::~VolumeTracer() = default;
@@ -458,7 +616,9 @@ bool VolumeTracer::touches(double x0, double y0, double x1, double y1) const {
     }
     if (unbounded) return true;
     // Screen y may run either way (ay < 0): the box is min/max either way.
-    if (hx >= x0 - 1 && lx <= x1 + 1 && hy >= y0 - 1 && ly <= y1 + 1) return true;
+    // A sample blending shared rays sees medium up to one lattice spacing beyond the bounds.
+    const double reach = 1 + (m.shareRays ? m.spacing : 0.0);
+    if (hx >= x0 - reach && lx <= x1 + reach && hy >= y0 - reach && ly <= y1 + reach) return true;
   }
   return false;
 }
@@ -467,46 +627,19 @@ void VolumeTracer::integrate(double x, double y, double t, double z0, double z1,
   Impl& m = *impl_;
   out = VolumeSegment{};
   if (!(z1 > z0)) return;
+  if (m.shareRays) {
+    integrateShared(x, y, z0, z1, out, slices, ratio);
+    return;
+  }
   const VolumeCamera& c = m.camera;
   m.placeAt(t);
-  // Camera-space ray: point(z) = origin + dir · z.
-  glm::dvec3 origin(0.0), dir(0.0, 0.0, 1.0);
-  if (c.perspective) dir = {(x - c.bx) / c.ax, (y - c.by) / c.ay, 1.0};
-  else origin = {(x - c.bx) / c.ax, (y - c.by) / c.ay, 0.0};
+  glm::dvec3 origin, dir;
+  m.rayThrough(x, y, origin, dir);
   const double worldPerZ = glm::length(glm::dvec3(m.cameraToWorld * glm::dvec4(dir, 0.0)));
   const double seconds = (t - c.referenceFrame) / c.framesPerSecond;
   const double zFar = std::isfinite(z1) ? z1 : 1e30;
-
-  // Each volume's intervals of camera depth that may hold density, merged.
-  m.spans.clear();
-  double stepZ = INFINITY;
-  for (auto& pv : m.volumes) {
-    double a = z0, b = zFar;
-    m.clipToBounds(pv, origin, dir, a, b);
-    if (!(a < b)) continue;
-    ++stats_.rays;
-    // The ray in the density grid's index space, parametrised by camera depth.
-    const glm::dvec3 i0 = pv.toDensity(origin), id = pv.toDensity.linear(dir);
-    const double indexPerZ = glm::length(id);
-    if (!(indexPerZ > 0)) continue;
-    stepZ = std::min(stepZ, double(m.scene.options().step) / indexPerZ);
-    if (!pv.hdda) {
-      m.spans.emplace_back(a, b);
-      continue;
-    }
-    IndexRay ray(toVdb(i0), toVdb(id), a, b);
-    if (!pv.intersector.setIndexRay(ray)) continue;
-    double s0, s1;
-    while (pv.intersector.march(s0, s1)) m.spans.emplace_back(std::max(s0, a), std::min(s1, b));
-  }
-  if (m.spans.empty()) return;
-  std::sort(m.spans.begin(), m.spans.end());
-  // Merge overlapping intervals in place.
-  size_t n = 0;
-  for (size_t i = 1; i < m.spans.size(); ++i)
-    if (m.spans[i].first <= m.spans[n].second) m.spans[n].second = std::max(m.spans[n].second, m.spans[i].second);
-    else m.spans[++n] = m.spans[i];
-  m.spans.resize(n + 1);
+  const double stepZ = m.collectSpans(origin, dir, z0, zFar, stats_);
+  if (!std::isfinite(stepZ)) return;
 
   double T = 1.0, L[3] = {0, 0, 0};
   // Deep output's current slice: its steps' extent and what they add relative to its front.
@@ -535,30 +668,13 @@ void VolumeTracer::integrate(double x, double y, double t, double z0, double z1,
           open = true, cur.slice = k, cur.zFront = INFINITY, sliceT = 1.0, sliceL[0] = sliceL[1] = sliceL[2] = 0.0;
         }
       }
-      const glm::dvec3 p = origin + dir * z;
-      double sigma = 0, e[3] = {0, 0, 0}, scatter[3] = {0, 0, 0}, phaseG = 0;
-      m.medium(p, seconds, sigma, e, scatter, phaseG, stats_.steps);
-      if (sigma > 0 && !m.camera.lights.empty()) {
-        // Single scattering: the lights' colour here, through the medium toward each, by the
-        // phase function (normalised so that isotropic scattering is 1, as RenderMan's volume
-        // shaders light), times the albedo-weighted extinction below.
-        double S[3];
-        if (m.cachedLight(p, S)) ++stats_.cachedShadows;
-        else m.inScattered(p, -glm::normalize(dir), phaseG, seconds, S, stats_.shadowSteps);
-        for (int k = 0; k < 3; ++k) scatter[k] = scatter[k] / sigma * S[k];
-      } else {
-        scatter[0] = scatter[1] = scatter[2] = 0;
-      }
-      // The scattered light: the albedo-weighted extinction times the in-scattered light, whose
-      // σ cancels the gain's division: albedo · S · (1 - e^{-σ ds}).
-      const double tau = sigma * ds;
-      const double stepT = std::exp(-tau);
-      const double gain = tau > 1e-9 ? (1.0 - stepT) / sigma : ds;
       double add[3];
-      for (int k = 0; k < 3; ++k) add[k] = e[k] * gain + scatter[k] * (1.0 - stepT);
+      bool emits;
+      const double tau = m.step(origin + dir * z, dir, ds, seconds, add, emits, stats_);
+      const double stepT = std::exp(-tau);
       for (int k = 0; k < 3; ++k) L[k] += T * add[k];
       T *= stepT;
-      if (slices && (tau > 0.0 || e[0] != 0.0 || e[1] != 0.0 || e[2] != 0.0)) {
+      if (slices && (tau > 0.0 || emits)) {
         // The slice spans the steps that hold medium, so deep samples hug it.
         for (int k = 0; k < 3; ++k) sliceL[k] += sliceT * add[k];
         sliceT *= stepT;
@@ -569,6 +685,73 @@ void VolumeTracer::integrate(double x, double y, double t, double z0, double z1,
   if (slices) closeSlice();
   for (int k = 0; k < 3; ++k) out.radiance[k] = float(L[k]);
   out.transmittance = float(T);
+}
+
+void VolumeTracer::beginRegion(int x0, int y0, int w, int h) {
+  Impl& m = *impl_;
+  (void)y0, (void)h;
+  if (!m.shareRays) return;
+  // A sample at x interpolates lattice columns floor(x / s - ½) and the next.
+  m.iLo = int64_t(std::floor(double(x0) / m.spacing - 0.5));
+  m.iHi = int64_t(std::floor(double(x0 + w) / m.spacing - 0.5)) + 1;
+  for (auto& row : m.rows) row.j = INT64_MIN;
+}
+
+bool VolumeTracer::sharesRays() const { return impl_->shareRays; }
+
+// The segment [z0, z1] of the ray through raster (x, y) from the four shared rays around it,
+// blended bilinearly in optical depth and accumulated radiance (both cumulative from the eye, so
+// a sample's segments telescope to its blended whole ray, as they do exactly when marched).
+void VolumeTracer::integrateShared(double x, double y, double z0, double z1, VolumeSegment& out, std::vector<VolumeSlice>* slices, double ratio) {
+  Impl& m = *impl_;
+  ++stats_.sharedSegments;
+  const double gx = x / m.spacing - 0.5, gy = y / m.spacing - 0.5;
+  const double fi = std::floor(gx), fj = std::floor(gy);
+  const int64_t i0 = int64_t(fi), j0 = int64_t(fj);
+  const double fx = gx - fi, fy = gy - fj;
+  const Impl::SharedRay* ray[4];
+  double w[4] = {(1 - fx) * (1 - fy), fx * (1 - fy), (1 - fx) * fy, fx * fy};
+  for (int r = 0; r < 4; ++r) ray[r] = &m.sharedRay(i0 + (r & 1), j0 + (r >> 1), stats_);
+  auto at = [&](double z, double& tau, double L[3]) {
+    tau = 0, L[0] = L[1] = L[2] = 0;
+    for (int r = 0; r < 4; ++r) {
+      if (w[r] == 0.0) continue;
+      double rt, rl[3];
+      Impl::lookup(*ray[r], z, rt, rl);
+      tau += w[r] * rt;
+      for (int k = 0; k < 3; ++k) L[k] += w[r] * rl[k];
+    }
+  };
+  // What [a, b] adds, relative to its front: the radiance gathered over it, seen from a.
+  auto segment = [&](double a, double b, VolumeSegment& s) -> bool {
+    double ta, tb, la[3], lb[3];
+    at(a, ta, la), at(b, tb, lb);
+    const double dTau = std::max(0.0, tb - ta);
+    // The front's transmittance is in the composite already; a sample so deep in the medium
+    // that it is below 1e-35 has stopped compositing long before (the opacity threshold).
+    const double unseen = std::exp(std::min(ta, 80.0));
+    s.transmittance = float(std::exp(-dTau));
+    for (int k = 0; k < 3; ++k) s.radiance[k] = float(std::max(0.0, lb[k] - la[k]) * unseen);
+    return dTau > 0.0 || lb[0] != la[0] || lb[1] != la[1] || lb[2] != la[2];
+  };
+  // The medium's extent over the four rays: nothing to blend outside it.
+  double zLo = INFINITY, zHi = -INFINITY;
+  for (int r = 0; r < 4; ++r)
+    if (w[r] != 0.0 && !ray[r]->entries.empty()) zLo = std::min(zLo, double(ray[r]->entries.front().z)), zHi = std::max(zHi, double(ray[r]->entries.back().z));
+  const double a = std::max(z0, zLo), b = std::min(z1, zHi);
+  if (!(b > a)) return;
+  segment(a, b, out);
+  if (!slices) return;
+  // Deep output: the segment cut at the slices' depths (ratio^k), each part over its own extent.
+  const double logRatio = std::log(ratio);
+  const int32_t kA = int32_t(std::floor(std::log(std::max(a, 1e-30)) / logRatio)), kB = int32_t(std::floor(std::log(b) / logRatio));
+  for (int32_t k = kA; k <= kB; ++k) {
+    const double lo = std::max(a, std::exp(double(k) * logRatio)), hi = std::min(b, std::exp(double(k + 1) * logRatio));
+    if (!(hi > lo)) continue;
+    VolumeSlice vs;
+    vs.slice = k, vs.zFront = float(lo), vs.zBack = float(hi);
+    if (segment(lo, hi, vs.segment)) slices->push_back(vs);
+  }
 }
 
 // ------------------------------------------------------------------------------------------

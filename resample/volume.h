@@ -60,6 +60,12 @@ struct VolumeOptions {
   /// Look the in-scattered light up in a per-render cache (VolumeLighting) rather than marching a
   /// shadow ray per light from every step: within the cache's interpolation of the exact rays.
   bool cacheShadows = true;
+  /// Shared rays: one ray per point of a screen lattice `raySpacing` pixels apart, marched once
+  /// from the eye through every volume and tabulated (optical depth and radiance against depth);
+  /// a sample's segment blends the four rays around it bilinearly. 0: every sample marches its
+  /// own ray (exact to the step). Only volumes that stay put over the render share rays (no
+  /// velocity grid, no moving transform); others are marched per sample.
+  float raySpacing = 1.0f;
 };
 
 /// What a volume adds over a stretch of a ray: the light it emits toward the camera
@@ -128,7 +134,12 @@ struct VolumeStats {
   uint64_t steps = 0;          // density lookups along them
   uint64_t shadowSteps = 0;    // density lookups along shadow rays (the shadow cache's included)
   uint64_t cachedShadows = 0;  // steps whose in-scattered light came from the cache (VolumeLighting)
-  void add(const VolumeStats& o) { rays += o.rays, steps += o.steps, shadowSteps += o.shadowSteps, cachedShadows += o.cachedShadows; }
+  uint64_t sharedRays = 0;     // lattice rays marched (VolumeOptions::raySpacing)
+  uint64_t sharedSegments = 0; // segments blended from them instead of marched
+  void add(const VolumeStats& o) {
+    rays += o.rays, steps += o.steps, shadowSteps += o.shadowSteps, cachedShadows += o.cachedShadows;
+    sharedRays += o.sharedRays, sharedSegments += o.sharedSegments;
+  }
 };
 
 /// One render's lighting of its volumes: the light every light sends through the medium and
@@ -161,6 +172,11 @@ class VolumeTracer {
   /// Whether any volume may lie behind raster region [x0, x1] × [y0, y1] between the render's
   /// earliest and latest time (conservative: a volume that reaches the eye plane touches all).
   bool touches(double x0, double y0, double x1, double y1) const;
+  /// Starts a region of samples [x0, x0+w) × [y0, y0+h) (raster pixels), walked row by row:
+  /// the shared rays it needs are traced as its samples ask for them.
+  void beginRegion(int x0, int y0, int w, int h);
+  /// Whether segments come from shared rays (VolumeOptions::raySpacing) rather than marches.
+  bool sharesRays() const;
   /// Integrates the ray through raster (x, y) at absolute time t over camera depths [z0, z1]
   /// (z1 may be infinite: the volumes' far side).
   void integrate(double x, double y, double t, double z0, double z1, VolumeSegment& out) { integrate(x, y, t, z0, z1, out, nullptr, 0.0); }
@@ -171,6 +187,7 @@ class VolumeTracer {
 
  private:
   friend class VolumeLighting;  // marches its shadow rays with a tracer
+  void integrateShared(double x, double y, double z0, double z1, VolumeSegment& out, std::vector<VolumeSlice>* slices, double ratio);
   struct Impl;
   std::unique_ptr<Impl> impl_;
   VolumeStats stats_;

@@ -36,6 +36,29 @@ if [ "$target" = store ]; then
     { printf '\x01'; cat "$f"; } > "$work/corpus/seed-$(basename "$f")"
     rm -f "$f"
   done
+  # A format-3 store (recorded lights and a scene volume), shaded from a tiny RIB.
+  "$build"/reshutter -q smoke -o "$work/seed.vdb" --radius 1 --resolution 8
+  cat > "$work/seed.rib" <<RIB
+Format 24 16 1
+Projection "perspective" "fov" [50]
+Shutter 0 1
+WorldBegin
+LightSource "pointlight" 1 "from" [0 2 0] "intensity" [4]
+LightSource "distantlight" 2 "to" [0 0 1]
+Surface "plastic"
+Polygon "P" [-2 -2 6  2 -2 6  2 2 6  -2 2 6]
+AttributeBegin
+MotionBegin [0 1]
+Translate 0 0 4
+Translate 0.3 0 4
+MotionEnd
+Volume "blobbydso:impl_openvdb" [-1 1 -1 1 -1 1] [0 0 0] "constant string[2] blobbydso:stringargs" ["$work/seed.vdb" "density"]
+AttributeEnd
+WorldEnd
+RIB
+  "$build"/reshutter -q shade "$work/seed.rib" -o "$work/seed-v3.mps"
+  { printf '\x01'; cat "$work/seed-v3.mps"; } > "$work/corpus/seed-v3.mps"
+  rm -f "$work/seed-v3.mps" "$work/seed.rib"
 fi
 "$bin" -max_total_time="$seconds" -max_len=65536 -timeout=10 -rss_limit_mb=2048 \
   -artifact_prefix="$build/findings-$target/" "$work/corpus" 2>&1 | tail -n 5
