@@ -5,8 +5,9 @@
 // space, its samplers interpolate). The resolve (hit_buffer.cpp) composites the segments it
 // returns between a sample's surfaces, and deep output keeps them as volume samples.
 //
-// Only OpenVDB's own headers see OpenVDB: this header keeps it behind pointers, so the rest of
-// the re-sampler compiles without it.
+// OpenVDB stays behind this header: the classes below hold engines (resample/volume_engine.h)
+// that a plugin built with OpenVDB makes, loaded the first time a volume is asked for, so the
+// rest of the re-sampler neither compiles nor links against it.
 #pragma once
 
 #include <cstdint>
@@ -89,6 +90,10 @@ struct VolumeSlice {
 /// Object id of volume samples in deep output (their idManifest name is "volumes").
 inline constexpr uint32_t kVolumeObjectId = 0xFFFFFFFEu;
 
+struct VolumeSceneEngine;
+struct VolumeLightingEngine;
+struct VolumeTracerEngine;
+
 /// Loaded volumes, shared read-only by every thread of every render that uses them.
 class VolumeScene {
  public:
@@ -106,13 +111,12 @@ class VolumeScene {
   /// Warnings found while loading (NaN densities set to zero, an empty grid), one line each.
   const std::vector<std::string>& warnings() const { return warnings_; }
 
-  struct Impl;
-  const Impl& impl() const { return *impl_; }
+  const VolumeSceneEngine& engine() const { return *engine_; }
 
  private:
   VolumeOptions options_;
   std::vector<std::string> warnings_;
-  std::unique_ptr<Impl> impl_;
+  std::unique_ptr<VolumeSceneEngine> engine_;
 };
 
 /// The camera a render looks through, as volume tracing needs it: raster position → camera-space
@@ -153,13 +157,12 @@ class VolumeLighting {
  public:
   VolumeLighting(const VolumeScene& scene, const VolumeCamera& camera);
   ~VolumeLighting();
-  struct Impl;
-  const Impl& impl() const { return *impl_; }
+  const VolumeLightingEngine& engine() const { return *engine_; }
   /// Density lookups the cache took to build.
   uint64_t buildSteps() const;
 
  private:
-  std::unique_ptr<Impl> impl_;
+  std::unique_ptr<VolumeLightingEngine> engine_;
 };
 
 /// Traces one thread's rays through a VolumeScene (it holds per-thread accessors and intersector
@@ -186,10 +189,7 @@ class VolumeTracer {
   const VolumeStats& stats() const { return stats_; }
 
  private:
-  friend class VolumeLighting;  // marches its shadow rays with a tracer
-  void integrateShared(double x, double y, double z0, double z1, VolumeSegment& out, std::vector<VolumeSlice>* slices, double ratio);
-  struct Impl;
-  std::unique_ptr<Impl> impl_;
+  std::unique_ptr<VolumeTracerEngine> engine_;
   VolumeStats stats_;
 };
 
@@ -204,5 +204,9 @@ struct SmokePuff {
 };
 /// Throws Error naming the file if it cannot be written.
 void writeSmokePuff(const std::string& path, const SmokePuff& puff);
+
+/// Whether this process has loaded OpenVDB (the volume plugin): only a render or command that
+/// uses volumes does.
+bool volumeSupportLoaded();
 
 }  // namespace reshutter::resample

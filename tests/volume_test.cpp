@@ -502,6 +502,34 @@ TEST(Volume, CliAddsAVolumeAndReportsIt) {
   EXPECT_FALSE(std::filesystem::exists(dir.path("bad.exr")));
 }
 
+// OpenVDB is a plugin the program loads when a volume is asked for: a render without volumes
+// never maps it (the dynamic loader's own report, LD_DEBUG=files, names every object it loads).
+// A missing plugin is a one-line error saying where it was looked for.
+TEST(Volume, OpenVdbIsLoadedOnlyWhenAVolumeIsAsked) {
+  ScratchDir dir;
+  test::TestScene scene = test::makeScene(kW, kH, {0.0});
+  test::TestMp mp;
+  mp.knots = {scene.rect(-8, -8, kW + 8, kH + 8, 8.0)};
+  scene.mps.push_back(mp);
+  test::writeScene(scene, dir.path("s.0001.mps"));
+  const std::string vdb = writeVdb(dir, "box.vdb", {filledGrid(boxOf(-4, 4, -3, 3, 3, 5), 1.f, "density")});
+  const std::string bin = RESHUTTER_BINARY;
+  const auto plain = test::runCommand("LD_DEBUG=files " + bin + " -q resample " + dir.path("s.0001.mps") + " -o " + dir.path("plain.exr"));
+  ASSERT_EQ(plain.exitCode, 0) << plain.err;
+  EXPECT_NE(plain.err.find("libOpenEXR"), std::string::npos);  // the loader did report (it names what the program links)
+  EXPECT_EQ(plain.err.find("libopenvdb"), std::string::npos);
+  EXPECT_EQ(plain.err.find("libreshutter_volume"), std::string::npos);
+  const auto with = test::runCommand("LD_DEBUG=files " + bin + " -q resample " + dir.path("s.0001.mps") + " --volume " + vdb + " -o " + dir.path("with.exr"));
+  ASSERT_EQ(with.exitCode, 0) << with.err;
+  EXPECT_NE(with.err.find("libreshutter_volume"), std::string::npos);
+  EXPECT_NE(with.err.find("libopenvdb"), std::string::npos);
+  const auto missing = test::runCommand("RESHUTTER_VOLUME_PLUGIN=" + dir.path("none.so") + " " + bin + " -q resample " + dir.path("s.0001.mps") +
+                                        " --volume " + vdb + " -o " + dir.path("missing.exr"));
+  EXPECT_EQ(missing.exitCode, 1);
+  EXPECT_NE(missing.err.find(dir.path("none.so") + ": no such file"), std::string::npos) << missing.err;
+  EXPECT_FALSE(std::filesystem::exists(dir.path("missing.exr")));
+}
+
 }  // namespace
 }  // namespace reshutter
 
