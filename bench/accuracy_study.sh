@@ -80,7 +80,7 @@ EOF
 | ![codecs](accuracy/codec.png) | ![motion factor](accuracy/motionfactor.png) |
 | ![deep](accuracy/deep.png) | ![time bounds](accuracy/timebounds.png) |
 | ![shadow samples](accuracy/shadowsamples.png) | ![shadow rate](accuracy/shadowrate.png) |
-| ![volume step](accuracy/volumestep.png) | |
+| ![volume step](accuracy/volumestep.png) | ![volume ray spacing](accuracy/volumespacing.png) |
 
 ## Tables
 

@@ -62,9 +62,10 @@ void RenderOptions::addTo(CLI::App* app) {
       ->group("Performance");
   app->add_option("--volume", volumes,
                   "Add an OpenVDB fog volume in front of and between the surfaces, integrated per sample at its own time: "
-                  "FILE.vdb[,density=GRID][,emission=GRID][,velocity=GRID][,scale=S][,translate=X:Y:Z][,density-scale=K][,emission-color=R:G:B]"
-                  "[,albedo=R:G:B][,anisotropy=G] (world units of the store's camera; velocity 'vel' or 'v' is used when present; lit by the "
-                  "lights the store recorded, with self-shadowing). Repeatable")
+                  "FILE.vdb[,density=GRID][,emission=GRID][,velocity=GRID][,color=GRID][,scale=S][,translate=X:Y:Z][,density-scale=K]"
+                  "[,emission-color=R:G:B][,albedo=R:G:B][,anisotropy=G] (world units of the store's camera; emission: a float grid such as "
+                  "'temperature' times emission-color, or a vec3 grid; color: a vec3 grid such as 'Cd' scaling the albedo; velocity 'vel' or "
+                  "'v' is used when present; lit by the lights the store recorded, with self-shadowing). Repeatable")
       ->group("Volumes");
   app->add_option("--volume-step", volumeStep, "Ray-march step in voxels: smaller is more accurate and slower (docs/accuracy.md)")
       ->capture_default_str()

@@ -3,17 +3,12 @@
 // the plugin's loading, the first time a volume is asked for.
 #include "resample/volume_engine.h"
 
-#include <dlfcn.h>
-
-#include <algorithm>
 #include <atomic>
 #include <cmath>
-#include <cstdlib>
-#include <filesystem>
-#include <mutex>
 #include <sstream>
 
 #include "common/error.h"
+#include "common/module.h"
 
 namespace reshutter::resample {
 
@@ -55,13 +50,14 @@ VolumeSpec VolumeSpec::parse(const std::string& text, const std::string& where) 
     if (key == "density") s.density = value;
     else if (key == "emission") s.emission = value;
     else if (key == "velocity") s.velocity = value;
+    else if (key == "color") s.colour = value;
     else if (key == "scale") s.scale = parseNumber(value, where, key);
     else if (key == "translate") s.translate = parseTriple(value, where, key);
     else if (key == "density-scale") s.densityScale = float(parseNumber(value, where, key));
     else if (key == "emission-color") s.emissionColour = glm::vec3(parseTriple(value, where, key));
     else if (key == "albedo") s.albedo = glm::vec3(parseTriple(value, where, key));
     else if (key == "anisotropy") s.anisotropy = float(parseNumber(value, where, key));
-    else fail(where, "unknown volume key '", key, "' (density emission velocity scale translate density-scale emission-color albedo anisotropy)");
+    else fail(where, "unknown volume key '", key, "' (density emission velocity color scale translate density-scale emission-color albedo anisotropy)");
   }
   if (s.density.empty()) fail(where, "a volume needs a density grid");
   if (!(s.scale > 0)) fail(where, "'scale' must be positive");
@@ -86,44 +82,15 @@ const VolumeEngine& volumeEngine() {
   // A magic static: loaded once, by the first thread to ask; a failure throws and the next call
   // tries again.
   static const VolumeEngine* const engine = [] {
-    const char* name = "libreshutter_volume.so";
-    std::vector<std::string> candidates;
-    std::error_code ec;
-    if (const char* env = std::getenv("RESHUTTER_VOLUME_PLUGIN"); env && *env) {
-      candidates.push_back(env);  // the user's choice: nothing else
-    } else {
-      const std::filesystem::path self = std::filesystem::read_symlink("/proc/self/exe", ec);
-      if (!ec) candidates.push_back((self.parent_path() / name).string());
-#ifdef RESHUTTER_VOLUME_PLUGIN_BUILT
-      candidates.push_back(RESHUTTER_VOLUME_PLUGIN_BUILT);
+#ifdef RESHUTTER_VOLUME_MODULE_BUILT
+    const std::string built = RESHUTTER_VOLUME_MODULE_BUILT;
+#else
+    const std::string built;
 #endif
-    }
-    std::string tried;
-    for (size_t c = 0; c < candidates.size(); ++c) {
-      const std::string& path = candidates[c];
-      if (std::find(candidates.begin(), candidates.begin() + ptrdiff_t(c), path) != candidates.begin() + ptrdiff_t(c)) continue;
-      if (!std::filesystem::exists(path, ec)) {
-        tried += cat(tried.empty() ? "" : "; ", path, ": no such file");
-        continue;
-      }
-      // RTLD_LOCAL: OpenVDB's symbols stay the plugin's own.
-      void* handle = dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);
-      if (!handle) {
-        const char* why = dlerror();
-        tried += cat(tried.empty() ? "" : "; ", why ? why : path);
-        continue;
-      }
-      using Entry = const VolumeEngine* (*)();
-      auto entry = reinterpret_cast<Entry>(dlsym(handle, kVolumeEngineEntry));
-      if (!entry) {
-        tried += cat(tried.empty() ? "" : "; ", path, ": no ", kVolumeEngineEntry, " (a plugin from another build?)");
-        dlclose(handle);
-        continue;
-      }
-      engineLoaded = true;
-      return entry();
-    }
-    fail("volumes", "cannot load the OpenVDB plugin ", name, " (", tried, "); RESHUTTER_VOLUME_PLUGIN names its path");
+    using Entry = const VolumeEngine* (*)();
+    const auto entry = reinterpret_cast<Entry>(loadModule("RESHUTTER_VOLUME_MODULE", "libreshutter_volume.so", built, kVolumeEngineEntry, "OpenVDB volume"));
+    engineLoaded = true;
+    return entry();
   }();
   return *engine;
 }

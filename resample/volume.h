@@ -23,13 +23,14 @@
 namespace reshutter::resample {
 
 /// One volume as the user asks for it:
-/// "smoke.vdb[,density=GRID][,emission=GRID][,velocity=GRID][,scale=S][,translate=X:Y:Z]
+/// "smoke.vdb[,density=GRID][,emission=GRID][,velocity=GRID][,color=GRID][,scale=S][,translate=X:Y:Z]
 ///  [,density-scale=K][,emission-color=R:G:B][,albedo=R:G:B][,anisotropy=G]".
 struct VolumeSpec {
   std::string path;
   std::string density = "density";
   std::string emission;  // float grid (times emissionColour) or vec3 grid; empty = none
   std::string velocity;  // vec3 grid, world units per second; empty = "vel" or "v" if the file has one
+  std::string colour;    // vec3 grid scaling the albedo per voxel (Houdini's Cd); empty = none
   double scale = 1;      // placement: world = translate + scale · (the file's own world position)
   glm::dvec3 translate{0.0};
   float densityScale = 1;  // extinction per world unit = densityScale · density

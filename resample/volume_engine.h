@@ -58,9 +58,8 @@ struct VolumeEngine {
 /// The symbol the plugin exports: `const VolumeEngine* NAME()`.
 inline constexpr const char* kVolumeEngineEntry = "reshutter_volume_engine_v1";
 
-/// The plugin's engine, loaded on first call (thread-safe): from $RESHUTTER_VOLUME_PLUGIN if set
-/// (only there), else libreshutter_volume.so beside the running program, else where the build put it. Throws
-/// Error saying where it looked when none loads.
+/// The plugin's engine, loaded on first call (thread-safe) by common/module.h's loadModule():
+/// $RESHUTTER_VOLUME_MODULE names another copy. Throws Error saying where it looked when none loads.
 const VolumeEngine& volumeEngine();
 
 }  // namespace reshutter::resample

@@ -73,13 +73,14 @@ struct VdbScene final : VolumeSceneEngine {
     FloatGrid::Ptr density;
     FloatGrid::Ptr emissionScalar;
     Vec3SGrid::Ptr emissionColour;
+    Vec3SGrid::Ptr colour;  // scales the albedo (Cd)
     Vec3SGrid::Ptr velocity;
     std::shared_ptr<const Intersector> intersector;  // the master the tracers copy (shallowly)
     // The active voxels' bounds (dilated by the interpolation's reach) in the file's world space.
     glm::dvec3 fileLo{0.0}, fileHi{0.0};
     double maxSpeed = 0;                                                   // file world units per second
     double voxelSize = 1;                                                  // file world units
-    glm::dmat4 densityIndex{1.0}, emissionIndex{1.0}, velocityIndex{1.0};  // file world → each grid's index space
+    glm::dmat4 densityIndex{1.0}, emissionIndex{1.0}, velocityIndex{1.0}, colourIndex{1.0};  // file world → each grid's index space
   };
   std::vector<Volume> volumes;
   VolumeOptions opts;
@@ -138,6 +139,7 @@ std::unique_ptr<VdbScene> loadScene(const std::vector<VolumeSpec>& specs, const 
         if (!v.emissionScalar && !v.emissionColour)
           fail(path, "grid '", spec.emission, "' holds ", base->valueType(), " values; emission must be a float or vec3 grid");
       }
+      if (!spec.colour.empty()) v.colour = readGrid<Vec3SGrid>(file, path, spec.colour, "vec3");
       std::string velocityName = spec.velocity;
       if (velocityName.empty()) velocityName = file.hasGrid("vel") ? "vel" : file.hasGrid("v") ? "v" : "";
       if (!velocityName.empty()) v.velocity = readGrid<Vec3SGrid>(file, path, velocityName, "vec3");
@@ -169,6 +171,7 @@ std::unique_ptr<VdbScene> loadScene(const std::vector<VolumeSpec>& specs, const 
     if (v.emissionScalar) v.emissionIndex = indexFromWorld(*v.emissionScalar);
     if (v.emissionColour) v.emissionIndex = indexFromWorld(*v.emissionColour);
     if (v.velocity) v.velocityIndex = indexFromWorld(*v.velocity);
+    if (v.colour) v.colourIndex = indexFromWorld(*v.colour);
     if (v.velocity)
       for (auto it = v.velocity->cbeginValueOn(); it; ++it) {
         const double s = double(it->length());
@@ -200,10 +203,10 @@ struct VdbTracer final : VolumeTracerEngine {
     Intersector intersector;  // shallow copy of the master: its own ray and accessor
     FloatGrid::ConstAccessor density;
     std::optional<FloatGrid::ConstAccessor> emissionScalar;
-    std::optional<Vec3SGrid::ConstAccessor> emissionColour, velocity;
+    std::optional<Vec3SGrid::ConstAccessor> emissionColour, velocity, colour;
     // Camera space → the file's index space, affine: index = cameraToIndex · camera point.
     glm::dmat4 cameraToFile{1.0};
-    Affine toFile, toDensity, toEmission;  // camera space → file world, density and emission index space
+    Affine toFile, toDensity, toEmission, toColour;  // camera space → file world, density, emission and colour index space
     Affine fileToDensity, fileToVelocity;  // file world → index space (after a velocity's backtrace)
     double voxelInCamera = 1;              // a voxel's size in camera-space units
     double reach = 0;                      // file world units the velocity can carry density over the render's times
@@ -272,6 +275,7 @@ struct VdbTracer final : VolumeTracerEngine {
     pv.cameraToFile = cameraToFile;
     pv.voxelInCamera = v.voxelSize / glm::length(glm::dvec3(cameraToFile[0]));
     pv.toFile = Affine(cameraToFile), pv.toDensity = Affine(v.densityIndex * cameraToFile), pv.toEmission = Affine(v.emissionIndex * cameraToFile);
+    pv.toColour = Affine(v.colourIndex * cameraToFile);
   }
   // A moving scene volume's transform at frame-relative time tau: linear between its knots,
   // held outside them.
@@ -468,7 +472,12 @@ struct VdbTracer final : VolumeTracerEngine {
       if (d > 0.f) {
         const double s = double(d) * v.spec.densityScale;
         sigma += s, gw += s * v.spec.anisotropy;
-        for (int k = 0; k < 3; ++k) scatter[k] += s * v.spec.albedo[k];
+        if (pv.colour) {
+          const openvdb::Vec3s cd = openvdb::tools::BoxSampler::sample(*pv.colour, advected ? apply(v.colourIndex, f) : pv.toColour.vdb(p));
+          for (int k = 0; k < 3; ++k) scatter[k] += s * v.spec.albedo[k] * std::clamp(double(cd[k]), 0.0, 1.0);
+        } else {
+          for (int k = 0; k < 3; ++k) scatter[k] += s * v.spec.albedo[k];
+        }
       }
       if (pv.emissionScalar) {
         const float em = openvdb::tools::BoxSampler::sample(*pv.emissionScalar, advected ? apply(v.emissionIndex, f) : pv.toEmission.vdb(p));
@@ -513,6 +522,7 @@ VdbTracer::VdbTracer(const VdbScene& s, const VolumeCamera& c, double earliest, 
     if (v.emissionScalar) pv.emissionScalar.emplace(v.emissionScalar->getConstAccessor());
     if (v.emissionColour) pv.emissionColour.emplace(v.emissionColour->getConstAccessor());
     if (v.velocity) pv.velocity.emplace(v.velocity->getConstAccessor());
+    if (v.colour) pv.colour.emplace(v.colour->getConstAccessor());
     if (!v.spec.fileToCamera.empty()) {
       // A scene volume: placed in camera space (where it is at its first knot, if it moves).
       pv.moving = v.spec.fileToCamera.size() > 1;

@@ -1,6 +1,5 @@
 #include "shade/texture.h"
 
-#include <dlfcn.h>
 #include <unistd.h>
 
 #include <algorithm>
@@ -13,6 +12,7 @@
 
 #include "common/error.h"
 #include "common/log.h"
+#include "common/module.h"
 #include "common/random.h"
 #include "shade/texture_backend.h"
 
@@ -23,13 +23,9 @@ namespace {
 // why); RESHUTTER_TEXTURE_MODULE in the environment names another copy of it.
 TextureBackend& backend() {
   static TextureBackend* b = [] {
-    const char* env = std::getenv("RESHUTTER_TEXTURE_MODULE");
-    const std::string path = env && *env ? env : RESHUTTER_TEXTURE_MODULE;
-    void* module = ::dlopen(path.c_str(), RTLD_NOW | RTLD_LOCAL);
-    if (!module) fail(path, "cannot load the texture module: ", ::dlerror());
-    auto* entry = reinterpret_cast<TextureBackend* (*)()>(::dlsym(module, "reshutter_texture_backend"));
-    if (!entry) fail(path, "is not reshutter's texture module (no reshutter_texture_backend)");
-    return entry();
+    using Entry = TextureBackend* (*)();
+    return reinterpret_cast<Entry>(loadModule("RESHUTTER_TEXTURE_MODULE", "libreshutter_texture.so", RESHUTTER_TEXTURE_MODULE, "reshutter_texture_backend",
+                                              "texture"))();
   }();
   return *b;
 }
