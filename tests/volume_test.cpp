@@ -498,14 +498,20 @@ TEST(Volume, BadInputIsAOneLineErrorNamingTheFile) {
   EXPECT_NE(scene.warnings()[0].find("non-finite density"), std::string::npos);
 }
 
-TEST(Volume, CliAddsAVolumeAndReportsIt) {
-  ScratchDir dir;
+// For the command-line tests: a store of a wall filling the view at depth 8 (s.0001.mps) and a
+// box of fog in front of it; returns the box's file.
+std::string wallStoreAndBox(const ScratchDir& dir) {
   test::TestScene scene = test::makeScene(kW, kH, {0.0});
   test::TestMp mp;
   mp.knots = {scene.rect(-8, -8, kW + 8, kH + 8, 8.0)};
   scene.mps.push_back(mp);
   test::writeScene(scene, dir.path("s.0001.mps"));
-  const std::string vdb = writeVdb(dir, "box.vdb", {filledGrid(boxOf(-4, 4, -3, 3, 3, 5), 1.f, "density")});
+  return writeVdb(dir, "box.vdb", {filledGrid(boxOf(-4, 4, -3, 3, 3, 5), 1.f, "density")});
+}
+
+TEST(Volume, CliAddsAVolumeAndReportsIt) {
+  ScratchDir dir;
+  const std::string vdb = wallStoreAndBox(dir);
   const auto res = test::runReshutter("resample " + dir.path("s.0001.mps") + " --volume " + vdb + ",density-scale=0.5 --stats -o " + dir.path("out.exr"));
   ASSERT_EQ(res.exitCode, 0) << res.err;
   EXPECT_GT(test::numberBefore(res.out + res.err, " ray segments marched"), 0u);
@@ -522,12 +528,7 @@ TEST(Volume, CliAddsAVolumeAndReportsIt) {
 // libopenvdb must be OpenImageIO's. A missing module is a one-line error saying where it looked.
 TEST(Volume, OpenVdbIsLoadedOnlyWhenAVolumeIsAsked) {
   ScratchDir dir;
-  test::TestScene scene = test::makeScene(kW, kH, {0.0});
-  test::TestMp mp;
-  mp.knots = {scene.rect(-8, -8, kW + 8, kH + 8, 8.0)};
-  scene.mps.push_back(mp);
-  test::writeScene(scene, dir.path("s.0001.mps"));
-  const std::string vdb = writeVdb(dir, "box.vdb", {filledGrid(boxOf(-4, 4, -3, 3, 3, 5), 1.f, "density")});
+  const std::string vdb = wallStoreAndBox(dir);
   const std::string bin = RESHUTTER_BINARY;
   const auto plain = test::runCommand("LD_DEBUG=files " + bin + " -q resample " + dir.path("s.0001.mps") + " -o " + dir.path("plain.exr"));
   ASSERT_EQ(plain.exitCode, 0) << plain.err;
