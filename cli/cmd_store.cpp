@@ -76,12 +76,22 @@ std::string knotList(const Schedule& k) {
   return s + "]";
 }
 
+// Six significant digits: RIB values arrive as floats, and 2.79999995 reads worse than 2.8.
+std::string short6(double v) {
+  char b[32];
+  std::snprintf(b, sizeof b, "%.6g", v);
+  return b;
+}
+
 std::string cameraLine(const Camera& c) {
   double sw[4];
   c.effectiveScreenWindow(sw);
   std::string p = c.projection == Projection::Perspective ? cat("perspective fov ", c.fovDegrees) : std::string("orthographic");
   return cat(c.name, ": ", p, ", ", c.width, "x", c.height, ", pixel aspect ", c.pixelAspect, ", screen [", sw[0], " ", sw[1], " ", sw[2], " ", sw[3],
-             "], clip [", c.nearClip, " ", c.farClip, "]");
+             "], clip [", c.nearClip, " ", c.farClip, "]",
+             c.lens.active() ? cat(", lens f/", short6(c.lens.fstop), " focal length ", short6(c.lens.focalLength), " focus ", short6(c.lens.focalDistance),
+                                   " (aperture radius ", short6(c.lens.radius()), ")")
+                             : std::string(", pinhole"));
 }
 
 int runInfo(const std::string& path, bool json) {
@@ -111,7 +121,11 @@ int runInfo(const std::string& path, bool json) {
       j.value("fov", c.fovDegrees).value("width", c.width).value("height", c.height).value("pixel_aspect", c.pixelAspect);
       j.beginArray("screen_window");
       for (double v : sw) j.value(nullptr, v);
-      j.endArray().value("near", c.nearClip).value("far", c.farClip).beginArray("world_to_camera");
+      j.endArray().value("near", c.nearClip).value("far", c.farClip);
+      j.beginObject("lens").value("pinhole", !c.lens.active());
+      if (c.lens.active()) j.value("fstop", c.lens.fstop).value("focal_length", c.lens.focalLength).value("focal_distance", c.lens.focalDistance);
+      j.endObject();
+      j.beginArray("world_to_camera");
       for (int a = 0; a < 4; ++a)
         for (int b = 0; b < 4; ++b) j.value(nullptr, c.worldToCamera[b][a]);  // row-major
       j.endArray().endObject();

@@ -87,6 +87,16 @@ void RenderOptions::addTo(CLI::App* app) {
   app->add_flag("--volume-no-skip", volumeNoSkip, "March through each volume's whole bounding box instead of skipping empty space (to measure it)")
       ->group("Volumes");
   app->add_flag("--stats", stats, "Print sample tests, hits, efficiency and time per phase")->group("Performance");
+  // Depth of field, re-focusable after shading: the store keeps camera-space positions, so the
+  // lens is sampled here, not in the shading pass.
+  auto* fs = app->add_option("--fstop", fstop,
+                             "Depth of field: the lens f-stop, replacing the store camera's (RIB DepthOfField); a store shaded without a lens "
+                             "needs --focal-length and --focus-distance too")
+                 ->group("Lens");
+  auto* fl = app->add_option("--focal-length", focalLength, "Depth of field: the lens focal length, in camera-space units (aperture radius = focal length / 2 f-stop)")
+                 ->group("Lens");
+  auto* fd = app->add_option("--focus-distance", focusDistance, "Depth of field: the camera depth in focus (re-focus a stored frame)")->group("Lens");
+  app->add_flag("--pinhole", pinhole, "Render without depth of field, whatever lens the store's camera records")->excludes(fs)->excludes(fl)->excludes(fd)->group("Lens");
 }
 
 namespace {
@@ -117,6 +127,7 @@ PreviewRequest parsePreview(const std::string& p, int64_t frame) {
 }  // namespace
 
 void RenderOptions::applyTo(resample::RenderSpec& spec) const {
+  spec.lens.fstop = fstop, spec.lens.focalLength = focalLength, spec.lens.focalDistance = focusDistance, spec.lens.pinhole = pinhole;
   int nx = 4, ny = 4;
   if (!samples.empty()) {
     if (std::sscanf(samples.c_str(), "%dx%d", &nx, &ny) != 2 || nx < 1 || ny < 1) fail("--samples", "expected NxM, got '", samples, "'");

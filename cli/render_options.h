@@ -4,6 +4,7 @@
 #pragma once
 
 #include <memory>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -43,6 +44,8 @@ struct RenderOptions {
   bool volumeNoSkip = false;         // march through whole bounding boxes (to measure empty-space skipping)
   bool volumeExactShadows = false;   // shadow rays from every step, not the per-render cache
   bool noSceneVolumes = false;       // leave out the store's own volumes
+  std::optional<double> fstop, focalLength, focusDistance;  // replace the store camera's lens values
+  bool pinhole = false;                                      // render without the store's lens
   mutable std::shared_ptr<const resample::VolumeScene> loadedVolumes;  // loaded once, by the first applyTo()
 
   void addTo(CLI::App* app);

@@ -8,7 +8,8 @@
 
 namespace reshutter::resample {
 
-BucketSamples::BucketSamples(const SamplePattern& p, const ShutterModel& s) : pattern(p), shutter(s), N(p.spp()), tBase(std::floor(s.earliest())) {}
+BucketSamples::BucketSamples(const SamplePattern& p, const ShutterModel& s, bool lens)
+    : pattern(p), shutter(s), N(p.spp()), lensPlanes(lens), tBase(std::floor(s.earliest())) {}
 
 void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
   x0 = rx0, y0 = ry0, w = rw, h = rh, P = w * h;
@@ -28,8 +29,14 @@ void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
     groupPresent[rowGroup[size_t(r)]] = 1;
   }
   multiGroup = G > 1;
-  std::vector<uint16_t> stratumOf(static_cast<size_t>(N));
+  std::vector<uint16_t> stratumOf(static_cast<size_t>(N)), lensOf(static_cast<size_t>(N));
   std::vector<float> u(static_cast<size_t>(N));
+  std::vector<glm::vec2> disk(static_cast<size_t>(N));
+  if (lensPlanes) {
+    lx.resize(slots + kPad), ly.resize(slots + kPad);
+    lensLoX.assign(size_t(N), INFINITY), lensHiX.assign(size_t(N), -INFINITY);
+    lensLoY.assign(size_t(N), INFINITY), lensHiY.assign(size_t(N), -INFINITY);
+  }
   tMin = INFINITY, tMax = -INFINITY;
   // Time range of each stratum over this region's rows (rolling shutter widens it), widened to
   // the samples' stored times: a time rounded to float may leave its stratum's exact range, and
@@ -38,7 +45,8 @@ void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
   for (int g = 0; g < G; ++g)
     for (int s = 0; s < N; ++s) {
       double lo, hi;
-      shutter.timeRange(g, double(y0), double(y0 + h), double(s) / N, double(s + 1) / N, lo, hi);
+      // A lens plane's samples come from every time stratum.
+      shutter.timeRange(g, double(y0), double(y0 + h), lensPlanes ? 0.0 : double(s) / N, lensPlanes ? 1.0 : double(s + 1) / N, lo, hi);
       stratumLo[size_t(g) * N + s] = lo;
       stratumHi[size_t(g) * N + s] = hi;
     }
@@ -47,6 +55,7 @@ void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
       const int p = py * w + px, gx = x0 + px, gy = y0 + py;
       const int pat = pattern.patternOf(gx, gy);
       pattern.times(gx, gy, stratumOf.data(), u.data());
+      if (lensPlanes) pattern.lens(gx, gy, lensOf.data(), disk.data());
       const int g = rowGroup[size_t(py)];
       // A global box shutter (the usual case): time() is open + u * length for every sample,
       // the same sum, without its per-sample test.
@@ -54,7 +63,14 @@ void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
       const bool globalBox = shutter.rolling().duration == 0.0 && group.shape.isBox();
       const double open = group.open, length = group.length();
       for (int i = 0; i < N; ++i) {
-        const size_t idx = size_t(stratumOf[size_t(i)]) * PS + size_t(p);
+        const size_t plane = lensPlanes ? lensOf[size_t(i)] : stratumOf[size_t(i)];
+        const size_t idx = plane * PS + size_t(p);
+        if (lensPlanes) {
+          const glm::vec2 l = disk[size_t(i)];
+          lx[idx] = l.x, ly[idx] = l.y;
+          lensLoX[plane] = std::min(lensLoX[plane], l.x), lensHiX[plane] = std::max(lensHiX[plane], l.x);
+          lensLoY[plane] = std::min(lensLoY[plane], l.y), lensHiY[plane] = std::max(lensHiY[plane], l.y);
+        }
         glm::vec2 o = pattern.offset(pat, i);
         const float x = float(gx) + o.x, y = float(gy) + o.y;
         sx[idx] = x, sy[idx] = y;

@@ -51,14 +51,21 @@ class SkewedArray {
 inline constexpr size_t kPad = 16;
 
 struct BucketSamples {
-  BucketSamples(const SamplePattern& pattern, const ShutterModel& shutter);
+  /// With `lens`, each sample also has a lens position, and the planes are lens strata rather
+  /// than time strata (lensPlanes).
+  BucketSamples(const SamplePattern& pattern, const ShutterModel& shutter, bool lens = false);
 
   /// Lays out the samples of region [x0, x0+w) × [y0, y0+h) (raster pixels).
   void prepare(int x0, int y0, int w, int h);
 
   const SamplePattern& pattern;
   const ShutterModel& shutter;
-  const int N;  // samples per pixel = time strata
+  const int N;  // samples per pixel = time strata (= lens strata)
+  /// Depth of field: plane s holds each pixel's sample in lens stratum s (its time stratum is the
+  /// pixel's own permutation), so a plane's lens positions lie in one small cell and the lens
+  /// path bounds a micropolygon's defocus per plane; its times span the whole shutter, which the
+  /// path bounds per sample. Without a lens, planes are time strata.
+  const bool lensPlanes;
 
   // Region.
   int x0 = 0, y0 = 0, w = 0, h = 0, P = 0;
@@ -69,6 +76,8 @@ struct BucketSamples {
   size_t sampleSlots = 0;                   // N * PS: the length of every per-sample array
   SkewedArray<float> sx{0}, sy{8}, st{16};  // stratum-major: [s * PS + p]
   std::vector<uint32_t> idxOf;              // [p * N + i] → s * PS + p (sample i of pixel p lies in stratum s)
+  SkewedArray<float> lx{40}, ly{48};        // lensPlanes: the sample's point on the unit disk, [s * PS + p]
+  std::vector<float> lensLoX, lensHiX, lensLoY, lensHiY;  // lensPlanes: per plane, the extremes of its samples' lx, ly in this region
   std::vector<uint8_t> rowGroup;            // per region row
   std::vector<uint8_t> groupPresent;
   bool multiGroup = false;                   // more than one shutter group (fields): rows differ

@@ -24,27 +24,12 @@ void RasterStats::add(const RasterStats& o) {
   linearMicropolygons += o.linearMicropolygons;
   chunkCulledMicropolygons += o.chunkCulledMicropolygons;
   chunkGatheredMicropolygons += o.chunkGatheredMicropolygons;
+  lensMicropolygons += o.lensMicropolygons;
   transparentParts += o.transparentParts;
 }
 
-namespace {
-
-// Position of vertex v at local time tau: linear between knots, constant outside them.
-glm::vec3 positionAt(const TilePart& part, const store::Schedule& knots, uint32_t v, double tau) {
-  const uint32_t K = part.numKnots;
-  if (K == 1 || tau <= knots[0]) return part.position(0, v);
-  if (tau >= knots[K - 1]) return part.position(K - 1, v);
-  uint32_t k = 0;
-  while (k + 2 < K && knots[k + 1] <= tau) ++k;
-  const float f = float((tau - knots[k]) / (knots[k + 1] - knots[k]));
-  const glm::vec3& a = part.position(k, v);
-  return a + f * (part.position(k + 1, v) - a);
-}
-
-}  // namespace
-
 BucketRasterizer::Impl::Impl(const SamplePattern& p, const ShutterModel& s, const View& v, const std::vector<AovChannel>& a, const RasterOptions& o)
-    : BucketSamples(p, s),
+    : BucketSamples(p, s, v.lens()),
       HitBuffer(a, o, v.farClip, stats),
       view(v),
       opt(o),
@@ -116,6 +101,10 @@ void BucketRasterizer::Impl::rasterizeChunk(const Source& src, const TileEntry& 
   const auto& meta = src.store->meta();
   const auto& knots = meta.schedules[entry.schedule];
   const HitContext hc = hitContext(meta, entry, part, st.data(), tBase - double(src.frame));
+  if (view.lens()) {
+    rasterizeLens(src, entry, part, hc, ch);
+    return;
+  }
   const bool moving = (entry.effects & store::kEffectMoving) && part.numKnots > 1 && !ch.still;
   if (!moving) {
     // Knot 0 holds every knot's positions: one pass serves all samples, all groups.

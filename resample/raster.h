@@ -7,7 +7,8 @@
 //     - static (raster_static.cpp): parts that do not move, still chunks, exact instants;
 //     - linear (raster_linear.cpp): a moving chunk whose interval lies in one knot segment - each
 //       micropolygon's box lerped between the interval's ends; runs that move together gather once;
-//     - moving (raster_moving.cpp): other moving chunks, bounded per time stratum.
+//     - moving (raster_moving.cpp): other moving chunks, bounded per time stratum;
+//     - lens (raster_lens.cpp): with depth of field, every chunk, bounded per lens stratum.
 //  4. Gather (gather.h): the samples inside a micropolygon's box at their own time, not yet hidden
 //     by a nearer opaque surface (the early depth test: exact, it changes no bit).
 //  5. Coverage (coverage.h): the exact edge-function test of each candidate at its time - the
@@ -38,6 +39,11 @@ struct View {
   double ax = 1, bx = 0, ay = 1, by = 0;  // raster = a·(x/z) + b (perspective) or a·x + b
   bool perspective = true;
   float nearClip = 1e-4f, farClip = 1e30f;
+  /// A thin lens (depth of field): a sample at lens point L (camera space, |L| <= lensRadius) sees
+  /// camera-space point P where the pinhole sees P + L (P.z / focalDistance - 1), i.e. displaced
+  /// on the raster by a L (1 / focalDistance - 1 / P.z). Radius 0: the pinhole.
+  double lensRadius = 0, focalDistance = 1;
+  bool lens() const { return lensRadius > 0; }
 };
 
 /// One store contributing to the render: its micropolygons cover [frame + open, frame + close]
@@ -109,6 +115,7 @@ struct RasterStats {
   uint64_t chunkCulledMicropolygons = 0;    // moving ones skipped with their whole chunk (its path misses the region)
   uint64_t chunkGatheredMicropolygons = 0;  // linear-path ones whose candidates came from their chunk's one gather
   uint64_t generalHits = 0;                 // hits through the general attribute lookup (output variables, other attribute layouts)
+  uint64_t lensMicropolygons = 0;           // drawn on the lens path (depth of field)
   void add(const RasterStats& o);
 };
 

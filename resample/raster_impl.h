@@ -4,6 +4,7 @@
 //   raster_static.cpp  the static path (and exact instants): one set of positions for all samples
 //   raster_moving.cpp  the moving path: per-stratum time bounds, the exact moving test
 //   raster_linear.cpp  the linear path (one knot segment per interval) and its chunk gathers
+//   raster_lens.cpp    the lens path: depth of field, still and moving micropolygons alike
 //   coverage.h         does a sample hit a micropolygon at a time (scalar reference; kernels)
 //   gather.h           which samples a moving box holds (vector kernels)
 //   bucket_samples.h   the bucket's samples;  hit_buffer.h  what they saw, and the resolve.
@@ -209,6 +210,28 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   std::vector<float> thetaBox;       // current micropolygon's raster box per theta: x0[T] y0[T] x1[T] y1[T]
 
   // ------------------------------------------------------------------------------------------
+  // The lens path (raster_lens.cpp): every micropolygon when the view has a lens
+
+  // What a chunk's micropolygons share on the lens path.
+  struct LensChunk {
+    const store::TilePart& part;
+    const store::Schedule& knots;
+    const HitContext& hc;
+    bool moving;
+    uint32_t vBase, nV;
+    size_t C;                // bound times: cullX/Y/Z hold [time * nV + v - vBase]
+    float lensAx, lensAy;    // raster displacement per unit of lens and of k = 1/d - 1/z
+    float invD;              // 1 / focal distance
+    float kMag;              // the rounding scale of the displacements
+    Coverage cover;          // the source's coverage, in st units
+    double toLocal;          // local time = st + toLocal
+  };
+  void rasterizeLens(const Source& src, const store::TileEntry& entry, const store::TilePart& part, const HitContext& hc, const Chunk& ch);
+  void drawLens(const LensChunk& lc, uint32_t m);
+  void testLens(const LensChunk& lc, uint32_t m, const uint32_t* c, bool tri, uint8_t flags, uint32_t idx);
+  std::vector<double> lensTimes;  // a chunk's bound times (local)
+
+  // ------------------------------------------------------------------------------------------
   // The linear path and chunk gathers (raster_linear.cpp)
 
   // A micropolygon's moving box over the interval (linearBox()), with the depth no hit can come
@@ -260,6 +283,18 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   std::vector<uint32_t> cellStart;
   std::vector<uint16_t> cellScratch;
 };
+
+// Position of vertex v at local time tau: linear between knots, constant outside them.
+inline glm::vec3 positionAt(const store::TilePart& part, const store::Schedule& knots, uint32_t v, double tau) {
+  const uint32_t K = part.numKnots;
+  if (K == 1 || tau <= knots[0]) return part.position(0, v);
+  if (tau >= knots[K - 1]) return part.position(K - 1, v);
+  uint32_t k = 0;
+  while (k + 2 < K && knots[k + 1] <= tau) ++k;
+  const float f = float((tau - knots[k]) / (knots[k + 1] - knots[k]));
+  const glm::vec3& a = part.position(k, v);
+  return a + f * (part.position(k + 1, v) - a);
+}
 
 // ------------------------------------------------------------------------------------------
 // Gathering a micropolygon's candidates, for the static and moving paths (inline: per micropolygon).

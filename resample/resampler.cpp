@@ -43,6 +43,7 @@ std::string RenderStats::report() const {
   s << "  micropolygons      " << raster.micropolygons << " processed (" << raster.staticMicropolygons << " on the static path, " << raster.linearMicropolygons
     << " bounded from their interval ends, " << raster.chunkGatheredMicropolygons << " of those gathered by chunk, " << raster.chunkCulledMicropolygons
     << " skipped with their chunk), " << raster.parts << " parts (" << raster.transparentParts << " transparent)\n";
+  if (raster.lensMicropolygons) s << "  lens               " << raster.lensMicropolygons << " micropolygons through the lens (depth of field)\n";
   s << "  fragments          " << raster.fragments << " transparent\n";
   if (volumes.rays)
     s << "  volumes            " << volumes.rays << " ray segments marched, " << volumes.steps << " density lookups, " << volumes.shadowSteps
@@ -56,6 +57,22 @@ std::string RenderStats::report() const {
   if (wallSeconds > 0) s << ", " << double(samples) / wallSeconds / 1e6 << " M samples/s";
   s << "\n";
   return s.str();
+}
+
+store::Lens renderLens(const store::Camera& camera, const RenderSpec::LensOverride& o) {
+  if (o.pinhole) return {};
+  store::Lens lens = camera.lens;
+  if (!o.fstop && !o.focalLength && !o.focalDistance) return lens;
+  if (!lens.active() && !(o.fstop && o.focalLength && o.focalDistance))
+    fail("--fstop", "the store's camera '", camera.name, "' has no lens (no DepthOfField): give --fstop, --focal-length and --focus-distance together");
+  if (o.fstop) lens.fstop = *o.fstop;
+  if (o.focalLength) lens.focalLength = *o.focalLength;
+  if (o.focalDistance) lens.focalDistance = *o.focalDistance;
+  if (!(lens.fstop > 0 && std::isfinite(lens.fstop))) fail("--fstop", "f-stop ", lens.fstop, " is not a positive number");
+  if (!(lens.focalLength > 0 && std::isfinite(lens.focalLength))) fail("--focal-length", "focal length ", lens.focalLength, " is not a positive number");
+  if (!(lens.focalDistance > 0 && std::isfinite(lens.focalDistance)))
+    fail("--focus-distance", "focus distance ", lens.focalDistance, " is not a positive number");
+  return lens;
 }
 
 void checkCoverage(const std::vector<Source>& sources, const ShutterModel& shutter) {
@@ -91,7 +108,7 @@ void checkCoverage(const std::vector<Source>& sources, const ShutterModel& shutt
 
 namespace {
 
-View makeView(const store::Camera& cam, int width, int height) {
+View makeView(const store::Camera& cam, int width, int height, const store::Lens& lens) {
   store::Camera c = cam;
   // Same screen window over a different pixel count: a re-sampled resolution.
   double sw[4];
@@ -104,6 +121,11 @@ View makeView(const store::Camera& cam, int width, int height) {
   v.perspective = p.perspective;
   v.nearClip = float(cam.nearClip);
   v.farClip = float(std::min(cam.farClip, 1e30));
+  if (lens.active()) {
+    // RenderMan's depth of field applies to perspective cameras only.
+    if (v.perspective) v.lensRadius = lens.radius(), v.focalDistance = lens.focalDistance;
+    else warnOnce("lens-orthographic", "the camera is orthographic: depth of field ignored");
+  }
   return v;
 }
 
@@ -275,7 +297,7 @@ struct Plan {
         cam(meta0.cameras[0]),
         win(window),
         shutter(shutter),
-        view(makeView(cam, win.W, win.H)),
+        view(makeView(cam, win.W, win.H, renderLens(cam, spec.lens))),
         pattern(spec.samplesX, spec.samplesY, spec.seed),
         N(pattern.spp()),
         aovs(resolveAovs(spec.aovs, meta0.schema, spec.filter)),
@@ -424,7 +446,9 @@ void gatherParts(const Plan& plan, double tMin, double tMax, const Region& rg, s
     const auto& sc = m.cameras[0];
     const float fx = float(sc.width) / float(plan.win.W), fy = float(sc.height) / float(plan.win.H);
     store::RasterRect rect{float(rg.x0) * fx, float(rg.y0) * fy, float(rg.x0 + rg.w) * fx, float(rg.y0 + rg.h) * fy, false};
-    src.store->visit(rect, lo, hi, [&](size_t e) { parts.push_back({si, e}); });
+    // With a lens, a part's samples reach as far as its circle of confusion.
+    const double lensRadius = plan.view.lensRadius, focalDistance = plan.view.focalDistance;
+    src.store->visit(rect, lo, hi, [&](size_t e) { parts.push_back({si, e}); }, lensRadius, focalDistance);
   }
 }
 

@@ -65,7 +65,18 @@ struct RenderSpec {
   bool sceneVolumes = true;
   /// How the store's own volumes are integrated when `volumes` is null (else `volumes`' options).
   VolumeOptions volumeOptions;
+  /// Depth of field: the lens the store's camera records (RIB DepthOfField), with any of its
+  /// values replaced; `pinhole` renders without it. A store without a lens takes one only when
+  /// all three values are given.
+  struct LensOverride {
+    std::optional<double> fstop, focalLength, focalDistance;
+    bool pinhole = false;
+  } lens;
 };
+
+/// The lens a render uses: the camera's with `o` applied (see RenderSpec::lens); throws Error naming
+/// the option at fault.
+store::Lens renderLens(const store::Camera& camera, const RenderSpec::LensOverride& o);
 
 struct RenderStats {
   RasterStats raster;

@@ -35,6 +35,12 @@ class SamplePattern {
   /// Time strata of the pixel's samples: stratumOf[i] is a permutation of 0..N-1; u[i] is the
   /// time variate (stratumOf[i] + jitter) / N ∈ [0, 1).
   void times(int px, int py, uint16_t* stratumOf, float* u) const;
+  /// Lens strata of the pixel's samples, for depth of field: stratumOf[i] is a permutation of
+  /// 0..N-1 independent of the time strata's (so defocus and motion blur do not alias against each
+  /// other); stratum s is cell (s mod nx, s div nx) of the nx×ny grid over the unit square, jittered
+  /// inside it and mapped to the unit disk by the concentric map (Shirley and Chiu), which keeps
+  /// the cells' areas equal and compact.
+  void lens(int px, int py, uint16_t* stratumOf, glm::vec2* disk) const;
 
  private:
   int nx_, ny_, spp_;

@@ -498,7 +498,7 @@ bool RibSceneHandler::cullsBound(const std::array<double, 6>& b) {
   for (double t : times) {
     const glm::dmat4 m = ctm.at(t);
     bool allBehind = true, anyBehind = false, allBeyond = true;
-    double box[4] = {1e300, -1e300, 1e300, -1e300};
+    double box[4] = {1e300, -1e300, 1e300, -1e300}, zLo = 1e300, zHi = -1e300;
     for (int i = 0; i < 8; ++i) {
       const glm::dvec3 c(m * glm::dvec4(b[i & 1 ? 1 : 0], b[i & 2 ? 3 : 2], b[i & 4 ? 5 : 4], 1.0));
       const bool eyeSide = perspective && c.z < cam.nearClip;
@@ -507,7 +507,13 @@ bool RibSceneHandler::cullsBound(const std::array<double, 6>& b) {
       if (!eyeSide) {
         const glm::dvec2 r = proj.project(c);
         box[0] = std::min(box[0], r.x), box[1] = std::max(box[1], r.x), box[2] = std::min(box[2], r.y), box[3] = std::max(box[3], r.y);
+        zLo = std::min(zLo, c.z), zHi = std::max(zHi, c.z);
       }
+    }
+    // A lens blurs into view what lies within a circle of confusion of the frame.
+    if (const double coc = store::circleOfConfusion(cam, zLo, zHi); coc > 0 && !anyBehind) {
+      const double wx = coc * std::abs(proj.ax), wy = coc * std::abs(proj.ay);
+      box[0] -= wx, box[1] += wx, box[2] -= wy, box[3] += wy;
     }
     behind = behind && allBehind, beyond = beyond && allBeyond;
     const bool sides = !anyBehind;  // a box reaching behind the eye projects without bound

@@ -90,6 +90,12 @@ bool options(Scene& s, std::string_view n, const Args& a) {
   }
   if (n == "Projection") return projection(s, a), true;
   if (n == "Clipping") return s.clipping(a.number(0), a.number(1)), true;
+  if (n == "DepthOfField") {
+    // No arguments turns the lens off (RenderMan's pinhole); otherwise fstop focallength focaldistance.
+    if (a.count() == 0) return s.depthOfField(0, 0, 0), true;
+    if (a.count() != 3) a.fail(cat("expects fstop focallength focaldistance, has ", a.count(), " arguments"));
+    return s.depthOfField(a.number(0), a.number(1), a.number(2)), true;
+  }
   if (n == "Shutter") return s.shutter(a.number(0), a.number(1)), true;
   if (n == "Camera") return s.camera(a.string(0)), true;
   if (n == "FrameBegin") return s.frameBegin(a.count() ? integerArg(a, 0, -1e15, 1e15) : 1), true;

@@ -292,6 +292,13 @@ void Scene::clipping(double n, double f) {
   if (!(n > 0) || !(f > n)) error(cat("clipping planes ", n, " ", f, " invalid"));
   options_.camera.nearClip = n, options_.camera.farClip = std::min(f, 1e30);
 }
+void Scene::depthOfField(double fstop, double focalLength, double focalDistance) {
+  store::Lens lens{fstop, focalLength, focalDistance};
+  const bool off = (fstop == 0 && focalLength == 0 && focalDistance == 0) || std::isinf(fstop);
+  if (!off && !lens.active())
+    error(cat("DepthOfField ", fstop, " ", focalLength, " ", focalDistance, ": f-stop, focal length and focal distance must be positive and finite"));
+  options_.camera.lens = off ? store::Lens{} : lens;
+}
 void Scene::shutter(double open, double close) {
   if (!std::isfinite(open) || !std::isfinite(close) || close < open) error(cat("shutter [", open, ", ", close, "] is not an interval"));
   options_.shutterOpen = open, options_.shutterClose = close;

@@ -307,6 +307,7 @@ class Scene {
   void perspective(double fovDegrees);
   void orthographic();
   void clipping(double nearClip, double farClip);
+  void depthOfField(double fstop, double focalLength, double focalDistance);
   void shutter(double open, double close);
   void pixelSamples(int x, int y);
   void display(const std::string& name, const std::string& mode);

@@ -107,6 +107,9 @@ class Splitter {
 
   glm::dvec3 camera(size_t k, const UV& uv) const { return glm::dvec3(mats_[k] * glm::dvec4(evalP(p_, shapes_[k], uv.u, uv.v), 1.0)); }
   bool inFront(const glm::dvec3& c) const { return !proj_.perspective || c.z >= proj_.nearClip; }
+  // The thin lens's largest displacement, per unit of raster scale, over camera depths [z0, z1]:
+  // radius · |1/d - 1/z| at one end (0 without a lens).
+  double cocPerRasterUnit(double z0, double z1) const { return store::circleOfConfusion(cam_, z0, z1); }
   double edgeLength(double motion) const { return std::sqrt(rate_ * (1.0 + motionFactor_ * motion / 16.0)); }
 
   // The side from `from` to `to`, measured along itself alone: the same answer for every piece
@@ -210,6 +213,7 @@ class Splitter {
     for (int j = 0; j < kTest; ++j)
       for (int i = 0; i < kTest; ++i) uv[j][i] = bilinearUV(pc, double(i) / (kTest - 1), double(j) / (kTest - 1));
     double bb[4] = {1e300, -1e300, 1e300, -1e300};
+    double zLo = 1e300, zHi = -1e300;  // camera depths of the points in front
     for (size_t k = 0; k < K; ++k) {
       glm::dvec3 c[kTest][kTest];
       int nFront = 0;
@@ -222,6 +226,7 @@ class Splitter {
           if (fr[j][i]) {
             ++nFront;
             r[j][i] = proj_.project(c[j][i]);
+            zLo = std::min(zLo, c[j][i].z), zHi = std::max(zHi, c[j][i].z);
             bb[0] = std::min(bb[0], r[j][i].x), bb[1] = std::max(bb[1], r[j][i].x);
             bb[2] = std::min(bb[2], r[j][i].y), bb[3] = std::max(bb[3], r[j][i].y);
           }
@@ -250,7 +255,11 @@ class Splitter {
     }
     if (!e.allBehind) {
       // Curved pieces bulge between test points: pad the bound by a tenth of its size.
-      const double px = 0.1 * (bb[1] - bb[0]) + 1, py = 0.1 * (bb[3] - bb[2]) + 1;
+      double px = 0.1 * (bb[1] - bb[0]) + 1, py = 0.1 * (bb[3] - bb[2]) + 1;
+      // A lens sees past the pinhole's frame by each depth's circle of confusion: what it may
+      // blur into view is kept (its depths padded like its bound).
+      if (const double coc = cocPerRasterUnit(zLo - 0.1 * (zHi - zLo), zHi + 0.1 * (zHi - zLo)); coc > 0)
+        px += coc * std::abs(proj_.ax), py += coc * std::abs(proj_.ay);
       e.offscreen = bb[1] + px < window_[0] || bb[0] - px > window_[1] || bb[3] + py < window_[2] || bb[2] - py > window_[3];
     }
     return e;

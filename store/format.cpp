@@ -201,9 +201,16 @@ void writeMeta(const StoreMeta& m, ByteWriter& w) {
       }
     }
   }
+  if (version >= 4)
+    for (const Camera& c : m.cameras) {
+      const Lens lens = c.lens.active() ? c.lens : Lens{};  // an inactive lens is stored as the pinhole
+      w.put<double>(lens.fstop), w.put<double>(lens.focalLength), w.put<double>(lens.focalDistance);
+    }
 }
 
 uint32_t formatVersionFor(const StoreMeta& m) {
+  for (const Camera& c : m.cameras)
+    if (c.lens.active()) return 4;
   if (!m.lights.empty() || !m.volumes.empty()) return 3;
   return m.shadingTimes.empty() ? 1 : 2;
 }
@@ -275,6 +282,13 @@ StoreMeta readMeta(ByteReader& r, uint32_t version) {
         for (int i = 0; i < 4; ++i)
           for (int j = 0; j < 4; ++j) v.fileToCamera[k][i][j] = r.get<double>();
       }
+    }
+  }
+  if (version >= 4) {
+    for (Camera& c : m.cameras) {
+      c.lens.fstop = r.get<double>(), c.lens.focalLength = r.get<double>(), c.lens.focalDistance = r.get<double>();
+      const bool pinhole = c.lens.fstop == 0 && c.lens.focalLength == 0 && c.lens.focalDistance == 0;
+      if (!pinhole && !c.lens.active()) fail(r.context(), "camera '", c.name, "' has an invalid lens");
     }
   }
   if (!r.atEnd()) fail(r.context(), "unexpected bytes after the metadata");

@@ -82,7 +82,14 @@ bool Camera::operator==(const Camera& o) const {
   for (int i = 0; i < 4; ++i)
     if (screenWindow[i] != o.screenWindow[i]) return false;
   return name == o.name && projection == o.projection && fovDegrees == o.fovDegrees && width == o.width && height == o.height && pixelAspect == o.pixelAspect &&
-         nearClip == o.nearClip && farClip == o.farClip && worldToCamera == o.worldToCamera;
+         nearClip == o.nearClip && farClip == o.farClip && worldToCamera == o.worldToCamera && lens == o.lens;
+}
+
+double circleOfConfusion(const Camera& camera, double z0, double z1) {
+  if (!camera.lens.active() || camera.projection != Projection::Perspective) return 0.0;
+  if (!(z0 > 0)) return INFINITY;
+  const double invD = 1.0 / camera.lens.focalDistance;
+  return camera.lens.radius() * std::max(std::abs(invD - 1.0 / z0), std::abs(invD - 1.0 / z1));
 }
 
 Projector::Projector(const Camera& cam) {

@@ -7,6 +7,7 @@
 // (`Shutter` semantics). Positions are camera-space points, linear in camera space between knots.
 #pragma once
 
+#include <cmath>
 #include <cstdint>
 #include <span>
 #include <string>
@@ -60,6 +61,16 @@ struct Schema {
 
 enum class Projection : uint8_t { Perspective = 0, Orthographic = 1 };
 
+/// A thin lens (RenderMan's `DepthOfField fstop focallength focaldistance`): an aperture of radius
+/// focalLength / (2 fstop) in camera-space units, in focus at camera depth focalDistance. The
+/// default (fstop 0) is a pinhole; so is an infinite f-stop.
+struct Lens {
+  double fstop = 0, focalLength = 0, focalDistance = 0;
+  bool active() const { return fstop > 0 && std::isfinite(fstop) && focalLength > 0 && focalDistance > 0 && std::isfinite(focalLength) && std::isfinite(focalDistance); }
+  double radius() const { return active() ? focalLength / (2.0 * fstop) : 0.0; }
+  bool operator==(const Lens&) const = default;
+};
+
 struct Camera {
   std::string name = "world";
   Projection projection = Projection::Perspective;
@@ -69,11 +80,17 @@ struct Camera {
   double screenWindow[4] = {0, 0, 0, 0};  // left right bottom top; all zero = RenderMan default
   double nearClip = 1e-4, farClip = 1e30;
   glm::dmat4 worldToCamera{1.0};
+  Lens lens;  // format version 4
 
   /// Screen window after applying RenderMan's default (the frame aspect ratio over [-1,1]).
   void effectiveScreenWindow(double out[4]) const;
   bool operator==(const Camera&) const;
 };
+
+/// The largest lens displacement over camera depths [z0, z1] in units of the projection's scale
+/// (raster x moves by ax times it): radius · max |1/d - 1/z|. 0 without a lens or an orthographic
+/// camera; infinite when the depths reach the eye plane.
+double circleOfConfusion(const Camera& camera, double z0, double z1);
 
 /// Camera space → raster space for one camera: x_r = ax·x/z + bx (perspective) or ax·x + bx.
 struct Projector {

@@ -259,9 +259,27 @@ RasterRect StoreReader::bounds(size_t entry, double t0, double t1) const {
   return boundsOver(e, impl_->meta.schedules[e.schedule], impl_->projector, t0, t1);
 }
 
-void StoreReader::visit(const RasterRect& rect, double t0, double t1, const std::function<void(size_t)>& fn) const {
+void StoreReader::visit(const RasterRect& rect, double t0, double t1, const std::function<void(size_t)>& fn, double lensRadius, double focalDistance) const {
   const auto& I = *impl_;
   for (size_t i = 0; i < I.entries.size(); ++i) {
+    if (lensRadius > 0) {
+      // A point at depth z moves by a L (1/d - 1/z) on the raster for lens point L, |L| <= radius:
+      // the part's depths over every knot bound it (a part reaching the eye plane reaches everywhere).
+      float zLo = INFINITY, zHi = -INFINITY;
+      for (const KnotBounds& kb : I.entries[i].knots) zLo = std::min(zLo, kb.camera[2]), zHi = std::max(zHi, kb.camera[5]);
+      if (!(zLo > 0)) {
+        fn(i);
+        continue;
+      }
+      const double k = std::max(std::abs(1.0 / focalDistance - 1.0 / zLo), std::abs(1.0 / focalDistance - 1.0 / zHi));
+      const double wx = lensRadius * k * std::abs(I.projector.ax) * 1.0001 + 1e-3, wy = lensRadius * k * std::abs(I.projector.ay) * 1.0001 + 1e-3;
+      auto widened = [&](RasterRect r) {
+        if (!r.empty) r.x0 = float(r.x0 - wx), r.y0 = float(r.y0 - wy), r.x1 = float(r.x1 + wx), r.y1 = float(r.y1 + wy);
+        return r;
+      };
+      if (widened(I.shutterBounds[i]).overlaps(rect) && widened(bounds(i, t0, t1)).overlaps(rect)) fn(i);
+      continue;
+    }
     if (!I.shutterBounds[i].overlaps(rect)) continue;
     if (bounds(i, t0, t1).overlaps(rect)) fn(i);
   }

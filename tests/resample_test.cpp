@@ -268,20 +268,6 @@ TestScene matteOverBackground() {
   return s;
 }
 
-// The render r of scene s agrees with the brute-force ray caster on the same samples: only
-// samples within float rounding of an edge may differ, a handful in 18 k.
-void expectRayCasterAgrees(const TestScene& s, const RenderSpec& spec, const RenderResult& r, int width, int height, const std::string& what) {
-  const Reference ref = rayCast(s, spec, width, height);
-  double diff = 0, maxDiff = 0;
-  for (size_t p = 0; p < ref.a.size(); ++p)
-    for (auto [name, vals] : {std::pair{"R", &ref.r}, std::pair{"G", &ref.g}, std::pair{"B", &ref.b}, std::pair{"A", &ref.a}}) {
-      const double d = std::abs(channel(r, name).f[p] - (*vals)[p]);
-      diff += d, maxDiff = std::max(maxDiff, d);
-    }
-  EXPECT_LT(diff / double(ref.a.size()), 2e-3) << what;
-  EXPECT_LE(maxDiff, 2.0 / 16 + 1e-5) << what;
-}
-
 }  // namespace
 
 TEST(ResampleCompositing, MatteCutsOutAndHidesWhatIsBehind) {

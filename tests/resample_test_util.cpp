@@ -129,8 +129,13 @@ SampleReference rayCastSamples(const TestScene& scene, const RenderSpec& spec, i
   SampleReference ref;
   ref.x0 = x0, ref.y0 = y0, ref.width = W, ref.height = H, ref.spp = N;
   ref.r.assign(size_t(W) * H * N, 0), ref.g = ref.r, ref.b = ref.r, ref.a = ref.r;
-  std::vector<uint16_t> stratumOf(static_cast<size_t>(N));
+  std::vector<uint16_t> stratumOf(static_cast<size_t>(N)), lensOf(static_cast<size_t>(N));
   std::vector<float> u(static_cast<size_t>(N));
+  std::vector<glm::vec2> disk(static_cast<size_t>(N));
+  // A thin lens: each sample's ray leaves the lens at its own point L and passes through the point
+  // of the focal plane (z = d) that the pinhole ray through its raster position meets.
+  const store::Lens lens = camera.projection == Projection::Perspective ? renderLens(camera, spec.lens) : store::Lens{};
+  const double R = lens.radius(), d = lens.focalDistance;
   struct Hit {
     double z;
     size_t mp;
@@ -140,19 +145,24 @@ SampleReference rayCastSamples(const TestScene& scene, const RenderSpec& spec, i
     for (int px = x0; px < x0 + W; ++px) {
       const int pat = pattern.patternOf(px, py);
       pattern.times(px, py, stratumOf.data(), u.data());
+      if (R > 0) pattern.lens(px, py, lensOf.data(), disk.data());
       const int g = shutter.groupOfRow(py);
       for (int i = 0; i < N; ++i) {
         const glm::vec2 o = pattern.offset(pat, i);
         const float x = float(px) + o.x, y = float(py) + o.y;
         const double t = tBase + double(float(shutter.time(g, y, u[size_t(i)]) - tBase));
-        const glm::dvec3 d((double(x) - proj.bx) / proj.ax, (double(y) - proj.by) / proj.ay, 1.0);
+        const glm::dvec3 pinhole((double(x) - proj.bx) / proj.ax, (double(y) - proj.by) / proj.ay, 1.0);
+        // The ray from lens point L (the eye, for a pinhole) with direction z = 1; corners are
+        // taken relative to L, so a hit's ray parameter is its camera depth.
+        const glm::dvec3 L = R > 0 ? glm::dvec3(R * disk[size_t(i)].x, R * disk[size_t(i)].y, 0.0) : glm::dvec3(0.0);
+        const glm::dvec3 dir = R > 0 ? (pinhole * d - L) / d : pinhole;
         hits.clear();
         for (size_t m = 0; m < scene.mps.size(); ++m) {
           const TestMp& mp = scene.mps[m];
           glm::dvec3 c[4];
-          for (int j = 0; j < (mp.triangle ? 3 : 4); ++j) c[j] = positionAt(mp, scene.knotTimes, j, t - F);
-          double z = hitTriangle(d, c[0], c[1], c[2]);
-          if (!(z >= camera.nearClip && z <= camera.farClip) && !mp.triangle) z = hitTriangle(d, c[0], c[2], c[3]);
+          for (int j = 0; j < (mp.triangle ? 3 : 4); ++j) c[j] = positionAt(mp, scene.knotTimes, j, t - F) - L;
+          double z = hitTriangle(dir, c[0], c[1], c[2]);
+          if (!(z >= camera.nearClip && z <= camera.farClip) && !mp.triangle) z = hitTriangle(dir, c[0], c[2], c[3]);
           if (z >= camera.nearClip && z <= camera.farClip) hits.push_back({z, m});
         }
         std::stable_sort(hits.begin(), hits.end(), [](const Hit& a, const Hit& b) { return a.z < b.z; });
@@ -225,6 +235,18 @@ double analyticCoverage(int px, int py, double x0, double y0, double w, double h
     norm += (t1 - t0) / 6 * (weight(t0) + 4 * weight(tm) + weight(t1));
   }
   return sum / norm;
+}
+
+void expectRayCasterAgrees(const TestScene& s, const RenderSpec& spec, const RenderResult& r, int width, int height, const std::string& what) {
+  const Reference ref = rayCast(s, spec, width, height);
+  double diff = 0, maxDiff = 0;
+  for (size_t p = 0; p < ref.a.size(); ++p)
+    for (auto [name, vals] : {std::pair{"R", &ref.r}, std::pair{"G", &ref.g}, std::pair{"B", &ref.b}, std::pair{"A", &ref.a}}) {
+      const double d = std::abs(channel(r, name).f[p] - (*vals)[p]);
+      diff += d, maxDiff = std::max(maxDiff, d);
+    }
+  EXPECT_LT(diff / double(ref.a.size()), 2e-3) << what;
+  EXPECT_LE(maxDiff, 2.0 / 16 + 1e-5) << what;
 }
 
 const ImageChannel& channel(const RenderResult& r, const std::string& name) {

@@ -48,7 +48,8 @@ resample::RenderSpec specFor(std::shared_ptr<const store::StoreReader> reader, d
 
 /// The reference alpha per pixel (box filter over the pixel's own samples) of an opaque or
 /// transparent scene: per sample, the front-to-back composite of every surface the ray hits at
-/// the sample's time, using the same sample positions and times as `spec`.
+/// the sample's time, using the same sample positions and times as `spec` - and, with a lens
+/// (the camera's or spec.lens), the same lens points, each sample's ray leaving the lens there.
 struct Reference {
   std::vector<double> r, g, b, a;  // per pixel of the spec's full image
 };
@@ -73,6 +74,11 @@ SampleReference rayCastSamples(const TestScene& scene, const resample::RenderSpe
 /// pixel boundary or the weight changes slope.
 double analyticCoverage(int px, int py, double x0, double y0, double w, double h, double vx, double vy, double a, double b,
                         const std::vector<double>& shapeTimes = {}, const std::vector<double>& shapeWeights = {});
+
+/// Expects render r of scene s to agree with the ray caster (rayCast()) on the same samples: only
+/// samples within float rounding of an edge may differ, a handful in 18 k.
+void expectRayCasterAgrees(const TestScene& s, const resample::RenderSpec& spec, const resample::RenderResult& r, int width, int height,
+                           const std::string& what);
 
 const resample::ImageChannel& channel(const resample::RenderResult& r, const std::string& name);
 

@@ -1,0 +1,311 @@
+// Depth of field (resample/raster_lens.cpp): an out-of-focus edge blurs by exactly the thin-lens
+// circle of confusion, a surface at the focal distance is the pinhole image, a stored frame
+// re-focuses, a moving defocused square converges to its integral over time and lens, and every
+// render agrees sample by sample with a ray caster whose rays leave the lens (tests/resample_test_util.h).
+#include <algorithm>
+#include <cmath>
+#include <numeric>
+
+#include <gtest/gtest.h>
+
+#include "common/error.h"
+#include "common/random.h"
+#include "store/reader.h"
+#include "tests/resample_test_util.h"
+#include "tests/test_util.h"
+
+using namespace reshutter;
+using namespace reshutter::resample;
+using namespace reshutter::test;
+
+namespace {
+
+void writeText(const std::string& path, const std::string& text) { writeBytes(path, std::vector<uint8_t>(text.begin(), text.end())); }
+
+// Fraction of the unit disk with x <= a: the x marginal of a uniform lens point.
+double diskBelow(double a) {
+  if (a <= -1) return 0;
+  if (a >= 1) return 1;
+  return 1 - (std::acos(a) - a * std::sqrt(1 - a * a)) / M_PI;
+}
+
+// A lens whose circle of confusion for depth z has raster radius r, focused at d (spec overrides).
+RenderSpec::LensOverride lensFor(const TestScene& s, double r, double z, double d) {
+  const double ax = store::Projector(s.meta.cameras[0]).ax;
+  const double radius = r / (ax * std::abs(1 / d - 1 / z));
+  RenderSpec::LensOverride o;
+  o.focalLength = 1, o.fstop = 1 / (2 * radius), o.focalDistance = d;
+  return o;
+}
+
+// A static opaque surface at depth z covering raster x >= edge (and far beyond the frame).
+TestScene edgeScene(double edge, double z, int W = 64, int H = 24) {
+  TestScene s = makeScene(W, H, {0.0});
+  TestMp mp;
+  mp.knots = {s.rect(edge, -60, W + 60, H + 60, z)};
+  s.mps.push_back(mp);
+  return s;
+}
+
+std::vector<double> columnMeans(const RenderResult& r) {
+  const auto& A = channel(r, "A").f;
+  const int W = r.image.width, H = r.image.height;
+  std::vector<double> col(size_t(W), 0.0);
+  for (int py = 0; py < H; ++py)
+    for (int px = 0; px < W; ++px) col[size_t(px)] += A[size_t(py) * W + px] / H;
+  return col;
+}
+
+// The largest alpha in column px, or the smallest (lowest).
+float columnExtreme(const RenderResult& r, int px, bool lowest) {
+  const auto& A = channel(r, "A").f;
+  float e = A[size_t(px)];
+  for (int py = 0; py < r.image.height; ++py) {
+    const float v = A[size_t(py) * r.image.width + px];
+    e = lowest ? std::min(e, v) : std::max(e, v);
+  }
+  return e;
+}
+
+}  // namespace
+
+TEST(LensAnalytic, OutOfFocusEdgeBlursByTheCircleOfConfusion) {
+  ScratchDir dir;
+  const double edge = 30.3, z = 10, d = 5, r = 7.5;
+  const TestScene s = edgeScene(edge, z);
+  auto reader = writeScene(s, dir.path("edge.mps"));
+  RenderSpec spec = specFor(reader, 0, 0, 8, 8, 3);
+  spec.lens = lensFor(s, r, z, d);
+  RenderResult res = render(spec);
+  EXPECT_GT(res.stats.raster.lensMicropolygons, 0u);
+  EXPECT_EQ(res.stats.raster.staticMicropolygons, 0u);
+  const std::vector<double> col = columnMeans(res);
+  // The sample at x sees the surface where its lens point's displacement r·u (u the lens point's
+  // x on the unit disk) is at most x - edge: the pixel's column is that disk fraction averaged
+  // over the pixel.
+  double sumErr = 0;
+  for (int px = 0; px < int(col.size()); ++px) {
+    double expected = 0;
+    const int steps = 400;
+    for (int k = 0; k < steps; ++k) expected += diskBelow((px + (k + 0.5) / steps - edge) / r) / steps;
+    const double err = std::abs(col[size_t(px)] - expected);
+    sumErr += err;
+    EXPECT_LT(err, 0.03) << "column " << px << ": " << col[size_t(px)] << " against " << expected;
+    // Nothing reaches past the circle of confusion, and inside it nothing is lost.
+    if (px + 1 < edge - r - 1e-3) {
+      EXPECT_EQ(columnExtreme(res, px, false), 0.f) << "column " << px;
+    }
+    if (px > edge + r + 1e-3) {
+      EXPECT_EQ(columnExtreme(res, px, true), 1.f) << "column " << px;
+    }
+  }
+  EXPECT_LT(sumErr / double(col.size()), 0.008);
+  // The blur is as wide as the circle: columns a pixel inside it on both sides are partial.
+  EXPECT_GT(col[size_t(edge - r + 1)], 0.0);
+  EXPECT_LT(col[size_t(edge + r - 2)], 1.0);
+}
+
+TEST(LensAnalytic, InFocusSurfaceIsThePinholeImageAndAStoredFrameRefocuses) {
+  ScratchDir dir;
+  const double edge = 30.3, z = 10;
+  TestScene s = edgeScene(edge, z);
+  // The store's camera records a lens focused at 5 (RIB DepthOfField), so the edge is blurred.
+  const RenderSpec::LensOverride recorded = lensFor(s, 6, z, 5);
+  s.meta.cameras[0].lens = {*recorded.fstop, *recorded.focalLength, *recorded.focalDistance};
+  auto reader = writeScene(s, dir.path("edge.mps"));
+  ASSERT_TRUE(reader->meta().cameras[0].lens.active());
+  EXPECT_EQ(reader->meta().cameras[0].lens, s.meta.cameras[0].lens);
+
+  RenderSpec pinholeSpec = specFor(reader, 0, 0, 4, 4, 9);
+  pinholeSpec.lens.pinhole = true;
+  const RenderResult pinhole = render(pinholeSpec);
+  EXPECT_EQ(pinhole.stats.raster.lensMicropolygons, 0u);
+  EXPECT_GT(pinhole.stats.raster.staticMicropolygons, 0u);
+
+  const RenderResult stored = render(specFor(reader, 0, 0, 4, 4, 9));
+  EXPECT_GT(stored.stats.raster.lensMicropolygons, 0u);
+  const std::vector<double> blurred = columnMeans(stored);
+  EXPECT_GT(blurred[size_t(edge) - 3], 0.05);  // light three pixels before the edge: defocus
+  EXPECT_LT(blurred[size_t(edge) + 3], 0.95);
+
+  // Re-focused on the surface's depth: the pinhole image, sample for sample.
+  RenderSpec refocus = specFor(reader, 0, 0, 4, 4, 9);
+  refocus.lens.focalDistance = z;
+  const RenderResult sharp = render(refocus);
+  EXPECT_GT(sharp.stats.raster.lensMicropolygons, 0u);
+  const auto &A = channel(sharp, "A").f, &P = channel(pinhole, "A").f;
+  ASSERT_EQ(A.size(), P.size());
+  for (size_t i = 0; i < A.size(); ++i) ASSERT_NEAR(A[i], P[i], 1e-6) << "pixel " << i;
+  EXPECT_EQ(columnExtreme(sharp, int(edge) - 1, false), 0.f);
+  EXPECT_EQ(columnExtreme(sharp, int(edge) + 1, true), 1.f);
+}
+
+TEST(LensReference, AgreesWithARayCasterWhoseRaysLeaveTheLens) {
+  // Random moving quads and triangles, some transparent, some mattes, in front of and behind the
+  // focal plane; rays from each sample's own lens point at its own time.
+  ScratchDir dir;
+  TestScene s = makeScene(40, 28, {0.0, 0.4, 1.0});
+  Rng rng(23);
+  for (int i = 0; i < 40; ++i) {
+    TestMp mp;
+    const double cx = rng.uniform(-5, 45), cy = rng.uniform(-5, 33), size = rng.uniform(1, 9);
+    glm::dvec2 vel(rng.uniform(-10, 10), rng.uniform(-10, 10));
+    const double z = rng.uniform(3, 30), dz = rng.uniform(-2, 2);
+    for (int k = 0; k < 3; ++k) {
+      const double t = s.knotTimes[size_t(k)];
+      std::array<glm::dvec3, 4> c;
+      for (int j = 0; j < 4; ++j) {
+        const double ang = j * M_PI / 2 + rng.uniform(-0.3, 0.3) + t * 0.5;
+        c[size_t(j)] = s.cam(cx + vel.x * t + size * std::cos(ang), cy + vel.y * t + size * std::sin(ang), z + dz * t + rng.uniform(-0.5, 0.5));
+      }
+      mp.knots.push_back(c);
+    }
+    if (i % 5 == 0) mp.knots.assign(3, mp.knots[0]);  // some stand still
+    mp.triangle = i % 4 == 0;
+    mp.ci = {float(rng.uniform()), float(rng.uniform()), float(rng.uniform())};
+    if (i % 3 == 0) mp.oi = {0.3f, 0.5f, 0.7f}, mp.ci *= 0.3f;
+    if (i % 7 == 0) mp.flags = store::kMatte;
+    mp.flags |= store::kTwoSided;
+    s.mps.push_back(mp);
+  }
+  auto reader = writeScene(s, dir.path("random.mps"));
+  for (auto [a, b] : {std::pair{0.0, 1.0}, std::pair{0.3, 0.55}, std::pair{0.8, 0.8}}) {
+    RenderSpec spec = specFor(reader, a, b, 4, 4, 5);
+    spec.lens = lensFor(s, 4, 30, 8);  // 4 px at depth 30, more in front of the focal plane
+    RenderResult r = render(spec);
+    EXPECT_GT(r.stats.raster.lensMicropolygons, 0u);
+    expectRayCasterAgrees(s, spec, r, 40, 28, cat("interval ", a, ":", b));
+  }
+}
+
+TEST(LensAnalytic, MovingDefocusedSquareConvergesToItsIntegralOverTimeAndLens) {
+  ScratchDir dir;
+  const double x0 = 9.3, y0 = 7.6, w = 11.45, h = 8.8, vx = 12.7, vy = 5.35, z = 10, r = 4.5;
+  TestScene s = makeScene(44, 32);
+  TestMp mp;
+  mp.knots = {s.rect(x0, y0, x0 + w, y0 + h, z), s.rect(x0 + vx, y0 + vy, x0 + w + vx, y0 + h + vy, z)};
+  s.mps.push_back(mp);
+  auto reader = writeScene(s, dir.path("square.mps"));
+  const RenderSpec::LensOverride lens = lensFor(s, r, z, 4);
+  const double a = 0.1, b = 0.85;
+  // The integral: over the lens (polar midpoints, area-weighted), the exact time-averaged coverage
+  // of the square displaced by r·u (analyticCoverage()).
+  const int W = 44, H = 32, NR = 24, NT = 48;
+  std::vector<double> expected(size_t(W) * H, 0.0);
+  for (int py = 0; py < H; ++py)
+    for (int px = 0; px < W; ++px) {
+      if (px < x0 - r - 2 || px > x0 + w + vx + r + 2 || py < y0 - r - 2 || py > y0 + h + vy + r + 2) continue;
+      double sum = 0;
+      for (int ir = 0; ir < NR; ++ir)
+        for (int it = 0; it < NT; ++it) {
+          const double rho = std::sqrt((ir + 0.5) / NR), phi = 2 * M_PI * (it + 0.5) / NT;  // equal-area rings
+          sum += analyticCoverage(px, py, x0 + r * rho * std::cos(phi), y0 + r * rho * std::sin(phi), w, h, vx, vy, a, b);
+        }
+      expected[size_t(py) * W + px] = sum / (NR * NT);
+    }
+  // The integral keeps the square's area: defocus and motion move coverage, they do not make or
+  // lose it (the square stays in the frame).
+  EXPECT_NEAR(std::accumulate(expected.begin(), expected.end(), 0.0), w * h, 1e-3 * w * h);
+  std::vector<double> rms;
+  double bias = 0;
+  for (int n : {2, 4, 8, 16}) {
+    double sum = 0;
+    const int seeds = n == 16 ? 8 : 2;  // the bias check needs the mean of several images
+    for (int seed = 0; seed < seeds; ++seed) {
+      RenderSpec spec = specFor(reader, a, b, n, n, uint64_t(seed));
+      spec.lens = lens;
+      const RenderResult res = render(spec);
+      EXPECT_GT(res.stats.raster.lensMicropolygons, 0u);
+      const auto& A = channel(res, "A").f;
+      double e2 = 0, mean = 0;
+      for (size_t p = 0; p < A.size(); ++p) {
+        const double d = A[p] - expected[p];
+        e2 += d * d, mean += d;
+      }
+      sum += e2 / double(A.size());
+      if (n == 16) bias += mean / double(A.size()) / seeds;
+    }
+    rms.push_back(std::sqrt(sum / seeds));
+  }
+  for (size_t i = 1; i < rms.size(); ++i) EXPECT_LT(rms[i], rms[i - 1]) << "error did not fall at step " << i;
+  // 4 → 256 samples per pixel in five dimensions (x, y, t, lens u, v): at least the Monte Carlo rate.
+  EXPECT_LT(rms.back(), rms.front() / 8) << "rms 4 spp " << rms.front() << ", 256 spp " << rms.back();
+  EXPECT_LT(rms.back(), 0.01);
+  // No bias: the image's total alpha scatters by ~0.36 from seed to seed (2.6e-4 a pixel), so the
+  // mean of eight is held to 4 standard errors.
+  EXPECT_LT(std::abs(bias), 4e-4);
+}
+
+TEST(LensRib, DepthOfFieldIsRecordedAndTheCommandLineRefocuses) {
+  ScratchDir dir;
+  const std::string rib = dir.path("dof.rib");
+  writeText(rib,
+            "Format 64 48 1\nProjection \"perspective\" \"fov\" 40\nDepthOfField 2.8 0.5 4\nWorldBegin\n"
+            "Surface \"constant\"\nColor [1 1 1]\nTranslate 0 0 8\nPolygon \"P\" [-1 -1 0  1 -1 0  1 1 0  -1 1 0]\nWorldEnd\n");
+  const std::string mps = dir.path("dof.mps");
+  const CommandResult shade = runReshutter("shade " + rib + " -o " + mps);
+  ASSERT_EQ(shade.exitCode, 0) << shade.err;
+  const store::StoreReader reader(mps);
+  const store::Lens& lens = reader.meta().cameras[0].lens;
+  EXPECT_FLOAT_EQ(float(lens.fstop), 2.8f);  // RIB numbers are floats
+  EXPECT_EQ(lens.focalLength, 0.5);
+  EXPECT_EQ(lens.focalDistance, 4);
+  const CommandResult info = runReshutter("info " + mps);
+  EXPECT_NE(info.out.find("lens f/2.8 focal length 0.5 focus 4"), std::string::npos) << info.out;
+
+  const CommandResult blurred = runReshutter("resample " + mps + " -o " + dir.path("b.exr") + " --stats");
+  ASSERT_EQ(blurred.exitCode, 0) << blurred.err;
+  EXPECT_NE(blurred.out.find("through the lens"), std::string::npos) << blurred.out;
+  const CommandResult pinhole = runReshutter("resample " + mps + " -o " + dir.path("p.exr") + " --pinhole --stats");
+  ASSERT_EQ(pinhole.exitCode, 0) << pinhole.err;
+  EXPECT_EQ(pinhole.out.find("through the lens"), std::string::npos) << pinhole.out;
+  // Re-focused on the square (depth 8): the pinhole image, pixel for pixel (idiff: an independent reader).
+  const CommandResult refocus = runReshutter("resample " + mps + " -o " + dir.path("r.exr") + " --focus-distance 8");
+  ASSERT_EQ(refocus.exitCode, 0) << refocus.err;
+  EXPECT_EQ(runImageTool("idiff -fail 1e-6 -warn 1e-6 " + dir.path("r.exr") + " " + dir.path("p.exr")).exitCode, 0);
+  EXPECT_NE(runImageTool("idiff -fail 1e-3 " + dir.path("b.exr") + " " + dir.path("p.exr")).exitCode, 0);
+
+  // A store without a lens needs all three values; a bad value is one line and no image.
+  const std::string flat = dir.path("flat.mps");
+  ASSERT_EQ(runReshutter("generate -n 2000 --width 64 --height 48 -o " + flat).exitCode, 0);
+  for (const std::string& bad : {std::string("--focus-distance 5"), std::string("--fstop 2 --focal-length 1 --focus-distance -1")}) {
+    const CommandResult r = runReshutter("resample " + flat + " -o " + dir.path("x.exr") + " " + bad);
+    EXPECT_NE(r.exitCode, 0) << bad;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    EXPECT_FALSE(std::filesystem::exists(dir.path("x.exr"))) << bad;
+  }
+  const CommandResult ok = runReshutter("resample " + flat + " -o " + dir.path("x.exr") + " --fstop 2 --focal-length 1 --focus-distance 5 --stats");
+  EXPECT_EQ(ok.exitCode, 0) << ok.err;
+  EXPECT_NE(ok.out.find("through the lens"), std::string::npos) << ok.out;
+}
+
+TEST(LensShade, WhatTheLensBlursIntoViewIsShaded) {
+  // A square 6 px beyond the frame's right edge (overscan 0): the pinhole never sees it, a lens
+  // whose circle of confusion there is 12 px blurs it into the frame - the shading pass keeps it.
+  ScratchDir dir;
+  auto ribWith = [&](const std::string& lens) {
+    const std::string rib = dir.path("offscreen" + std::to_string(lens.size()) + ".rib");
+    writeText(rib, "Format 64 48 1\nProjection \"perspective\" \"fov\" 40\n" + lens +
+                       "WorldBegin\nSurface \"constant\"\nColor [1 1 1]\nTranslate 0 0 8\n"
+                       "Polygon \"P\" [-1 -1 0  1 -1 0  1 1 0  -1 1 0]\nPolygon \"P\" [4.6 -1 0  6.6 -1 0  6.6 1 0  4.6 1 0]\nWorldEnd\n");
+    return rib;
+  };
+  auto micropolygons = [&](const std::string& rib, const std::string& mps) {
+    const CommandResult r = runReshutter("shade " + rib + " --overscan 0 -o " + mps);
+    EXPECT_EQ(r.exitCode, 0) << r.err;
+    uint64_t n = 0;
+    const store::StoreReader reader(mps);
+    for (const auto& e : reader.entries()) n += e.numMicropolygons;
+    return n;
+  };
+  const uint64_t pinhole = micropolygons(ribWith(""), dir.path("p.mps"));
+  const uint64_t lens = micropolygons(ribWith("DepthOfField 1 1 2\n"), dir.path("l.mps"));
+  EXPECT_GT(pinhole, 0u);
+  EXPECT_GT(lens, pinhole + pinhole / 2) << "the off-screen square was culled";  // both squares' worth
+  // And it shows: the right-most column is lit by its blur.
+  const CommandResult r = runReshutter("resample " + dir.path("l.mps") + " -o " + dir.path("l.exr") + " --preview " + dir.path("l.png"));
+  ASSERT_EQ(r.exitCode, 0) << r.err;
+  const CommandResult stats = runImageTool("oiiotool " + dir.path("l.exr") + " --cut 4x48+60+0 --stats");
+  EXPECT_EQ(stats.exitCode, 0) << stats.err;
+  EXPECT_EQ(stats.out.find("Max: 0.000000 0.000000 0.000000 0.000000"), std::string::npos) << stats.out;
+}
