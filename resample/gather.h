@@ -57,6 +57,32 @@ struct Candidates {
 /// past a row's end (arrays need that padding) and writes up to 15 entries past the returned count.
 size_t gatherInBox(Isa isa, const SampleRows& rows, const MovingBox& box, const Candidates& out, size_t n);
 
+/// The lens path's box (raster_lens.cpp): a micropolygon's pinhole box over the render's times,
+/// widened by the rounding margin, and the raster displacement per unit of lens point over its
+/// depths, [cx0, cx1] in x and [cy0, cy1] in y. A sample at lens point (u, v) may see the
+/// micropolygon only if x - d lies in [x0, x1] for some displacement d in u [cx0, cx1], and so for y.
+/// A moving micropolygon's box is the lerp of its boxes at the interval's ends, by the sample's
+/// own time (MovingBox's thetaA, invLen and motions; all zero for a fixed box).
+struct LensBox {
+  float x0, x1, y0, y1;
+  float cx0, cx1, cy0, cy1;
+  float thetaA = 0, invLen = 0, mx0 = 0, mx1 = 0, my0 = 0, my1 = 0;
+  /// The test, in the operations and order of every implementation (vector kernels included).
+  bool admits(float t, float x, float y, float u, float v) const {
+    const float a = (t - thetaA) * invLen, f = a < 1.f ? (a > 0.f ? a : 0.f) : 1.f;
+    const float dx0 = u * cx0, dx1 = u * cx1, dy0 = v * cy0, dy1 = v * cy1;
+    const float xLo = (x0 + f * mx0) + (dx1 < dx0 ? dx1 : dx0), xHi = (x1 + f * mx1) + (dx0 < dx1 ? dx1 : dx0);
+    const float yLo = (y0 + f * my0) + (dy1 < dy0 ? dy1 : dy0), yHi = (y1 + f * my1) + (dy0 < dy1 ? dy1 : dy0);
+    return x >= xLo && x <= xHi && y >= yLo && y <= yHi;
+  }
+};
+
+/// Appends to `out` from position n the samples of `rows` (one plane; rowGroup is ignored) that
+/// the lens box admits at their lens points (lensX, lensY, indexed like the samples) and that pass
+/// the early depth test; returns the new count. Reads up to 7 floats past a row's end and writes
+/// up to 7 entries past the returned count.
+size_t gatherLens(Isa isa, const SampleRows& rows, const float* lensX, const float* lensY, const LensBox& box, const Candidates& out, size_t n);
+
 /// The strata of one moving box: stratum s covers box times u in [u0[s], u1[s]] and its
 /// samples are plane s of `rows` (whose first/cols/rows describe the whole region).
 struct StrataSpans {

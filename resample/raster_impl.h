@@ -225,6 +225,8 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
     float kMag;              // the rounding scale of the displacements
     Coverage cover;          // the source's coverage, in st units
     double toLocal;          // local time = st + toLocal
+    float thetaA, invLen;    // invLen > 0: one knot segment, the boxes lerp by (st - thetaA) invLen between the two bound times
+    float uErr;              // the rounding of that parameter
   };
   void rasterizeLens(const Source& src, const store::TileEntry& entry, const store::TilePart& part, const HitContext& hc, const Chunk& ch);
   void drawLens(const LensChunk& lc, uint32_t m);

@@ -42,12 +42,12 @@ void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileE
   // Local times to bound at: the region's first and last sample times and the knots between
   // (a corner's screen path is straight between them); a still chunk has one position.
   lensTimes.clear();
-  if (moving) {
+  if (moving && tMax > tMin) {
     lensTimes.push_back(tMin - F), lensTimes.push_back(tMax - F);
     for (double k : knots)
       if (k > tMin - F && k < tMax - F) lensTimes.push_back(k);
   } else {
-    lensTimes.push_back(0.0);
+    lensTimes.push_back(moving ? tMin - F : 0.0);  // an instant, or no motion
   }
   const size_t C = lensTimes.size();
   cullX.resize(C * nV), cullY.resize(C * nV), cullZ.resize(C * nV);
@@ -79,6 +79,15 @@ void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileE
       return;
     }
   }
+  // One knot segment over the render's times: each corner moves along a straight screen line, so
+  // a sample is held to the lerp of the end boxes at its own time (MovingBox's idea), widened by
+  // the perspective lag and the rounding of its time.
+  float thetaA = 0, invLen = 0, uErr = 0;
+  if (moving && C == 2) {
+    const double len = lensTimes[1] - lensTimes[0], toLocal = tBase - F;
+    thetaA = float(lensTimes[0] - toLocal), invLen = float(1.0 / len);
+    uErr = float(5e-7 * std::max({1.0, std::abs(lensTimes[0]), std::abs(lensTimes[1]), std::abs(toLocal)}) / len);
+  }
   const double covLo = src.coverStart(), covHi = src.coverEnd();
   // The displacement coefficients' own rounding: k = 1/d - 1/z cancels near the focal plane.
   const float kMag = std::max(std::abs(lensAx), std::abs(lensAy)) * (invD + (zLo > 0 ? 1.f / zLo : 0.f));
@@ -95,7 +104,10 @@ void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileE
                      std::isfinite(kMag) ? kMag : 0.f,
                      {!Source::covers(tMin, covLo, covHi, src.endShared) || !Source::covers(tMax, covLo, covHi, src.endShared), covLo - tBase, covHi - tBase,
                       src.endShared},
-                     tBase - F};
+                     tBase - F,
+                     thetaA,
+                     invLen,
+                     uErr};
   for (uint32_t m = ch.m0; m < ch.m1; ++m) drawLens(lc, m);
 }
 
@@ -124,6 +136,20 @@ void BucketRasterizer::Impl::drawLens(const LensChunk& lc, uint32_t m) {
   productRange(lc.lensAx, lc.lensAx, kLo, kHi, cx0, cx1);
   productRange(lc.lensAy, lc.lensAy, kLo, kHi, cy0, cy1);
   const uint8_t flags = part.flags[m];
+  // With two bound times: the box at each end, for the per-sample lerp.
+  float e0[4] = {0, 0, 0, 0}, e1[4] = {0, 0, 0, 0}, lag = 0;
+  const bool lerp = bounded && lc.invLen > 0;
+  if (lerp) {
+    for (int end = 0; end < 2; ++end) {
+      float* e = end ? e1 : e0;
+      e[0] = e[1] = INFINITY, e[2] = e[3] = -INFINITY;
+      for (int j = 0; j < nc; ++j) {
+        const size_t k = size_t(end) * lc.nV + (c[j] - lc.vBase);
+        e[0] = std::min(e[0], cullX[k]), e[1] = std::min(e[1], cullY[k]), e[2] = std::max(e[2], cullX[k]), e[3] = std::max(e[3], cullY[k]);
+      }
+    }
+    for (int j = 0; j < nc; ++j) lag = std::max(lag, perspectiveLag(cullZ[c[j] - lc.vBase], cullZ[lc.nV + (c[j] - lc.vBase)]));
+  }
   for (int s = 0; s < N; ++s) {
     TestArea ta;
     float shxLo = 0, shxHi = 0, shyLo = 0, shyHi = 0;
@@ -136,21 +162,36 @@ void BucketRasterizer::Impl::drawLens(const LensChunk& lc, uint32_t m) {
     // rounding of the projections and of the displacement (testArea()'s, and as much again).
     const float mag = std::max({std::abs(bx0), std::abs(bx1), std::abs(by0), std::abs(by1), std::abs(shxLo), std::abs(shxHi), std::abs(shyLo), std::abs(shyHi)});
     const float margin = 2e-3f + 4e-6f * (mag + lc.kMag);
-    for (int py = ta.py0; py <= ta.py1; ++py)
-      for (int px = ta.px0; px <= ta.px1; ++px) {
-        const uint32_t idx = uint32_t(size_t(s) * PS + size_t(py - y0) * w + size_t(px - x0));
-        if (!(zbuf[idx] > zCull)) continue;  // the early depth test
-        if (bounded) {
-          const float ux = lx[idx], uy = ly[idx];
-          const float dx0 = ux * cx0, dx1 = ux * cx1, dy0 = uy * cy0, dy1 = uy * cy1;
-          const float x = sx[idx], y = sy[idx];
-          if (x < bx0 + std::min(dx0, dx1) - margin || x > bx1 + std::max(dx0, dx1) + margin) continue;
-          if (y < by0 + std::min(dy0, dy1) - margin || y > by1 + std::max(dy0, dy1) + margin) continue;
+    kernels::LensBox box = bounded ? kernels::LensBox{bx0 - margin, bx1 + margin, by0 - margin, by1 + margin, cx0, cx1, cy0, cy1}
+                                   : kernels::LensBox{-INFINITY, INFINITY, -INFINITY, INFINITY, 0.f, 0.f, 0.f, 0.f};
+    if (lerp) {
+      const float mx = margin + (lag + lc.uErr + 1e-5f) * (bx1 - bx0), my = margin + (lag + lc.uErr + 1e-5f) * (by1 - by0);
+      box.x0 = e0[0] - mx, box.y0 = e0[1] - my, box.x1 = e0[2] + mx, box.y1 = e0[3] + my;
+      box.mx0 = e1[0] - e0[0], box.my0 = e1[1] - e0[1], box.mx1 = e1[2] - e0[2], box.my1 = e1[3] - e0[3];
+      box.thetaA = lc.thetaA, box.invLen = lc.invLen;
+    }
+    const size_t first = size_t(s) * PS + size_t(ta.py0 - y0) * w + size_t(ta.px0 - x0);
+    const int cols = ta.px1 - ta.px0 + 1, rows = ta.py1 - ta.py0 + 1;
+    size_t n = 0;
+    if (vectorKernels) {
+      const kernels::SampleRows sr{st.data(), sx.data(), sy.data(), first, size_t(w), cols, rows, nullptr, 0, 1, PS, zbuf.data(), zCull};
+      n = kernels::gatherLens(isa, sr, lx.data(), ly.data(), box, candidateList(), 0);
+    } else {
+      uint32_t* __restrict cand = candidates.data();
+      for (int row = 0; row < rows; ++row)
+        for (int col = 0; col < cols; ++col) {
+          const uint32_t idx = uint32_t(first + size_t(row) * w + size_t(col));
+          cand[n] = idx;
+          n += (zbuf[idx] > zCull) & box.admits(st[idx], sx[idx], sy[idx], lx[idx], ly[idx]);  // the early depth test, then the lens box
         }
-        if (lc.cover.check && !Source::covers(double(st[idx]), lc.cover.lo, lc.cover.hi, lc.cover.openEnd)) continue;
-        ++stats.sampleTests;
-        testLens(lc, m, c, tri, flags, idx);
-      }
+    }
+    const uint32_t* cand = candidates.data();
+    for (size_t i = 0; i < n; ++i) {
+      const uint32_t idx = cand[i];
+      if (lc.cover.check && !Source::covers(double(st[idx]), lc.cover.lo, lc.cover.hi, lc.cover.openEnd)) continue;
+      ++stats.sampleTests;
+      testLens(lc, m, c, tri, flags, idx);
+    }
   }
 }
 

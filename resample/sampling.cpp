@@ -7,6 +7,22 @@
 
 namespace reshutter::resample {
 
+namespace {
+
+// The concentric map of [0, 1)² onto the unit disk: squares around the centre become rings, so
+// equal cells stay equal in area and compact (a polar map would make slivers near the centre).
+glm::vec2 concentricDisk(double u, double v) {
+  const double a = 2 * u - 1, b = 2 * v - 1;
+  if (a == 0 && b == 0) return {0.f, 0.f};
+  constexpr double kQuarterPi = 0.78539816339744830962;
+  double r, phi;
+  if (std::abs(a) > std::abs(b)) r = a, phi = kQuarterPi * (b / a);
+  else r = b, phi = 2 * kQuarterPi - kQuarterPi * (a / b);
+  return {float(r * std::cos(phi)), float(r * std::sin(phi))};
+}
+
+}  // namespace
+
 void SamplePattern::factor(int spp, int& nx, int& ny) {
   nx = int(std::sqrt(double(spp)));
   while (nx > 1 && spp % nx) --nx;
@@ -23,6 +39,14 @@ SamplePattern::SamplePattern(int nx, int ny, uint64_t seed) : nx_(nx), ny_(ny), 
         float x = float((i + rng.uniform()) / nx), y = float((j + rng.uniform()) / ny);
         offsets_[size_t(p) * spp_ + size_t(j * nx + i)] = {std::min(x, 0x1.fffffep-1f), std::min(y, 0x1.fffffep-1f)};
       }
+  }
+  lensPoints_.resize(size_t(kPatterns) * spp_);
+  for (int p = 0; p < kPatterns; ++p) {
+    Rng rng(hashCombine(seed, 0x1E450000u + uint64_t(p)));
+    for (int s = 0; s < spp_; ++s) {
+      const double u = (double(s % nx) + rng.uniform()) / nx, v = (double(s / nx) + rng.uniform()) / ny;
+      lensPoints_[size_t(p) * spp_ + size_t(s)] = concentricDisk(u, v);
+    }
   }
 }
 
@@ -68,44 +92,23 @@ void SamplePattern::times(int px, int py, uint16_t* stratumOf, float* u) const {
   }
 }
 
-namespace {
-
-// The concentric map of [0, 1)² onto the unit disk: squares around the centre become rings, so
-// equal cells stay equal in area and compact (a polar map would make slivers near the centre).
-glm::vec2 concentricDisk(double u, double v) {
-  const double a = 2 * u - 1, b = 2 * v - 1;
-  if (a == 0 && b == 0) return {0.f, 0.f};
-  constexpr double kQuarterPi = 0.78539816339744830962;
-  double r, phi;
-  if (std::abs(a) > std::abs(b)) r = a, phi = kQuarterPi * (b / a);
-  else r = b, phi = 2 * kQuarterPi - kQuarterPi * (a / b);
-  return {float(r * std::cos(phi)), float(r * std::sin(phi))};
-}
-
-}  // namespace
-
 void SamplePattern::lens(int px, int py, uint16_t* stratumOf, glm::vec2* disk) const {
   // A stream of its own (not the time stream's): renders without a lens keep their samples.
   const uint64_t key = hashCombine(seed_ ^ 0x1E45000000000000ull, (uint64_t(uint32_t(px)) << 32) | uint32_t(py));
-  constexpr int kLocal = 192;
+  constexpr int kLocal = 128;
   uint64_t local[kLocal];
   std::vector<uint64_t> heap;
-  const int draws = 3 * spp_ - 1;
+  const int draws = spp_;  // the pattern, then the shuffle
   uint64_t* r = local;
   if (draws > kLocal) heap.resize(size_t(draws)), r = heap.data();
   splitMixDraws(key, draws, r);
+  const glm::vec2* points = &lensPoints_[size_t(r[0] % kPatterns) * spp_];
   for (int i = 0; i < spp_; ++i) stratumOf[i] = uint16_t(i);
-  for (int i = spp_ - 1, d = 0; i > 0; --i, ++d) {
+  for (int i = spp_ - 1, d = 1; i > 0; --i, ++d) {
     const int j = int(uint32_t((r[d] >> 32) * uint64_t(uint32_t(i + 1)) >> 32));
     std::swap(stratumOf[i], stratumOf[j]);
   }
-  const uint64_t* jitter = r + (spp_ - 1);
-  for (int i = 0; i < spp_; ++i) {
-    const int s = stratumOf[i];
-    const double u = (double(s % nx_) + double(toUnitFloat(jitter[2 * i]))) / nx_;
-    const double v = (double(s / nx_) + double(toUnitFloat(jitter[2 * i + 1]))) / ny_;
-    disk[i] = concentricDisk(u, v);
-  }
+  for (int i = 0; i < spp_; ++i) disk[i] = points[stratumOf[i]];
 }
 
 }  // namespace reshutter::resample

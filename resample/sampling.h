@@ -39,13 +39,15 @@ class SamplePattern {
   /// 0..N-1 independent of the time strata's (so defocus and motion blur do not alias against each
   /// other); stratum s is cell (s mod nx, s div nx) of the nx×ny grid over the unit square, jittered
   /// inside it and mapped to the unit disk by the concentric map (Shirley and Chiu), which keeps
-  /// the cells' areas equal and compact.
+  /// the cells' areas equal and compact. Like positions, the jittered points come from a fixed set
+  /// of patterns, one chosen per pixel by hash (no trigonometry per sample).
   void lens(int px, int py, uint16_t* stratumOf, glm::vec2* disk) const;
 
  private:
   int nx_, ny_, spp_;
   uint64_t seed_;
   std::vector<glm::vec2> offsets_;
+  std::vector<glm::vec2> lensPoints_;  // [pattern * spp + stratum]: a point of the unit disk in that lens stratum
 };
 
 }  // namespace reshutter::resample

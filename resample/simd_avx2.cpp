@@ -511,6 +511,40 @@ bool avx2::projectLerped(const float* a, const float* b, float f, size_t n, cons
   return bad != 0;
 }
 
+size_t avx2::gatherLens(const SampleRows& rows, const float* lensX, const float* lensY, const LensBox& box, const Candidates& out, size_t n) {
+  // LensBox::admits() eight samples at a time (min / max as its conditionals: b < a ? b : a).
+  const __m256 x0 = _mm256_set1_ps(box.x0), x1 = _mm256_set1_ps(box.x1), y0 = _mm256_set1_ps(box.y0), y1 = _mm256_set1_ps(box.y1);
+  const __m256 cx0 = _mm256_set1_ps(box.cx0), cx1 = _mm256_set1_ps(box.cx1), cy0 = _mm256_set1_ps(box.cy0), cy1 = _mm256_set1_ps(box.cy1);
+  const __m256 zCull = _mm256_set1_ps(rows.zCull);
+  const __m256 thetaA = _mm256_set1_ps(box.thetaA), invLen = _mm256_set1_ps(box.invLen), one = _mm256_set1_ps(1.f), zero = _mm256_setzero_ps();
+  const __m256 mx0 = _mm256_set1_ps(box.mx0), mx1 = _mm256_set1_ps(box.mx1), my0 = _mm256_set1_ps(box.my0), my1 = _mm256_set1_ps(box.my1);
+  const __m256i iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+  for (int row = 0; row < rows.rows; ++row) {
+    const size_t base = rows.first + size_t(row) * rows.stride;
+    for (int c = 0; c < rows.cols; c += 8) {
+      const size_t at = base + size_t(c);
+      const unsigned live = rows.cols - c >= 8 ? 0xFFu : (1u << (rows.cols - c)) - 1;
+      const __m256 u = _mm256_loadu_ps(lensX + at), v = _mm256_loadu_ps(lensY + at);
+      const __m256 t = _mm256_loadu_ps(rows.st + at), x = _mm256_loadu_ps(rows.sx + at), y = _mm256_loadu_ps(rows.sy + at);
+      // f = a < 1 ? (a > 0 ? a : 0) : 1: min(max(a, 0), 1) in _mm256 operand order (min/max
+      // return the second operand unless the comparison holds).
+      const __m256 f = _mm256_min_ps(_mm256_max_ps(_mm256_mul_ps(_mm256_sub_ps(t, thetaA), invLen), zero), one);
+      const __m256 dx0 = _mm256_mul_ps(u, cx0), dx1 = _mm256_mul_ps(u, cx1), dy0 = _mm256_mul_ps(v, cy0), dy1 = _mm256_mul_ps(v, cy1);
+      // _mm256_min_ps(a, b) is a < b ? a : b: operands swapped to give admits()' b < a ? b : a.
+      const __m256 xLo = _mm256_add_ps(_mm256_add_ps(x0, _mm256_mul_ps(f, mx0)), _mm256_min_ps(dx1, dx0));
+      const __m256 xHi = _mm256_add_ps(_mm256_add_ps(x1, _mm256_mul_ps(f, mx1)), _mm256_max_ps(dx1, dx0));
+      const __m256 yLo = _mm256_add_ps(_mm256_add_ps(y0, _mm256_mul_ps(f, my0)), _mm256_min_ps(dy1, dy0));
+      const __m256 yHi = _mm256_add_ps(_mm256_add_ps(y1, _mm256_mul_ps(f, my1)), _mm256_max_ps(dy1, dy0));
+      __m256 in = _mm256_and_ps(_mm256_cmp_ps(x, xLo, _CMP_GE_OQ), _mm256_cmp_ps(x, xHi, _CMP_LE_OQ));
+      in = _mm256_and_ps(in, _mm256_and_ps(_mm256_cmp_ps(y, yLo, _CMP_GE_OQ), _mm256_cmp_ps(y, yHi, _CMP_LE_OQ)));
+      in = _mm256_and_ps(in, _mm256_cmp_ps(_mm256_loadu_ps(rows.depth + at), zCull, _CMP_GT_OQ));
+      const unsigned mask = unsigned(_mm256_movemask_ps(in)) & live;
+      n = appendMasked(mask, _mm256_add_epi32(_mm256_set1_epi32(int(uint32_t(at))), iota), t, x, y, out, n);
+    }
+  }
+  return n;
+}
+
 namespace {
 
 // sortByCell()'s cell of every candidate: MovingBox's u (insideAtOwnTime()'s operations), then
@@ -535,6 +569,6 @@ void cellsOfAvx2(const CellGrid& g, const float* t, const float* x, const float*
 }  // namespace
 
 const IsaKernels kAvx2Kernels = {gatherInBoxAvx2, gatherStrataAvx2,           filterCandidatesAvx2,     cellsOfAvx2, avx2::projectLerped, linearEdgesAvx2,
-                                 fixedEdgesAvx2,  testLinearEdgesAvx2<false>, testLinearEdgesAvx2<true>};
+                                 fixedEdgesAvx2,  testLinearEdgesAvx2<false>, testLinearEdgesAvx2<true>, avx2::gatherLens};
 
 }  // namespace reshutter::resample::kernels

@@ -412,6 +412,7 @@ void fixedEdgesAvx512(const float* const at[4], const RasterScale& m, LinearEdge
 
 const IsaKernels kAvx512Kernels = {gatherInBoxAvx512, gatherStrataAvx512,           filterCandidatesAvx512,
                                    cellsOfAvx512,     avx2::projectLerped,          edgesAvx512<false>,
-                                   fixedEdgesAvx512,  testLinearEdgesAvx512<false>, testLinearEdgesAvx512<true>};
+                                   fixedEdgesAvx512,  testLinearEdgesAvx512<false>, testLinearEdgesAvx512<true>,
+                                   avx2::gatherLens};
 
 }  // namespace reshutter::resample::kernels

@@ -43,6 +43,10 @@ size_t gatherInBox(Isa isa, const SampleRows& rows, const MovingBox& box, const 
   return kernelsFor(isa).gatherInBox(rows, box, out, n);
 }
 
+size_t gatherLens(Isa isa, const SampleRows& rows, const float* lensX, const float* lensY, const LensBox& box, const Candidates& out, size_t n) {
+  return kernelsFor(isa).gatherLens(rows, lensX, lensY, box, out, n);
+}
+
 size_t gatherStrata(Isa isa, const SampleRows& region, const StrataSpans& spans, const MovingBox& box, const Candidates& out) {
   CHECK(spans.strata <= 64, "more than 64 time strata per pixel for the vector kernels");
   return kernelsFor(isa).gatherStrata(region, spans, box, out);

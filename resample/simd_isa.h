@@ -29,6 +29,7 @@ struct IsaKernels {
   void (*fixedEdges)(const float* const at[4], const RasterScale& scale, LinearEdges& out);
   size_t (*testMovingEdges)(const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits);  // setup.fixed false
   size_t (*testFixedEdges)(const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits);   // setup.fixed true
+  size_t (*gatherLens)(const SampleRows& rows, const float* lensX, const float* lensY, const LensBox& box, const Candidates& out, size_t n);
 };
 
 #if defined(__x86_64__) || defined(__i386__)
@@ -38,6 +39,7 @@ extern const IsaKernels kAvx512Kernels;
 // The AVX2 kernels that the AVX-512 table shares.
 namespace avx2 {
 bool projectLerped(const float* a, const float* b, float f, size_t n, const ProjectionScale& scale, float* x, float* y, float* z, float box[4]);
+size_t gatherLens(const SampleRows& rows, const float* lensX, const float* lensY, const LensBox& box, const Candidates& out, size_t n);
 }  // namespace avx2
 #endif
 
