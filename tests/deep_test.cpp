@@ -100,8 +100,9 @@ std::shared_ptr<const store::StoreReader> writeScene(const std::string& path, in
 }
 
 RenderResult renderDeep(const std::shared_ptr<const store::StoreReader>& store, const std::string& filter, int spp = 16, float tolerance = 0.01f,
-                        std::vector<AovRequest> aovs = {}) {
+                        std::vector<AovRequest> aovs = {}, const RenderSpec::LensOverride& lens = {}) {
   RenderSpec spec;
+  spec.lens = lens;
   spec.sources = {Source{store, store->meta().frame}};
   spec.shutter = ShutterModel::progressive(double(store->meta().frame), double(store->meta().frame) + 1.0, ShutterShape::parse("box", "test"));
   SamplePattern::factor(spp, spec.samplesX, spec.samplesY);
@@ -396,6 +397,20 @@ TEST(DeepRender, FlattenMatchesFlatWideFilters) {
     const RenderResult res = renderDeep(store, filter, 16);
     const FlattenError e = compareFlatten(res);
     std::printf("%s: max %.3g mean %.3g\n", filter, e.max, e.mean);
+    EXPECT_LT(e.max, 1e-5) << filter << "\n" << describePixel(res, e.worstX, e.worstY);
+  }
+}
+
+TEST(DeepRender, DefocusedFramesFlattenToTheFlatImage) {
+  // Depth of field moves every sample's surfaces; the deep pixel still holds what each sample saw.
+  ScratchDir dir;
+  auto store = writeScene(dir.path("s.mps"), 64, 48, translucentScene());
+  RenderSpec::LensOverride lens;
+  lens.fstop = 2, lens.focalLength = 1, lens.focalDistance = 20;
+  for (const char* filter : {"box:1", "gaussian:2"}) {
+    const RenderResult res = renderDeep(store, filter, 16, 0.01f, {}, lens);
+    EXPECT_GT(res.stats.raster.lensMicropolygons, 0u);
+    const FlattenError e = compareFlatten(res);
     EXPECT_LT(e.max, 1e-5) << filter << "\n" << describePixel(res, e.worstX, e.worstY);
   }
 }

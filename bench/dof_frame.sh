@@ -1,0 +1,38 @@
+#!/usr/bin/env bash
+# What depth of field costs: the 1080p bench store re-sampled through a thin lens (16 spp, gaussian
+# 2×2, PIZ write) focused on the scene's nearest depth (5), with the aperture chosen so that the
+# circle of confusion at its farthest depth (50) has a radius of 0 (the pinhole), 5, 20 and 50
+# pixels: wall and CPU seconds, rasterize thread-seconds, sample-test efficiency (hits / tests)
+# and the ratio to the pinhole frame. Not a test: run by hand.
+# Usage: bench/dof_frame.sh BUILD_DIR STORE [RADII...]
+#   (stores: reshutter generate -n 5000000 -o moving.0001.mps, and with --motion 0 --knots 1)
+set -euo pipefail
+build=${1:?usage: bench/dof_frame.sh BUILD_DIR STORE [RADII...]}
+store=${2:?usage: bench/dof_frame.sh BUILD_DIR STORE [RADII...]}
+shift 2
+radii=("$@")
+((${#radii[@]})) || radii=(0 5 20 50)
+bin=$build/reshutter
+work=$(mktemp -d /tmp/reshutter-dof.XXXXXX)
+trap 'rm -rf "$work"' EXIT
+source "$(dirname "$0")/host.sh"
+host_line
+# The synthetic camera: fov 40 over 1080 rows, so raster x = a x/z + b with a = 540 / tan(20°).
+# A point at depth z moves by a R (1/d - 1/z) for a lens point at radius R: with d = 5 the far
+# end (z = 50) moves by a R 0.18, and f-stop = focal length / 2R with focal length 1.
+pinhole=""
+for r in "${radii[@]}"; do
+  lens=(--pinhole)
+  if [[ $r != 0 ]]; then
+    fstop=$(awk -v r="$r" 'BEGIN { a = 540 / (sin(20 * atan2(0, -1) / 180) / cos(20 * atan2(0, -1) / 180)); printf "%.6f", 1 / (2 * r / (a * 0.18)) }')
+    lens=(--fstop "$fstop" --focal-length 1 --focus-distance 5)
+  fi
+  /usr/bin/time -o "$work/time" -f "%e %U %S %M" "$bin" -q resample "$store" --spp 16 --filter gaussian:2x2 --stats -o "$work/out.exr" "${lens[@]}" > "$work/log" 2>&1
+  read -r wall user sys rss < "$work/time"
+  raster=$(awk '/time \(thread-sum\)/ { for (i = 1; i <= NF; ++i) if ($i == "rasterize") print $(i + 1) }' "$work/log")
+  eff=$(awk '/test efficiency/ { print $3 }' "$work/log")
+  tests=$(awk '/sample tests/ { print $3 }' "$work/log")
+  [[ -z $pinhole ]] && pinhole=$wall
+  printf 'CoC radius %3s px   wall %8.2f s (%5.1fx)   CPU %8.2f s   rasterize %9s thread-s   tests %11s   efficiency %s   peak RSS %5d MB\n' \
+    "$r" "$wall" "$(awk -v a="$wall" -v b="$pinhole" 'BEGIN { print a / b }')" "$(awk -v u="$user" -v s="$sys" 'BEGIN { print u + s }')" "$raster" "$tests" "$eff" $((rss / 1024))
+done
