@@ -8,8 +8,8 @@
 
 namespace reshutter::resample {
 
-BucketSamples::BucketSamples(const SamplePattern& p, const ShutterModel& s, bool lens)
-    : pattern(p), shutter(s), N(p.spp()), lensPlanes(lens), tBase(std::floor(s.earliest())) {}
+BucketSamples::BucketSamples(const SamplePattern& p, const ShutterModel& s, int lensTimeBlocks)
+    : pattern(p), shutter(s), N(p.spp()), lensPlanes(lensTimeBlocks >= 1), lensTimeBlocks(std::max(lensTimeBlocks, 1)), tBase(std::floor(s.earliest())) {}
 
 void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
   x0 = rx0, y0 = ry0, w = rw, h = rh, P = w * h;
@@ -45,8 +45,10 @@ void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
   for (int g = 0; g < G; ++g)
     for (int s = 0; s < N; ++s) {
       double lo, hi;
-      // A lens plane's samples come from every time stratum.
-      shutter.timeRange(g, double(y0), double(y0 + h), lensPlanes ? 0.0 : double(s) / N, lensPlanes ? 1.0 : double(s + 1) / N, lo, hi);
+      // A lens plane's samples come from its time block (every time stratum, with one block).
+      const int perBlock = N / lensTimeBlocks, block = s / perBlock;
+      shutter.timeRange(g, double(y0), double(y0 + h), lensPlanes ? double(block) / lensTimeBlocks : double(s) / N,
+                        lensPlanes ? double(block + 1) / lensTimeBlocks : double(s + 1) / N, lo, hi);
       stratumLo[size_t(g) * N + s] = lo;
       stratumHi[size_t(g) * N + s] = hi;
     }
@@ -55,7 +57,7 @@ void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
       const int p = py * w + px, gx = x0 + px, gy = y0 + py;
       const int pat = pattern.patternOf(gx, gy);
       pattern.times(gx, gy, stratumOf.data(), u.data());
-      if (lensPlanes) pattern.lens(gx, gy, lensOf.data(), disk.data());
+      if (lensPlanes) pattern.lensPlanes(gx, gy, stratumOf.data(), lensTimeBlocks, lensOf.data(), disk.data());
       const int g = rowGroup[size_t(py)];
       // A global box shutter (the usual case): time() is open + u * length for every sample,
       // the same sum, without its per-sample test.

@@ -51,9 +51,9 @@ class SkewedArray {
 inline constexpr size_t kPad = 16;
 
 struct BucketSamples {
-  /// With `lens`, each sample also has a lens position, and the planes are lens strata rather
-  /// than time strata (lensPlanes).
-  BucketSamples(const SamplePattern& pattern, const ShutterModel& shutter, bool lens = false);
+  /// With a lens (lensTimeBlocks >= 1), each sample also has a lens position, and the planes pair
+  /// lens and time strata (SamplePattern::lensPlanes) rather than being time strata.
+  BucketSamples(const SamplePattern& pattern, const ShutterModel& shutter, int lensTimeBlocks = 0);
 
   /// Lays out the samples of region [x0, x0+w) × [y0, y0+h) (raster pixels).
   void prepare(int x0, int y0, int w, int h);
@@ -61,11 +61,14 @@ struct BucketSamples {
   const SamplePattern& pattern;
   const ShutterModel& shutter;
   const int N;  // samples per pixel = time strata (= lens strata)
-  /// Depth of field: plane s holds each pixel's sample in lens stratum s (its time stratum is the
-  /// pixel's own permutation), so a plane's lens positions lie in one small cell and the lens
-  /// path bounds a micropolygon's defocus per plane; its times span the whole shutter, which the
-  /// path bounds per sample. Without a lens, planes are time strata.
+  /// Depth of field: with lensTimeBlocks 1, plane s holds each pixel's sample in lens stratum s (its
+  /// time stratum is the pixel's own permutation), so a plane's lens positions lie in one small
+  /// cell and the lens path bounds a micropolygon's defocus per plane; its times span the whole
+  /// shutter, which the path bounds per sample. With A > 1 time blocks, plane s pairs time block
+  /// s / (N/A) with a quadrant of the lens (SamplePattern::lensPlanes): for moving scenes. Without
+  /// a lens, planes are time strata.
   const bool lensPlanes;
+  const int lensTimeBlocks;
 
   // Region.
   int x0 = 0, y0 = 0, w = 0, h = 0, P = 0;

@@ -25,11 +25,12 @@ void RasterStats::add(const RasterStats& o) {
   chunkCulledMicropolygons += o.chunkCulledMicropolygons;
   chunkGatheredMicropolygons += o.chunkGatheredMicropolygons;
   lensMicropolygons += o.lensMicropolygons;
+  lensScanned += o.lensScanned;
   transparentParts += o.transparentParts;
 }
 
 BucketRasterizer::Impl::Impl(const SamplePattern& p, const ShutterModel& s, const View& v, const std::vector<AovChannel>& a, const RasterOptions& o)
-    : BucketSamples(p, s, v.lens()),
+    : BucketSamples(p, s, v.lens() ? o.lensTimeBlocks : 0),
       HitBuffer(a, o, v.farClip, stats),
       view(v),
       opt(o),

@@ -105,6 +105,10 @@ struct RasterOptions {
   /// (one gather, sorted into cells) instead of one gather each. The same candidates, hits and
   /// image either way; off only to measure what it saves.
   bool chunkGathers = true;
+  /// With a lens: the bucket's sample planes pair this many time blocks with N / this many lens
+  /// strata (SamplePattern::lensPlanes; 1 = lens strata alone). render() chooses it
+  /// (lensTimeBlocks() in resampler.h).
+  int lensTimeBlocks = 1;
 };
 
 /// Counters for --stats; summed over buckets.
@@ -116,6 +120,7 @@ struct RasterStats {
   uint64_t chunkGatheredMicropolygons = 0;  // linear-path ones whose candidates came from their chunk's one gather
   uint64_t generalHits = 0;                 // hits through the general attribute lookup (output variables, other attribute layouts)
   uint64_t lensMicropolygons = 0;           // drawn on the lens path (depth of field)
+  uint64_t lensScanned = 0;                 // samples the lens path's gathers examined (its search boxes' area, plane by plane)
   void add(const RasterStats& o);
 };
 

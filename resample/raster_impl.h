@@ -231,7 +231,8 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   void rasterizeLens(const Source& src, const store::TileEntry& entry, const store::TilePart& part, const HitContext& hc, const Chunk& ch);
   void drawLens(const LensChunk& lc, uint32_t m);
   void testLens(const LensChunk& lc, uint32_t m, const uint32_t* c, bool tri, uint8_t flags, uint32_t idx);
-  std::vector<double> lensTimes;  // a chunk's bound times (local)
+  std::vector<double> lensTimes;                // a chunk's bound times (local)
+  std::vector<float> lensPlaneF0, lensPlaneF1;  // with two bound times: each plane's span of the lerp parameter
 
   // ------------------------------------------------------------------------------------------
   // The linear path and chunk gathers (raster_linear.cpp)

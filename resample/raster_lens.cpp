@@ -87,6 +87,16 @@ void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileE
     const double len = lensTimes[1] - lensTimes[0], toLocal = tBase - F;
     thetaA = float(lensTimes[0] - toLocal), invLen = float(1.0 / len);
     uErr = float(5e-7 * std::max({1.0, std::abs(lensTimes[0]), std::abs(lensTimes[1]), std::abs(toLocal)}) / len);
+    // Each plane's times (a block of the shutter when planes pair time and lens), as the span of
+    // the lerp parameter its samples take: the plane's search box covers that part of the path.
+    lensPlaneF0.assign(size_t(N), 1.f), lensPlaneF1.assign(size_t(N), 0.f);
+    for (int s = 0; s < N; ++s)
+      for (size_t g = 0; g < groupPresent.size(); ++g) {
+        if (!groupPresent[g]) continue;
+        const double f0 = (stratumLo[g * N + size_t(s)] - F - lensTimes[0]) / len, f1 = (stratumHi[g * N + size_t(s)] - F - lensTimes[0]) / len;
+        lensPlaneF0[size_t(s)] = std::min(lensPlaneF0[size_t(s)], std::clamp(float(f0) - 1e-6f, 0.f, 1.f));
+        lensPlaneF1[size_t(s)] = std::max(lensPlaneF1[size_t(s)], std::clamp(float(f1) + 1e-6f, 0.f, 1.f));
+      }
   }
   const double covLo = src.coverStart(), covHi = src.coverEnd();
   // The displacement coefficients' own rounding: k = 1/d - 1/z cancels near the focal plane.
@@ -157,7 +167,18 @@ void BucketRasterizer::Impl::drawLens(const LensChunk& lc, uint32_t m) {
       productRange(lensLoX[size_t(s)], lensHiX[size_t(s)], cx0, cx1, shxLo, shxHi);
       productRange(lensLoY[size_t(s)], lensHiY[size_t(s)], cy0, cy1, shyLo, shyHi);
     }
-    if (!testArea(bounded, bx0 + shxLo, by0 + shyLo, bx1 + shxHi, by1 + shyHi, ta)) continue;
+    // The pinhole box over the plane's times: the lerped boxes at its first and last (their
+    // union bounds the lerp between), widened as the per-sample test is.
+    float px0 = bx0, py0 = by0, px1 = bx1, py1 = by1;
+    if (lerp) {
+      const float f0 = lensPlaneF0[size_t(s)], f1 = lensPlaneF1[size_t(s)];
+      if (f0 > f1) continue;  // no sample of this plane in the region's groups
+      const float mx = (lag + lc.uErr + 1e-5f) * (bx1 - bx0), my = (lag + lc.uErr + 1e-5f) * (by1 - by0);
+      auto at = [](float a, float b, float f) { return a + f * (b - a); };
+      px0 = std::min(at(e0[0], e1[0], f0), at(e0[0], e1[0], f1)) - mx, px1 = std::max(at(e0[2], e1[2], f0), at(e0[2], e1[2], f1)) + mx;
+      py0 = std::min(at(e0[1], e1[1], f0), at(e0[1], e1[1], f1)) - my, py1 = std::max(at(e0[3], e1[3], f0), at(e0[3], e1[3], f1)) + my;
+    }
+    if (!testArea(bounded, px0 + shxLo, py0 + shyLo, px1 + shxHi, py1 + shyHi, ta)) continue;
     // Each sample against the box displaced by its own lens point; the margin covers the
     // rounding of the projections and of the displacement (testArea()'s, and as much again).
     const float mag = std::max({std::abs(bx0), std::abs(bx1), std::abs(by0), std::abs(by1), std::abs(shxLo), std::abs(shxHi), std::abs(shyLo), std::abs(shyHi)});
@@ -172,6 +193,7 @@ void BucketRasterizer::Impl::drawLens(const LensChunk& lc, uint32_t m) {
     }
     const size_t first = size_t(s) * PS + size_t(ta.py0 - y0) * w + size_t(ta.px0 - x0);
     const int cols = ta.px1 - ta.px0 + 1, rows = ta.py1 - ta.py0 + 1;
+    stats.lensScanned += uint64_t(cols) * uint64_t(rows);
     size_t n = 0;
     if (vectorKernels) {
       const kernels::SampleRows sr{st.data(), sx.data(), sy.data(), first, size_t(w), cols, rows, nullptr, 0, 1, PS, zbuf.data(), zCull};

@@ -10,6 +10,7 @@
 #include <cmath>
 #include <map>
 #include <mutex>
+#include <iomanip>
 #include <sstream>
 
 #include <tbb/enumerable_thread_specific.h>
@@ -43,7 +44,10 @@ std::string RenderStats::report() const {
   s << "  micropolygons      " << raster.micropolygons << " processed (" << raster.staticMicropolygons << " on the static path, " << raster.linearMicropolygons
     << " bounded from their interval ends, " << raster.chunkGatheredMicropolygons << " of those gathered by chunk, " << raster.chunkCulledMicropolygons
     << " skipped with their chunk), " << raster.parts << " parts (" << raster.transparentParts << " transparent)\n";
-  if (raster.lensMicropolygons) s << "  lens               " << raster.lensMicropolygons << " micropolygons through the lens (depth of field)\n";
+  if (raster.lensMicropolygons)
+    s << "  lens               " << raster.lensMicropolygons << " micropolygons through the lens (depth of field), " << raster.lensScanned
+      << " samples in their search boxes (" << std::setprecision(1) << double(raster.lensScanned) / double(raster.lensMicropolygons) << std::setprecision(3)
+      << " each)\n";
   s << "  fragments          " << raster.fragments << " transparent\n";
   if (volumes.rays)
     s << "  volumes            " << volumes.rays << " ray segments marched, " << volumes.steps << " density lookups, " << volumes.shadowSteps
@@ -73,6 +77,21 @@ store::Lens renderLens(const store::Camera& camera, const RenderSpec::LensOverri
   if (!(lens.focalDistance > 0 && std::isfinite(lens.focalDistance)))
     fail("--focus-distance", "focus distance ", lens.focalDistance, " is not a positive number");
   return lens;
+}
+
+int lensTimeBlocks(const RenderSpec& spec) {
+  const int N = spec.samplesX * spec.samplesY;
+  if (spec.samplesX % 2 || spec.samplesY % 2 || N < 8 || N > 256 || spec.sources.empty()) return 1;
+  bool interval = false;
+  for (const ShutterGroup& g : spec.shutter.groups()) interval = interval || g.length() > 0;
+  if (!interval && spec.shutter.rolling().duration == 0) return 1;
+  uint64_t moving = 0, all = 0;
+  for (const Source& src : spec.sources)
+    for (const store::TileEntry& e : src.store->entries()) {
+      all += e.numMicropolygons;
+      if (e.effects & store::kEffectMoving) moving += e.numMicropolygons;
+    }
+  return 4 * moving >= all && moving > 0 ? N / 4 : 1;
 }
 
 void checkCoverage(const std::vector<Source>& sources, const ShutterModel& shutter) {
@@ -309,6 +328,7 @@ struct Plan {
     for (const auto& t : aovTables) margin = std::max(margin, t->margin());
     rasterOptions = spec.raster;
     rasterOptions.surfaceIds = spec.deep;  // only deep output reads them back
+    if (view.lens()) rasterOptions.lensTimeBlocks = lensTimeBlocks(spec);
     // The volumes: those the caller adds, and the scene's own the store records.
     volumes = spec.volumes;
     if (!meta0.volumes.empty() && spec.sceneVolumes) {

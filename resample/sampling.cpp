@@ -111,4 +111,37 @@ void SamplePattern::lens(int px, int py, uint16_t* stratumOf, glm::vec2* disk) c
   for (int i = 0; i < spp_; ++i) disk[i] = points[stratumOf[i]];
 }
 
+void SamplePattern::lensPlanes(int px, int py, const uint16_t* timeStratumOf, int timeBlocks, uint16_t* planeOf, glm::vec2* disk) const {
+  if (timeBlocks <= 1) {
+    lens(px, py, planeOf, disk);
+    return;
+  }
+  const int A = timeBlocks, B = 4, halfX = nx_ / 2, halfY = ny_ / 2;
+  // A stream of its own again: the pattern, a permutation of the lens blocks per time block, and
+  // a permutation of each lens block's strata over the time blocks.
+  const uint64_t key = hashCombine(seed_ ^ 0x1E4B000000000000ull, (uint64_t(uint32_t(px)) << 32) | uint32_t(py));
+  constexpr int kLocal = 256;
+  uint64_t local[kLocal];
+  std::vector<uint64_t> heap;
+  const int draws = 1 + A * (B - 1) + B * (A - 1);
+  uint64_t* r = local;
+  if (draws > kLocal) heap.resize(size_t(draws)), r = heap.data();
+  splitMixDraws(key, draws, r);
+  const glm::vec2* points = &lensPoints_[size_t(r[0] % kPatterns) * spp_];
+  int d = 1;
+  auto shuffle = [&](uint16_t* v, int n) {
+    for (int i = 0; i < n; ++i) v[i] = uint16_t(i);
+    for (int i = n - 1; i > 0; --i, ++d) std::swap(v[i], v[int(uint32_t((r[d] >> 32) * uint64_t(uint32_t(i + 1)) >> 32))]);
+  };
+  uint16_t blockOf[64][4], cellOf[4][64];  // per time block: lens block by time sub-stratum; per lens block: its stratum by time block
+  for (int a = 0; a < A; ++a) shuffle(blockOf[a], B);
+  for (int b = 0; b < B; ++b) shuffle(cellOf[b], A);
+  for (int i = 0; i < spp_; ++i) {
+    const int ts = timeStratumOf[i], a = ts / B, b = blockOf[a][ts % B], k = cellOf[b][a];
+    const int cx = (b % 2) * halfX + k % halfX, cy = (b / 2) * halfY + k / halfX;
+    planeOf[i] = uint16_t(a * B + b);
+    disk[i] = points[cy * nx_ + cx];
+  }
+}
+
 }  // namespace reshutter::resample

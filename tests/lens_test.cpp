@@ -79,6 +79,7 @@ TEST(LensAnalytic, OutOfFocusEdgeBlursByTheCircleOfConfusion) {
   auto reader = writeScene(s, dir.path("edge.mps"));
   RenderSpec spec = specFor(reader, 0, 0, 8, 8, 3);
   spec.lens = lensFor(s, r, z, d);
+  EXPECT_EQ(lensTimeBlocks(spec), 1);  // nothing moves: planes are lens strata
   RenderResult res = render(spec);
   EXPECT_GT(res.stats.raster.lensMicropolygons, 0u);
   EXPECT_EQ(res.stats.raster.staticMicropolygons, 0u);
@@ -175,6 +176,7 @@ TEST(LensReference, AgreesWithARayCasterWhoseRaysLeaveTheLens) {
   for (auto [a, b] : {std::pair{0.0, 1.0}, std::pair{0.3, 0.55}, std::pair{0.8, 0.8}}) {
     RenderSpec spec = specFor(reader, a, b, 4, 4, 5);
     spec.lens = lensFor(s, 4, 30, 8);  // 4 px at depth 30, more in front of the focal plane
+    EXPECT_EQ(lensTimeBlocks(spec), a == b ? 1 : 4) << "interval " << a << ":" << b;  // an instant needs no time blocks
     RenderResult r = render(spec);
     EXPECT_GT(r.stats.raster.lensMicropolygons, 0u);
     expectRayCasterAgrees(s, spec, r, 40, 28, cat("interval ", a, ":", b));
@@ -217,6 +219,7 @@ TEST(LensAnalytic, MovingDefocusedSquareConvergesToItsIntegralOverTimeAndLens) {
     for (int seed = 0; seed < seeds; ++seed) {
       RenderSpec spec = specFor(reader, a, b, n, n, uint64_t(seed));
       spec.lens = lens;
+      EXPECT_EQ(lensTimeBlocks(spec), n % 2 ? 1 : n * n / 4);  // a moving square: time blocks with even grids of 8+ samples
       const RenderResult res = render(spec);
       EXPECT_GT(res.stats.raster.lensMicropolygons, 0u);
       const auto& A = channel(res, "A").f;
@@ -356,11 +359,12 @@ TEST(LensDeterminism, BitIdenticalForAnyThreadCountBucketSizeAndInstructionSet) 
   std::vector<std::vector<float>> images;
   for (const Variant v : {Variant{1, 32, true}, Variant{2, 16, true}, Variant{2, 57, true}, Variant{1, 24, false}}) {
     tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(v.threads));
-    RenderSpec spec = specFor(reader, 0.1, 0.9, 3, 3, 42);
+    RenderSpec spec = specFor(reader, 0.1, 0.9, 4, 4, 42);
     spec.filter = FilterSpec::parse("gaussian:2x2", "test");
     spec.bucketSize = v.bucket;
     spec.raster.vectorKernels = v.vector;
     spec.lens.fstop = 1, spec.lens.focalLength = 1, spec.lens.focalDistance = 20;  // depths 5 to 50: up to ~6 px
+    EXPECT_EQ(lensTimeBlocks(spec), 4);  // a moving store: planes pair time blocks with lens quadrants
     const RenderResult r = render(spec);
     EXPECT_GT(r.stats.raster.lensMicropolygons, 0u);
     std::vector<float> all;

@@ -136,6 +136,7 @@ SampleReference rayCastSamples(const TestScene& scene, const RenderSpec& spec, i
   // of the focal plane (z = d) that the pinhole ray through its raster position meets.
   const store::Lens lens = camera.projection == Projection::Perspective ? renderLens(camera, spec.lens) : store::Lens{};
   const double R = lens.radius(), d = lens.focalDistance;
+  const int timeBlocks = R > 0 ? lensTimeBlocks(spec) : 1;  // the render's pairing of lens and time strata
   struct Hit {
     double z;
     size_t mp;
@@ -145,7 +146,7 @@ SampleReference rayCastSamples(const TestScene& scene, const RenderSpec& spec, i
     for (int px = x0; px < x0 + W; ++px) {
       const int pat = pattern.patternOf(px, py);
       pattern.times(px, py, stratumOf.data(), u.data());
-      if (R > 0) pattern.lens(px, py, lensOf.data(), disk.data());
+      if (R > 0) pattern.lensPlanes(px, py, stratumOf.data(), timeBlocks, lensOf.data(), disk.data());
       const int g = shutter.groupOfRow(py);
       for (int i = 0; i < N; ++i) {
         const glm::vec2 o = pattern.offset(pat, i);
