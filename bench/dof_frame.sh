@@ -2,8 +2,9 @@
 # What depth of field costs: the 1080p bench store re-sampled through a thin lens (16 spp, gaussian
 # 2×2, PIZ write) focused on the scene's nearest depth (5), with the aperture chosen so that the
 # circle of confusion at its farthest depth (50) has a radius of 0 (the pinhole), 5, 20 and 50
-# pixels: wall and CPU seconds, rasterize thread-seconds, sample-test efficiency (hits / tests)
-# and the ratio to the pinhole frame. Not a test: run by hand.
+# pixels: wall and CPU seconds, rasterize thread-seconds, sample-test efficiency (hits / tests),
+# the samples the lens path searched per micropolygon (its cost driver) and the ratio to the
+# pinhole frame. Not a test: run by hand.
 # Usage: bench/dof_frame.sh BUILD_DIR STORE [RADII...]
 #   (stores: reshutter generate -n 5000000 -o moving.0001.mps, and with --motion 0 --knots 1)
 set -euo pipefail
@@ -32,7 +33,8 @@ for r in "${radii[@]}"; do
   raster=$(awk '/time \(thread-sum\)/ { for (i = 1; i <= NF; ++i) if ($i == "rasterize") print $(i + 1) }' "$work/log")
   eff=$(awk '/test efficiency/ { print $3 }' "$work/log")
   tests=$(awk '/sample tests/ { print $3 }' "$work/log")
+  scanned=$(sed -n 's/.*search boxes (\([0-9.]*\) each).*/\1/p' "$work/log")
   [[ -z $pinhole ]] && pinhole=$wall
-  printf 'CoC radius %3s px   wall %8.2f s (%5.1fx)   CPU %8.2f s   rasterize %9s thread-s   tests %11s   efficiency %s   peak RSS %5d MB\n' \
-    "$r" "$wall" "$(awk -v a="$wall" -v b="$pinhole" 'BEGIN { print a / b }')" "$(awk -v u="$user" -v s="$sys" 'BEGIN { print u + s }')" "$raster" "$tests" "$eff" $((rss / 1024))
+  printf 'CoC radius %3s px   wall %8.2f s (%5.1fx)   CPU %8.2f s   rasterize %9s thread-s   tests %11s   efficiency %s   searched %6s per micropolygon   peak RSS %5d MB\n' \
+    "$r" "$wall" "$(awk -v a="$wall" -v b="$pinhole" 'BEGIN { print a / b }')" "$(awk -v u="$user" -v s="$sys" 'BEGIN { print u + s }')" "$raster" "$tests" "$eff" "${scanned:--}" $((rss / 1024))
 done

@@ -148,30 +148,7 @@ TEST(LensReference, AgreesWithARayCasterWhoseRaysLeaveTheLens) {
   // Random moving quads and triangles, some transparent, some mattes, in front of and behind the
   // focal plane; rays from each sample's own lens point at its own time.
   ScratchDir dir;
-  TestScene s = makeScene(40, 28, {0.0, 0.4, 1.0});
-  Rng rng(23);
-  for (int i = 0; i < 40; ++i) {
-    TestMp mp;
-    const double cx = rng.uniform(-5, 45), cy = rng.uniform(-5, 33), size = rng.uniform(1, 9);
-    glm::dvec2 vel(rng.uniform(-10, 10), rng.uniform(-10, 10));
-    const double z = rng.uniform(3, 30), dz = rng.uniform(-2, 2);
-    for (int k = 0; k < 3; ++k) {
-      const double t = s.knotTimes[size_t(k)];
-      std::array<glm::dvec3, 4> c;
-      for (int j = 0; j < 4; ++j) {
-        const double ang = j * M_PI / 2 + rng.uniform(-0.3, 0.3) + t * 0.5;
-        c[size_t(j)] = s.cam(cx + vel.x * t + size * std::cos(ang), cy + vel.y * t + size * std::sin(ang), z + dz * t + rng.uniform(-0.5, 0.5));
-      }
-      mp.knots.push_back(c);
-    }
-    if (i % 5 == 0) mp.knots.assign(3, mp.knots[0]);  // some stand still
-    mp.triangle = i % 4 == 0;
-    mp.ci = {float(rng.uniform()), float(rng.uniform()), float(rng.uniform())};
-    if (i % 3 == 0) mp.oi = {0.3f, 0.5f, 0.7f}, mp.ci *= 0.3f;
-    if (i % 7 == 0) mp.flags = store::kMatte;
-    mp.flags |= store::kTwoSided;
-    s.mps.push_back(mp);
-  }
+  const TestScene s = randomQuadScene(23, true);
   auto reader = writeScene(s, dir.path("random.mps"));
   for (auto [a, b] : {std::pair{0.0, 1.0}, std::pair{0.3, 0.55}, std::pair{0.8, 0.8}}) {
     RenderSpec spec = specFor(reader, a, b, 4, 4, 5);

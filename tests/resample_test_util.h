@@ -39,6 +39,11 @@ struct TestScene {
 /// [0, 1], schema Ci, Oi (vertex colours) plus a vertex normal "N".
 TestScene makeScene(int width, int height, std::vector<double> knotTimes = {0.0, 1.0});
 
+/// 40 random quads and triangles on a 40×28 frame, moving over knots 0, 0.4, 1 (in depth too),
+/// some transparent, some mattes, all two-sided, overlapping in depth 3 to 30; with `someStill`
+/// every fifth stands still.
+TestScene randomQuadScene(uint64_t seed, bool someStill);
+
 /// Writes the scene as a store: each micropolygon its own grid, or (asOneGrid) all of them one
 /// grid in scene order with the first one's object id and flags (no shared vertices either way).
 std::shared_ptr<const store::StoreReader> writeScene(const TestScene& scene, const std::string& path, bool asOneGrid = false);
