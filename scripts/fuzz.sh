@@ -36,12 +36,13 @@ if [ "$target" = store ]; then
     { printf '\x01'; cat "$f"; } > "$work/corpus/seed-$(basename "$f")"
     rm -f "$f"
   done
-  # A format-3 store (recorded lights and a scene volume), shaded from a tiny RIB.
+  # A format-4 store (recorded lights, a scene volume and a lens), shaded from a tiny RIB.
   "$build"/reshutter -q smoke -o "$work/seed.vdb" --radius 1 --resolution 8
   cat > "$work/seed.rib" <<RIB
 Format 24 16 1
 Projection "perspective" "fov" [50]
 Shutter 0 1
+DepthOfField 2.8 0.5 5
 WorldBegin
 LightSource "pointlight" 1 "from" [0 2 0] "intensity" [4]
 LightSource "distantlight" 2 "to" [0 0 1]
@@ -56,9 +57,9 @@ Volume "blobbydso:impl_openvdb" [-1 1 -1 1 -1 1] [0 0 0] "constant string[2] blo
 AttributeEnd
 WorldEnd
 RIB
-  "$build"/reshutter -q shade "$work/seed.rib" -o "$work/seed-v3.mps"
-  { printf '\x01'; cat "$work/seed-v3.mps"; } > "$work/corpus/seed-v3.mps"
-  rm -f "$work/seed-v3.mps" "$work/seed.rib"
+  "$build"/reshutter -q shade "$work/seed.rib" -o "$work/seed-v4.mps"
+  { printf '\x01'; cat "$work/seed-v4.mps"; } > "$work/corpus/seed-v4.mps"
+  rm -f "$work/seed-v4.mps" "$work/seed.rib"
 fi
 "$bin" -max_total_time="$seconds" -max_len=65536 -timeout=10 -rss_limit_mb=2048 \
   -artifact_prefix="$build/findings-$target/" "$work/corpus" 2>&1 | tail -n 5

@@ -233,6 +233,8 @@ TEST(LensRib, DepthOfFieldIsRecordedAndTheCommandLineRefocuses) {
   EXPECT_FLOAT_EQ(float(lens.fstop), 2.8f);  // RIB numbers are floats
   EXPECT_EQ(lens.focalLength, 0.5);
   EXPECT_EQ(lens.focalDistance, 4);
+  // Written as format 4 (the lowest version that holds a lens); a store without one is not.
+  EXPECT_EQ(readBytes(mps).at(8), 4);
   const CommandResult info = runReshutter("info " + mps);
   EXPECT_NE(info.out.find("lens f/2.8 focal length 0.5 focus 4"), std::string::npos) << info.out;
 
@@ -251,6 +253,7 @@ TEST(LensRib, DepthOfFieldIsRecordedAndTheCommandLineRefocuses) {
   // A store without a lens needs all three values; a bad value is one line and no image.
   const std::string flat = dir.path("flat.mps");
   ASSERT_EQ(runReshutter("generate -n 2000 --width 64 --height 48 -o " + flat).exitCode, 0);
+  EXPECT_EQ(readBytes(flat).at(8), 1);
   for (const std::string& bad : {std::string("--focus-distance 5"), std::string("--fstop 2 --focal-length 1 --focus-distance -1")}) {
     const CommandResult r = runReshutter("resample " + flat + " -o " + dir.path("x.exr") + " " + bad);
     EXPECT_NE(r.exitCode, 0) << bad;
