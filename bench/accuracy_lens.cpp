@@ -51,7 +51,7 @@ void studyLens(const std::string& out) {
       const LensSquare q = lensSquare(cell, moving);
       const double coc = ax * radius * std::abs(1 / focus - 1 / q.z);
       const glm::dvec3 c = colourOf(cell);
-      for (int py = std::max(0, int(q.y - coc - 2)); py <= std::min(kH - 1, int(q.y + q.size + std::abs(q.vy) + coc + 2)); ++py)
+      for (int py = std::max(0, int(q.y - coc - 2 - std::abs(q.vy))); py <= std::min(kH - 1, int(q.y + q.size + std::abs(q.vy) + coc + 2)); ++py)
         for (int px = std::max(0, int(q.x - coc - 2 - std::abs(q.vx))); px <= std::min(kW - 1, int(q.x + q.size + std::abs(q.vx) + coc + 2)); ++px) {
           double a = 0;
           for (int ir = 0; ir < rings; ++ir)
@@ -74,7 +74,7 @@ void studyLens(const std::string& out) {
           },
           ref, 3);
   }
-  plot(out, "lens", "Depth of field: samples per pixel (squares at depths 6-30, focus 10, circles of confusion up to 8 px)");
+  plot(out, "lens", "Depth of field: samples per pixel (focus 10, circles of confusion up to 8 px)");
   gTables << "### Depth of field\n\nScene: 12 opaque squares (14–20 px) at depths 6 to 30 through a lens focused at 10 (circles of confusion up to "
              "8 px), still and moving 12 px over the shutter, "
           << kW << "×" << kH
