@@ -98,6 +98,7 @@ void addResampleCommand(CLI::App& app, Registry& registry) {
       "  reshutter resample frame.mps -o aov.exr --aov N --aov id:zmin --spp 64 --filter catmull-rom\n"
       "  reshutter resample frame.mps -o out.exr --preview out.png --stats\n"
       "  reshutter resample frame.mps -o flat.exr --deep deep.exr         # flat and deep (docs/deep.md)\n"
+      "  reshutter resample dof.mps -o far.exr --focus-distance 3.2 --fstop 1.4   # re-focus a frame shaded with DepthOfField\n"
       "  reshutter resample shot.####.mps --frames 1-100 --shutter 0:0.25 -o quarter.####.exr   # every frame of a shot");
   registry.add(sub, [cmd, hook = registry.sequenceHook] { return cmd->run(hook); });
 }
