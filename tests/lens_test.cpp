@@ -324,6 +324,7 @@ TEST(LensReference, FieldsAndRollingShutterAgreeWithTheRayCaster) {
   rolling.shutter.setRolling(rs);
   rolling.lens = lensFor(s, 3, 25, 6);
   const RenderResult rr = render(rolling);
+  EXPECT_GT(rr.stats.raster.lensMicropolygons, 0u);
   expectRayCasterAgrees(s, rolling, rr, 36, 24, "rolling");
 }
 
