@@ -160,6 +160,19 @@ void BucketRasterizer::Impl::drawLens(const LensChunk& lc, uint32_t m) {
     }
     for (int j = 0; j < nc; ++j) lag = std::max(lag, perspectiveLag(cullZ[c[j] - lc.vBase], cullZ[lc.nV + (c[j] - lc.vBase)]));
   }
+  // What the lerped boxes are widened by (perspective lag, the rounding of the sample's time),
+  // and the rounding margin of the projections and of any displacement the lens gives (|lens
+  // point| <= 1 bounds every plane's): the same for every plane.
+  const float lagX = (lag + lc.uErr + 1e-5f) * (bx1 - bx0), lagY = (lag + lc.uErr + 1e-5f) * (by1 - by0);
+  const float mag = std::max({std::abs(bx0), std::abs(bx1), std::abs(by0), std::abs(by1), std::abs(cx0), std::abs(cx1), std::abs(cy0), std::abs(cy1)});
+  const float margin = 2e-3f + 4e-6f * (mag + lc.kMag);
+  kernels::LensBox box = bounded ? kernels::LensBox{bx0 - margin, bx1 + margin, by0 - margin, by1 + margin, cx0, cx1, cy0, cy1}
+                                 : kernels::LensBox{-INFINITY, INFINITY, -INFINITY, INFINITY, 0.f, 0.f, 0.f, 0.f};
+  if (lerp) {
+    box.x0 = e0[0] - (margin + lagX), box.y0 = e0[1] - (margin + lagY), box.x1 = e0[2] + (margin + lagX), box.y1 = e0[3] + (margin + lagY);
+    box.mx0 = e1[0] - e0[0], box.my0 = e1[1] - e0[1], box.mx1 = e1[2] - e0[2], box.my1 = e1[3] - e0[3];
+    box.thetaA = lc.thetaA, box.invLen = lc.invLen;
+  }
   for (int s = 0; s < N; ++s) {
     TestArea ta;
     float shxLo = 0, shxHi = 0, shyLo = 0, shyHi = 0;
@@ -173,24 +186,12 @@ void BucketRasterizer::Impl::drawLens(const LensChunk& lc, uint32_t m) {
     if (lerp) {
       const float f0 = lensPlaneF0[size_t(s)], f1 = lensPlaneF1[size_t(s)];
       if (f0 > f1) continue;  // no sample of this plane in the region's groups
-      const float mx = (lag + lc.uErr + 1e-5f) * (bx1 - bx0), my = (lag + lc.uErr + 1e-5f) * (by1 - by0);
       auto at = [](float a, float b, float f) { return a + f * (b - a); };
-      px0 = std::min(at(e0[0], e1[0], f0), at(e0[0], e1[0], f1)) - mx, px1 = std::max(at(e0[2], e1[2], f0), at(e0[2], e1[2], f1)) + mx;
-      py0 = std::min(at(e0[1], e1[1], f0), at(e0[1], e1[1], f1)) - my, py1 = std::max(at(e0[3], e1[3], f0), at(e0[3], e1[3], f1)) + my;
+      px0 = std::min(at(e0[0], e1[0], f0), at(e0[0], e1[0], f1)) - lagX, px1 = std::max(at(e0[2], e1[2], f0), at(e0[2], e1[2], f1)) + lagX;
+      py0 = std::min(at(e0[1], e1[1], f0), at(e0[1], e1[1], f1)) - lagY, py1 = std::max(at(e0[3], e1[3], f0), at(e0[3], e1[3], f1)) + lagY;
     }
+    // The plane's search box; each sample in it is then held to `box` displaced by its own lens point.
     if (!testArea(bounded, px0 + shxLo, py0 + shyLo, px1 + shxHi, py1 + shyHi, ta)) continue;
-    // Each sample against the box displaced by its own lens point; the margin covers the
-    // rounding of the projections and of the displacement (testArea()'s, and as much again).
-    const float mag = std::max({std::abs(bx0), std::abs(bx1), std::abs(by0), std::abs(by1), std::abs(shxLo), std::abs(shxHi), std::abs(shyLo), std::abs(shyHi)});
-    const float margin = 2e-3f + 4e-6f * (mag + lc.kMag);
-    kernels::LensBox box = bounded ? kernels::LensBox{bx0 - margin, bx1 + margin, by0 - margin, by1 + margin, cx0, cx1, cy0, cy1}
-                                   : kernels::LensBox{-INFINITY, INFINITY, -INFINITY, INFINITY, 0.f, 0.f, 0.f, 0.f};
-    if (lerp) {
-      const float mx = margin + (lag + lc.uErr + 1e-5f) * (bx1 - bx0), my = margin + (lag + lc.uErr + 1e-5f) * (by1 - by0);
-      box.x0 = e0[0] - mx, box.y0 = e0[1] - my, box.x1 = e0[2] + mx, box.y1 = e0[3] + my;
-      box.mx0 = e1[0] - e0[0], box.my0 = e1[1] - e0[1], box.mx1 = e1[2] - e0[2], box.my1 = e1[3] - e0[3];
-      box.thetaA = lc.thetaA, box.invLen = lc.invLen;
-    }
     const size_t first = size_t(s) * PS + size_t(ta.py0 - y0) * w + size_t(ta.px0 - x0);
     const int cols = ta.px1 - ta.px0 + 1, rows = ta.py1 - ta.py0 + 1;
     stats.lensScanned += uint64_t(cols) * uint64_t(rows);

@@ -9,8 +9,8 @@
 #include <chrono>
 #include <cmath>
 #include <map>
-#include <mutex>
 #include <iomanip>
+#include <mutex>
 #include <sstream>
 
 #include <tbb/enumerable_thread_specific.h>
@@ -316,7 +316,8 @@ struct Plan {
         cam(meta0.cameras[0]),
         win(window),
         shutter(shutter),
-        view(makeView(cam, win.W, win.H, renderLens(cam, spec.lens))),
+        lens(renderLens(cam, spec.lens)),
+        view(makeView(cam, win.W, win.H, lens)),
         pattern(spec.samplesX, spec.samplesY, spec.seed),
         N(pattern.spp()),
         aovs(resolveAovs(spec.aovs, meta0.schema, spec.filter)),
@@ -359,6 +360,7 @@ struct Plan {
   const store::Camera& cam;
   const Window win;
   const ShutterModel shutter;
+  const store::Lens lens;  // the camera's with the spec's overrides (view has it only for a perspective camera)
   const View view;
   const SamplePattern pattern;
   const int N;  // samples per pixel
@@ -467,8 +469,7 @@ void gatherParts(const Plan& plan, double tMin, double tMax, const Region& rg, s
     const float fx = float(sc.width) / float(plan.win.W), fy = float(sc.height) / float(plan.win.H);
     store::RasterRect rect{float(rg.x0) * fx, float(rg.y0) * fy, float(rg.x0 + rg.w) * fx, float(rg.y0 + rg.h) * fy, false};
     // With a lens, a part's samples reach as far as its circle of confusion.
-    const double lensRadius = plan.view.lensRadius, focalDistance = plan.view.focalDistance;
-    src.store->visit(rect, lo, hi, [&](size_t e) { parts.push_back({si, e}); }, lensRadius, focalDistance);
+    src.store->visit(rect, lo, hi, [&](size_t e) { parts.push_back({si, e}); }, plan.view.lens() ? plan.lens : store::Lens{});
   }
 }
 

@@ -69,23 +69,41 @@ void splitMixDraws(uint64_t key, int n, uint64_t* out) {
 
 }  // namespace
 
-void SamplePattern::times(int px, int py, uint16_t* stratumOf, float* u) const {
-  uint64_t key = hashCombine(seed_ ^ 0x7157000000000000ull, (uint64_t(uint32_t(px)) << 32) | uint32_t(py));
-  // The same values as Rng(key): spp - 1 draws for the shuffle, then one jitter per sample.
-  constexpr int kLocal = 128;
-  uint64_t local[kLocal];
-  std::vector<uint64_t> heap;
-  const int draws = 2 * spp_ - 1;
-  uint64_t* r = local;
-  if (draws > kLocal) heap.resize(size_t(draws)), r = heap.data();
-  splitMixDraws(key, draws, r);
-  for (int i = 0; i < spp_; ++i) stratumOf[i] = uint16_t(i);
-  for (int i = spp_ - 1, d = 0; i > 0; --i, ++d) {  // Fisher-Yates with a deterministic generator (Rng::below)
-    int j = int(uint32_t((r[d] >> 32) * uint64_t(uint32_t(i + 1)) >> 32));
-    std::swap(stratumOf[i], stratumOf[j]);
+namespace {
+
+// A pixel's draws from the stream `salt` of the seed: kept on the stack for the usual counts.
+class PixelDraws {
+ public:
+  PixelDraws(uint64_t seed, uint64_t salt, int px, int py, int n) {
+    uint64_t* r = local_;
+    if (n > kLocal) heap_.resize(size_t(n)), r = heap_.data();
+    splitMixDraws(hashCombine(seed ^ salt, (uint64_t(uint32_t(px)) << 32) | uint32_t(py)), n, r);
+    draws_ = r;
   }
+  const uint64_t* data() const { return draws_; }
+
+ private:
+  static constexpr int kLocal = 256;
+  uint64_t local_[kLocal];
+  std::vector<uint64_t> heap_;
+  const uint64_t* draws_;
+};
+
+// A permutation of 0..n-1 into v by Fisher-Yates from n - 1 draws (Rng::below's mapping); returns
+// the draws after those it used.
+const uint64_t* permutation(const uint64_t* r, uint16_t* v, int n) {
+  for (int i = 0; i < n; ++i) v[i] = uint16_t(i);
+  for (int i = n - 1; i > 0; --i, ++r) std::swap(v[i], v[int(uint32_t((*r >> 32) * uint64_t(uint32_t(i + 1)) >> 32))]);
+  return r;
+}
+
+}  // namespace
+
+void SamplePattern::times(int px, int py, uint16_t* stratumOf, float* u) const {
+  // The same values as Rng(key): spp - 1 draws for the shuffle, then one jitter per sample.
+  const PixelDraws draws(seed_, 0x7157000000000000ull, px, py, 2 * spp_ - 1);
+  const uint64_t* jitter = permutation(draws.data(), stratumOf, spp_);
   const float inv = 1.0f / float(spp_);
-  const uint64_t* jitter = r + (spp_ - 1);
   for (int i = 0; i < spp_; ++i) {
     float v = (float(stratumOf[i]) + toUnitFloat(jitter[i])) * inv;
     u[i] = std::min(v, 0x1.fffffep-1f);
@@ -94,20 +112,10 @@ void SamplePattern::times(int px, int py, uint16_t* stratumOf, float* u) const {
 
 void SamplePattern::lens(int px, int py, uint16_t* stratumOf, glm::vec2* disk) const {
   // A stream of its own (not the time stream's): renders without a lens keep their samples.
-  const uint64_t key = hashCombine(seed_ ^ 0x1E45000000000000ull, (uint64_t(uint32_t(px)) << 32) | uint32_t(py));
-  constexpr int kLocal = 128;
-  uint64_t local[kLocal];
-  std::vector<uint64_t> heap;
-  const int draws = spp_;  // the pattern, then the shuffle
-  uint64_t* r = local;
-  if (draws > kLocal) heap.resize(size_t(draws)), r = heap.data();
-  splitMixDraws(key, draws, r);
-  const glm::vec2* points = &lensPoints_[size_t(r[0] % kPatterns) * spp_];
-  for (int i = 0; i < spp_; ++i) stratumOf[i] = uint16_t(i);
-  for (int i = spp_ - 1, d = 1; i > 0; --i, ++d) {
-    const int j = int(uint32_t((r[d] >> 32) * uint64_t(uint32_t(i + 1)) >> 32));
-    std::swap(stratumOf[i], stratumOf[j]);
-  }
+  // The pattern, then the shuffle.
+  const PixelDraws draws(seed_, 0x1E45000000000000ull, px, py, spp_);
+  const glm::vec2* points = &lensPoints_[size_t(draws.data()[0] % kPatterns) * spp_];
+  permutation(draws.data() + 1, stratumOf, spp_);
   for (int i = 0; i < spp_; ++i) disk[i] = points[stratumOf[i]];
 }
 
@@ -119,23 +127,12 @@ void SamplePattern::lensPlanes(int px, int py, const uint16_t* timeStratumOf, in
   const int A = timeBlocks, B = 4, halfX = nx_ / 2, halfY = ny_ / 2;
   // A stream of its own again: the pattern, a permutation of the lens blocks per time block, and
   // a permutation of each lens block's strata over the time blocks.
-  const uint64_t key = hashCombine(seed_ ^ 0x1E4B000000000000ull, (uint64_t(uint32_t(px)) << 32) | uint32_t(py));
-  constexpr int kLocal = 256;
-  uint64_t local[kLocal];
-  std::vector<uint64_t> heap;
-  const int draws = 1 + A * (B - 1) + B * (A - 1);
-  uint64_t* r = local;
-  if (draws > kLocal) heap.resize(size_t(draws)), r = heap.data();
-  splitMixDraws(key, draws, r);
-  const glm::vec2* points = &lensPoints_[size_t(r[0] % kPatterns) * spp_];
-  int d = 1;
-  auto shuffle = [&](uint16_t* v, int n) {
-    for (int i = 0; i < n; ++i) v[i] = uint16_t(i);
-    for (int i = n - 1; i > 0; --i, ++d) std::swap(v[i], v[int(uint32_t((r[d] >> 32) * uint64_t(uint32_t(i + 1)) >> 32))]);
-  };
+  const PixelDraws draws(seed_, 0x1E4B000000000000ull, px, py, 1 + A * (B - 1) + B * (A - 1));
+  const glm::vec2* points = &lensPoints_[size_t(draws.data()[0] % kPatterns) * spp_];
+  const uint64_t* r = draws.data() + 1;
   uint16_t blockOf[64][4], cellOf[4][64];  // per time block: lens block by time sub-stratum; per lens block: its stratum by time block
-  for (int a = 0; a < A; ++a) shuffle(blockOf[a], B);
-  for (int b = 0; b < B; ++b) shuffle(cellOf[b], A);
+  for (int a = 0; a < A; ++a) r = permutation(r, blockOf[a], B);
+  for (int b = 0; b < B; ++b) r = permutation(r, cellOf[b], A);
   for (int i = 0; i < spp_; ++i) {
     const int ts = timeStratumOf[i], a = ts / B, b = blockOf[a][ts % B], k = cellOf[b][a];
     const int cx = (b % 2) * halfX + k % halfX, cy = (b / 2) * halfY + k / halfX;

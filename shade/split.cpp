@@ -107,9 +107,6 @@ class Splitter {
 
   glm::dvec3 camera(size_t k, const UV& uv) const { return glm::dvec3(mats_[k] * glm::dvec4(evalP(p_, shapes_[k], uv.u, uv.v), 1.0)); }
   bool inFront(const glm::dvec3& c) const { return !proj_.perspective || c.z >= proj_.nearClip; }
-  // The thin lens's largest displacement, per unit of raster scale, over camera depths [z0, z1]:
-  // radius · |1/d - 1/z| at one end (0 without a lens).
-  double cocPerRasterUnit(double z0, double z1) const { return store::circleOfConfusion(cam_, z0, z1); }
   double edgeLength(double motion) const { return std::sqrt(rate_ * (1.0 + motionFactor_ * motion / 16.0)); }
 
   // The side from `from` to `to`, measured along itself alone: the same answer for every piece
@@ -258,7 +255,7 @@ class Splitter {
       double px = 0.1 * (bb[1] - bb[0]) + 1, py = 0.1 * (bb[3] - bb[2]) + 1;
       // A lens sees past the pinhole's frame by each depth's circle of confusion: what it may
       // blur into view is kept (its depths padded like its bound).
-      if (const double coc = cocPerRasterUnit(zLo - 0.1 * (zHi - zLo), zHi + 0.1 * (zHi - zLo)); coc > 0)
+      if (const double coc = store::circleOfConfusion(cam_, zLo - 0.1 * (zHi - zLo), zHi + 0.1 * (zHi - zLo)); coc > 0)
         px += coc * std::abs(proj_.ax), py += coc * std::abs(proj_.ay);
       e.offscreen = bb[1] + px < window_[0] || bb[0] - px > window_[1] || bb[3] + py < window_[2] || bb[2] - py > window_[3];
     }

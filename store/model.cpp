@@ -85,11 +85,15 @@ bool Camera::operator==(const Camera& o) const {
          nearClip == o.nearClip && farClip == o.farClip && worldToCamera == o.worldToCamera && lens == o.lens;
 }
 
-double circleOfConfusion(const Camera& camera, double z0, double z1) {
-  if (!camera.lens.active() || camera.projection != Projection::Perspective) return 0.0;
+double circleOfConfusion(const Lens& lens, double z0, double z1) {
+  if (!lens.active()) return 0.0;
   if (!(z0 > 0)) return INFINITY;
-  const double invD = 1.0 / camera.lens.focalDistance;
-  return camera.lens.radius() * std::max(std::abs(invD - 1.0 / z0), std::abs(invD - 1.0 / z1));
+  const double invD = 1.0 / lens.focalDistance;
+  return lens.radius() * std::max(std::abs(invD - 1.0 / z0), std::abs(invD - 1.0 / z1));
+}
+
+double circleOfConfusion(const Camera& camera, double z0, double z1) {
+  return camera.projection == Projection::Perspective ? circleOfConfusion(camera.lens, z0, z1) : 0.0;
 }
 
 Projector::Projector(const Camera& cam) {

@@ -88,8 +88,9 @@ struct Camera {
 };
 
 /// The largest lens displacement over camera depths [z0, z1] in units of the projection's scale
-/// (raster x moves by ax times it): radius · max |1/d - 1/z|. 0 without a lens or an orthographic
-/// camera; infinite when the depths reach the eye plane.
+/// (raster x moves by ax times it): radius · max |1/d - 1/z|. 0 without a lens (or, for a camera,
+/// an orthographic one); infinite when the depths reach the eye plane.
+double circleOfConfusion(const Lens& lens, double z0, double z1);
 double circleOfConfusion(const Camera& camera, double z0, double z1);
 
 /// Camera space → raster space for one camera: x_r = ax·x/z + bx (perspective) or ax·x + bx.

@@ -31,6 +31,7 @@ struct StoreReader::Impl {
   std::vector<TileEntry> entries;
   std::vector<uint32_t> partNumber;  // n-th part of its tile, for messages
   std::vector<RasterRect> shutterBounds;
+  std::vector<std::pair<float, float>> depthRange;  // per part: nearest and farthest camera depth at any knot
   Projector projector;
   uint64_t micropolygons = 0;
 
@@ -97,7 +98,7 @@ struct StoreReader::Impl {
     projector = Projector(meta.cameras[0]);
 
     partNumber.resize(entries.size());
-    shutterBounds.resize(entries.size());
+    shutterBounds.resize(entries.size()), depthRange.resize(entries.size());
     for (size_t i = 0; i < entries.size(); ++i) {
       const auto& e = entries[i];
       partNumber[i] = (i > 0 && entries[i - 1].tx == e.tx && entries[i - 1].ty == e.ty) ? partNumber[i - 1] + 1 : 0;
@@ -107,6 +108,8 @@ struct StoreReader::Impl {
       if (e.rawSize != expected) fail(where(i), "payload size ", e.rawSize, " does not match its counts (", expected, ")");
       micropolygons += e.numMicropolygons;
       shutterBounds[i] = boundsOver(e, meta.schedules[e.schedule], projector, meta.shutterOpen, meta.shutterClose);
+      depthRange[i] = {INFINITY, -INFINITY};
+      for (const KnotBounds& kb : e.knots) depthRange[i].first = std::min(depthRange[i].first, kb.camera[2]), depthRange[i].second = std::max(depthRange[i].second, kb.camera[5]);
     }
   }
 
@@ -259,29 +262,26 @@ RasterRect StoreReader::bounds(size_t entry, double t0, double t1) const {
   return boundsOver(e, impl_->meta.schedules[e.schedule], impl_->projector, t0, t1);
 }
 
-void StoreReader::visit(const RasterRect& rect, double t0, double t1, const std::function<void(size_t)>& fn, double lensRadius, double focalDistance) const {
+void StoreReader::visit(const RasterRect& rect, double t0, double t1, const std::function<void(size_t)>& fn, const Lens& lens) const {
   const auto& I = *impl_;
   for (size_t i = 0; i < I.entries.size(); ++i) {
-    if (lensRadius > 0) {
-      // A point at depth z moves by a L (1/d - 1/z) on the raster for lens point L, |L| <= radius:
-      // the part's depths over every knot bound it (a part reaching the eye plane reaches everywhere).
-      float zLo = INFINITY, zHi = -INFINITY;
-      for (const KnotBounds& kb : I.entries[i].knots) zLo = std::min(zLo, kb.camera[2]), zHi = std::max(zHi, kb.camera[5]);
-      if (!(zLo > 0)) {
+    // A point at depth z moves by a L (1/d - 1/z) on the raster for lens point L: the part's depths
+    // bound its reach (a part reaching the eye plane reaches everywhere). No lens: no widening.
+    float wx = 0, wy = 0;
+    if (lens.active()) {
+      const double coc = circleOfConfusion(lens, I.depthRange[i].first, I.depthRange[i].second);
+      if (!std::isfinite(coc)) {
         fn(i);
         continue;
       }
-      const double k = std::max(std::abs(1.0 / focalDistance - 1.0 / zLo), std::abs(1.0 / focalDistance - 1.0 / zHi));
-      const double wx = lensRadius * k * std::abs(I.projector.ax) * 1.0001 + 1e-3, wy = lensRadius * k * std::abs(I.projector.ay) * 1.0001 + 1e-3;
-      auto widened = [&](RasterRect r) {
-        if (!r.empty) r.x0 = float(r.x0 - wx), r.y0 = float(r.y0 - wy), r.x1 = float(r.x1 + wx), r.y1 = float(r.y1 + wy);
-        return r;
-      };
-      if (widened(I.shutterBounds[i]).overlaps(rect) && widened(bounds(i, t0, t1)).overlaps(rect)) fn(i);
-      continue;
+      wx = float(coc * std::abs(I.projector.ax) * 1.0001 + 1e-3), wy = float(coc * std::abs(I.projector.ay) * 1.0001 + 1e-3);
     }
-    if (!I.shutterBounds[i].overlaps(rect)) continue;
-    if (bounds(i, t0, t1).overlaps(rect)) fn(i);
+    auto widened = [&](RasterRect r) {
+      if (!r.empty && (wx > 0 || wy > 0)) r.x0 -= wx, r.y0 -= wy, r.x1 += wx, r.y1 += wy;
+      return r;
+    };
+    if (!widened(I.shutterBounds[i]).overlaps(rect)) continue;
+    if (widened(bounds(i, t0, t1)).overlaps(rect)) fn(i);
   }
 }
 

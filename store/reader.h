@@ -63,9 +63,9 @@ class StoreReader {
   /// Bound of a part over [t0, t1] in the primary camera's raster.
   RasterRect bounds(size_t entry, double t0, double t1) const;
   /// Calls fn(entry) for every part whose bound over [t0, t1] overlaps `rect`, in index order.
-  /// With a thin lens (radius > 0, camera space; in focus at focalDistance) each bound is first
-  /// widened by the largest circle of confusion the part's depths take (Camera::lens).
-  void visit(const RasterRect& rect, double t0, double t1, const std::function<void(size_t)>& fn, double lensRadius = 0, double focalDistance = 1) const;
+  /// With a lens (Camera::lens) each bound is first widened by the largest circle of confusion
+  /// the part's depths take.
+  void visit(const RasterRect& rect, double t0, double t1, const std::function<void(size_t)>& fn, const Lens& lens = {}) const;
 
   /// Decodes every part and checks every invariant (checksums, bounds hold at every knot, tile
   /// assignment, effect flags, payload ranges). Throws Error on the first violation.

@@ -4,9 +4,9 @@
 // render agrees sample by sample with a ray caster whose rays leave the lens (tests/resample_test_util.h).
 #include <algorithm>
 #include <cmath>
-#include <numeric>
-
 #include <cstring>
+#include <fstream>
+#include <numeric>
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
@@ -22,8 +22,6 @@ using namespace reshutter::resample;
 using namespace reshutter::test;
 
 namespace {
-
-void writeText(const std::string& path, const std::string& text) { writeBytes(path, std::vector<uint8_t>(text.begin(), text.end())); }
 
 // Fraction of the unit disk with x <= a: the x marginal of a uniform lens point.
 double diskBelow(double a) {
@@ -222,9 +220,8 @@ TEST(LensAnalytic, MovingDefocusedSquareConvergesToItsIntegralOverTimeAndLens) {
 TEST(LensRib, DepthOfFieldIsRecordedAndTheCommandLineRefocuses) {
   ScratchDir dir;
   const std::string rib = dir.path("dof.rib");
-  writeText(rib,
-            "Format 64 48 1\nProjection \"perspective\" \"fov\" 40\nDepthOfField 2.8 0.5 4\nWorldBegin\n"
-            "Surface \"constant\"\nColor [1 1 1]\nTranslate 0 0 8\nPolygon \"P\" [-1 -1 0  1 -1 0  1 1 0  -1 1 0]\nWorldEnd\n");
+  std::ofstream(rib) << "Format 64 48 1\nProjection \"perspective\" \"fov\" 40\nDepthOfField 2.8 0.5 4\nWorldBegin\n"
+                        "Surface \"constant\"\nColor [1 1 1]\nTranslate 0 0 8\nPolygon \"P\" [-1 -1 0  1 -1 0  1 1 0  -1 1 0]\nWorldEnd\n";
   const std::string mps = dir.path("dof.mps");
   const CommandResult shade = runReshutter("shade " + rib + " -o " + mps);
   ASSERT_EQ(shade.exitCode, 0) << shade.err;
@@ -271,7 +268,7 @@ TEST(LensShade, WhatTheLensBlursIntoViewIsShaded) {
   ScratchDir dir;
   auto ribWith = [&](const std::string& lens) {
     const std::string rib = dir.path("offscreen" + std::to_string(lens.size()) + ".rib");
-    writeText(rib, "Format 64 48 1\nProjection \"perspective\" \"fov\" 40\n" + lens +
+    std::ofstream(rib) << ("Format 64 48 1\nProjection \"perspective\" \"fov\" 40\n" + lens +
                        "WorldBegin\nSurface \"constant\"\nColor [1 1 1]\nTranslate 0 0 8\n"
                        "Polygon \"P\" [-1 -1 0  1 -1 0  1 1 0  -1 1 0]\nPolygon \"P\" [4.6 -1 0  6.6 -1 0  6.6 1 0  4.6 1 0]\nWorldEnd\n");
     return rib;
