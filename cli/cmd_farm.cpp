@@ -87,7 +87,10 @@ farm::Rect imageWindow(const SequenceRequest& req) {
     store::ShotStores shot(req.stores, 0);
     meta = shot.firstMeta(double(req.frames.front()));
   }
-  return {0, meta.cameras[0].width, 0, meta.cameras[0].height};
+  const std::vector<store::Camera> views = r.viewCameras(meta);
+  if (views.size() > 1) fail("farm", "a job renders one camera: submit one job per view (--camera NAME) rather than ", views.size(), " views in one");
+  const store::Camera& cam = views.empty() ? meta.cameras[0] : views[0];
+  return {0, cam.width, 0, cam.height};
 }
 
 std::string describe(const farm::Job& job, const farm::Job::Task& t) {

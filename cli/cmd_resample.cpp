@@ -70,13 +70,15 @@ struct ResampleCommand {
     shutter.applyRolling(spec.shutter, 1.0);
     opts.applyTo(spec);
     spec.progress = frame == nullptr;
-    resample::RenderResult result = resample::render(spec);
-    opts.writeOutputs(result, out, meta.frame);
+    const std::vector<RenderOptions::View> views = opts.renderViews(spec);
+    opts.writeViews(views, out, meta.frame);
+    const resample::RenderResult& result = views[0].result;
     const auto& img = result.image;
     const std::string wrote = out.empty() ? deepOut : deepOut.empty() ? out : out + " and " + deepOut;
     note(cat("wrote ", wrote, ": ", img.width, "x", img.height, ", ", spec.samplesX * spec.samplesY, " spp, shutter [", open, ", ", close, "] in ",
-             result.stats.wallSeconds, " s"));
-    if (render.stats) std::printf("%s", result.stats.report().c_str());
+             result.stats.wallSeconds, " s", views.size() > 1 ? cat(" (first of ", views.size(), " views)") : std::string()));
+    if (render.stats)
+      for (const auto& v : views) std::printf("%s%s", v.name.empty() ? "" : ("view " + v.name + ":\n").c_str(), v.result.stats.report().c_str());
   }
 };
 
@@ -99,6 +101,9 @@ void addResampleCommand(CLI::App& app, Registry& registry) {
       "  reshutter resample frame.mps -o out.exr --preview out.png --stats\n"
       "  reshutter resample frame.mps -o flat.exr --deep deep.exr         # flat and deep (docs/deep.md)\n"
       "  reshutter resample dof.mps -o far.exr --focus-distance 3.2 --fstop 1.4   # re-focus a frame shaded with DepthOfField\n"
+      "  reshutter resample frame.mps -o right.exr --camera right             # from a camera the RIB recorded (Camera \"right\")\n"
+      "  reshutter resample frame.mps -o stereo.exr --stereo 0.065:4          # a stereo pair, one multi-view OpenEXR (left, right)\n"
+      "  reshutter resample frame.mps -o wide.exr --look-from 3,1,-6 --look-at 0,0,0 --fov 50   # a camera given after the fact\n"
       "  reshutter resample shot.####.mps --frames 1-100 --shutter 0:0.25 -o quarter.####.exr   # every frame of a shot");
   registry.add(sub, [cmd, hook = registry.sequenceHook] { return cmd->run(hook); });
 }

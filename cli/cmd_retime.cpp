@@ -67,11 +67,14 @@ int renderSequence(const std::string& storePattern, const std::string& outPatter
     const OutputFrame& f = frames[i];
     RenderSpec spec = specOf(stores, frames, i, render);
     spec.progress = frames.size() == 1;
-    RenderResult result = resample::render(spec);
-    result.provenance.frame = f.frame;
-    render.writeOutputs(result, outPattern.empty() ? "" : expandFramePattern(outPattern, f.frame), f.frame);
-    seconds += result.stats.wallSeconds;
-    if (render.stats) std::printf("frame %lld\n%s", static_cast<long long>(f.frame), result.stats.report().c_str());
+    std::vector<RenderOptions::View> views = render.renderViews(spec);
+    for (RenderOptions::View& v : views) {
+      v.result.provenance.frame = f.frame;
+      seconds += v.result.stats.wallSeconds;
+      if (render.stats)
+        std::printf("frame %lld%s\n%s", static_cast<long long>(f.frame), v.name.empty() ? "" : (", view " + v.name).c_str(), v.result.stats.report().c_str());
+    }
+    render.writeViews(views, outPattern.empty() ? "" : expandFramePattern(outPattern, f.frame), f.frame);
     progress.advance();
   }
   progress.finish();
@@ -121,20 +124,26 @@ struct FieldsCommand {
     double seconds = 0;
     for (size_t i = 0; i < list.size(); ++i) {
       const int64_t f = list[i];
-      RenderResult field[2];
-      for (size_t k = 0; k < 2; ++k) {
-        RenderSpec spec = specOf(stores, passes, 2 * i + k, render);
-        spec.progress = false;
-        field[k] = resample::render(spec);
+      // Each view (the store's own camera when none is asked for): two fields, interlaced.
+      const std::vector<store::Camera> cams = render.viewCameras(specOf(stores, passes, 2 * i, render).sources.at(0).store->meta());
+      std::vector<RenderOptions::View> views;
+      for (size_t v = 0; v < std::max<size_t>(1, cams.size()); ++v) {
+        RenderResult field[2];
+        for (size_t k = 0; k < 2; ++k) {
+          RenderSpec spec = specOf(stores, passes, 2 * i + k, render);
+          spec.progress = false;
+          if (!cams.empty()) spec.camera = cams[v];
+          field[k] = resample::render(spec);
+        }
+        seconds += field[0].stats.wallSeconds + field[1].stats.wallSeconds;
+        if (render.stats)
+          std::printf("frame %lld, field 1\n%sframe %lld, field 2\n%s", static_cast<long long>(f), field[0].stats.report().c_str(), static_cast<long long>(f),
+                      field[1].stats.report().c_str());
+        resample::interlaceFields(field[0], field[1], fs.firstFieldParity);
+        field[0].provenance.frame = f;
+        views.push_back({cams.empty() ? "" : cams[v].name, std::move(field[0])});
       }
-      seconds += field[0].stats.wallSeconds + field[1].stats.wallSeconds;
-      RenderResult& out = field[0];
-      resample::interlaceFields(out, field[1], fs.firstFieldParity);
-      out.provenance.frame = f;
-      render.writeOutputs(out, output.empty() ? "" : expandFramePattern(output, f), f);
-      if (render.stats)
-        std::printf("frame %lld, field 1\n%sframe %lld, field 2\n%s", static_cast<long long>(f), field[0].stats.report().c_str(), static_cast<long long>(f),
-                    field[1].stats.report().c_str());
+      render.writeViews(views, output.empty() ? "" : expandFramePattern(output, f), f);
       progress.advance();
     }
     progress.finish();

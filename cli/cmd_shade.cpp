@@ -10,6 +10,7 @@
 #include "common/error.h"
 #include "common/frame_range.h"
 #include "common/log.h"
+#include "resample/camera_view.h"
 #include "shade/rib_scene.h"
 #include "shade/shading_pass.h"
 
@@ -26,6 +27,16 @@ struct ShadeCommand {
   std::string shadeInTime = "off";
   int shadingTimes = shade::ShadeOptions{}.shadingTimes;
   uint64_t primitiveBudget = shade::DiceOptions{}.maxMicropolygonsPerPrimitive;
+  std::string stereo;  // BASELINE[:CONVERGENCE]
+
+  // --stereo: the pair around the main camera, recorded (and kept) like RIB Camera requests.
+  void addStereoCameras(shade::FrameOptions& options) const {
+    for (const store::Camera& eye : resample::stereoPair(options.camera, stereo, "--stereo")) {
+      auto& cams = options.namedCameras;
+      cams.erase(std::remove_if(cams.begin(), cams.end(), [&](const store::Camera& c) { return c.name == eye.name; }), cams.end());
+      cams.push_back(eye);
+    }
+  }
 
   int run() const {
     shade::ShadeOptions opt;
@@ -76,6 +87,7 @@ struct ShadeCommand {
       std::string skipped;
       for (const auto& [request, count] : frame.skipped) skipped += cat(skipped.empty() ? "" : ", ", grouped(count), " ", request);
       if (frame.prims.empty() && frame.volumes.empty() && !skipped.empty()) fail(scene, "frame ", n, ": every primitive was skipped (", skipped, "); nothing to shade");
+      if (!stereo.empty()) addStereoCameras(frame.options);
       const std::string path = expandFramePattern(output, n);
       shade::StoreResult r = shade::shadeToStore(frame, opt, path);
       ++written;
@@ -89,6 +101,9 @@ struct ShadeCommand {
                   r.shade.seconds, path.c_str(), humanBytes(double(r.write.fileBytes)).c_str(),
                   r.shade.micropolygons ? double(r.write.fileBytes) / double(r.shade.micropolygons) : 0.0,
                   skipped.empty() ? "" : cat("; skipped primitives: ", skipped).c_str());
+      if (r.shade.primaryCameraDetail)
+        std::printf("frame %lld: kept and diced for %zu cameras: geometry detail expansion %.3f (micropolygons for every camera / for the primary alone)\n",
+                    (long long)n, frame.options.namedCameras.size() + 1, r.shade.detailExpansion());
       std::fflush(stdout);
       if (r.shade.overBudgetPrimitives)
         warn(cat(scene, ": frame ", n, ": ", r.shade.overBudgetPrimitives, " primitive(s) needed more than ", grouped(opt.dice.maxMicropolygonsPerPrimitive),
@@ -139,6 +154,9 @@ void addShadeCommand(CLI::App& app, Registry& registry) {
   sub->add_option("--grid-size", cmd->gridSize, "Largest grid, in micropolygons per side")->capture_default_str();
   sub->add_option("--overscan", cmd->overscan, "Keep geometry this far beyond the screen edges (fraction of the resolution), for re-framing and other cameras")
       ->capture_default_str();
+  sub->add_option("--stereo", cmd->stereo,
+                  "Also keep, dice for and record a stereo pair around the camera: cameras 'left' and 'right' BASELINE apart, parallel or "
+                  "converged at depth CONVERGENCE (BASELINE:CONVERGENCE); `resample --camera left,right` renders both eyes from this one pass");
   sub->add_option("--primitive-budget", cmd->primitiveBudget,
                   "Most micropolygons one primitive may take; past it (a surface edge-on under an extreme transform) its remaining pieces are diced "
                   "coarser, with a warning")

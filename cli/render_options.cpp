@@ -1,12 +1,16 @@
 #include "cli/render_options.h"
 
+#include <algorithm>
+#include <cmath>
 #include <cstdio>
+#include <filesystem>
 #include <sstream>
 
 #include "common/atomic_file.h"
 #include "common/error.h"
 #include "common/frame_range.h"
 #include "common/log.h"
+#include "resample/camera_view.h"
 #include "resample/simd.h"
 
 namespace reshutter::cli {
@@ -96,6 +100,23 @@ void RenderOptions::addTo(CLI::App* app) {
   auto* fl = app->add_option("--focal-length", focalLength, "Depth of field: the lens focal length, in camera-space units (aperture radius = focal length / 2 f-stop)")
                  ->group("Lens");
   auto* fd = app->add_option("--focus-distance", focusDistance, "Depth of field: the camera depth in focus (re-focus a stored frame)")->group("Lens");
+  app->add_option("--camera", cameras,
+                  "Render from these cameras the store records (RIB Camera requests; 'world' is the one it was shaded from), "
+                  "without re-shading: NAME or NAME,NAME,... (several: one multi-view OpenEXR, a view per camera)")
+      ->delimiter(',')
+      ->group("Camera");
+  auto* lf = app->add_option("--look-from", lookFrom, "Render from a camera given after the fact at X,Y,Z (the store camera's world space)")
+                 ->delimiter(',')
+                 ->expected(3)
+                 ->group("Camera");
+  auto* la = app->add_option("--look-at", lookAt, "... looking at X,Y,Z")->delimiter(',')->expected(3)->group("Camera");
+  lf->needs(la), la->needs(lf);
+  app->add_option("--up", up, "... with X,Y,Z towards the top of the image (default 0,1,0)")->delimiter(',')->expected(3)->needs(lf)->group("Camera");
+  app->add_option("--fov", fov, "... with this field of view in degrees (default: the store camera's)")->needs(lf)->group("Camera");
+  app->add_option("--stereo", stereo,
+                  "Render a stereo pair around the camera (the store's, --camera's or --look-from's): views 'left' and 'right' BASELINE "
+                  "apart (camera-space units), parallel, or converged at depth CONVERGENCE (BASELINE:CONVERGENCE, off-axis)")
+      ->group("Camera");
   app->add_flag("--pinhole", pinhole, "Render without depth of field, whatever lens the store's camera records")->excludes(fs)->excludes(fl)->excludes(fd)->group("Lens");
 }
 
@@ -177,6 +198,85 @@ void RenderOptions::applyTo(resample::RenderSpec& spec) const {
       for (const auto& w : loadedVolumes->warnings()) warn(w);
     }
     spec.volumes = loadedVolumes;
+  }
+}
+
+std::vector<store::Camera> RenderOptions::viewCameras(const store::StoreMeta& meta) const {
+  std::vector<store::Camera> views;
+  for (const std::string& name : cameras) {
+    if (name == "world") {
+      views.push_back(meta.cameras[0]);
+      continue;
+    }
+    auto it = std::find_if(meta.cameras.begin() + 1, meta.cameras.end(), [&](const store::Camera& c) { return c.name == name; });
+    if (it == meta.cameras.end()) {
+      std::string have = "world";
+      for (size_t i = 1; i < meta.cameras.size(); ++i) have += ", " + meta.cameras[i].name;
+      fail("--camera", "the store records no camera '", name, "' (it has ", have, ")");
+    }
+    views.push_back(*it);
+  }
+  for (size_t i = 0; i < views.size(); ++i)
+    for (size_t j = 0; j < i; ++j)
+      if (views[i].name == views[j].name) fail("--camera", "camera '", views[i].name, "' given twice");
+  if (!lookFrom.empty()) {
+    if (!views.empty()) fail("--look-from", "give either --camera or --look-from");
+    const glm::dvec3 u = up.empty() ? glm::dvec3(0, 1, 0) : glm::dvec3(up[0], up[1], up[2]);
+    views.push_back(resample::lookAtCamera(meta.cameras[0], {lookFrom[0], lookFrom[1], lookFrom[2]}, {lookAt[0], lookAt[1], lookAt[2]}, u, fov));
+  }
+  if (!stereo.empty()) {
+    if (views.size() > 1) fail("--stereo", "a stereo pair is made around one camera, not ", views.size());
+    views = resample::stereoPair(views.empty() ? meta.cameras[0] : views[0], stereo, "--stereo");
+  }
+  return views;
+}
+
+std::vector<RenderOptions::View> RenderOptions::renderViews(const resample::RenderSpec& spec) const {
+  const std::vector<store::Camera> cams = viewCameras(spec.sources.at(0).store->meta());
+  std::vector<View> out;
+  if (cams.empty()) {
+    out.push_back({"", resample::render(spec)});
+    return out;
+  }
+  for (const store::Camera& c : cams) {
+    resample::RenderSpec one = spec;
+    one.camera = c;
+    out.push_back({c.name, resample::render(one)});
+  }
+  return out;
+}
+
+namespace {
+
+/// `path` for view `view`: %v replaced by its name, or the name after the file name's stem.
+std::string pathForView(const std::string& path, const std::string& view) {
+  if (const size_t v = path.find("%v"); v != std::string::npos) return path.substr(0, v) + view + path.substr(v + 2);
+  const std::filesystem::path p(path);
+  return (p.parent_path() / (p.stem().string() + "_" + view + p.extension().string())).string();
+}
+
+}  // namespace
+
+void RenderOptions::writeViews(const std::vector<View>& views, const std::string& exrPath, int64_t frame) const {
+  if (views.size() == 1) {
+    writeOutputs(views[0].result, exrPath, frame);
+    return;
+  }
+  resample::ExrOptions eo;
+  eo.compression = resample::parseExrCompression(compression, "--compression");
+  if (!exrPath.empty()) {
+    std::vector<resample::ExrView> ev;
+    for (const View& v : views) ev.push_back({v.name, &v.result.image, &v.result.provenance});
+    resample::writeMultiViewExr(exrPath, ev, eo);
+  }
+  for (const View& v : views) {
+    RenderOptions one = *this;
+    if (!deep.empty()) one.deep = pathForView(expandFramePattern(deep, frame), v.name);
+    for (std::string& p : one.previews) {
+      const size_t eq = p.find('=');
+      p = pathForView(p.substr(0, eq), v.name) + (eq == std::string::npos ? "" : p.substr(eq));
+    }
+    one.writeOutputs(v.result, "", frame);
   }
 }
 

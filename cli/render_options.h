@@ -46,9 +46,31 @@ struct RenderOptions {
   bool noSceneVolumes = false;       // leave out the store's own volumes
   std::optional<double> fstop, focalLength, focusDistance;  // replace the store camera's lens values
   bool pinhole = false;                                      // render without the store's lens
+  // Other cameras (resample/camera_view.h): recorded ones by name, one given after the fact, a
+  // stereo pair around either.
+  std::vector<std::string> cameras;          // --camera NAME[,NAME...]
+  std::vector<double> lookFrom, lookAt, up;  // world space of the store's camera
+  std::optional<double> fov;
+  std::string stereo;  // BASELINE[:CONVERGENCE]
   mutable std::shared_ptr<const resample::VolumeScene> loadedVolumes;  // loaded once, by the first applyTo()
 
+  /// One image a render produced: `view` names its camera when the options ask for cameras.
+  struct View {
+    std::string name;  // "" for the store's own camera
+    resample::RenderResult result;
+  };
+
   void addTo(CLI::App* app);
+  /// The cameras the options ask for, each named, from a store with this metadata (its recorded
+  /// cameras, its primary camera as "world"); empty when none is asked for. Throws Error naming the
+  /// option at fault.
+  std::vector<store::Camera> viewCameras(const store::StoreMeta& meta) const;
+  /// Renders `spec` from each camera viewCameras() names (once, from the store's own, when none).
+  std::vector<View> renderViews(const resample::RenderSpec& spec) const;
+  /// Writes the views: one as writeOutputs() does; several as one multi-view OpenEXR, with a deep
+  /// OpenEXR and previews per view (the view's name replaces %v in their paths, or follows the
+  /// file name's stem).
+  void writeViews(const std::vector<View>& views, const std::string& exrPath, int64_t frame) const;
   /// Fills sampling, filter, AOV, crop and raster settings of `spec`.
   void applyTo(resample::RenderSpec& spec) const;
   /// Checks, before rendering, what writeOutputs() would otherwise find only after it: every

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <csetjmp>
 #include <filesystem>
+#include <functional>
 
 #include <Imath/half.h>
 #include <OpenEXR/ImfChannelList.h>
@@ -11,6 +12,8 @@
 #include <OpenEXR/ImfFrameBuffer.h>
 #include <OpenEXR/ImfHeader.h>
 #include <OpenEXR/ImfIntAttribute.h>
+#include <OpenEXR/ImfMatrixAttribute.h>
+#include <OpenEXR/ImfMultiView.h>
 #include <OpenEXR/ImfOutputFile.h>
 #include <OpenEXR/ImfStandardAttributes.h>
 #include <OpenEXR/ImfStringAttribute.h>
@@ -98,18 +101,17 @@ void addProvenanceAttributes(Imf::Header& header, const ImageProvenance& info) {
   if (!info.comments.empty()) Imf::addComments(header, info.comments);
 }
 
-void writeExr(const std::string& path, const FlatImage& image, const ImageProvenance& info, const ExrOptions& options) {
-  if (image.width <= 0 || image.height <= 0) fail(path, "empty image");
-  Imath::Box2i display(Imath::V2i(0, 0), Imath::V2i(image.fullWidth - 1, image.fullHeight - 1));
-  Imath::Box2i data(Imath::V2i(image.x0, image.y0), Imath::V2i(image.x0 + image.width - 1, image.y0 + image.height - 1));
-  Imf::Header header(display, data, 1.0f, Imath::V2f(0, 0), 1.0f, Imf::INCREASING_Y, toImf(options.compression));
-  std::vector<std::vector<Imath::half>> halves;
-  halves.reserve(image.channels.size());
-  Imf::FrameBuffer fb;
+namespace {
+
+// Adds `image`'s channels to `header` and `fb`, each under name(channel name); half channels are
+// converted into `halves`, which must outlive the write.
+void addChannels(const FlatImage& image, Imf::Header& header, Imf::FrameBuffer& fb, std::vector<std::vector<Imath::half>>& halves,
+                 const std::function<std::string(const std::string&)>& name) {
   const size_t xs = 1, ys = size_t(image.width);
   for (const auto& c : image.channels) {
     Imf::PixelType type = c.isUInt ? Imf::UINT : (c.half ? Imf::HALF : Imf::FLOAT);
-    header.channels().insert(c.name, Imf::Channel(type));
+    const std::string n = name(c.name);
+    header.channels().insert(n, Imf::Channel(type));
     char* base;
     size_t elem;
     if (c.isUInt) {
@@ -126,19 +128,75 @@ void writeExr(const std::string& path, const FlatImage& image, const ImageProven
     }
     // OpenEXR addresses pixels by absolute coordinates: offset the base by the data window origin.
     base -= (ptrdiff_t(image.x0) * ptrdiff_t(xs) + ptrdiff_t(image.y0) * ptrdiff_t(ys)) * ptrdiff_t(elem);
-    fb.insert(c.name, Imf::Slice(type, base, elem * xs, elem * ys));
+    fb.insert(n, Imf::Slice(type, base, elem * xs, elem * ys));
   }
-  addProvenanceAttributes(header, info);
+}
 
+Imf::Header headerFor(const FlatImage& image, const ExrOptions& options) {
+  Imath::Box2i display(Imath::V2i(0, 0), Imath::V2i(image.fullWidth - 1, image.fullHeight - 1));
+  Imath::Box2i data(Imath::V2i(image.x0, image.y0), Imath::V2i(image.x0 + image.width - 1, image.y0 + image.height - 1));
+  return Imf::Header(display, data, 1.0f, Imath::V2f(0, 0), 1.0f, Imf::INCREASING_Y, toImf(options.compression));
+}
+
+void writePixels(const std::string& path, const Imf::Header& header, const Imf::FrameBuffer& fb, int height) {
   AtomicFile file(path);
   try {
     Imf::OutputFile out(file.tempPath().c_str(), header);
     out.setFrameBuffer(fb);
-    out.writePixels(image.height);
+    out.writePixels(height);
   } catch (const std::exception& e) {
     fail(path, "OpenEXR write failed: ", e.what());
   }
   file.commit();
+}
+
+}  // namespace
+
+void writeExr(const std::string& path, const FlatImage& image, const ImageProvenance& info, const ExrOptions& options) {
+  if (image.width <= 0 || image.height <= 0) fail(path, "empty image");
+  Imf::Header header = headerFor(image, options);
+  std::vector<std::vector<Imath::half>> halves;
+  Imf::FrameBuffer fb;
+  addChannels(image, header, fb, halves, [](const std::string& n) { return n; });
+  addProvenanceAttributes(header, info);
+  writePixels(path, header, fb, image.height);
+}
+
+std::string viewChannelName(const std::string& channel, const std::string& view) {
+  const size_t dot = channel.rfind('.');
+  return dot == std::string::npos ? view + "." + channel : channel.substr(0, dot + 1) + view + channel.substr(dot);
+}
+
+void writeMultiViewExr(const std::string& path, const std::vector<ExrView>& views, const ExrOptions& options) {
+  if (views.empty()) fail(path, "no view to write");
+  const FlatImage& first = *views[0].image;
+  if (first.width <= 0 || first.height <= 0) fail(path, "empty image");
+  Imf::Header header = headerFor(first, options);
+  std::vector<std::vector<Imath::half>> halves;
+  Imf::FrameBuffer fb;
+  Imf::StringVector names;
+  for (size_t v = 0; v < views.size(); ++v) {
+    const ExrView& view = views[v];
+    const FlatImage& im = *view.image;
+    if (view.name.empty() || view.name.find('.') != std::string::npos) fail(path, "view name '", view.name, "' must be non-empty and without '.'");
+    if (std::find(names.begin(), names.end(), view.name) != names.end()) fail(path, "view '", view.name, "' given twice");
+    if (im.x0 != first.x0 || im.y0 != first.y0 || im.width != first.width || im.height != first.height || im.fullWidth != first.fullWidth ||
+        im.fullHeight != first.fullHeight)
+      fail(path, "view '", view.name, "' has another data window than view '", views[0].name, "': the views of one file share it");
+    names.push_back(view.name);
+    if (v == 0) {
+      addChannels(im, header, fb, halves, [](const std::string& n) { return n; });
+      addProvenanceAttributes(header, *view.info);
+    } else {
+      addChannels(im, header, fb, halves, [&](const std::string& n) { return viewChannelName(n, view.name); });
+      // The standard worldToCamera / worldToNDC are the default view's; each other view's go by
+      // its name.
+      header.insert("reshutter/" + view.name + "/worldToCamera", Imf::M44fAttribute(toImath(view.info->worldToCamera)));
+      header.insert("reshutter/" + view.name + "/worldToNDC", Imf::M44fAttribute(toImath(view.info->worldToNdc)));
+    }
+  }
+  Imf::addMultiView(header, names);
+  writePixels(path, header, fb, first.height);
 }
 
 namespace {

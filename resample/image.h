@@ -57,6 +57,21 @@ struct ExrOptions {
 /// Writes a scanline OpenEXR. Throws Error naming the file on failure; nothing is left under
 /// `path` unless the write completes.
 void writeExr(const std::string& path, const FlatImage& image, const ImageProvenance& info, const ExrOptions& options = {});
+/// One view of a multi-view image: its name ("left") and the image rendered from it.
+struct ExrView {
+  std::string name;
+  const FlatImage* image = nullptr;
+  const ImageProvenance* info = nullptr;
+};
+/// The name of `channel` in view `view` of a multi-view file (OpenEXR's convention: the view is the
+/// next-to-last component): R → right.R, N.X → N.right.X.
+std::string viewChannelName(const std::string& channel, const std::string& view);
+/// Writes `views` as one multi-view OpenEXR (the `multiView` attribute, as Nuke and OpenImageIO
+/// read it): the first is the default view, its channels named as writeExr names them, its
+/// matrices the standard worldToCamera / worldToNDC; each other view's channels carry its name
+/// (viewChannelName), its matrices go in reshutter/VIEW/worldToCamera and .../worldToNDC. The
+/// views must share the data and display windows. Atomic, like writeExr.
+void writeMultiViewExr(const std::string& path, const std::vector<ExrView>& views, const ExrOptions& options = {});
 /// Threads OpenEXR compresses (and decompresses) chunks with, flat and deep; 0 = none (the
 /// calling thread does it all). The file's bytes do not depend on it.
 void setExrThreads(int threads);

@@ -20,6 +20,7 @@
 #include "common/error.h"
 #include "common/log.h"
 #include "common/progress.h"
+#include "resample/camera_view.h"
 
 namespace reshutter::resample {
 
@@ -54,7 +55,9 @@ std::string RenderStats::report() const {
       << " on shadow rays, " << volumes.cachedShadows << " shadows from the cache, " << volumes.sharedSegments << " segments blended from "
       << volumes.sharedRays << " shared rays\n";
   s << "  parts              " << partsFetched << " fetched, " << partsDecoded << " decoded, " << partsWaited
-    << " waited for (another thread was decoding them)\n";
+    << " waited for (another thread was decoding them)";
+  if (partsCarried) s << ", " << partsCarried << " carried into the view's camera";
+  s << "\n";
   s << "  time (thread-sum)  set-up " << setupSeconds << " s, parts " << partsSeconds << " s (decode, or wait for another thread's), rasterize "
     << rasterSeconds << " s, resolve " << resolveSeconds << " s, filter " << filterSeconds << " s\n";
   s << "  wall               " << wallSeconds << " s";
@@ -127,14 +130,18 @@ void checkCoverage(const std::vector<Source>& sources, const ShutterModel& shutt
 
 namespace {
 
-View makeView(const store::Camera& cam, int width, int height, const store::Lens& lens) {
+/// `cam` over another pixel count, its screen window kept: a re-sampled resolution.
+store::Camera atResolution(const store::Camera& cam, int width, int height) {
   store::Camera c = cam;
-  // Same screen window over a different pixel count: a re-sampled resolution.
   double sw[4];
   cam.effectiveScreenWindow(sw);
   std::copy(sw, sw + 4, c.screenWindow);
   c.width = width, c.height = height;
-  store::Projector p(c);
+  return c;
+}
+
+View makeView(const store::Camera& cam, int width, int height, const store::Lens& lens) {
+  store::Projector p(atResolution(cam, width, height));
   View v;
   v.ax = p.ax, v.bx = p.bx, v.ay = p.ay, v.by = p.by;
   v.perspective = p.perspective;
@@ -252,7 +259,7 @@ struct Window {
 Window validateSpec(const RenderSpec& spec) {
   if (spec.sources.empty()) fail("resample", "no store to re-sample");
   const store::StoreMeta& meta0 = spec.sources[0].store->meta();
-  const store::Camera& cam = meta0.cameras[0];
+  const store::Camera& cam = spec.camera ? *spec.camera : meta0.cameras[0];
   for (const auto& s : spec.sources)
     if (!(s.store->meta().schema == meta0.schema))
       fail(s.store->path(), "its output variables differ from ", spec.sources[0].store->path(), "'s; stores of one render must share a schema");
@@ -313,7 +320,7 @@ struct Plan {
       : spec(spec),
         sources(withSharedEnds(spec.sources)),
         meta0(spec.sources[0].store->meta()),
-        cam(meta0.cameras[0]),
+        cam(spec.camera ? *spec.camera : meta0.cameras[0]),
         win(window),
         shutter(shutter),
         lens(renderLens(cam, spec.lens)),
@@ -330,11 +337,21 @@ struct Plan {
     rasterOptions = spec.raster;
     rasterOptions.surfaceIds = spec.deep;  // only deep output reads them back
     if (view.lens()) rasterOptions.lensTimeBlocks = lensTimeBlocks(spec);
+    // Another camera: each store whose primary camera stands elsewhere is carried into it.
+    const store::Projector projector(atResolution(cam, win.W, win.H));
+    for (const Source& src : sources) {
+      const store::Camera& primary = src.store->meta().cameras[0];
+      carried.push_back(spec.camera && !sameView(primary, cam) ? std::make_unique<const CarriedStore>(*src.store, cam, projector) : nullptr);
+    }
+    const glm::dmat4 toView = carried[0] ? carried[0]->toView() : glm::dmat4(1.0);
     // The volumes: those the caller adds, and the scene's own the store records.
     volumes = spec.volumes;
     if (!meta0.volumes.empty() && spec.sceneVolumes) {
       std::vector<VolumeSpec> fromStore;
-      for (const store::StoredVolume& v : meta0.volumes) fromStore.push_back(VolumeSpec::fromStore(v));
+      for (store::StoredVolume v : meta0.volumes) {
+        for (glm::dmat4& m : v.fileToCamera) m = toView * m;
+        fromStore.push_back(VolumeSpec::fromStore(v));
+      }
       auto scene =
           spec.volumes ? std::make_shared<const VolumeScene>(*spec.volumes, fromStore) : std::make_shared<const VolumeScene>(fromStore, spec.volumeOptions);
       for (size_t w = spec.volumes ? spec.volumes->warnings().size() : 0; w < scene->warnings().size(); ++w) warnOnce("store-volume", scene->warnings()[w]);
@@ -346,7 +363,7 @@ struct Plan {
       volumeCamera.worldToCamera = cam.worldToCamera;
       volumeCamera.framesPerSecond = double(meta0.fps.num) / double(meta0.fps.den);
       volumeCamera.referenceFrame = double(spec.sources[0].frame);
-      volumeCamera.lights = meta0.lights;
+      for (const store::StoredLight& l : meta0.lights) volumeCamera.lights.push_back(carriedLight(l, toView));
       if (!meta0.lights.empty() && volumes->options().cacheShadows) volumeLighting = std::make_unique<const VolumeLighting>(*volumes, volumeCamera);
     }
   }
@@ -357,7 +374,7 @@ struct Plan {
   const RenderSpec& spec;
   const std::vector<Source> sources;  // spec.sources, with the ends they share marked
   const store::StoreMeta& meta0;
-  const store::Camera& cam;
+  const store::Camera cam;  // the camera rendered from (RenderSpec::camera, or the store's primary)
   const Window win;
   const ShutterModel shutter;
   const store::Lens lens;  // the camera's with the spec's overrides (view has it only for a perspective camera)
@@ -368,6 +385,8 @@ struct Plan {
   const FilterTable mainTable;                                // R G B A
   const std::vector<std::unique_ptr<FilterTable>> aovTables;  // per output variable
   const std::vector<Bucket> buckets;
+  /// Per source: its parts carried into `cam` when its primary camera stands elsewhere, else null.
+  std::vector<std::unique_ptr<const CarriedStore>> carried;
   int margin = 0;
   const AovLayout aovLayout{aovs};  // where each output variable lies among ResolvedSamples::aov / aovU
   RasterOptions rasterOptions;
@@ -465,11 +484,17 @@ void gatherParts(const Plan& plan, double tMin, double tMax, const Region& rg, s
     const double lo = std::max(tMin - double(src.frame), m.shutterOpen);
     const double hi = std::min(tMax - double(src.frame), m.shutterClose);
     if (lo > hi) continue;
+    const store::Lens lens = plan.view.lens() ? plan.lens : store::Lens{};
+    if (plan.carried[si]) {
+      const store::RasterRect rect{float(rg.x0), float(rg.y0), float(rg.x0 + rg.w), float(rg.y0 + rg.h), false};
+      plan.carried[si]->bounds().visit(rect, lo, hi, [&](size_t e) { parts.push_back({si, e}); }, lens);
+      continue;
+    }
     const auto& sc = m.cameras[0];
     const float fx = float(sc.width) / float(plan.win.W), fy = float(sc.height) / float(plan.win.H);
     store::RasterRect rect{float(rg.x0) * fx, float(rg.y0) * fy, float(rg.x0 + rg.w) * fx, float(rg.y0 + rg.h) * fy, false};
     // With a lens, a part's samples reach as far as its circle of confusion.
-    src.store->visit(rect, lo, hi, [&](size_t e) { parts.push_back({si, e}); }, plan.view.lens() ? plan.lens : store::Lens{});
+    src.store->visit(rect, lo, hi, [&](size_t e) { parts.push_back({si, e}); }, lens);
   }
 }
 
@@ -545,7 +570,8 @@ double rasterizeParts(const Plan& plan, BucketRasterizer& r, ThreadState& ts) {
       ts.held.clear(), queuedBytes = 0;
     }
     auto ta = Clock::now();
-    ts.held.push_back(src.store->part(e));
+    if (plan.carried[si]) ++ts.stats.partsCarried;
+    ts.held.push_back(plan.carried[si] ? plan.carried[si]->part(e) : src.store->part(e));
     fetch += secondsBetween(ta, Clock::now());
     r.add(src, entry, *ts.held.back());
     queuedBytes += entry.rawSize;
@@ -710,6 +736,7 @@ void addThreadStats(const tbb::enumerable_thread_specific<ThreadState>& threads,
     total.setupSeconds += ts.stats.setupSeconds;
     total.partsSeconds += ts.stats.partsSeconds;
     total.partsFetched += ts.stats.partsFetched;
+    total.partsCarried += ts.stats.partsCarried;
     total.rasterSeconds += ts.stats.rasterSeconds;
     total.resolveSeconds += ts.stats.resolveSeconds;
     total.filterSeconds += ts.stats.filterSeconds;

@@ -72,6 +72,12 @@ struct RenderSpec {
     std::optional<double> fstop, focalLength, focalDistance;
     bool pinhole = false;
   } lens;
+  /// The camera to render from: none = sources[0]'s primary camera (the one it was shaded from).
+  /// Any other camera of that world - one the store records, or one given after the fact
+  /// (resample/camera_view.h) - renders the same stores through it: each store's micropolygons
+  /// are carried from its primary camera's space into this camera's. Its resolution is the
+  /// default output resolution.
+  std::optional<store::Camera> camera;
 };
 
 /// The lens a render uses: the camera's with `o` applied (see RenderSpec::lens); throws Error naming
@@ -92,6 +98,7 @@ struct RenderStats {
   double setupSeconds = 0, partsSeconds = 0, rasterSeconds = 0, resolveSeconds = 0, filterSeconds = 0;
   uint64_t partsFetched = 0, partsDecoded = 0;  // decoded: the store caches' misses during the render
   uint64_t partsWaited = 0;                     // fetches that waited for another thread's decode
+  uint64_t partsCarried = 0;                    // fetches carried into another camera's space (RenderSpec::camera)
   VolumeStats volumes;
   double wallSeconds = 0;
   uint64_t samples = 0;

@@ -484,19 +484,20 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
   return false;
 }
 
-bool RibSceneHandler::cullsBound(const std::array<double, 6>& b) {
-  if (!scene_.inWorld()) return false;
-  const store::Camera& cam = scene_.world().options.camera;
+namespace {
+
+// Whether camera `cam` (reached from the primary camera's space by `fromPrimary`) cannot see the
+// object-space box `b` under the transform `ctm` (object → primary camera) at any of its knots.
+bool boundOutOfView(const std::array<double, 6>& b, const MotionXform& ctm, const store::Camera& cam, const glm::dmat4& fromPrimary, double cullMargin) {
   const store::Projector proj(cam);
   const bool perspective = cam.projection == store::Projection::Perspective;
-  const MotionXform& ctm = scene_.currentTransform();
-  const double mx = cullMargin_ * cam.width, my = cullMargin_ * cam.height;
+  const double mx = cullMargin * cam.width, my = cullMargin * cam.height;
   // Per knot, where the box's eight corners lie; culled only where one reason holds at every
   // knot (between knots the box moves linearly, so it stays on that side).
   bool behind = true, beyond = true, left = true, right = true, above = true, below = true;
   const std::vector<double> times = ctm.times.empty() ? std::vector<double>{0.0} : ctm.times;
   for (double t : times) {
-    const glm::dmat4 m = ctm.at(t);
+    const glm::dmat4 m = fromPrimary * ctm.at(t);
     bool allBehind = true, anyBehind = false, allBeyond = true;
     double box[4] = {1e300, -1e300, 1e300, -1e300}, zLo = 1e300, zHi = -1e300;
     for (int i = 0; i < 8; ++i) {
@@ -520,7 +521,19 @@ bool RibSceneHandler::cullsBound(const std::array<double, 6>& b) {
     left = left && sides && box[1] < -mx, right = right && sides && box[0] > cam.width + mx;
     above = above && sides && box[3] < -my, below = below && sides && box[2] > cam.height + my;
   }
-  if (!(behind || beyond || left || right || above || below)) return false;
+  return behind || beyond || left || right || above || below;
+}
+
+}  // namespace
+
+bool RibSceneHandler::cullsBound(const std::array<double, 6>& b) {
+  if (!scene_.inWorld()) return false;
+  const auto& options = scene_.world().options;
+  const MotionXform& ctm = scene_.currentTransform();
+  // Culled only when no camera the store records can see it.
+  if (!boundOutOfView(b, ctm, options.camera, glm::dmat4(1.0), cullMargin_)) return false;
+  for (const store::Camera& other : options.namedCameras)
+    if (!boundOutOfView(b, ctm, other, other.worldToCamera * glm::inverse(options.camera.worldToCamera), cullMargin_)) return false;
   scene_.archiveCulled();
   return true;
 }

@@ -150,12 +150,14 @@ SplitScene splitScene(const FrameScene& scene, const Interval& iv, const store::
   tbb::parallel_for(tbb::blocked_range<size_t>(0, nPrims, 1), [&](const tbb::blocked_range<size_t>& r) {
     for (size_t i = r.begin(); i != r.end(); ++i) {
       split.knots[i] = clipKnots(scene.prims[i], iv.open, iv.close);
-      splitPrimitive(scene.prims[i], split.knots[i], cam, dice, split.leaves[i], diceStats[i]);
+      splitPrimitive(scene.prims[i], split.knots[i], cam, scene.options.namedCameras, dice, split.leaves[i], diceStats[i]);
     }
   });
   for (size_t i = 0; i < nPrims; ++i) {
     stats.culledPieces += diceStats[i].culledPieces;
     stats.eyeSplits += diceStats[i].eyeSplits;
+    if (!scene.options.namedCameras.empty())
+      stats.allCameraDetail += diceStats[i].micropolygons, stats.primaryCameraDetail += diceStats[i].primaryMicropolygons;
     stats.forcedCuts += diceStats[i].forcedCuts;
     stats.overBudgetPrimitives += diceStats[i].overBudget;
     for (const Leaf& l : split.leaves[i]) split.flat.emplace_back(uint32_t(i), &l);

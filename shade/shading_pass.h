@@ -51,6 +51,11 @@ struct ShadeOptions {
 struct ShadeStats {
   uint64_t primitives = 0, grids = 0, micropolygons = 0, vertices = 0, movingGrids = 0, movingMicropolygons = 0;
   uint64_t culledPieces = 0, droppedMicropolygons = 0, eyeSplits = 0;
+  /// With cameras besides the primary (RIB Camera requests): micropolygons split for every camera,
+  /// and what the primary alone would have split of the same pieces. Their ratio is the multi-camera
+  /// reference's "geometry detail expansion" (1 with one camera).
+  uint64_t allCameraDetail = 0, primaryCameraDetail = 0;
+  double detailExpansion() const { return primaryCameraDetail ? double(allCameraDetail) / double(primaryCameraDetail) : 1.0; }
   uint64_t trimmedMicropolygons = 0;                // cut away by trim curves
   uint64_t forcedCuts = 0;                          // leaf sides the split depth limit left unfinished (split.h): possible cracks
   uint64_t overBudgetPrimitives = 0;                // diced coarser for needing more than DiceOptions::maxMicropolygonsPerPrimitive

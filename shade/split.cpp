@@ -2,6 +2,7 @@
 #include "shade/split.h"
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 
 #include <glm/geometric.hpp>
@@ -76,10 +77,22 @@ struct Estimate {
   double cu = 0, cv = 0;              // camera-space lengths (for eye splits)
 };
 
+/// One camera the pieces are measured and culled for: the primary (the store's raster), or another
+/// the store records, reached from the primary's camera space by `fromPrimary`.
+struct SplitView {
+  store::Projector proj;
+  const store::Camera* cam = nullptr;
+  glm::dmat4 fromPrimary{1.0};
+  bool primary = true;
+  double window[4] = {0, 0, 0, 0};  // raster x0 x1 y0 y1 kept (the screen and the cull margin)
+  glm::dvec3 in(const glm::dvec3& c) const { return primary ? c : glm::dvec3(fromPrimary * glm::dvec4(c, 1.0)); }
+};
+
 class Splitter {
  public:
-  Splitter(const Primitive& p, const std::vector<double>& knots, const store::Camera& cam, const DiceOptions& o, std::vector<Leaf>& out, DiceStats& stats)
-      : p_(p), proj_(cam), cam_(cam), o_(o), out_(out), stats_(stats) {
+  Splitter(const Primitive& p, const std::vector<double>& knots, const store::Camera& cam, const std::vector<store::Camera>& others, const DiceOptions& o,
+           std::vector<Leaf>& out, DiceStats& stats)
+      : p_(p), o_(o), out_(out), stats_(stats) {
     if (knots.empty()) {
       shapes_.push_back(p.keys.empty() ? Shape{} : p.keys[0]);
       mats_.push_back(p.xform->at(0));
@@ -91,8 +104,8 @@ class Splitter {
     const Attributes& a = *p.attrs;
     motionFactor_ = o.motionFactor ? *o.motionFactor : a.motionFactor;
     rate_ = a.shadingRate * o.shadingRateScale;
-    const double mx = o.cullMargin * cam.width, my = o.cullMargin * cam.height;
-    window_[0] = -mx, window_[1] = cam.width + mx, window_[2] = -my, window_[3] = cam.height + my;
+    views_.push_back(viewOf(cam, cam, true));
+    for (const store::Camera& c : others) views_.push_back(viewOf(cam, c, false));
   }
 
   void run() {
@@ -105,8 +118,20 @@ class Splitter {
  private:
   static constexpr int kTest = 5;
 
+  SplitView viewOf(const store::Camera& primary, const store::Camera& cam, bool isPrimary) const {
+    SplitView v;
+    v.proj = store::Projector(cam);
+    v.cam = &cam;
+    v.primary = isPrimary;
+    v.fromPrimary = cam.worldToCamera * glm::inverse(primary.worldToCamera);
+    const double mx = o_.cullMargin * cam.width, my = o_.cullMargin * cam.height;
+    v.window[0] = -mx, v.window[1] = cam.width + mx, v.window[2] = -my, v.window[3] = cam.height + my;
+    return v;
+  }
+
+  /// A point of the piece in the primary camera's space.
   glm::dvec3 camera(size_t k, const UV& uv) const { return glm::dvec3(mats_[k] * glm::dvec4(evalP(p_, shapes_[k], uv.u, uv.v), 1.0)); }
-  bool inFront(const glm::dvec3& c) const { return !proj_.perspective || c.z >= proj_.nearClip; }
+  static bool inFront(const SplitView& v, const glm::dvec3& c) { return !v.proj.perspective || c.z >= v.proj.nearClip; }
   double edgeLength(double motion) const { return std::sqrt(rate_ * (1.0 + motionFactor_ * motion / 16.0)); }
 
   // The side from `from` to `to`, measured along itself alone: the same answer for every piece
@@ -122,26 +147,34 @@ class Splitter {
     Edge e;
     e.a = fromFirst ? from : to, e.b = fromFirst ? to : from;
 
+    // Measured on every camera's raster: the finest rate any of them needs wins.
     double longest = 0, motion = 0, spread = 0, scale = 0;
-    glm::dvec2 prev[kTest];
-    bool prevFront[kTest] = {};
+    std::vector<std::array<glm::dvec2, kTest>> prev(views_.size());
+    std::vector<std::array<bool, kTest>> prevFront(views_.size(), std::array<bool, kTest>{});
     for (size_t k = 0; k < shapes_.size(); ++k) {
-      glm::dvec2 r[kTest];
-      bool front[kTest];
+      glm::dvec3 c[kTest];
       glm::dvec3 first(0.0);  // collapsed: one point at every knot (it may move)
       for (int i = 0; i < kTest; ++i) {
         const bool end = k == 0 && (i == 0 || i == kTest - 1);  // the end points at the first knot are known
-        const glm::dvec3 c = end ? ((i == 0) == fromFirst ? pf : pt) : camera(k, pointOnSegment(e.a, e.b, i, kTest - 1));
-        if (i == 0) first = c;
-        spread = std::max(spread, glm::length(c - first));
-        scale = std::max({scale, std::abs(c.x), std::abs(c.y), std::abs(c.z)});
-        front[i] = inFront(c);
-        r[i] = front[i] ? proj_.project(c) : glm::dvec2(0.0);
-        if (front[i] && prevFront[i]) motion = std::max(motion, glm::length(r[i] - prev[i]));
-        prev[i] = r[i], prevFront[i] = front[i];
+        c[i] = end ? ((i == 0) == fromFirst ? pf : pt) : camera(k, pointOnSegment(e.a, e.b, i, kTest - 1));
+        if (i == 0) first = c[i];
+        spread = std::max(spread, glm::length(c[i] - first));
+        scale = std::max({scale, std::abs(c[i].x), std::abs(c[i].y), std::abs(c[i].z)});
       }
-      for (int i = 0; i + 1 < kTest; ++i)
-        if (front[i] && front[i + 1]) longest = std::max(longest, (kTest - 1) * glm::length(r[i + 1] - r[i]));
+      for (size_t v = 0; v < views_.size(); ++v) {
+        const SplitView& view = views_[v];
+        glm::dvec2 r[kTest];
+        bool front[kTest];
+        for (int i = 0; i < kTest; ++i) {
+          const glm::dvec3 cv = view.in(c[i]);
+          front[i] = inFront(view, cv);
+          r[i] = front[i] ? view.proj.project(cv) : glm::dvec2(0.0);
+          if (front[i] && prevFront[v][size_t(i)]) motion = std::max(motion, glm::length(r[i] - prev[v][size_t(i)]));
+          prev[v][size_t(i)] = r[i], prevFront[v][size_t(i)] = front[i];
+        }
+        for (int i = 0; i + 1 < kTest; ++i)
+          if (front[i] && front[i + 1]) longest = std::max(longest, (kTest - 1) * glm::length(r[i + 1] - r[i]));
+      }
     }
     if (spread <= 1e-12 * std::max(1.0, scale)) {
       e.collapsed = true, e.n = 1, e.lo = 0, e.hi = 1, e.need = 0;
@@ -201,14 +234,40 @@ class Splitter {
     split(b, depth + 1, eyeDepth);
   }
 
-  Estimate estimate(const Piece& pc) const {
+  /// The piece as every camera sees it: culled only where every camera culls it (behind its eye,
+  /// beyond its far plane or outside its window), sized for the camera that needs the most
+  /// micropolygons; `primary` holds the primary camera's own verdict and sizes (for the detail
+  /// expansion statistic).
+  Estimate estimate(const Piece& pc, Estimate* primary = nullptr) const {
+    const size_t K = shapes_.size();
+    UV uv[kTest][kTest];
+    for (int j = 0; j < kTest; ++j)
+      for (int i = 0; i < kTest; ++i) uv[j][i] = bilinearUV(pc, double(i) / (kTest - 1), double(j) / (kTest - 1));
+    std::vector<std::array<std::array<glm::dvec3, kTest>, kTest>> c(K);
+    for (size_t k = 0; k < K; ++k)
+      for (int j = 0; j < kTest; ++j)
+        for (int i = 0; i < kTest; ++i) c[k][size_t(j)][size_t(i)] = camera(k, uv[j][i]);
+    Estimate all;
+    all.allBehind = true, all.beyondFar = true, all.offscreen = true;
+    for (size_t v = 0; v < views_.size(); ++v) {
+      const Estimate e = estimateIn(views_[v], c);
+      if (v == 0 && primary) *primary = e;
+      all.allBehind = all.allBehind && e.allBehind, all.beyondFar = all.beyondFar && e.beyondFar;
+      const bool culled = e.allBehind || e.beyondFar || e.offscreen;
+      all.offscreen = all.offscreen && culled;
+      if (culled) continue;
+      all.straddle = all.straddle || e.straddle;
+      all.lu = std::max(all.lu, e.lu), all.lv = std::max(all.lv, e.lv), all.motion = std::max(all.motion, e.motion);
+      all.cu = std::max(all.cu, e.cu), all.cv = std::max(all.cv, e.cv);
+    }
+    return all;
+  }
+
+  Estimate estimateIn(const SplitView& view, const std::vector<std::array<std::array<glm::dvec3, kTest>, kTest>>& cp) const {
     Estimate e;
     const size_t K = shapes_.size();
     glm::dvec2 r[kTest][kTest], prev[kTest][kTest];
     bool fr[kTest][kTest], prevFront[kTest][kTest];
-    UV uv[kTest][kTest];
-    for (int j = 0; j < kTest; ++j)
-      for (int i = 0; i < kTest; ++i) uv[j][i] = bilinearUV(pc, double(i) / (kTest - 1), double(j) / (kTest - 1));
     double bb[4] = {1e300, -1e300, 1e300, -1e300};
     double zLo = 1e300, zHi = -1e300;  // camera depths of the points in front
     for (size_t k = 0; k < K; ++k) {
@@ -216,13 +275,13 @@ class Splitter {
       int nFront = 0;
       for (int j = 0; j < kTest; ++j)
         for (int i = 0; i < kTest; ++i) {
-          c[j][i] = camera(k, uv[j][i]);
-          fr[j][i] = inFront(c[j][i]);
-          if (c[j][i].z <= cam_.farClip) e.beyondFar = false;
+          c[j][i] = view.in(cp[k][size_t(j)][size_t(i)]);
+          fr[j][i] = inFront(view, c[j][i]);
+          if (c[j][i].z <= view.cam->farClip) e.beyondFar = false;
           r[j][i] = glm::dvec2(0.0);
           if (fr[j][i]) {
             ++nFront;
-            r[j][i] = proj_.project(c[j][i]);
+            r[j][i] = view.proj.project(c[j][i]);
             zLo = std::min(zLo, c[j][i].z), zHi = std::max(zHi, c[j][i].z);
             bb[0] = std::min(bb[0], r[j][i].x), bb[1] = std::max(bb[1], r[j][i].x);
             bb[2] = std::min(bb[2], r[j][i].y), bb[3] = std::max(bb[3], r[j][i].y);
@@ -255,9 +314,9 @@ class Splitter {
       double px = 0.1 * (bb[1] - bb[0]) + 1, py = 0.1 * (bb[3] - bb[2]) + 1;
       // A lens sees past the pinhole's frame by each depth's circle of confusion: what it may
       // blur into view is kept (its depths padded like its bound).
-      if (const double coc = store::circleOfConfusion(cam_, zLo - 0.1 * (zHi - zLo), zHi + 0.1 * (zHi - zLo)); coc > 0)
-        px += coc * std::abs(proj_.ax), py += coc * std::abs(proj_.ay);
-      e.offscreen = bb[1] + px < window_[0] || bb[0] - px > window_[1] || bb[3] + py < window_[2] || bb[2] - py > window_[3];
+      if (const double coc = store::circleOfConfusion(*view.cam, zLo - 0.1 * (zHi - zLo), zHi + 0.1 * (zHi - zLo)); coc > 0)
+        px += coc * std::abs(view.proj.ax), py += coc * std::abs(view.proj.ay);
+      e.offscreen = bb[1] + px < view.window[0] || bb[0] - px > view.window[1] || bb[3] + py < view.window[2] || bb[2] - py > view.window[3];
     }
     return e;
   }
@@ -266,7 +325,8 @@ class Splitter {
     // Pieces visited count too: splitting that culls nearly everything it makes (slivers along
     // the screen's edge) works without emitting micropolygons.
     if (++visited_ > o_.maxMicropolygonsPerPrimitive / 4 && !overBudget_) overBudget_ = true, ++stats_.overBudget;
-    const Estimate e = estimate(pc);
+    Estimate primary;
+    const Estimate e = estimate(pc, &primary);
     if (e.allBehind || e.beyondFar || e.offscreen) {
       ++stats_.culledPieces;
       return;
@@ -304,6 +364,11 @@ class Splitter {
       return;
     }
     emit(pc, iu, iv);
+    if (views_.size() > 1 && !(primary.allBehind || primary.beyondFar || primary.offscreen)) {
+      const double edge0 = edgeLength(primary.motion);
+      auto steps0 = [&](double length) { return std::clamp(std::isfinite(std::ceil(length / edge0)) ? std::ceil(length / edge0) : G, 1.0, G); };
+      stats_.primaryMicropolygons += uint64_t(steps0(primary.lu) * steps0(primary.lv));
+    }
   }
 
   // The piece as a leaf whose interior needs iu × iv steps (its sides may need more).
@@ -328,19 +393,18 @@ class Splitter {
     out_.push_back(leaf);
     ++stats_.leaves;
     micropolygons_ += uint64_t(leaf.nu) * uint64_t(leaf.nv);
+    stats_.micropolygons += uint64_t(leaf.nu) * uint64_t(leaf.nv);
     if (!overBudget_ && micropolygons_ > o_.maxMicropolygonsPerPrimitive) overBudget_ = true, ++stats_.overBudget;
   }
 
   const Primitive& p_;
-  store::Projector proj_;
-  const store::Camera& cam_;
   const DiceOptions& o_;
   std::vector<Leaf>& out_;
   DiceStats& stats_;
   std::vector<Shape> shapes_;
   std::vector<glm::dmat4> mats_;
   double rate_ = 1, motionFactor_ = 0;
-  double window_[4];
+  std::vector<SplitView> views_;  // [0] the primary camera
   uint64_t micropolygons_ = 0;  // in the leaves so far
   uint64_t visited_ = 0;        // pieces estimated so far
   bool overBudget_ = false;
@@ -348,9 +412,9 @@ class Splitter {
 
 }  // namespace
 
-void splitPrimitive(const Primitive& p, const std::vector<double>& knots, const store::Camera& camera, const DiceOptions& options, std::vector<Leaf>& out,
-                    DiceStats& stats) {
-  Splitter(p, knots, camera, options, out, stats).run();
+void splitPrimitive(const Primitive& p, const std::vector<double>& knots, const store::Camera& camera, const std::vector<store::Camera>& others,
+                    const DiceOptions& options, std::vector<Leaf>& out, DiceStats& stats) {
+  Splitter(p, knots, camera, others, options, out, stats).run();
 }
 
 }  // namespace reshutter::shade

@@ -89,6 +89,9 @@ struct DiceStats {
   uint64_t leaves = 0, culledPieces = 0, eyeSplits = 0;
   uint64_t forcedCuts = 0;  // sides maxSplitDepth left unfinished: a possible T-junction
   uint64_t overBudget = 0;  // primitives past maxMicropolygonsPerPrimitive (diced coarser)
+  /// Micropolygons in the leaves, and (with other cameras) what the primary camera alone would
+  /// have diced of the same pieces: their ratio is the geometry detail expansion.
+  uint64_t micropolygons = 0, primaryMicropolygons = 0;
 };
 
 /// The knot times of `p` inside [open, close]: just `open` for a static primitive, a zero-length
@@ -96,8 +99,10 @@ struct DiceStats {
 /// strictly inside, and close.
 std::vector<double> clipKnots(const Primitive& p, double open, double close);
 
-/// Splits `p` into leaves for `camera` (positions at `knots`, or its only shape when empty).
-void splitPrimitive(const Primitive& p, const std::vector<double>& knots, const store::Camera& camera, const DiceOptions& options, std::vector<Leaf>& out,
-                    DiceStats& stats);
+/// Splits `p` into leaves for `camera` (positions at `knots`, or its only shape when empty), and
+/// for `others` too (cameras of the same world the store records): a piece is kept when any
+/// camera sees it and diced for the finest rate any camera needs.
+void splitPrimitive(const Primitive& p, const std::vector<double>& knots, const store::Camera& camera, const std::vector<store::Camera>& others,
+                    const DiceOptions& options, std::vector<Leaf>& out, DiceStats& stats);
 
 }  // namespace reshutter::shade

@@ -16,6 +16,7 @@
 
 #include "common/error.h"
 #include "store/codec.h"
+#include "store/view_bounds.h"
 
 namespace reshutter::store {
 
@@ -30,9 +31,8 @@ struct StoreReader::Impl {
   StoreMeta meta;
   std::vector<TileEntry> entries;
   std::vector<uint32_t> partNumber;  // n-th part of its tile, for messages
-  std::vector<RasterRect> shutterBounds;
-  std::vector<std::pair<float, float>> depthRange;  // per part: nearest and farthest camera depth at any knot
   Projector projector;
+  ViewBounds view;  // the parts' bounds in the primary camera
   uint64_t micropolygons = 0;
 
   struct Slot {
@@ -98,7 +98,6 @@ struct StoreReader::Impl {
     projector = Projector(meta.cameras[0]);
 
     partNumber.resize(entries.size());
-    shutterBounds.resize(entries.size()), depthRange.resize(entries.size());
     for (size_t i = 0; i < entries.size(); ++i) {
       const auto& e = entries[i];
       partNumber[i] = (i > 0 && entries[i - 1].tx == e.tx && entries[i - 1].ty == e.ty) ? partNumber[i - 1] + 1 : 0;
@@ -107,10 +106,8 @@ struct StoreReader::Impl {
       size_t expected = rawPayloadSize(meta.schema, e.numVertices, e.numMicropolygons, uint32_t(e.knots.size()), e.attrPresence);
       if (e.rawSize != expected) fail(where(i), "payload size ", e.rawSize, " does not match its counts (", expected, ")");
       micropolygons += e.numMicropolygons;
-      shutterBounds[i] = boundsOver(e, meta.schedules[e.schedule], projector, meta.shutterOpen, meta.shutterClose);
-      depthRange[i] = {INFINITY, -INFINITY};
-      for (const KnotBounds& kb : e.knots) depthRange[i].first = std::min(depthRange[i].first, kb.camera[2]), depthRange[i].second = std::max(depthRange[i].second, kb.camera[5]);
     }
+    view = ViewBounds(entries, meta.schedules, projector, meta.shutterOpen, meta.shutterClose);
   }
 
   // Drops the mapped pages of a decoded payload so resident memory does not grow with the file.
@@ -257,32 +254,10 @@ CacheStats StoreReader::cacheStats() const {
   return impl_->stats;
 }
 
-RasterRect StoreReader::bounds(size_t entry, double t0, double t1) const {
-  const auto& e = impl_->entries.at(entry);
-  return boundsOver(e, impl_->meta.schedules[e.schedule], impl_->projector, t0, t1);
-}
+RasterRect StoreReader::bounds(size_t entry, double t0, double t1) const { return impl_->view.bounds(entry, t0, t1); }
 
 void StoreReader::visit(const RasterRect& rect, double t0, double t1, const std::function<void(size_t)>& fn, const Lens& lens) const {
-  const auto& I = *impl_;
-  for (size_t i = 0; i < I.entries.size(); ++i) {
-    // A point at depth z moves by a L (1/d - 1/z) on the raster for lens point L: the part's depths
-    // bound its reach (a part reaching the eye plane reaches everywhere). No lens: no widening.
-    float wx = 0, wy = 0;
-    if (lens.active()) {
-      const double coc = circleOfConfusion(lens, I.depthRange[i].first, I.depthRange[i].second);
-      if (!std::isfinite(coc)) {
-        fn(i);
-        continue;
-      }
-      wx = float(coc * std::abs(I.projector.ax) * 1.0001 + 1e-3), wy = float(coc * std::abs(I.projector.ay) * 1.0001 + 1e-3);
-    }
-    auto widened = [&](RasterRect r) {
-      if (!r.empty && (wx > 0 || wy > 0)) r.x0 -= wx, r.y0 -= wy, r.x1 += wx, r.y1 += wy;
-      return r;
-    };
-    if (!widened(I.shutterBounds[i]).overlaps(rect)) continue;
-    if (widened(bounds(i, t0, t1)).overlaps(rect)) fn(i);
-  }
+  impl_->view.visit(rect, t0, t1, fn, lens);
 }
 
 VerifyReport StoreReader::verify(const std::function<void(size_t)>& progress) const {

@@ -1016,7 +1016,7 @@ TEST(ShadeDiceHard, APathologicalPrimitiveStopsAtItsBudget) {
     for (const Primitive& p : f.prims) {
       std::vector<Leaf> leaves;
       DiceStats stats;
-      splitPrimitive(p, clipKnots(p, 0, 0), cam, o, leaves, stats);
+      splitPrimitive(p, clipKnots(p, 0, 0), cam, {}, o, leaves, stats);
       uint64_t mps = 0;
       for (const Leaf& l : leaves) mps += uint64_t(l.nu) * uint64_t(l.nv);
       most = std::max(most, mps);
@@ -1047,7 +1047,7 @@ TEST(ShadeDiceHard, APathologicalPrimitiveStopsAtItsBudget) {
   for (const Primitive& p : g.prims) {
     std::vector<Leaf> leaves;
     DiceStats stats;
-    splitPrimitive(p, clipKnots(p, 0, 0), small, o, leaves, stats);
+    splitPrimitive(p, clipKnots(p, 0, 0), small, {}, o, leaves, stats);
     most = std::max(most, stats.leaves + stats.culledPieces + stats.eyeSplits);
   }
   EXPECT_LE(most, 20000 / 4 + 2 * uint64_t(o.maxSplitDepth + 2));

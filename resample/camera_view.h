@@ -1,0 +1,66 @@
+// Rendering from a camera other than the one a store was shaded from (the reference's multi-camera
+// output): cameras given after the fact (look-from / look-at, a stereo pair around a camera), and
+// what a render needs to draw a store through one - the transform from the store's primary camera
+// space into it, the parts' bounds carried there (store/view_bounds.h), the store's lights and
+// volumes carried with them. The rasterizer is the same: it only ever sees camera-space parts.
+#pragma once
+
+#include <memory>
+#include <optional>
+#include <string>
+#include <utility>
+#include <vector>
+
+#include <glm/mat4x4.hpp>
+#include <glm/vec3.hpp>
+
+#include "store/reader.h"
+#include "store/view_bounds.h"
+
+namespace reshutter::resample {
+
+/// A camera like `base` (projection, resolution, screen window, clipping, lens) looking from
+/// `from` at `to` in `base`'s world, `up` towards the top of the image, with `fovDegrees` when
+/// given. It keeps the handedness of base's world-to-camera transform (a RIB camera transform often
+/// mirrors z), so that a look-at placed where base is gives base's image, not its mirror. Throws
+/// Error naming the option when from == to or up is parallel to the view direction.
+store::Camera lookAtCamera(const store::Camera& base, const glm::dvec3& from, const glm::dvec3& to, const glm::dvec3& up, std::optional<double> fovDegrees);
+
+/// The two eyes of a stereo pair around `centre`, named "left" and "right": each moved half of
+/// `baseline` (camera-space units) along centre's x axis, axes parallel. A finite `convergence`
+/// (camera depth, > 0) shifts each eye's screen window so that points at that depth land where the
+/// centre camera puts them (zero parallax: the off-axis stereo rig); infinite = parallel.
+std::vector<store::Camera> stereoPair(const store::Camera& centre, double baseline, double convergence);
+/// stereoPair() from "BASELINE" or "BASELINE:CONVERGENCE" (the --stereo option); throws Error
+/// naming `where`.
+std::vector<store::Camera> stereoPair(const store::Camera& centre, const std::string& rig, const std::string& where);
+
+/// The transform from `primary`'s camera space to `view`'s (both cameras of one world).
+glm::dmat4 primaryToView(const store::Camera& primary, const store::Camera& view);
+
+/// Whether `view` sees what `primary` does: the same world-to-camera transform, projection, field
+/// of view, screen window and near plane, so that the store's own bounds serve it (its resolution
+/// and lens may differ).
+bool sameView(const store::Camera& primary, const store::Camera& view);
+
+/// One store as another camera sees it: its index carried into the camera's space and bounded in
+/// its raster (`projector`: the output resolution).
+class CarriedStore {
+ public:
+  CarriedStore(const store::StoreReader& reader, const store::Camera& view, const store::Projector& projector);
+  const glm::dmat4& toView() const { return toView_; }
+  const store::ViewBounds& bounds() const { return bounds_; }
+  /// The decoded part `entry` carried into the view's space.
+  std::shared_ptr<const store::TilePart> part(size_t entry) const;
+
+ private:
+  const store::StoreReader& reader_;
+  glm::dmat4 toView_;
+  std::vector<store::TileEntry> entries_;
+  store::ViewBounds bounds_;
+};
+
+/// A light the shading pass recorded (primary camera space) in the view camera's space.
+store::StoredLight carriedLight(const store::StoredLight& light, const glm::dmat4& toView);
+
+}  // namespace reshutter::resample

@@ -1,0 +1,111 @@
+#include "store/view_bounds.h"
+
+#include <algorithm>
+#include <cmath>
+
+#include <glm/mat3x3.hpp>
+
+namespace reshutter::store {
+
+ViewBounds::ViewBounds(const std::vector<TileEntry>& entries, const std::vector<Schedule>& schedules, const Projector& projector, double open, double close)
+    : entries_(&entries), schedules_(&schedules), projector_(projector) {
+  shutterBounds_.resize(entries.size()), depthRange_.resize(entries.size());
+  for (size_t i = 0; i < entries.size(); ++i) {
+    const TileEntry& e = entries[i];
+    shutterBounds_[i] = boundsOver(e, schedules[e.schedule], projector_, open, close);
+    depthRange_[i] = {INFINITY, -INFINITY};
+    for (const KnotBounds& kb : e.knots) depthRange_[i].first = std::min(depthRange_[i].first, kb.camera[2]), depthRange_[i].second = std::max(depthRange_[i].second, kb.camera[5]);
+  }
+}
+
+RasterRect ViewBounds::bounds(size_t i, double t0, double t1) const {
+  const TileEntry& e = entries_->at(i);
+  return boundsOver(e, (*schedules_)[e.schedule], projector_, t0, t1);
+}
+
+void ViewBounds::visit(const RasterRect& rect, double t0, double t1, const std::function<void(size_t)>& fn, const Lens& lens) const {
+  for (size_t i = 0; i < entries_->size(); ++i) {
+    // A point at depth z moves by a L (1/d - 1/z) on the raster for lens point L: the part's depths
+    // bound its reach (a part reaching the eye plane reaches everywhere). No lens: no widening.
+    float wx = 0, wy = 0;
+    if (lens.active()) {
+      const double coc = circleOfConfusion(lens, depthRange_[i].first, depthRange_[i].second);
+      if (!std::isfinite(coc)) {
+        fn(i);
+        continue;
+      }
+      wx = float(coc * std::abs(projector_.ax) * 1.0001 + 1e-3), wy = float(coc * std::abs(projector_.ay) * 1.0001 + 1e-3);
+    }
+    auto widened = [&](RasterRect r) {
+      if (!r.empty && (wx > 0 || wy > 0)) r.x0 -= wx, r.y0 -= wy, r.x1 += wx, r.y1 += wy;
+      return r;
+    };
+    if (!widened(shutterBounds_[i]).overlaps(rect)) continue;
+    if (widened(bounds(i, t0, t1)).overlaps(rect)) fn(i);
+  }
+}
+
+namespace {
+
+// One knot's bounds carried into another camera's space.
+KnotBounds carriedKnot(const KnotBounds& kb, const glm::dmat4& m, const Projector& projector) {
+  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
+  glm::dvec3 corners[8];
+  for (int c = 0; c < 8; ++c) {
+    const glm::dvec4 p(kb.camera[(c & 1) ? 3 : 0], kb.camera[(c & 2) ? 4 : 1], kb.camera[(c & 4) ? 5 : 2], 1.0);
+    corners[c] = glm::dvec3(m * p);
+    for (int i = 0; i < 3; ++i) lo[i] = std::min(lo[i], corners[c][i]), hi[i] = std::max(hi[i], corners[c][i]);
+  }
+  KnotBounds out;
+  // A carried position is rounded to float once (carriedPart): a relative 1e-6 holds it.
+  for (int i = 0; i < 3; ++i) {
+    const double pad = 1e-6 * std::max({std::abs(lo[i]), std::abs(hi[i]), 1e-30});
+    out.camera[i] = std::nextafter(float(lo[i] - pad), -INFINITY);
+    out.camera[i + 3] = std::nextafter(float(hi[i] + pad), INFINITY);
+  }
+  out.rasterFinite = !projector.perspective || out.camera[2] >= projector.nearClip;
+  if (!out.rasterFinite) return out;
+  // Each carried corner padded as the camera box is: the carried vertices lie in the hull of
+  // those little boxes, whose projection their projections' union holds.
+  RasterRect r;
+  for (int c = 0; c < 8; ++c) {
+    float point[6];
+    for (int i = 0; i < 3; ++i) {
+      const double pad = 1e-6 * std::max({std::abs(lo[i]), std::abs(hi[i]), 1e-30});
+      point[i] = std::nextafter(float(corners[c][i] - pad), -INFINITY);
+      point[i + 3] = std::nextafter(float(corners[c][i] + pad), INFINITY);
+    }
+    r.extend(projectCameraBox(point, projector));
+  }
+  out.raster[0] = r.x0, out.raster[1] = r.y0, out.raster[2] = r.x1, out.raster[3] = r.y1;
+  return out;
+}
+
+}  // namespace
+
+std::vector<TileEntry> carriedEntries(const std::vector<TileEntry>& entries, const glm::dmat4& primaryToView, const Projector& projector) {
+  std::vector<TileEntry> out = entries;
+  for (TileEntry& e : out)
+    for (KnotBounds& kb : e.knots) kb = carriedKnot(kb, primaryToView, projector);
+  return out;
+}
+
+TilePart carriedPart(const TilePart& part, const glm::dmat4& primaryToView, const Schema& schema) {
+  TilePart out = part;
+  const glm::dmat3 linear(primaryToView);
+  const glm::dmat3 normals = glm::transpose(glm::inverse(linear));
+  for (glm::vec3& p : out.positions) p = glm::vec3(primaryToView * glm::dvec4(glm::dvec3(p), 1.0));
+  for (size_t a = 0; a < schema.attrs.size() && a < out.attrs.size(); ++a) {
+    const AttrType type = schema.attrs[a].type;
+    if (type != AttrType::Point && type != AttrType::Vector && type != AttrType::Normal) continue;
+    std::vector<float>& f = out.attrs[a].f;
+    for (size_t i = 0; i + 2 < f.size(); i += 3) {
+      const glm::dvec3 v(f[i], f[i + 1], f[i + 2]);
+      const glm::dvec3 w = type == AttrType::Point ? glm::dvec3(primaryToView * glm::dvec4(v, 1.0)) : type == AttrType::Vector ? linear * v : normals * v;
+      f[i] = float(w.x), f[i + 1] = float(w.y), f[i + 2] = float(w.z);
+    }
+  }
+  return out;
+}
+
+}  // namespace reshutter::store
