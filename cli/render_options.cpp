@@ -269,9 +269,17 @@ void RenderOptions::writeViews(const std::vector<View>& views, const std::string
     for (const View& v : views) ev.push_back({v.name, &v.result.image, &v.result.provenance});
     resample::writeMultiViewExr(exrPath, ev, eo);
   }
+  if (!deep.empty()) {
+    resample::DeepExrOptions deo;
+    deo.compression = resample::parseDeepCompression(deepCompression, "--deep-compression");
+    deo.allChannels = deepAllChannels;
+    std::vector<resample::DeepView> dv;
+    for (const View& v : views) dv.push_back({v.name, &v.result.deep, &v.result.provenance});
+    resample::writeMultiViewDeepExr(expandFramePattern(deep, frame), dv, deo);
+  }
   for (const View& v : views) {
     RenderOptions one = *this;
-    if (!deep.empty()) one.deep = pathForView(expandFramePattern(deep, frame), v.name);
+    one.deep.clear();
     for (std::string& p : one.previews) {
       const size_t eq = p.find('=');
       p = pathForView(p.substr(0, eq), v.name) + (eq == std::string::npos ? "" : p.substr(eq));

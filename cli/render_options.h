@@ -67,9 +67,9 @@ struct RenderOptions {
   std::vector<store::Camera> viewCameras(const store::StoreMeta& meta) const;
   /// Renders `spec` from each camera viewCameras() names (once, from the store's own, when none).
   std::vector<View> renderViews(const resample::RenderSpec& spec) const;
-  /// Writes the views: one as writeOutputs() does; several as one multi-view OpenEXR, with a deep
-  /// OpenEXR and previews per view (the view's name replaces %v in their paths, or follows the
-  /// file name's stem).
+  /// Writes the views: one as writeOutputs() does; several as one multi-view OpenEXR, one
+  /// multi-part deep OpenEXR (a part per view) and previews per view (the view's name replaces %v
+  /// in their paths, or follows the file name's stem).
   void writeViews(const std::vector<View>& views, const std::string& exrPath, int64_t frame) const;
   /// Fills sampling, filter, AOV, crop and raster settings of `spec`.
   void applyTo(resample::RenderSpec& spec) const;

@@ -86,7 +86,7 @@ bool sameView(const store::Camera& primary, const store::Camera& view) {
 CarriedStore::CarriedStore(const store::StoreReader& reader, const store::Camera& view, const store::Projector& projector)
     : reader_(reader),
       toView_(primaryToView(reader.meta().cameras[0], view)),
-      entries_(store::carriedEntries(reader.entries(), toView_, projector)),
+      entries_(store::carriedEntries(reader.entries(), toView_, store::Projector(reader.meta().cameras[0]), projector)),
       bounds_(entries_, reader.meta().schedules, projector, reader.meta().shutterOpen, reader.meta().shutterClose) {}
 
 std::shared_ptr<const store::TilePart> CarriedStore::part(size_t entry) const {

@@ -11,6 +11,8 @@
 #include <OpenEXR/ImfDeepFrameBuffer.h>
 #include <OpenEXR/ImfDeepImageState.h>
 #include <OpenEXR/ImfDeepScanLineOutputFile.h>
+#include <OpenEXR/ImfDeepScanLineOutputPart.h>
+#include <OpenEXR/ImfMultiPartOutputFile.h>
 #include <OpenEXR/ImfHeader.h>
 #include <OpenEXR/ImfIDManifest.h>
 #include <OpenEXR/ImfPartType.h>
@@ -578,23 +580,18 @@ DeepCompression parseDeepCompression(const std::string& s, const std::string& wh
   fail(where, "deep OpenEXR compression must be zips, rle or none (OpenEXR allows no other for deep data), got '", s, "'");
 }
 
-void writeDeepExr(const std::string& path, const DeepImage& image, const ImageProvenance& info, const DeepExrOptions& options) {
-  if (image.width <= 0 || image.height <= 0) fail(path, "empty deep image");
-  const Imf::Compression comp = options.compression == DeepCompression::Zips  ? Imf::ZIPS_COMPRESSION
-                                : options.compression == DeepCompression::Rle ? Imf::RLE_COMPRESSION
-                                                                              : Imf::NO_COMPRESSION;
-  Imath::Box2i display(Imath::V2i(0, 0), Imath::V2i(image.fullWidth - 1, image.fullHeight - 1));
-  Imath::Box2i data(Imath::V2i(image.x0, image.y0), Imath::V2i(image.x0 + image.width - 1, image.y0 + image.height - 1));
-  Imf::Header header(display, data, 1.0f, Imath::V2f(0, 0), 1.0f, Imf::INCREASING_Y, comp);
-  header.setType(Imf::DEEPSCANLINE);
+namespace {
 
-  struct Out {
-    std::string name;
-    bool isUInt;
-    int field;
-  };
+struct DeepOut {
+  std::string name;
+  bool isUInt;
+  int field;
+};
+
+/// The channels a deep file of `image` holds (writeDeepExr says which).
+std::vector<DeepOut> deepChannels(const std::string& path, const DeepImage& image, const DeepExrOptions& options) {
   const DeepLayout& L = image.layout;
-  std::vector<Out> outs{{"R", false, kDeepR}, {"G", false, kDeepG}, {"B", false, kDeepB}, {"A", false, kDeepA}, {"Z", false, kDeepZ}};
+  std::vector<DeepOut> outs{{"R", false, kDeepR}, {"G", false, kDeepG}, {"B", false, kDeepB}, {"A", false, kDeepA}, {"Z", false, kDeepZ}};
   if (options.allChannels || image.anyThick()) outs.push_back({"ZBack", false, kDeepZBack});
   if (options.allChannels || image.anyColouredAlpha())
     for (auto [n, f] : {std::pair{"AR", kDeepAR}, {"AG", kDeepAG}, {"AB", kDeepAB}}) outs.push_back({n, false, f});
@@ -604,8 +601,18 @@ void writeDeepExr(const std::string& path, const DeepImage& image, const ImagePr
   for (size_t i = 0; i < outs.size(); ++i)
     for (size_t j = 0; j < i; ++j)
       if (outs[i].name == outs[j].name) fail(path, "deep channel '", outs[i].name, "' named twice");
-  for (const auto& o : outs) header.channels().insert(o.name, Imf::Channel(o.isUInt ? Imf::UINT : Imf::FLOAT));
+  return outs;
+}
 
+Imf::Header deepHeader(const DeepImage& image, const ImageProvenance& info, const DeepExrOptions& options, const std::vector<DeepOut>& outs) {
+  const Imf::Compression comp = options.compression == DeepCompression::Zips  ? Imf::ZIPS_COMPRESSION
+                                : options.compression == DeepCompression::Rle ? Imf::RLE_COMPRESSION
+                                                                              : Imf::NO_COMPRESSION;
+  Imath::Box2i display(Imath::V2i(0, 0), Imath::V2i(image.fullWidth - 1, image.fullHeight - 1));
+  Imath::Box2i data(Imath::V2i(image.x0, image.y0), Imath::V2i(image.x0 + image.width - 1, image.y0 + image.height - 1));
+  Imf::Header header(display, data, 1.0f, Imath::V2f(0, 0), 1.0f, Imf::INCREASING_Y, comp);
+  header.setType(Imf::DEEPSCANLINE);
+  for (const auto& o : outs) header.channels().insert(o.name, Imf::Channel(o.isUInt ? Imf::UINT : Imf::FLOAT));
   addProvenanceAttributes(header, info);
   if (image.tidy) Imf::addDeepImageState(header, Imf::DIS_TIDY);
   if (!image.objectNames.empty()) {
@@ -618,43 +625,86 @@ void writeDeepExr(const std::string& path, const DeepImage& image, const ImagePr
     for (const auto& [id, name] : image.objectNames) g.insert(uint64_t(id), name);
     Imf::addIDManifest(header, Imf::CompressedIDManifest(manifest));
   }
+  return header;
+}
 
+/// Writes `image`'s samples through `out` (a deep scanline file or part), 32 rows at a time.
+template <class Output>
+void writeDeepPixels(Output& out, const DeepImage& image, const std::vector<DeepOut>& outs) {
+  const DeepLayout& L = image.layout;
   const int W = image.width;
   const int chunk = 32;
   const size_t nf = size_t(L.nf()), nu = size_t(L.nu());
   std::vector<unsigned int> counts(size_t(W) * chunk);
   std::vector<std::vector<char*>> ptrs(outs.size(), std::vector<char*>(size_t(W) * chunk, nullptr));
   static float dummy[64];
+  for (int ys = image.y0; ys < image.y0 + image.height; ys += chunk) {
+    const int rows = std::min(chunk, image.y0 + image.height - ys);
+    for (int y = ys; y < ys + rows; ++y)
+      for (int x = image.x0; x < image.x0 + W; ++x) {
+        const size_t i = size_t(y - ys) * W + size_t(x - image.x0);
+        const DeepImage::PixelRef& r = image.ref(x, y);
+        counts[i] = r.count;
+        for (size_t c = 0; c < outs.size(); ++c) {
+          if (r.count == 0) {
+            ptrs[c][i] = reinterpret_cast<char*>(dummy);
+            continue;
+          }
+          const DeepImage::Block& bl = image.block(r.block);
+          ptrs[c][i] = outs[c].isUInt ? reinterpret_cast<char*>(const_cast<uint32_t*>(bl.u.data() + size_t(r.first) * nu + size_t(outs[c].field)))
+                                      : reinterpret_cast<char*>(const_cast<float*>(bl.f.data() + size_t(r.first) * nf + size_t(outs[c].field)));
+        }
+      }
+    // OpenEXR addresses pixels absolutely: shift the bases by the chunk's first pixel.
+    const ptrdiff_t origin = ptrdiff_t(ys) * W + image.x0;
+    Imf::DeepFrameBuffer fb;
+    fb.insertSampleCountSlice(Imf::Slice(Imf::UINT, reinterpret_cast<char*>(counts.data() - origin), sizeof(unsigned int), sizeof(unsigned int) * size_t(W)));
+    for (size_t c = 0; c < outs.size(); ++c)
+      fb.insert(outs[c].name, Imf::DeepSlice(outs[c].isUInt ? Imf::UINT : Imf::FLOAT, reinterpret_cast<char*>(ptrs[c].data() - origin), sizeof(char*),
+                                             sizeof(char*) * size_t(W), 4 * (outs[c].isUInt ? nu : nf)));
+    out.setFrameBuffer(fb);
+    out.writePixels(rows);
+  }
+}
+
+// zlib dominates a deep write (ZIPS compresses every scanline separately): use every core.
+int deepWriteThreads() { return int(std::max(1u, std::thread::hardware_concurrency())); }
+
+}  // namespace
+
+void writeDeepExr(const std::string& path, const DeepImage& image, const ImageProvenance& info, const DeepExrOptions& options) {
+  if (image.width <= 0 || image.height <= 0) fail(path, "empty deep image");
+  const std::vector<DeepOut> outs = deepChannels(path, image, options);
+  const Imf::Header header = deepHeader(image, info, options, outs);
   AtomicFile file(path);
   try {
-    // zlib dominates the write (ZIPS compresses every scanline separately): use every core.
-    Imf::DeepScanLineOutputFile out(file.tempPath().c_str(), header, int(std::max(1u, std::thread::hardware_concurrency())));
-    for (int ys = image.y0; ys < image.y0 + image.height; ys += chunk) {
-      const int rows = std::min(chunk, image.y0 + image.height - ys);
-      for (int y = ys; y < ys + rows; ++y)
-        for (int x = image.x0; x < image.x0 + W; ++x) {
-          const size_t i = size_t(y - ys) * W + size_t(x - image.x0);
-          const DeepImage::PixelRef& r = image.ref(x, y);
-          counts[i] = r.count;
-          for (size_t c = 0; c < outs.size(); ++c) {
-            if (r.count == 0) {
-              ptrs[c][i] = reinterpret_cast<char*>(dummy);
-              continue;
-            }
-            const DeepImage::Block& bl = image.block(r.block);
-            ptrs[c][i] = outs[c].isUInt ? reinterpret_cast<char*>(const_cast<uint32_t*>(bl.u.data() + size_t(r.first) * nu + size_t(outs[c].field)))
-                                        : reinterpret_cast<char*>(const_cast<float*>(bl.f.data() + size_t(r.first) * nf + size_t(outs[c].field)));
-          }
-        }
-      // OpenEXR addresses pixels absolutely: shift the bases by the chunk's first pixel.
-      const ptrdiff_t origin = ptrdiff_t(ys) * W + image.x0;
-      Imf::DeepFrameBuffer fb;
-      fb.insertSampleCountSlice(Imf::Slice(Imf::UINT, reinterpret_cast<char*>(counts.data() - origin), sizeof(unsigned int), sizeof(unsigned int) * size_t(W)));
-      for (size_t c = 0; c < outs.size(); ++c)
-        fb.insert(outs[c].name, Imf::DeepSlice(outs[c].isUInt ? Imf::UINT : Imf::FLOAT, reinterpret_cast<char*>(ptrs[c].data() - origin), sizeof(char*),
-                                               sizeof(char*) * size_t(W), 4 * (outs[c].isUInt ? nu : nf)));
-      out.setFrameBuffer(fb);
-      out.writePixels(rows);
+    Imf::DeepScanLineOutputFile out(file.tempPath().c_str(), header, deepWriteThreads());
+    writeDeepPixels(out, image, outs);
+  } catch (const std::exception& e) {
+    fail(path, "OpenEXR deep write failed: ", e.what());
+  }
+  file.commit();
+}
+
+void writeMultiViewDeepExr(const std::string& path, const std::vector<DeepView>& views, const DeepExrOptions& options) {
+  if (views.empty()) fail(path, "no view to write");
+  std::vector<std::vector<DeepOut>> outs;
+  std::vector<Imf::Header> headers;
+  for (const DeepView& v : views) {
+    if (v.image->width <= 0 || v.image->height <= 0) fail(path, "view '", v.name, "': empty deep image");
+    for (const Imf::Header& h : headers)
+      if (h.name() == v.name) fail(path, "view '", v.name, "' given twice");
+    outs.push_back(deepChannels(path, *v.image, options));
+    headers.push_back(deepHeader(*v.image, *v.info, options, outs.back()));
+    headers.back().setName(v.name);
+    headers.back().setView(v.name);
+  }
+  AtomicFile file(path);
+  try {
+    Imf::MultiPartOutputFile out(file.tempPath().c_str(), headers.data(), int(headers.size()), false, deepWriteThreads());
+    for (size_t i = 0; i < views.size(); ++i) {
+      Imf::DeepScanLineOutputPart part(out, int(i));
+      writeDeepPixels(part, *views[i].image, outs[i]);
     }
   } catch (const std::exception& e) {
     fail(path, "OpenEXR deep write failed: ", e.what());

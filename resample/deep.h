@@ -213,4 +213,15 @@ struct DeepExrOptions {
 /// throws Error naming the file.
 void writeDeepExr(const std::string& path, const DeepImage& image, const ImageProvenance& info, const DeepExrOptions& options = {});
 
+/// One view of a stereo or multi-camera deep image.
+struct DeepView {
+  std::string name;
+  const DeepImage* image = nullptr;
+  const ImageProvenance* info = nullptr;
+};
+/// Writes `views` as one multi-part deep OpenEXR, a part per view named after it with its `view`
+/// attribute (OpenEXR's multi-part form of multi-view, which Nuke's DeepRead takes), each part
+/// as writeDeepExr writes a single view. Atomic; throws Error naming the file.
+void writeMultiViewDeepExr(const std::string& path, const std::vector<DeepView>& views, const DeepExrOptions& options = {});
+
 }  // namespace reshutter::resample

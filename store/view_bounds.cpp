@@ -47,17 +47,55 @@ void ViewBounds::visit(const RasterRect& rect, double t0, double t1, const std::
 
 namespace {
 
-// One knot's bounds carried into another camera's space.
-KnotBounds carriedKnot(const KnotBounds& kb, const glm::dmat4& m, const Projector& projector) {
-  double lo[3] = {INFINITY, INFINITY, INFINITY}, hi[3] = {-INFINITY, -INFINITY, -INFINITY};
-  glm::dvec3 corners[8];
-  for (int c = 0; c < 8; ++c) {
-    const glm::dvec4 p(kb.camera[(c & 1) ? 3 : 0], kb.camera[(c & 2) ? 4 : 1], kb.camera[(c & 4) ? 5 : 2], 1.0);
-    corners[c] = glm::dvec3(m * p);
-    for (int i = 0; i < 3; ++i) lo[i] = std::min(lo[i], corners[c][i]), hi[i] = std::max(hi[i], corners[c][i]);
+// The box of `points` carried by `m`, padded for the float rounding of a carried position (a
+// relative 1e-6), as lo/hi.
+void carriedBox(const glm::dvec3* points, int n, const glm::dmat4& m, glm::dvec3* carried, double lo[3], double hi[3]) {
+  for (int i = 0; i < 3; ++i) lo[i] = INFINITY, hi[i] = -INFINITY;
+  for (int c = 0; c < n; ++c) {
+    carried[c] = glm::dvec3(m * glm::dvec4(points[c], 1.0));
+    for (int i = 0; i < 3; ++i) lo[i] = std::min(lo[i], carried[c][i]), hi[i] = std::max(hi[i], carried[c][i]);
+  }
+}
+
+// The projection of the hull of `points` (each padded as a carried position is), when all lie in
+// front of the near plane: a perspective projection maps the hull to the hull of the projected
+// points. Empty when one does not.
+RasterRect projectedHull(const glm::dvec3* points, int n, const double lo[3], const double hi[3], const Projector& projector) {
+  RasterRect r;
+  for (int c = 0; c < n; ++c) {
+    float point[6];
+    for (int i = 0; i < 3; ++i) {
+      const double pad = 1e-6 * std::max({std::abs(lo[i]), std::abs(hi[i]), 1e-30});
+      point[i] = std::nextafter(float(points[c][i] - pad), -INFINITY);
+      point[i + 3] = std::nextafter(float(points[c][i] + pad), INFINITY);
+    }
+    if (projector.perspective && point[2] < projector.nearClip) return RasterRect{};
+    r.extend(projectCameraBox(point, projector));
+  }
+  return r;
+}
+
+// One knot's bounds carried into another camera's space. A part's points lie in its camera box,
+// and - where its primary raster bound is finite - in the slab of the primary's frustum over that
+// bound between the box's depths. For a tile of micropolygons at many depths the slab is far
+// tighter than the box (whose corners pair the tile's near x with its far depth), so each bound
+// is the intersection of both.
+KnotBounds carriedKnot(const KnotBounds& kb, const glm::dmat4& m, const Projector& primary, const Projector& projector) {
+  glm::dvec3 box[8], boxCarried[8];
+  for (int c = 0; c < 8; ++c) box[c] = {kb.camera[(c & 1) ? 3 : 0], kb.camera[(c & 2) ? 4 : 1], kb.camera[(c & 4) ? 5 : 2]};
+  double lo[3], hi[3];
+  carriedBox(box, 8, m, boxCarried, lo, hi);
+  glm::dvec3 slabCarried[8];
+  double slo[3], shi[3];
+  const bool slab = kb.rasterFinite && std::isfinite(kb.camera[2]) && std::isfinite(kb.camera[5]) && (!primary.perspective || kb.camera[2] > 0);
+  if (slab) {
+    glm::dvec3 corners[8];
+    for (int c = 0; c < 8; ++c)
+      corners[c] = primary.unproject({kb.raster[(c & 1) ? 2 : 0], kb.raster[(c & 2) ? 3 : 1]}, (c & 4) ? kb.camera[5] : kb.camera[2]);
+    carriedBox(corners, 8, m, slabCarried, slo, shi);
+    for (int i = 0; i < 3; ++i) lo[i] = std::max(lo[i], slo[i]), hi[i] = std::min(hi[i], shi[i]);
   }
   KnotBounds out;
-  // A carried position is rounded to float once (carriedPart): a relative 1e-6 holds it.
   for (int i = 0; i < 3; ++i) {
     const double pad = 1e-6 * std::max({std::abs(lo[i]), std::abs(hi[i]), 1e-30});
     out.camera[i] = std::nextafter(float(lo[i] - pad), -INFINITY);
@@ -65,17 +103,14 @@ KnotBounds carriedKnot(const KnotBounds& kb, const glm::dmat4& m, const Projecto
   }
   out.rasterFinite = !projector.perspective || out.camera[2] >= projector.nearClip;
   if (!out.rasterFinite) return out;
-  // Each carried corner padded as the camera box is: the carried vertices lie in the hull of
-  // those little boxes, whose projection their projections' union holds.
-  RasterRect r;
-  for (int c = 0; c < 8; ++c) {
-    float point[6];
-    for (int i = 0; i < 3; ++i) {
-      const double pad = 1e-6 * std::max({std::abs(lo[i]), std::abs(hi[i]), 1e-30});
-      point[i] = std::nextafter(float(corners[c][i] - pad), -INFINITY);
-      point[i + 3] = std::nextafter(float(corners[c][i] + pad), INFINITY);
-    }
-    r.extend(projectCameraBox(point, projector));
+  RasterRect r = projectedHull(boxCarried, 8, lo, hi, projector);
+  if (slab) {
+    const RasterRect t = projectedHull(slabCarried, 8, lo, hi, projector);
+    if (!t.empty) r = r.empty ? t : RasterRect{std::max(r.x0, t.x0), std::max(r.y0, t.y0), std::min(r.x1, t.x1), std::min(r.y1, t.y1), false};
+  }
+  if (r.empty) {
+    out.rasterFinite = false;  // unreachable while the box lies in front; the caller projects the box instead
+    return out;
   }
   out.raster[0] = r.x0, out.raster[1] = r.y0, out.raster[2] = r.x1, out.raster[3] = r.y1;
   return out;
@@ -83,10 +118,10 @@ KnotBounds carriedKnot(const KnotBounds& kb, const glm::dmat4& m, const Projecto
 
 }  // namespace
 
-std::vector<TileEntry> carriedEntries(const std::vector<TileEntry>& entries, const glm::dmat4& primaryToView, const Projector& projector) {
+std::vector<TileEntry> carriedEntries(const std::vector<TileEntry>& entries, const glm::dmat4& primaryToView, const Projector& primary, const Projector& projector) {
   std::vector<TileEntry> out = entries;
   for (TileEntry& e : out)
-    for (KnotBounds& kb : e.knots) kb = carriedKnot(kb, primaryToView, projector);
+    for (KnotBounds& kb : e.knots) kb = carriedKnot(kb, primaryToView, primary, projector);
   return out;
 }
 

@@ -37,12 +37,14 @@ class ViewBounds {
   std::vector<std::pair<float, float>> depthRange_;  // per part: nearest and farthest camera depth at any knot
 };
 
-/// `entries` with their knot bounds carried by `primaryToView` (primary camera space → another
-/// camera's space, affine) and projected by that camera's `projector`: each knot's camera box is
-/// the box of its eight carried corners, widened for the float rounding of carried positions; its
-/// raster bound is the box of their projections while all lie in front of the near plane (a
-/// perspective projection maps the box to the hull of its projected corners), else not finite.
-std::vector<TileEntry> carriedEntries(const std::vector<TileEntry>& entries, const glm::dmat4& primaryToView, const Projector& projector);
+/// `entries` (bounded for the camera `primary` projects for) with their knot bounds carried by
+/// `primaryToView` (primary camera space → another camera's space, affine) and projected by that
+/// camera's `projector`. A knot's points lie in its camera box and, where its primary raster bound
+/// is finite, in the slab of the primary's frustum over that bound between the box's depths: each
+/// carried bound is the intersection of both hulls' (their eight corners carried, padded for the
+/// float rounding of carried positions; a perspective projection maps a hull in front of the eye
+/// to the hull of its projected corners), and not finite where the box reaches the near plane.
+std::vector<TileEntry> carriedEntries(const std::vector<TileEntry>& entries, const glm::dmat4& primaryToView, const Projector& primary, const Projector& projector);
 
 /// A copy of `part` in another camera's space: positions and every point-typed attribute carried
 /// by `primaryToView`, vectors by its linear part, normals by that part's inverse transpose (a

@@ -187,12 +187,13 @@ TEST(CameraMultiView, TheStereoFileHoldsEachViewBitForBit) {
   ScratchDir dir;
   const TestScene s = parallaxScene();
   auto reader = writeScene(s, dir.path("s.mps"));
-  const std::string exr = dir.path("stereo.exr");
-  const CommandResult run = runReshutter("resample " + dir.path("s.mps") + " -o " + exr + " --stereo 0.5:6 --spp 16 --filter box:1x1 --compression zip --preview " +
-                                         dir.path("stereo.png") + " --stats");
+  const std::string exr = dir.path("stereo.exr"), deep = dir.path("stereo_deep.exr");
+  const CommandResult run = runReshutter("resample " + dir.path("s.mps") + " -o " + exr + " --deep " + deep +
+                                         " --stereo 0.5:6 --spp 16 --filter box:1x1 --compression zip --preview " + dir.path("stereo.png") + " --stats");
   ASSERT_EQ(run.exitCode, 0) << run.err;
   EXPECT_NE(run.out.find("carried into the view's camera"), std::string::npos) << run.out;
   EXPECT_FALSE(Imf::checkOpenEXRFile(exr.c_str(), false, false, true)) << "checkOpenEXRFile reports a problem";
+  EXPECT_FALSE(Imf::checkOpenEXRFile(deep.c_str(), false, false, true)) << "checkOpenEXRFile reports a problem with the deep file";
   EXPECT_TRUE(std::filesystem::exists(dir.path("stereo_left.png")));
   EXPECT_TRUE(std::filesystem::exists(dir.path("stereo_right.png")));
   // OpenImageIO reads the views (an independent reader of the multiView convention).
@@ -206,6 +207,7 @@ TEST(CameraMultiView, TheStereoFileHoldsEachViewBitForBit) {
   for (size_t v = 0; v < eyes.size(); ++v) {
     RenderSpec spec = specFor(reader, 0, 1, 4, 4);
     spec.camera = eyes[v];
+    spec.deep = true;
     const RenderResult one = render(spec);
     for (const char* c : {"R", "G", "B", "A", "Z"}) {
       const std::string name = v == 0 ? c : viewChannelName(c, eyes[v].name);
@@ -213,6 +215,25 @@ TEST(CameraMultiView, TheStereoFileHoldsEachViewBitForBit) {
       ASSERT_NE(ch, nullptr) << name;
       EXPECT_EQ(ch->f, channel(one, c).f) << name << " differs from the single-camera render";
     }
+    // The deep file: a part per view, named by its view attribute, each the view's deep image.
+    std::string view;
+    const DeepExr part = readDeepExrPart(deep, int(v), view);
+    EXPECT_EQ(view, eyes[v].name);
+    const resample::DeepImage& a = part.image;
+    const resample::DeepImage& b = one.deep;
+    ASSERT_EQ(a.width, b.width);
+    uint64_t samples = 0;
+    for (int y = b.y0; y < b.y0 + b.height; ++y)
+      for (int x = b.x0; x < b.x0 + b.width; ++x) {
+        const auto &ra = a.ref(x, y), &rb = b.ref(x, y);
+        ASSERT_EQ(ra.count, rb.count) << "view " << view << " pixel " << x << "," << y;
+        samples += rb.count;
+        for (uint32_t k = 0; k < rb.count; ++k)
+          for (int f : {kDeepR, kDeepG, kDeepB, kDeepA, kDeepZ})
+            EXPECT_EQ(a.block(ra.block).f[size_t(ra.first + k) * size_t(a.layout.nf()) + size_t(f)],
+                      b.block(rb.block).f[size_t(rb.first + k) * size_t(b.layout.nf()) + size_t(f)]);
+      }
+    EXPECT_GT(samples, 0u);
   }
   EXPECT_EQ(viewChannelName("N.X", "right"), "N.right.X");
 
@@ -278,4 +299,46 @@ TEST(CameraRib, ShadedOnceForTwoCamerasTheSecondRendersAsShadingFromIt) {
   const double noise = rmseRgba(direct, directSeed), err = rmseRgba(fromStore, direct);
   EXPECT_GT(noise, 0.0);
   EXPECT_LT(err, 2.0 * noise + 1e-3) << "shaded once for two cameras vs shaded from the second: RMSE " << err << ", two seeds " << noise;
+}
+
+TEST(CameraBounds, CarriedBoundsHoldEveryCarriedVertex) {
+  // The bounds a render from another camera culls by (store/view_bounds.h): at every knot each
+  // carried vertex lies in its part's carried camera box and, in front of the near plane, projects
+  // into its carried raster bound - for cameras moved, turned, widened and looking back at the scene.
+  ScratchDir dir;
+  TestScene s = randomQuadScene(23, true);
+  s.meta.tileSize = 8;  // many parts, each of several depths
+  auto reader = writeScene(s, dir.path("b.mps"));
+  const store::Camera& primary = s.meta.cameras[0];
+  const std::vector<store::Camera> views = {
+      moved(primary, {0.3, 0, 0}, "moved"), lookAtCamera(primary, {2, 1, -3}, {0, 0, 15}, {0, 1, 0}, 70.0),
+      lookAtCamera(primary, {-1, 0.5, 40}, {0, 0, 10}, {0, 1, 0}, 60.0),  // behind the scene, looking back
+      lookAtCamera(primary, {0, 0, 12}, {5, 0, 12}, {0, 1, 0}, 90.0)};   // inside it, looking sideways
+  uint64_t checked = 0;
+  for (const store::Camera& v : views) {
+    const store::Projector proj(v);
+    const glm::dmat4 m = primaryToView(primary, v);
+    const std::vector<store::TileEntry> carried = store::carriedEntries(reader->entries(), m, store::Projector(primary), proj);
+    for (size_t e = 0; e < carried.size(); ++e) {
+      const store::TilePart part = store::carriedPart(reader->decode(e), m, reader->meta().schema);
+      for (uint32_t k = 0; k < part.numKnots; ++k) {
+        const store::KnotBounds& kb = carried[e].knots[k];
+        for (uint32_t i = 0; i < part.numVertices; ++i) {
+          const glm::vec3 p = part.position(k, i);
+          for (int a = 0; a < 3; ++a) {
+            EXPECT_GE(p[a], kb.camera[a]) << v.name << " part " << e << " knot " << k;
+            EXPECT_LE(p[a], kb.camera[a + 3]) << v.name << " part " << e << " knot " << k;
+          }
+          if (!kb.rasterFinite) continue;
+          ASSERT_GE(double(p.z), proj.nearClip) << "a finite raster bound with a vertex before the near plane";
+          const glm::dvec2 r = proj.project(glm::dvec3(p));
+          EXPECT_TRUE(r.x >= kb.raster[0] && r.x <= kb.raster[2] && r.y >= kb.raster[1] && r.y <= kb.raster[3])
+              << v.name << " part " << e << " knot " << k << ": " << r.x << "," << r.y << " outside [" << kb.raster[0] << ", " << kb.raster[2] << "] x ["
+              << kb.raster[1] << ", " << kb.raster[3] << "]";
+          ++checked;
+        }
+      }
+    }
+  }
+  EXPECT_GT(checked, 1000u);
 }

@@ -6,6 +6,7 @@
 #include <OpenEXR/ImfDeepFrameBuffer.h>
 #include <OpenEXR/ImfDeepImageStateAttribute.h>
 #include <OpenEXR/ImfDeepScanLineInputFile.h>
+#include <OpenEXR/ImfDeepScanLineInputPart.h>
 #include <OpenEXR/ImfFrameBuffer.h>
 #include <OpenEXR/ImfHeader.h>
 #include <OpenEXR/ImfInputFile.h>
@@ -37,9 +38,12 @@ FlatImage readFlatExr(const std::string& path) {
   return out;
 }
 
-DeepExr readDeepExr(const std::string& path) {
+namespace {
+
+// A deep scanline file or part, read whole.
+template <class Input>
+DeepExr readDeep(Input& in) {
   DeepExr out;
-  Imf::DeepScanLineInputFile in(path.c_str());
   const Imf::Header& h = in.header();
   for (auto it = h.channels().begin(); it != h.channels().end(); ++it) out.channels.push_back(it.name());
   if (auto* a = h.findTypedAttribute<Imf::DeepImageStateAttribute>("deepImageState")) out.tidyState = a->value() == Imf::DIS_TIDY;
@@ -104,6 +108,20 @@ DeepExr readDeepExr(const std::string& path) {
     out.image.setPixel(0, dw.min.x + int(i % size_t(W)), dw.min.y + int(i / size_t(W)), px);
   }
   return out;
+}
+
+}  // namespace
+
+DeepExr readDeepExr(const std::string& path) {
+  Imf::DeepScanLineInputFile in(path.c_str());
+  return readDeep(in);
+}
+
+DeepExr readDeepExrPart(const std::string& path, int part, std::string& view) {
+  Imf::MultiPartInputFile file(path.c_str());
+  Imf::DeepScanLineInputPart in(file, part);
+  view = in.header().hasView() ? in.header().view() : "";
+  return readDeep(in);
 }
 
 ExrShutter readExrShutter(const std::string& path) {

@@ -24,6 +24,8 @@ struct DeepExr {
   bool manifest = false;              // an idManifest is present
 };
 DeepExr readDeepExr(const std::string& path);
+/// Part `part` of a multi-part deep OpenEXR, and its `view` attribute ("" when absent).
+DeepExr readDeepExrPart(const std::string& path, int part, std::string& view);
 
 /// The reshutter/shutter (description) and reshutter/shutterInterval attributes of a flat or deep OpenEXR.
 struct ExrShutter {
