@@ -313,4 +313,29 @@ const Point* find(const std::string& study, const std::string& curvePrefix, int 
 }
 
 
+// ---------------------------------------------------------------------------------------------
+// The demo scene
+
+double shadeStore(const shade::FrameScene& scene, const shade::ShadeOptions& o, const std::string& path, uint64_t* mps) {
+  double best = 1e30;
+  for (int r = 0; r < 3; ++r) {
+    bench::Stopwatch sw;
+    auto res = shade::shadeToStore(scene, o, path);
+    best = std::min(best, sw.seconds());
+    if (mps) *mps = res.shade.micropolygons;
+  }
+  return best;
+}
+
+RenderSpec demoSpec(std::vector<std::shared_ptr<const store::StoreReader>> stores, ShutterModel shutter, int n, uint64_t seed) {
+  RenderSpec spec;
+  for (auto& s : stores) spec.sources.push_back(Source{s, s->meta().frame});
+  spec.shutter = std::move(shutter);
+  spec.samplesX = spec.samplesY = n;
+  spec.seed = seed;
+  spec.filter = FilterSpec::parse("gaussian:2", "accuracy_study");
+  spec.progress = false;
+  return spec;
+}
+
 }  // namespace reshutter::accuracy

@@ -16,6 +16,7 @@
 #include <glm/vec3.hpp>
 
 #include "resample/resampler.h"
+#include "shade/shading_pass.h"
 #include "store/reader.h"
 #include "tests/resample_test_util.h"
 
@@ -109,11 +110,24 @@ std::vector<int> sppSides(std::vector<int> sides);
 void sweepTimeBounds(const std::string& study, std::shared_ptr<const store::StoreReader> store, const Img& ref, int seeds, int oneBoundMaxSide);
 
 // ---------------------------------------------------------------------------------------------
+// The demo scene (shading-pass studies)
+
+inline constexpr int kDW = 256, kDH = 144;
+/// Shades `scene` into `path` three times; the best time. `mps`: the micropolygons it made.
+double shadeStore(const shade::FrameScene& scene, const shade::ShadeOptions& o, const std::string& path, uint64_t* mps = nullptr);
+/// n × n samples per pixel, gaussian 2, of `stores` over `shutter`.
+resample::RenderSpec demoSpec(std::vector<std::shared_ptr<const store::StoreReader>> stores, resample::ShutterModel shutter, int n, uint64_t seed);
+
+// ---------------------------------------------------------------------------------------------
 // Studies in files of their own
 
 /// Depth of field (bench/accuracy_lens.cpp): lens samples per pixel against error and time.
 void studyLens(const std::string& out);
 /// Its headline for docs/accuracy.md (empty when the study did not run).
 std::string lensHeadline();
+/// Other cameras (bench/accuracy_views.cpp): the second eye of a stereo pair shaded once - as
+/// shaded, or re-lit for its eye - against shading it from that eye.
+void studyViews(const std::string& out);
+std::string viewsHeadline();
 
 }  // namespace reshutter::accuracy

@@ -299,30 +299,8 @@ void studyFilters(const std::string& out) {
   table("filter", "spp");
 }
 
-// Demo-scene studies (shading pass): motion factor, deep tolerance, shade once vs re-shade.
-constexpr int kDW = 256, kDH = 144;
-
-double shadeStore(const shade::FrameScene& scene, const shade::ShadeOptions& o, const std::string& path, uint64_t* mps = nullptr) {
-  double best = 1e30;
-  for (int r = 0; r < 3; ++r) {
-    bench::Stopwatch sw;
-    auto res = shade::shadeToStore(scene, o, path);
-    best = std::min(best, sw.seconds());
-    if (mps) *mps = res.shade.micropolygons;
-  }
-  return best;
-}
-
-RenderSpec demoSpec(std::vector<std::shared_ptr<const store::StoreReader>> stores, ShutterModel shutter, int n, uint64_t seed) {
-  RenderSpec spec;
-  for (auto& s : stores) spec.sources.push_back(Source{s, s->meta().frame});
-  spec.shutter = std::move(shutter);
-  spec.samplesX = spec.samplesY = n;
-  spec.seed = seed;
-  spec.filter = FilterSpec::parse("gaussian:2", "accuracy_study");
-  spec.progress = false;
-  return spec;
-}
+// Demo-scene studies (shading pass): motion factor, deep tolerance, shade once vs re-shade (the
+// scene's size and helpers: accuracy_common.h).
 
 void studyFields(const std::string& out) {
   std::fprintf(stderr, "fields: shade once, shade in time, re-shade each field\n");
@@ -604,7 +582,7 @@ void studyDeep(const std::string& out) {
 
 std::string headlines() {
   std::ostringstream h;
-  h << lensHeadline();
+  h << lensHeadline() << viewsHeadline();
   if (auto a = find("volumestep", "a ray per sample, empty space skipped", 16, 0.5), b = find("volumestep", "a ray per sample, empty space skipped", 16, 1.0),
       c = find("volumestep", "a ray per sample, empty space skipped", 16, 4.0), d = find("volumestep", "a ray per sample, whole bounds", 16, 1.0),
       e = find("volumestep", "shared rays", 16, 1.0), f = find("volumespacing", "shared rays", 16, 2.0);
@@ -664,7 +642,7 @@ std::string headlines() {
 
 int main(int argc, char** argv) {
   static const char* const kStudies[] = {"lens", "spp",    "timebounds",   "knots",         "depth", "codec",     "filter",
-                                         "fields", "motionfactor", "shadowsamples", "deep",  "volumestep"};
+                                         "fields", "motionfactor", "shadowsamples", "deep",  "volumestep", "views"};
   auto usage = [](FILE* to) {
     std::fprintf(to,
                  "usage: accuracy_study OUTDIR [--quick] [--tmp DIR] [--only a,b]\n"
@@ -672,7 +650,7 @@ int main(int argc, char** argv) {
                  "(bench/accuracy_study.sh turns them into docs/accuracy.md).\n"
                  "  --quick     fewer samples and time steps (a smoke run)\n"
                  "  --tmp DIR   scratch directory for stores (default /tmp)\n"
-                 "  --only L    comma-separated studies: spp timebounds knots depth codec filter fields lens motionfactor shadowsamples deep\n");
+                 "  --only L    comma-separated studies: spp timebounds knots depth codec filter fields lens views motionfactor shadowsamples deep volumestep\n");
   };
   if (argc >= 2 && (std::string(argv[1]) == "-h" || std::string(argv[1]) == "--help")) {
     usage(stdout);
@@ -719,6 +697,7 @@ int main(int argc, char** argv) {
     if (want("filter")) studyFilters(out);
     if (want("fields")) studyFields(out);
     if (want("lens")) studyLens(out);
+    if (want("views")) studyViews(out);
     if (want("motionfactor")) studyMotionFactor(out);
     if (want("shadowsamples")) studyShadowSamples(out);
     if (want("deep") && std::filesystem::exists(gTmp + "/acc_demo_once.mps")) studyDeep(out);

@@ -28,6 +28,7 @@ struct ShadeCommand {
   int shadingTimes = shade::ShadeOptions{}.shadingTimes;
   uint64_t primitiveBudget = shade::DiceOptions{}.maxMicropolygonsPerPrimitive;
   std::string stereo;  // BASELINE[:CONVERGENCE]
+  bool viewDependent = false;
 
   // --stereo: the pair around the main camera, recorded (and kept) like RIB Camera requests.
   void addStereoCameras(shade::FrameOptions& options) const {
@@ -61,6 +62,7 @@ struct ShadeCommand {
     opt.dice.maxMicropolygonsPerPrimitive = primitiveBudget;
     if (shadows != "on" && shadows != "off") fail("--shadows", "expected on or off, got '", shadows, "'");
     opt.shadows = shadows == "on";
+    opt.viewDependent = viewDependent;
     if (shadowSamples < 1 || shadowSamples > 4096) fail("--shadow-samples", "must be 1 to 4096");
     opt.shadowSamples = shadowSamples;
     if (!(shadowRate >= 1) || shadowRate > 1024) fail("--shadow-rate", "must be 1 to 1024");
@@ -157,6 +159,10 @@ void addShadeCommand(CLI::App& app, Registry& registry) {
   sub->add_option("--stereo", cmd->stereo,
                   "Also keep, dice for and record a stereo pair around the camera: cameras 'left' and 'right' BASELINE apart, parallel or "
                   "converged at depth CONVERGENCE (BASELINE:CONVERGENCE); `resample --camera left,right` renders both eyes from this one pass");
+  sub->add_flag("--view-dependent", cmd->viewDependent,
+                "Keep what re-lighting speculars and headlights for another eye needs (colour less its view-dependent term, the lobe's "
+                "weight, normal and roughness, each light's shadow share), so that renders from other cameras (--camera, --stereo) "
+                "re-evaluate the view-dependent term for their own eye (larger stores; error against time in docs/accuracy.md)");
   sub->add_option("--primitive-budget", cmd->primitiveBudget,
                   "Most micropolygons one primitive may take; past it (a surface edge-on under an extreme transform) its remaining pieces are diced "
                   "coarser, with a warning")

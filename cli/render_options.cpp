@@ -117,6 +117,12 @@ void RenderOptions::addTo(CLI::App* app) {
                   "Render a stereo pair around the camera (the store's, --camera's or --look-from's): views 'left' and 'right' BASELINE "
                   "apart (camera-space units), parallel, or converged at depth CONVERGENCE (BASELINE:CONVERGENCE, off-axis)")
       ->group("Camera");
+  app->add_option("--view-dependent", viewDependent,
+                  "From another camera: re-light speculars and headlights for its eye where the store carries what that needs "
+                  "(shade --view-dependent), or off: the shading camera's, as shaded (faster; error in docs/accuracy.md)")
+      ->capture_default_str()
+      ->check(CLI::IsMember({"on", "off"}))
+      ->group("Camera");
   app->add_flag("--pinhole", pinhole, "Render without depth of field, whatever lens the store's camera records")->excludes(fs)->excludes(fl)->excludes(fd)->group("Lens");
 }
 
@@ -148,6 +154,7 @@ PreviewRequest parsePreview(const std::string& p, int64_t frame) {
 }  // namespace
 
 void RenderOptions::applyTo(resample::RenderSpec& spec) const {
+  spec.viewDependent = viewDependent == "on";
   spec.lens.fstop = fstop, spec.lens.focalLength = focalLength, spec.lens.focalDistance = focusDistance, spec.lens.pinhole = pinhole;
   int nx = 4, ny = 4;
   if (!samples.empty()) {

@@ -52,6 +52,7 @@ struct RenderOptions {
   std::vector<double> lookFrom, lookAt, up;  // world space of the store's camera
   std::optional<double> fov;
   std::string stereo;  // BASELINE[:CONVERGENCE]
+  std::string viewDependent = "on";
   mutable std::shared_ptr<const resample::VolumeScene> loadedVolumes;  // loaded once, by the first applyTo()
 
   /// One image a render produced: `view` names its camera when the options ask for cameras.

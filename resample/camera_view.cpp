@@ -83,14 +83,94 @@ bool sameView(const store::Camera& primary, const store::Camera& view) {
          std::equal(a, a + 4, b) && primary.nearClip == view.nearClip && double(primary.width) * view.height == double(view.width) * primary.height;
 }
 
-CarriedStore::CarriedStore(const store::StoreReader& reader, const store::Camera& view, const store::Projector& projector)
+ViewRelighting::ViewRelighting(const store::StoreMeta& meta, const glm::dmat4& toView, bool perspective) : meta_(meta), perspective_(perspective) {
+  using VT = store::ViewTerm;
+  const store::Schema& schema = meta.schema;
+  cvi_ = schema.find(VT::kViewIndependent), back_ = schema.find(VT::kBackSide), weight_ = schema.find(VT::kWeight), normal_ = schema.find(VT::kNormal), roughness_ = schema.find(VT::kRoughness);
+  ci_ = schema.ci();
+  if (back_ < 0 || weight_ < 0 || normal_ < 0 || roughness_ < 0 || ci_ < 0) cvi_ = -1;
+  for (size_t k = 0; k < meta.lights.size(); ++k) visibility_.push_back(schema.find(VT::visibility(k)));
+  for (size_t k = 1; k < meta.shadingTimes.size(); ++k) timedCi_.push_back(schema.find(store::StoreMeta::timedName("Ci", k)));
+  const glm::dmat4 toPrimary = glm::inverse(toView);
+  eye_ = glm::dvec3(toPrimary * glm::dvec4(0, 0, 0, 1));
+  const glm::dvec3 back = glm::dmat3(toPrimary) * glm::dvec3(0, 0, -1);
+  towardsEye_ = glm::length(back) > 0 ? glm::normalize(back) : glm::dvec3(0, 0, -1);
+}
+
+uint64_t ViewRelighting::apply(const store::TilePart& primary, store::TilePart& carried) const {
+  if (!active()) return 0;
+  const auto& a = primary.attrs;
+  auto present = [&](int slot) { return slot >= 0 && size_t(slot) < a.size() && a[size_t(slot)].f.size() >= size_t(primary.numVertices) * 3; };
+  if (!present(cvi_) || !present(back_) || !present(weight_) || !present(normal_) || !present(ci_) || roughness_ >= int(a.size()) ||
+      a[size_t(roughness_)].f.size() < primary.numVertices)
+    return 0;
+  const float *cvi = a[size_t(cvi_)].f.data(), *back = a[size_t(back_)].f.data(), *weight = a[size_t(weight_)].f.data(), *normal = a[size_t(normal_)].f.data();
+  const float* roughness = a[size_t(roughness_)].f.data();
+  std::vector<const float*> visibility(visibility_.size(), nullptr);
+  for (size_t k = 0; k < visibility_.size(); ++k)
+    if (visibility_[k] >= 0 && size_t(visibility_[k]) < a.size() && a[size_t(visibility_[k])].f.size() >= primary.numVertices) visibility[k] = a[size_t(visibility_[k])].f.data();
+  float* ci = carried.attrs[size_t(ci_)].f.data();
+  uint64_t relit = 0;
+  for (uint32_t i = 0; i < primary.numVertices; ++i) {
+    const double r = roughness[i];
+    // 0: no inputs (a grid without a view-dependent term shares the part); anything but a lobe's
+    // roughness or the two markers is not this format's: the stored colour stands.
+    if (!(r > 0 || r == store::ViewTerm::kNoLobe || r == store::ViewTerm::kHeadlight)) continue;
+    const glm::dvec3 P(primary.position(0, i));
+    const glm::dvec3 toEye = perspective_ ? eye_ - P : towardsEye_;
+    if (!(glm::length(toEye) > 0)) continue;
+    const glm::dvec3 V = glm::normalize(toEye);
+    glm::dvec3 N(normal[3 * i], normal[3 * i + 1], normal[3 * i + 2]);
+    const bool backSide = glm::dot(N, V) < 0;  // faceforward for this eye
+    if (backSide) N = -N;
+    const float* rest = backSide ? back : cvi;
+    glm::dvec3 S(0.0);
+    if (r == store::ViewTerm::kNoLobe) {
+      // Only the side.
+    } else if (r == store::ViewTerm::kHeadlight) {
+      const double d = glm::dot(V, N);  // defaultsurface's headlight, N unit
+      S = glm::dvec3(d * d);
+    } else {
+      const double exponent = 1.0 / r;
+      glm::dvec3 L, Cl;
+      for (size_t k = 0; k < meta_.lights.size(); ++k) {
+        const double vis = visibility[k] ? double(visibility[k][i]) : 1.0;
+        if (vis <= 0 || !meta_.lights[k].illuminate(P, L, Cl)) continue;
+        const glm::dvec3 Ln = glm::normalize(L);
+        if (glm::dot(Ln, N) <= 0) continue;
+        const glm::dvec3 H = Ln + V;
+        const double hl = glm::length(H);
+        if (!(hl > 0)) continue;
+        const double nh = glm::dot(N, H / hl);
+        if (nh > 0) S += vis * Cl * std::pow(nh, exponent);
+      }
+    }
+    for (int c = 0; c < 3; ++c) {
+      const double value = double(rest[3 * i + c]) + double(weight[3 * i + c]) * S[c];
+      const float now = std::isfinite(value) ? float(value) : 0.f;
+      const float change = now - ci[3 * i + c];
+      ci[3 * i + c] = now;
+      for (int slot : timedCi_)
+        if (slot >= 0 && carried.attrs[size_t(slot)].f.size() >= size_t(primary.numVertices) * 3) carried.attrs[size_t(slot)].f[3 * i + c] += change;
+    }
+    ++relit;
+  }
+  return relit;
+}
+
+CarriedStore::CarriedStore(const store::StoreReader& reader, const store::Camera& view, const store::Projector& projector, bool relight)
     : reader_(reader),
       toView_(primaryToView(reader.meta().cameras[0], view)),
       entries_(store::carriedEntries(reader.entries(), toView_, store::Projector(reader.meta().cameras[0]), projector)),
-      bounds_(entries_, reader.meta().schedules, projector, reader.meta().shutterOpen, reader.meta().shutterClose) {}
+      bounds_(entries_, reader.meta().schedules, projector, reader.meta().shutterOpen, reader.meta().shutterClose),
+      relighting_(reader.meta(), toView_, view.projection == store::Projection::Perspective),
+      relight_(relight) {}
 
-std::shared_ptr<const store::TilePart> CarriedStore::part(size_t entry) const {
-  return std::make_shared<const store::TilePart>(store::carriedPart(*reader_.part(entry), toView_, reader_.meta().schema));
+std::shared_ptr<const store::TilePart> CarriedStore::part(size_t entry, uint64_t& relit) const {
+  const std::shared_ptr<const store::TilePart> primary = reader_.part(entry);
+  auto carried = std::make_shared<store::TilePart>(store::carriedPart(*primary, toView_, reader_.meta().schema));
+  if (relight_) relit += relighting_.apply(*primary, *carried);
+  return carried;
 }
 
 store::StoredLight carriedLight(const store::StoredLight& light, const glm::dmat4& toView) {

@@ -43,21 +43,45 @@ glm::dmat4 primaryToView(const store::Camera& primary, const store::Camera& view
 /// and lens may differ).
 bool sameView(const store::Camera& primary, const store::Camera& view);
 
+/// Re-lights a part's view-dependent terms for another eye (store::ViewTerm): each vertex that
+/// carries their inputs gets the colour of the side it shows the view's eye plus Kspec · S(V), V
+/// towards that eye, and its colours at later shading times ("Ci@k") the same change.
+class ViewRelighting {
+ public:
+  /// Inactive when the store carries no view-dependent inputs.
+  ViewRelighting(const store::StoreMeta& meta, const glm::dmat4& toView, bool perspective);
+  bool active() const { return cvi_ >= 0; }
+  /// `carried` is `primary` carried into the view's space; returns the vertices re-lit.
+  uint64_t apply(const store::TilePart& primary, store::TilePart& carried) const;
+
+ private:
+  const store::StoreMeta& meta_;
+  int cvi_ = -1, back_ = -1, weight_ = -1, normal_ = -1, roughness_ = -1, ci_ = -1;
+  std::vector<int> visibility_;  // per stored light: its Lvis attribute (-1: none, counted visible)
+  std::vector<int> timedCi_;     // "Ci@k" slots
+  bool perspective_ = true;
+  glm::dvec3 eye_{0.0}, towardsEye_{0.0};  // in the primary camera's space: the view's eye, or (orthographic) the direction to it
+};
+
 /// One store as another camera sees it: its index carried into the camera's space and bounded in
-/// its raster (`projector`: the output resolution).
+/// its raster (`projector`: the output resolution), its view-dependent shading re-lit for the
+/// camera's eye when asked and the store carries what that needs.
 class CarriedStore {
  public:
-  CarriedStore(const store::StoreReader& reader, const store::Camera& view, const store::Projector& projector);
+  CarriedStore(const store::StoreReader& reader, const store::Camera& view, const store::Projector& projector, bool relight);
   const glm::dmat4& toView() const { return toView_; }
   const store::ViewBounds& bounds() const { return bounds_; }
-  /// The decoded part `entry` carried into the view's space.
-  std::shared_ptr<const store::TilePart> part(size_t entry) const;
+  /// The decoded part `entry` carried into the view's space; `relit` counts the vertices whose
+  /// view-dependent term was re-evaluated.
+  std::shared_ptr<const store::TilePart> part(size_t entry, uint64_t& relit) const;
 
  private:
   const store::StoreReader& reader_;
   glm::dmat4 toView_;
   std::vector<store::TileEntry> entries_;
   store::ViewBounds bounds_;
+  ViewRelighting relighting_;
+  bool relight_;
 };
 
 /// A light the shading pass recorded (primary camera space) in the view camera's space.

@@ -57,6 +57,7 @@ std::string RenderStats::report() const {
   s << "  parts              " << partsFetched << " fetched, " << partsDecoded << " decoded, " << partsWaited
     << " waited for (another thread was decoding them)";
   if (partsCarried) s << ", " << partsCarried << " carried into the view's camera";
+  if (relitVertices) s << ", " << relitVertices << " vertices re-lit for its eye (view-dependent shading)";
   s << "\n";
   s << "  time (thread-sum)  set-up " << setupSeconds << " s, parts " << partsSeconds << " s (decode, or wait for another thread's), rasterize "
     << rasterSeconds << " s, resolve " << resolveSeconds << " s, filter " << filterSeconds << " s\n";
@@ -341,7 +342,7 @@ struct Plan {
     const store::Projector projector(atResolution(cam, win.W, win.H));
     for (const Source& src : sources) {
       const store::Camera& primary = src.store->meta().cameras[0];
-      carried.push_back(spec.camera && !sameView(primary, cam) ? std::make_unique<const CarriedStore>(*src.store, cam, projector) : nullptr);
+      carried.push_back(spec.camera && !sameView(primary, cam) ? std::make_unique<const CarriedStore>(*src.store, cam, projector, spec.viewDependent) : nullptr);
     }
     const glm::dmat4 toView = carried[0] ? carried[0]->toView() : glm::dmat4(1.0);
     // The volumes: those the caller adds, and the scene's own the store records.
@@ -571,7 +572,7 @@ double rasterizeParts(const Plan& plan, BucketRasterizer& r, ThreadState& ts) {
     }
     auto ta = Clock::now();
     if (plan.carried[si]) ++ts.stats.partsCarried;
-    ts.held.push_back(plan.carried[si] ? plan.carried[si]->part(e) : src.store->part(e));
+    ts.held.push_back(plan.carried[si] ? plan.carried[si]->part(e, ts.stats.relitVertices) : src.store->part(e));
     fetch += secondsBetween(ta, Clock::now());
     r.add(src, entry, *ts.held.back());
     queuedBytes += entry.rawSize;
@@ -737,6 +738,7 @@ void addThreadStats(const tbb::enumerable_thread_specific<ThreadState>& threads,
     total.partsSeconds += ts.stats.partsSeconds;
     total.partsFetched += ts.stats.partsFetched;
     total.partsCarried += ts.stats.partsCarried;
+    total.relitVertices += ts.stats.relitVertices;
     total.rasterSeconds += ts.stats.rasterSeconds;
     total.resolveSeconds += ts.stats.resolveSeconds;
     total.filterSeconds += ts.stats.filterSeconds;

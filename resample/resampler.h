@@ -78,6 +78,9 @@ struct RenderSpec {
   /// are carried from its primary camera's space into this camera's. Its resolution is the
   /// default output resolution.
   std::optional<store::Camera> camera;
+  /// From another camera: re-light the view-dependent shading for its eye where the store carries
+  /// what that needs (shade --view-dependent, store::ViewTerm); off: the primary camera's shading.
+  bool viewDependent = true;
 };
 
 /// The lens a render uses: the camera's with `o` applied (see RenderSpec::lens); throws Error naming
@@ -99,6 +102,7 @@ struct RenderStats {
   uint64_t partsFetched = 0, partsDecoded = 0;  // decoded: the store caches' misses during the render
   uint64_t partsWaited = 0;                     // fetches that waited for another thread's decode
   uint64_t partsCarried = 0;                    // fetches carried into another camera's space (RenderSpec::camera)
+  uint64_t relitVertices = 0;                   // vertices of carried parts whose view-dependent shading was re-lit for the view's eye
   VolumeStats volumes;
   double wallSeconds = 0;
   uint64_t samples = 0;

@@ -191,7 +191,7 @@ void glossyRow(Scene& s) {
 
 }  // namespace
 
-void buildDemoScene(Scene& s, int width, int height) {
+void buildDemoScene(Scene& s, int width, int height, double eyeX) {
   const std::string where = s.where;
   s.where = "built-in demo";
   s.format(width, height, 1.0);
@@ -202,7 +202,8 @@ void buildDemoScene(Scene& s, int width, int height) {
   s.shadingRate(1.0);
   s.frameBegin(1);
   // Camera at (0, 2.1, -9) in a left-handed, y-up world, pitched down 8° (Rotate first: the
-  // CTM is world → camera).
+  // CTM is world → camera); an eye offset moves it along its own x.
+  if (eyeX != 0) s.translate(-eyeX, 0, 0);
   s.rotate(-8, 1, 0, 0);
   s.translate(0, -2.1, 9);
   s.worldBegin();
@@ -233,10 +234,10 @@ void buildDemoScene(Scene& s, int width, int height) {
   s.where = where;
 }
 
-FrameScene demoFrame(int width, int height) {
+FrameScene demoFrame(int width, int height, double eyeX) {
   FrameScene out;
   Scene s([&](FrameScene& f) { out = std::move(f); });
-  buildDemoScene(s, width, height);
+  buildDemoScene(s, width, height, eyeX);
   out.source = "built-in demo";
   return out;
 }

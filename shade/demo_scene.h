@@ -19,9 +19,11 @@ constexpr int kDemoWidth = 640, kDemoHeight = 360;
 
 /// Issues the whole demo frame (options, WorldBegin … WorldEnd) into `scene`, whose callback
 /// receives it. Shutter [0, 1]; the framing is the same at any resolution of a 16:9 aspect.
-void buildDemoScene(Scene& scene, int width = kDemoWidth, int height = kDemoHeight);
+/// `eyeX` moves the camera that far along its own x axis (the right eye of a stereo pair: the
+/// accuracy study shades each eye on its own as the reference).
+void buildDemoScene(Scene& scene, int width = kDemoWidth, int height = kDemoHeight, double eyeX = 0);
 
 /// The demo frame as a value (for tests and benchmarks).
-FrameScene demoFrame(int width = kDemoWidth, int height = kDemoHeight);
+FrameScene demoFrame(int width = kDemoWidth, int height = kDemoHeight, double eyeX = 0);
 
 }  // namespace reshutter::shade

@@ -23,9 +23,15 @@ Var varOf(const std::string& name) {
                                                       {"Cs", Var::Cs},
                                                       {"Os", Var::Os},
                                                       {"depth", Var::depth},
-                                                      {"specular", Var::specular}};
+                                                      {"specular", Var::specular},
+                                                      {store::ViewTerm::kViewIndependent, Var::Cvi},
+                                                      {store::ViewTerm::kBackSide, Var::CviBack},
+                                                      {store::ViewTerm::kWeight, Var::Kspec},
+                                                      {store::ViewTerm::kNormal, Var::Nspec},
+                                                      {store::ViewTerm::kRoughness, Var::roughness}};
   for (const auto& [n, v] : table)
     if (name == n) return v;
+  if (name.rfind("Lvis.", 0) == 0) return Var::Lvis;
   fail("schema", "output variable '", name, "' is not computable");
 }
 
@@ -37,11 +43,28 @@ void put3(std::vector<float>& dst, size_t i, const glm::dvec3& v) { dst[i * 3 + 
 // the writer rejects it. Clamp to zero here, where the cause is known.
 glm::dvec3 finite(const glm::dvec3& c) { return {std::isfinite(c.x) ? c.x : 0.0, std::isfinite(c.y) ? c.y : 0.0, std::isfinite(c.z) ? c.z : 0.0}; }
 
+/// What the view-dependent terms' inputs need beyond the shading itself: the unit shading normal,
+/// the rest of Ci lit on each side of it, and per stored light its share reaching the vertex.
+struct ViewInputs {
+  glm::dvec3 N{0, 0, -1}, front{0.0}, back{0.0};
+  std::span<const float> visibility;
+};
+
+/// The rest of Ci (less its view-dependent term) lit on the side of `in` that unit normal N points
+/// to: the shader run with the eye placed on that side.
+glm::dvec3 litOnSide(const SurfaceShader& shader, SurfaceInput in, const glm::dvec3& N, std::span<const LitLight> lights) {
+  in.Ng = N, in.N = N, in.I = -N;
+  const SurfaceOutput so = shadeSurface(shader, in, lights);
+  return so.Ci - so.viewDependent;
+}
+
 /// Vertex i's output variables into `attrs` (parallel to the schema).
-void storeOutputs(const std::vector<Var>& vars, const DicedGrid& g, size_t i, const SurfaceInput& in, const SurfaceOutput& so,
+void storeOutputs(const ShadeContext& c, const DicedGrid& g, size_t i, const SurfaceInput& in, const SurfaceOutput& so, const ViewInputs& view,
                   std::vector<std::vector<float>>& attrs) {
+  const std::vector<Var>& vars = c.vars;
   for (size_t ai = 0; ai < vars.size(); ++ai) {
     auto& dst = attrs[ai];
+    if (dst.empty()) continue;  // absent on this grid
     switch (vars[ai]) {
       case Var::Ci: put3(dst, i, finite(so.Ci)); break;
       case Var::Oi: put3(dst, i, finite(so.Oi)); break;
@@ -57,6 +80,12 @@ void storeOutputs(const std::vector<Var>& vars, const DicedGrid& g, size_t i, co
       case Var::depth: dst[i] = float(g.P[i].z); break;
       case Var::specular: put3(dst, i, finite(so.viewDependent)); break;
       case Var::Timed: break;
+      case Var::Cvi: put3(dst, i, finite(view.front)); break;
+      case Var::CviBack: put3(dst, i, finite(view.back)); break;
+      case Var::Kspec: put3(dst, i, finite(so.specWeight)); break;
+      case Var::Nspec: put3(dst, i, finite(view.N)); break;
+      case Var::roughness: dst[i] = float(so.specRoughness); break;
+      case Var::Lvis: dst[i] = view.visibility[size_t(c.varLight[ai])]; break;
     }
   }
 }
@@ -117,8 +146,13 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
     }
   }
   attrs.resize(c.vars.size());
+  // The view-dependent term's inputs only where the shader has such a term (absent elsewhere).
+  const bool viewTerm = viewDependentKind(shader.kind);
   for (size_t ai = 0; ai < c.vars.size(); ++ai)
-    if (c.vars[ai] != Var::Timed) attrs[ai].resize(nV * size_t(store::componentCount(c.schema.attrs[ai].type)));
+    if (c.vars[ai] != Var::Timed && (viewTerm || c.vars[ai] < Var::Cvi)) attrs[ai].resize(nV * size_t(store::componentCount(c.schema.attrs[ai].type)));
+  // Per stored light, its share reaching the vertex: 1 for the grid's lights until a shadow ray
+  // says less, 0 for the others.
+  std::vector<float> visibility(c.lit.size(), 0.f);
   if (reuse && reuse->recording) reuse->visibility.assign(nV * lights.size(), 1.f), reuse->stillBlocked.clear();
   size_t ray = 0;  // reuse: the next ray of the first time's order
   std::vector<ShadowRay> rays;
@@ -135,6 +169,8 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
     return still || (!stillCastersOnly && c.shadows->occludedByMoving(r.origin, r.dir, r.tfar, time));
   };
   for (size_t i = 0; i < nV; ++i) {
+    for (const LitLight& l : lights)
+      if (l.stored < visibility.size()) visibility[l.stored] = 1.f;
     SurfaceInput in;
     in.P = g.P[i], in.N = g.N[i], in.Ng = g.Ng[i];
     in.I = c.perspective ? g.P[i] : glm::dvec3(0, 0, 1);
@@ -159,6 +195,7 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
         shadowRays += rays.size();
         const double share = double(visible) / double(n);
         shadowed[li].Cl0 *= share;
+        if (lights[li].stored < visibility.size()) visibility[lights[li].stored] = float(share);
         if (!reuse) continue;
         float& firstShare = reuse->visibility[i * lights.size() + li];
         if (reuse->recording) firstShare = float(share);
@@ -166,7 +203,7 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
       }
       if (asFirst) {  // every light as visible as at the first time: the first time's outputs
         for (size_t ai = 0; ai < c.vars.size(); ++ai) {
-          if (c.vars[ai] == Var::Timed) continue;
+          if (c.vars[ai] == Var::Timed || attrs[ai].empty()) continue;
           const size_t comps = size_t(store::componentCount(c.schema.attrs[ai].type));
           std::copy_n(&(*reuse->first)[ai][i * comps], comps, &attrs[ai][i * comps]);
         }
@@ -184,7 +221,14 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
       in.Cs *= c.textures->rgb(map, float(g.s[i]), t, f.dsdx, shader.textureFlipT ? -f.dtdx : f.dtdx, f.dsdy, shader.textureFlipT ? -f.dtdy : f.dtdy);
     }
     const SurfaceOutput so = shadeSurface(shader, in, vertexLights);
-    storeOutputs(c.vars, g, i, in, so, attrs);
+    ViewInputs view;
+    if (viewTerm && c.viewInputs) {
+      const double nl = glm::length(in.N);
+      view.N = nl > 0 ? in.N / nl : glm::dvec3(0, 0, -1);
+      view.front = litOnSide(shader, in, view.N, vertexLights), view.back = litOnSide(shader, in, -view.N, vertexLights);
+      view.visibility = visibility;
+    }
+    storeOutputs(c, g, i, in, so, view, attrs);
   }
 }
 

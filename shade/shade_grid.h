@@ -23,7 +23,9 @@
 namespace reshutter::shade::pass {
 
 // Timed: "Ci@k" / "Oi@k", filled by shading at the other times (shadeInTime()).
-enum class Var : uint8_t { Ci, Oi, P, N, Ng, s, t, u, v, Cs, Os, depth, specular, Timed };
+/// What a schema attribute holds. Cvi .. Lvis: the view-dependent term's inputs
+/// (ShadeOptions::viewDependent; store/model.h names them), on grids whose shader has one.
+enum class Var : uint8_t { Ci, Oi, P, N, Ng, s, t, u, v, Cs, Os, depth, specular, Timed, Cvi, CviBack, Kspec, Nspec, roughness, Lvis };
 Var varOf(const std::string& name);
 
 // What the pipeline carries: grids shaded and ready to send.
@@ -47,6 +49,7 @@ struct ShadeContext {
   const SplitScene& split;
   const store::Schema& schema;
   std::vector<Var> vars;      // what each schema attribute holds
+  std::vector<int> varLight;  // per schema attribute: for Var::Lvis, the stored light it is the visibility of
   std::vector<LitLight> lit;  // every light, resolved once at the shading time
   double shadeAt;
   double nearClip;
@@ -66,6 +69,7 @@ struct ShadeContext {
   // Per attribute carried in time (Ci, Oi, output variables): its schema slot at each shading
   // time ([0]: the attribute itself, [k]: "name@k").
   std::vector<std::vector<int>> timedSlots{};
+  bool viewInputs = false;  // the schema holds the view-dependent terms' inputs (Var::Cvi ...)
 };
 
 /// Shading in time for a grid whose shading can change only through moving casters' shadows (it

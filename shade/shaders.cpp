@@ -217,6 +217,7 @@ SurfaceOutput shadeSurface(const SurfaceShader& s, const SurfaceInput& in, std::
       glm::dvec3 spec = in.Os * in.Cs * s.Ks * specular(in.P, Nf, V, s.roughness, lights);
       out.Ci = in.Os * in.Cs * s.Ka * ambient(lights) + spec;
       out.viewDependent = spec;
+      out.specWeight = in.Os * in.Cs * s.Ks, out.specRoughness = std::max(s.roughness, 1e-6);
       break;
     }
     case SurfaceKind::Plastic:
@@ -226,6 +227,7 @@ SurfaceOutput shadeSurface(const SurfaceShader& s, const SurfaceInput& in, std::
       glm::dvec3 spec = in.Os * s.specularColor * s.Ks * specular;
       out.Ci = in.Os * in.Cs * (s.Ka * ambient(lights) + s.Kd * diff) + spec;
       out.viewDependent = spec;
+      out.specWeight = in.Os * s.specularColor * s.Ks, out.specRoughness = std::max(s.roughness, 1e-6);
       break;
     }
     case SurfaceKind::DefaultSurface: {
@@ -235,6 +237,7 @@ SurfaceOutput shadeSurface(const SurfaceShader& s, const SurfaceInput& in, std::
       glm::dvec3 head = in.Os * in.Cs * s.Kd * d;
       out.Ci = in.Os * in.Cs * s.Ka + head;
       out.viewDependent = head;
+      out.specWeight = in.Os * in.Cs * s.Kd, out.specRoughness = -1;
       break;
     }
   }

@@ -36,6 +36,7 @@ struct LitLight {
   // spanned by the half-extent vectors (sphere, disk: radius vectors), or, for a distant light,
   // directions within its angular radius.
   bool shadows = false;
+  uint32_t stored = 0;  // its index among the frame's lights (StoreMeta::lights)
   LightShape shape = LightShape::Point;
   glm::dvec3 halfU{0.0}, halfV{0.0};
   double tanHalfAngle = 0;
@@ -65,12 +66,22 @@ struct SurfaceInput {
 struct SurfaceOutput {
   glm::dvec3 Ci{0.0}, Oi{1.0};
   glm::dvec3 viewDependent{0.0};  // the part of Ci that depends on I (included in Ci)
+  /// What re-evaluating viewDependent for another eye needs: viewDependent = specWeight ·
+  /// Σ visible Cl · max(0, Nf·H)^(1/specRoughness) over the lights (specular()), or, for
+  /// defaultsurface's headlight (specRoughness -1), specWeight · (V·Nf)²; -2: no such term
+  /// (store::ViewTerm).
+  glm::dvec3 specWeight{0.0};
+  double specRoughness = -2;
 };
 
 SurfaceOutput shadeSurface(const SurfaceShader& shader, const SurfaceInput& in, std::span<const LitLight> lights);
 
 /// faceforward(normalize(N), I), the side Ng decides: the normal the shaders light with.
 glm::dvec3 facingNormal(const SurfaceInput& in);
+
+/// Whether a surface of this kind has a term that depends on the eye (SurfaceOutput::specWeight).
+/// Diffuse terms count: they are lit on the side facing the eye (faceforward).
+constexpr bool viewDependentKind(SurfaceKind k) { return k != SurfaceKind::Constant; }
 
 /// Whether a surface of this kind reflects light sources (so their shadows can show on it).
 constexpr bool usesLights(SurfaceKind k) { return k != SurfaceKind::Constant && k != SurfaceKind::DefaultSurface; }

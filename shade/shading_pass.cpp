@@ -80,6 +80,25 @@ store::StoreMeta storeMeta(const FrameScene& scene, const ShadeOptions& o) {
   for (const auto& name : scene.options.outputs)
     for (const auto& v : knownOutputVars())
       if (v.name == name) m.schema.attrs.push_back({name, v.type, store::AttrRate::Vertex, store::AttrCodec::Lossless});
+  if (o.viewDependent) {
+    using VT = store::ViewTerm;
+    for (auto [name, type] : {std::pair{VT::kViewIndependent, store::AttrType::Color},
+                              {VT::kBackSide, store::AttrType::Color},
+                              {VT::kWeight, store::AttrType::Color},
+                              {VT::kNormal, store::AttrType::Normal},
+                              {VT::kRoughness, store::AttrType::Float}})
+      m.schema.attrs.push_back({name, type, store::AttrRate::Vertex, store::AttrCodec::Lossless});
+    size_t withVisibility = 0;
+    for (size_t li = 0; li < scene.lights.size(); ++li) {
+      if (scene.lights[li].kind == LightKind::Ambient) continue;
+      if (withVisibility++ == VT::kMaxLights) {
+        warn(cat("--view-dependent: the scene has more than ", VT::kMaxLights,
+                 " lights; the others' shadows and light links are not kept (other cameras see them unshadowed)"));
+        break;
+      }
+      m.schema.attrs.push_back({VT::visibility(li), store::AttrType::Float, store::AttrRate::Vertex, store::AttrCodec::Lossless});
+    }
+  }
   if (iv.times.size() > 1) {
     // Colour, opacity and every output variable that can change with time (not the parametric
     // s t u v) at the other shading times, declared as at the first - as many as the store's
@@ -88,6 +107,7 @@ store::StoreMeta storeMeta(const FrameScene& scene, const ShadeOptions& o) {
     const std::vector<store::AttrDecl> first = m.schema.attrs;
     for (const store::AttrDecl& a : first) {
       if (a.name == "s" || a.name == "t" || a.name == "u" || a.name == "v") continue;
+      if (varOf(a.name) >= Var::Cvi) continue;  // the view-dependent term's inputs: at the first time
       if (m.schema.attrs.size() + iv.times.size() - 1 > store::Schema::kMaxAttributes) {
         warnOnce(cat("timed-aov:", a.name), cat("output variable '", a.name, "' is stored at the first shading time only (a store holds at most ",
                                                 store::Schema::kMaxAttributes, " attributes)"));
@@ -398,17 +418,21 @@ ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::Gri
   stats.shadeAt = iv.shadeAt;
 
   const SplitScene split = splitScene(scene, iv, cam, o.dice, stats);
-  ShadeContext context{scene, split, meta.schema, {}, {}, iv.shadeAt, cam.nearClip, cam.projection == store::Projection::Perspective};
+  ShadeContext context{scene, split, meta.schema, {}, {}, {}, iv.shadeAt, cam.nearClip, cam.projection == store::Projection::Perspective};
   context.lit.reserve(scene.lights.size());
-  for (const auto& l : scene.lights) context.lit.push_back(resolveLight(l, iv.shadeAt));
-  for (const auto& a : meta.schema.attrs) context.vars.push_back(varOf(a.name));
+  for (const auto& l : scene.lights) context.lit.push_back(resolveLight(l, iv.shadeAt)), context.lit.back().stored = uint32_t(context.lit.size() - 1);
+  for (const auto& a : meta.schema.attrs) {
+    context.vars.push_back(varOf(a.name));
+    context.varLight.push_back(context.vars.back() == Var::Lvis ? std::stoi(a.name.substr(a.name.find('.') + 1)) : -1);
+    context.viewInputs = context.viewInputs || context.vars.back() == Var::Cvi;
+  }
   if (iv.times.size() > 1) {
     context.times = iv.times;
     context.tolerance = *o.timeTolerance;
     context.ci = meta.schema.ci(), context.oi = meta.schema.oi();
     context.litAt.resize(iv.times.size());
     for (size_t k = 1; k < iv.times.size(); ++k)
-      for (const auto& l : scene.lights) context.litAt[k].push_back(resolveLight(l, iv.times[k]));
+      for (const auto& l : scene.lights) context.litAt[k].push_back(resolveLight(l, iv.times[k])), context.litAt[k].back().stored = uint32_t(context.litAt[k].size() - 1);
     for (size_t ai = 0; ai < meta.schema.attrs.size(); ++ai) {
       const std::string& name = meta.schema.attrs[ai].name;
       if (store::StoreMeta::timedIndex(name) || meta.schema.find(store::StoreMeta::timedName(name, 1)) < 0) continue;

@@ -46,6 +46,10 @@ struct ShadeOptions {
   /// re-sampler then blends each sample's colour at its own time.
   std::optional<double> timeTolerance;
   int shadingTimes = 5;
+  /// Keep what re-evaluating the view-dependent term for another eye needs (store::ViewTerm),
+  /// on the grids whose shader has one: a render from another camera then lights speculars and
+  /// headlights for its own eye. Off: other cameras see the primary camera's shading.
+  bool viewDependent = false;
 };
 
 struct ShadeStats {

@@ -155,6 +155,27 @@ struct StoredVolume {
   bool operator==(const StoredVolume&) const = default;
 };
 
+/// The inputs of the shading's view-dependent terms, which a store carries per vertex when it was
+/// shaded for re-evaluation (`shade --view-dependent`) on the grids whose shader has one (a
+/// specular lobe, a headlight, or a diffuse term lit on the side facing the eye), so that a render
+/// from another camera re-evaluates them for its own eye: with N = ±Nspec facing the eye,
+/// Ci = (Cvi or CviBack, the side N is) + Kspec · S(V), where S(V) = Σ_k Lvis.k · Cl_k ·
+/// max(0, N·H_k)^(1 / specRoughness) over the stored lights (H_k the half vector), or for
+/// specRoughness -1 (defaultsurface's headlight) S(V) = (V·N)², or 0 for specRoughness -2 (no
+/// lobe: only the side). specRoughness 0 marks a vertex without these inputs (a grid sharing the
+/// part with one that has them), whose Ci stands. Lvis.k is light k's share reaching the vertex
+/// (its shadows, and 0 where the light does not light it).
+struct ViewTerm {
+  static constexpr const char* kViewIndependent = "Cvi";  // colour: the rest of Ci, lit on the side Nspec points to
+  static constexpr const char* kBackSide = "CviBack";     // colour: the same lit on the other side
+  static constexpr const char* kWeight = "Kspec";         // colour
+  static constexpr const char* kNormal = "Nspec";         // normal: the unit shading normal
+  static constexpr const char* kRoughness = "specRoughness";
+  static constexpr double kHeadlight = -1, kNoLobe = -2;  // specRoughness values besides a lobe's roughness
+  static constexpr size_t kMaxLights = 16;  // lights with a visibility attribute (the others count as visible)
+  static std::string visibility(size_t light) { return "Lvis." + std::to_string(light); }
+};
+
 struct StoreMeta {
   int64_t frame = 1;
   Rational fps{24, 1};
