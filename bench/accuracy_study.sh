@@ -81,7 +81,7 @@ EOF
 | ![deep](accuracy/deep.png) | ![time bounds](accuracy/timebounds.png) |
 | ![shadow samples](accuracy/shadowsamples.png) | ![shadow rate](accuracy/shadowrate.png) |
 | ![volume step](accuracy/volumestep.png) | ![volume ray spacing](accuracy/volumespacing.png) |
-| ![depth of field](accuracy/lens.png) | |
+| ![depth of field](accuracy/lens.png) | ![other cameras](accuracy/views.png) |
 
 ## Tables
 

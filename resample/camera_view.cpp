@@ -7,6 +7,8 @@
 #include <glm/geometric.hpp>
 #include <glm/mat3x3.hpp>
 
+#include <tbb/parallel_for.h>
+
 #include "common/error.h"
 
 namespace reshutter::resample {
@@ -171,6 +173,82 @@ std::shared_ptr<const store::TilePart> CarriedStore::part(size_t entry, uint64_t
   auto carried = std::make_shared<store::TilePart>(store::carriedPart(*primary, toView_, reader_.meta().schema));
   if (relight_) relit += relighting_.apply(*primary, *carried);
   return carried;
+}
+
+namespace {
+
+// Whether the segment a → b meets the rectangle [x0, x1] × [y0, y1] (Liang-Barsky).
+bool segmentMeetsRect(glm::dvec2 a, glm::dvec2 b, double x0, double y0, double x1, double y1) {
+  double t0 = 0, t1 = 1;
+  const glm::dvec2 d = b - a;
+  const double p[4] = {-d.x, d.x, -d.y, d.y}, q[4] = {a.x - x0, x1 - a.x, a.y - y0, y1 - a.y};
+  for (int i = 0; i < 4; ++i) {
+    if (p[i] == 0) {
+      if (q[i] < 0) return false;
+      continue;
+    }
+    const double r = q[i] / p[i];
+    if (p[i] < 0) t0 = std::max(t0, r);
+    else t1 = std::min(t1, r);
+    if (t0 > t1) return false;
+  }
+  return true;
+}
+
+}  // namespace
+
+std::vector<uint8_t> unseenPixels(const store::StoreReader& reader, const store::Camera& view, const glm::dmat4& toView, int width, int height) {
+  std::vector<uint8_t> unseen(size_t(width) * size_t(height), 0);
+  const store::StoreMeta& meta = reader.meta();
+  const store::Projector vp(view);
+  if (!vp.perspective || meta.cameras.empty()) return unseen;
+  // The depths the store's parts reach, along the view's rays: bounded by the primary's depths
+  // carried (a rigid move changes depths by at most the distance between the eyes).
+  const glm::dmat4 toPrimary = glm::inverse(toView);
+  const double shift = glm::length(glm::dvec3(toPrimary[3]));
+  double lo = INFINITY, hi = 0;
+  for (const store::TileEntry& e : reader.entries())
+    for (const store::KnotBounds& kb : e.knots) lo = std::min(lo, double(kb.camera[2])), hi = std::max(hi, double(kb.camera[5]));
+  if (!(hi > 0) || !std::isfinite(hi)) return unseen;
+  const double zFar = hi + shift;
+  lo = std::max(view.nearClip, lo - shift);
+  // Every recorded camera's frame, and the primary's kept bounds.
+  struct Frame {
+    glm::dmat4 fromPrimary;
+    store::Projector proj;
+    double x0, y0, x1, y1;
+  };
+  std::vector<Frame> frames;
+  for (size_t c = 0; c < meta.cameras.size(); ++c) {
+    const store::Camera& cam = meta.cameras[c];
+    frames.push_back({cam.worldToCamera * glm::inverse(meta.cameras[0].worldToCamera), store::Projector(cam), 0, 0, double(cam.width), double(cam.height)});
+  }
+  store::RasterRect kept;
+  for (size_t i = 0; i < reader.entries().size(); ++i) kept.extend(reader.bounds(i, meta.shutterOpen, meta.shutterClose));
+  if (!kept.empty) frames.push_back({glm::dmat4(1.0), store::Projector(meta.cameras[0]), kept.x0, kept.y0, kept.x1, kept.y1});
+  tbb::parallel_for(0, height, [&](int y) {
+    for (int x = 0; x < width; ++x) {
+      const glm::dvec2 r(x + 0.5, y + 0.5);
+      const glm::dvec3 a(toPrimary * glm::dvec4(vp.unproject(r, lo), 1.0)), b(toPrimary * glm::dvec4(vp.unproject(r, zFar), 1.0));
+      bool seen = false;
+      for (const Frame& f : frames) {
+        glm::dvec3 pa(f.fromPrimary * glm::dvec4(a, 1.0)), pb(f.fromPrimary * glm::dvec4(b, 1.0));
+        if (f.proj.perspective) {
+          // The part of the segment in front of this camera's near plane.
+          const double near = f.proj.nearClip;
+          if (pa.z < near && pb.z < near) continue;
+          if (pa.z < near) pa += (pb - pa) * ((near - pa.z) / (pb.z - pa.z));
+          if (pb.z < near) pb += (pa - pb) * ((near - pb.z) / (pa.z - pb.z));
+        }
+        if (segmentMeetsRect(f.proj.project(pa), f.proj.project(pb), f.x0, f.y0, f.x1, f.y1)) {
+          seen = true;
+          break;
+        }
+      }
+      unseen[size_t(y) * size_t(width) + size_t(x)] = !seen;
+    }
+  });
+  return unseen;
 }
 
 store::StoredLight carriedLight(const store::StoredLight& light, const glm::dmat4& toView) {

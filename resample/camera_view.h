@@ -84,6 +84,13 @@ class CarriedStore {
   bool relight_;
 };
 
+/// Per pixel of a `width` × `height` image from `view` (at that resolution; `toView` carries the
+/// store's primary camera space into it): 1 where the pixel's centre ray, between the depths the
+/// store's parts reach, never enters the frame of a camera the store records nor the raster
+/// bounds of what it kept - no shading camera looked there, so the store cannot hold what is
+/// there. Orthographic views: all 0 (not judged).
+std::vector<uint8_t> unseenPixels(const store::StoreReader& reader, const store::Camera& view, const glm::dmat4& toView, int width, int height);
+
 /// A light the shading pass recorded (primary camera space) in the view camera's space.
 store::StoredLight carriedLight(const store::StoredLight& light, const glm::dmat4& toView);
 

@@ -59,6 +59,9 @@ std::string RenderStats::report() const {
   if (partsCarried) s << ", " << partsCarried << " carried into the view's camera";
   if (relitVertices) s << ", " << relitVertices << " vertices re-lit for its eye (view-dependent shading)";
   s << "\n";
+  if (unseenJudged)
+    s << "  unseen             " << unseenSamples << " samples (" << std::setprecision(2) << (samples ? 100.0 * double(unseenSamples) / double(samples) : 0.0)
+      << std::setprecision(3) << " %) found nothing where no camera the store records looked: what is there, the store cannot hold\n";
   s << "  time (thread-sum)  set-up " << setupSeconds << " s, parts " << partsSeconds << " s (decode, or wait for another thread's), rasterize "
     << rasterSeconds << " s, resolve " << resolveSeconds << " s, filter " << filterSeconds << " s\n";
   s << "  wall               " << wallSeconds << " s";
@@ -345,6 +348,10 @@ struct Plan {
       carried.push_back(spec.camera && !sameView(primary, cam) ? std::make_unique<const CarriedStore>(*src.store, cam, projector, spec.viewDependent) : nullptr);
     }
     const glm::dmat4 toView = carried[0] ? carried[0]->toView() : glm::dmat4(1.0);
+    // Where no shading camera looked: unless the view is one of the store's own cameras.
+    const auto& recorded = meta0.cameras;
+    if (carried[0] && std::none_of(recorded.begin(), recorded.end(), [&](const store::Camera& c) { return sameView(c, cam); }))
+      unseen = unseenPixels(*sources[0].store, atResolution(cam, win.W, win.H), toView, win.W, win.H);
     // The volumes: those the caller adds, and the scene's own the store records.
     volumes = spec.volumes;
     if (!meta0.volumes.empty() && spec.sceneVolumes) {
@@ -388,6 +395,7 @@ struct Plan {
   const std::vector<Bucket> buckets;
   /// Per source: its parts carried into `cam` when its primary camera stands elsewhere, else null.
   std::vector<std::unique_ptr<const CarriedStore>> carried;
+  std::vector<uint8_t> unseen;  // per output pixel (W × H), from another camera: 1 where no shading camera looked
   int margin = 0;
   const AovLayout aovLayout{aovs};  // where each output variable lies among ResolvedSamples::aov / aovU
   RasterOptions rasterOptions;
@@ -695,6 +703,19 @@ class BucketFilter {
 };
 
 /// One bucket, start to end: its pixels of the flat (and deep) image, its figures in ts.stats.
+/// The bucket's samples that found nothing in pixels no shading camera looked into.
+uint64_t unseenSamples(const Plan& plan, const Bucket& bk, const Region& rg, const ResolvedSamples& rs) {
+  uint64_t n = 0;
+  for (int py = bk.y0; py < bk.y1; ++py)
+    for (int px = bk.x0; px < bk.x1; ++px) {
+      if (!plan.unseen[size_t(py) * size_t(plan.win.W) + size_t(px)]) continue;
+      const size_t first = (size_t(py - rg.y0) * size_t(rg.w) + size_t(px - rg.x0)) * size_t(plan.N);
+      // A sample that found nothing resolves to the far plane's depth.
+      for (int i = 0; i < plan.N; ++i) n += !(rs.z[first + size_t(i)] < plan.view.farClip);
+    }
+  return n;
+}
+
 void renderBucket(const Plan& plan, const std::vector<std::vector<int>>& aovImageChannel, size_t b, ThreadState& ts, PartUses& uses, FlatImage& img,
                   DeepFormer* deepFormer) {
   const Bucket& bk = plan.buckets[b];
@@ -708,6 +729,7 @@ void renderBucket(const Plan& plan, const std::vector<std::vector<int>>& aovImag
   uses.done(plan, ts.parts);
   const auto t2 = Clock::now();
   const ResolvedSamples& rs = r.resolve();
+  if (!plan.unseen.empty()) ts.stats.unseenSamples += unseenSamples(plan, bk, rg, rs);
   const auto t3 = Clock::now();
   BucketFilter(plan, aovImageChannel, rg, rs, ts, img).run(bk);
   // Deep output forms its samples from r.visitFragments() (resample/deep.h).
@@ -739,6 +761,7 @@ void addThreadStats(const tbb::enumerable_thread_specific<ThreadState>& threads,
     total.partsFetched += ts.stats.partsFetched;
     total.partsCarried += ts.stats.partsCarried;
     total.relitVertices += ts.stats.relitVertices;
+    total.unseenSamples += ts.stats.unseenSamples;
     total.rasterSeconds += ts.stats.rasterSeconds;
     total.resolveSeconds += ts.stats.resolveSeconds;
     total.filterSeconds += ts.stats.filterSeconds;
@@ -816,6 +839,7 @@ RenderResult render(const RenderSpec& spec) {
   result.stats.wallSeconds = secondsBetween(wallStart, Clock::now());
   addCacheStats(cacheBefore, result.stats);
   result.provenance = provenanceOf(plan);
+  result.stats.unseenJudged = !plan.unseen.empty();
   return result;
 }
 

@@ -103,6 +103,10 @@ struct RenderStats {
   uint64_t partsWaited = 0;                     // fetches that waited for another thread's decode
   uint64_t partsCarried = 0;                    // fetches carried into another camera's space (RenderSpec::camera)
   uint64_t relitVertices = 0;                   // vertices of carried parts whose view-dependent shading was re-lit for the view's eye
+  /// From another camera: samples that found nothing where no camera the store records looked
+  /// (camera_view.h unseenPixels): what is there, the store cannot hold.
+  uint64_t unseenSamples = 0;
+  bool unseenJudged = false;  // unseenSamples was counted (a camera the store does not record)
   VolumeStats volumes;
   double wallSeconds = 0;
   uint64_t samples = 0;

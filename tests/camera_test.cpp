@@ -299,6 +299,20 @@ TEST(CameraRib, ShadedOnceForTwoCamerasTheSecondRendersAsShadingFromIt) {
   const double noise = rmseRgba(direct, directSeed), err = rmseRgba(fromStore, direct);
   EXPECT_GT(noise, 0.0);
   EXPECT_LT(err, 2.0 * noise + 1e-3) << "shaded once for two cameras vs shaded from the second: RMSE " << err << ", two seeds " << noise;
+
+  // What no shading camera looked at is reported: nothing for a recorded camera; for one at the
+  // primary's eye looking back, away from the scene, every sample.
+  const CommandResult recorded = runReshutter("resample " + dir.path("both.mps") + " -o " + dir.path("x.exr") + " --camera right --stats");
+  EXPECT_EQ(recorded.out.find("unseen"), std::string::npos) << "a recorded camera's samples were judged: " << recorded.out;
+  const CommandResult away = runReshutter("resample " + dir.path("both.mps") + " -o " + dir.path("x.exr") + " --look-from 0,0,0 --look-at 0,0,-1 --stats");
+  ASSERT_EQ(away.exitCode, 0) << away.err;
+  EXPECT_EQ(numberBefore(away.out, " samples ("), uint64_t(96 * 64 * 16)) << away.out;
+  // A camera beside the primary looking the same way: the strip beyond the primary's frame.
+  const CommandResult beside = runReshutter("resample " + dir.path("both.mps") + " -o " + dir.path("x.exr") + " --look-from -1,0,0 --look-at -1,0,1 --stats");
+  ASSERT_EQ(beside.exitCode, 0) << beside.err;
+  const uint64_t strip = numberBefore(beside.out, " samples (");
+  EXPECT_GT(strip, 0u) << beside.out;
+  EXPECT_LT(double(strip), 0.5 * double(96 * 64 * 16)) << beside.out;
 }
 
 TEST(CameraBounds, CarriedBoundsHoldEveryCarriedVertex) {
