@@ -41,23 +41,17 @@ void studyViews(const std::string& out) {
   const ShutterModel shutter = ShutterModel::progressive(F, F + 1);
   const int refSide = gQuick ? 8 : 24;
   const Img ref = toImg(render(demoSpec({sRight}, shutter, refSide, 99)));
+  // The right eye from a store shaded once for both eyes: rendered through its recorded camera.
+  auto fromStore = [&](const std::shared_ptr<const store::StoreReader>& st, int n) {
+    return [&, st, n](uint64_t seed) {
+      RenderSpec spec = demoSpec({st}, shutter, n, seed);
+      spec.camera = st->meta().cameras.at(1);
+      return spec;
+    };
+  };
   for (int n : sppSides({1, 2, 4, 8})) {
-    measure(
-        "views", "shade once, as shaded", n * n,
-        [&](uint64_t seed) {
-          RenderSpec spec = demoSpec({sOnce}, shutter, n, seed);
-          spec.camera = sOnce->meta().cameras.at(1);
-          return spec;
-        },
-        ref, 3, gShadeOnce);
-    measure(
-        "views", "shade once, re-lit for the eye (--view-dependent)", n * n,
-        [&](uint64_t seed) {
-          RenderSpec spec = demoSpec({sInputs}, shutter, n, seed);
-          spec.camera = sInputs->meta().cameras.at(1);
-          return spec;
-        },
-        ref, 3, gShadeInputs);
+    measure("views", "shade once, as shaded", n * n, fromStore(sOnce, n), ref, 3, gShadeOnce);
+    measure("views", "shade once, re-lit for the eye (--view-dependent)", n * n, fromStore(sInputs, n), ref, 3, gShadeInputs);
     measure(
         "views", "re-shade each eye", n * n, [&](uint64_t seed) { return demoSpec({sRight}, shutter, n, seed); }, ref, 3, gShadeEach);
   }

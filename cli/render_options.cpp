@@ -11,6 +11,7 @@
 #include "common/frame_range.h"
 #include "common/log.h"
 #include "resample/camera_view.h"
+#include "shade/rib_scene.h"
 #include "resample/simd.h"
 
 namespace reshutter::cli {
@@ -113,6 +114,11 @@ void RenderOptions::addTo(CLI::App* app) {
   lf->needs(la), la->needs(lf);
   app->add_option("--up", up, "... with X,Y,Z towards the top of the image (default 0,1,0)")->delimiter(',')->expected(3)->needs(lf)->group("Camera");
   app->add_option("--fov", fov, "... with this field of view in degrees (default: the store camera's)")->needs(lf)->group("Camera");
+  app->add_option("--camera-rib", cameraRib,
+                  "Render from the camera a RIB file describes (Format, Projection, ScreenWindow, Clipping, DepthOfField and the "
+                  "transform before WorldBegin - a camera snippet, or a whole scene whose camera moved), in the store camera's world")
+      ->excludes(lf)
+      ->group("Camera");
   app->add_option("--stereo", stereo,
                   "Render a stereo pair around the camera (the store's, --camera's or --look-from's): views 'left' and 'right' BASELINE "
                   "apart (camera-space units), parallel, or converged at depth CONVERGENCE (BASELINE:CONVERGENCE, off-axis)")
@@ -230,6 +236,10 @@ std::vector<store::Camera> RenderOptions::viewCameras(const store::StoreMeta& me
     if (!views.empty()) fail("--look-from", "give either --camera or --look-from");
     const glm::dvec3 u = up.empty() ? glm::dvec3(0, 1, 0) : glm::dvec3(up[0], up[1], up[2]);
     views.push_back(resample::lookAtCamera(meta.cameras[0], {lookFrom[0], lookFrom[1], lookFrom[2]}, {lookAt[0], lookAt[1], lookAt[2]}, u, fov));
+  }
+  if (!cameraRib.empty()) {
+    if (!views.empty()) fail("--camera-rib", "give one of --camera, --look-from and --camera-rib");
+    views.push_back(shade::readRibCamera(cameraRib));
   }
   if (!stereo.empty()) {
     if (views.size() > 1) fail("--stereo", "a stereo pair is made around one camera, not ", views.size());

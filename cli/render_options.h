@@ -51,7 +51,8 @@ struct RenderOptions {
   std::vector<std::string> cameras;          // --camera NAME[,NAME...]
   std::vector<double> lookFrom, lookAt, up;  // world space of the store's camera
   std::optional<double> fov;
-  std::string stereo;  // BASELINE[:CONVERGENCE]
+  std::string cameraRib;  // a RIB file describing the camera
+  std::string stereo;     // BASELINE[:CONVERGENCE]
   std::string viewDependent = "on";
   mutable std::shared_ptr<const resample::VolumeScene> loadedVolumes;  // loaded once, by the first applyTo()
 

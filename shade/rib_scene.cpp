@@ -3,6 +3,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <filesystem>
+#include <optional>
 
 #include <glm/gtc/type_ptr.hpp>
 
@@ -542,6 +544,22 @@ void readRibScene(const std::string& path, Scene& scene, double cullMargin) {
   RibSceneHandler handler(scene, cullMargin);
   rib::Reader reader;
   reader.parseFile(path, handler);
+}
+
+store::Camera readRibCamera(const std::string& path) {
+  std::optional<store::Camera> camera;
+  Scene scene([&](FrameScene& frame) {
+    if (!camera) camera = frame.options.camera;
+  });
+  readRibScene(path, scene);
+  if (!camera) {
+    if (scene.inWorld()) fail(path, "WorldBegin without WorldEnd");
+    scene.worldBegin();
+    scene.worldEnd();
+  }
+  if (!camera) fail(path, "no camera: the file describes none");
+  camera->name = std::filesystem::path(path).stem().string();
+  return *camera;
 }
 
 }  // namespace reshutter::shade

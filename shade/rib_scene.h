@@ -33,4 +33,9 @@ class RibSceneHandler final : public rib::RequestHandler {
 /// Parses `path` into `scene` (whose callback receives each WorldEnd's frame).
 void readRibScene(const std::string& path, Scene& scene, double cullMargin = 0.1);
 
+/// The camera a RIB file describes - Format, Projection, ScreenWindow, Clipping, DepthOfField and
+/// the transform before its first WorldBegin, as WorldBegin freezes them (a snippet without one is
+/// read as if it came next), named after the file's stem. Throws Error naming the file.
+store::Camera readRibCamera(const std::string& path);
+
 }  // namespace reshutter::shade

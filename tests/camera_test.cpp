@@ -300,6 +300,16 @@ TEST(CameraRib, ShadedOnceForTwoCamerasTheSecondRendersAsShadingFromIt) {
   EXPECT_GT(noise, 0.0);
   EXPECT_LT(err, 2.0 * noise + 1e-3) << "shaded once for two cameras vs shaded from the second: RMSE " << err << ", two seeds " << noise;
 
+  // The same camera read from a RIB snippet: the same image, bit for bit.
+  std::ofstream(dir.path("right_cam.rib")) << head << turn;
+  const resample::FlatImage fromSnippet = renderTo("both.mps", "snippet.exr", "--camera-rib " + dir.path("right_cam.rib"));
+  EXPECT_EQ(fromSnippet.find("R")->f, fromStore.find("R")->f);
+  EXPECT_EQ(fromSnippet.find("A")->f, fromStore.find("A")->f);
+  const CommandResult missing = runReshutter("resample " + dir.path("both.mps") + " -o " + dir.path("y.exr") + " --camera-rib " + dir.path("none.rib"));
+  EXPECT_NE(missing.exitCode, 0);
+  EXPECT_NE(missing.err.find("none.rib"), std::string::npos) << missing.err;
+  EXPECT_FALSE(std::filesystem::exists(dir.path("y.exr")));
+
   // What no shading camera looked at is reported: nothing for a recorded camera; for one at the
   // primary's eye looking back, away from the scene, every sample.
   const CommandResult recorded = runReshutter("resample " + dir.path("both.mps") + " -o " + dir.path("x.exr") + " --camera right --stats");
