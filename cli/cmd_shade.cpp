@@ -27,16 +27,21 @@ struct ShadeCommand {
   std::string shadeInTime = "off";
   int shadingTimes = shade::ShadeOptions{}.shadingTimes;
   uint64_t primitiveBudget = shade::DiceOptions{}.maxMicropolygonsPerPrimitive;
-  std::string stereo;  // BASELINE[:CONVERGENCE]
+  std::string stereo;                   // BASELINE[:CONVERGENCE]
+  std::vector<std::string> addCameras;  // RIB files, each describing a camera to keep and record
   bool viewDependent = false;
 
   // --stereo: the pair around the main camera, recorded (and kept) like RIB Camera requests.
   void addStereoCameras(shade::FrameOptions& options) const {
-    for (const store::Camera& eye : resample::stereoPair(options.camera, stereo, "--stereo")) {
-      auto& cams = options.namedCameras;
-      cams.erase(std::remove_if(cams.begin(), cams.end(), [&](const store::Camera& c) { return c.name == eye.name; }), cams.end());
-      cams.push_back(eye);
-    }
+    for (const store::Camera& eye : resample::stereoPair(options.camera, stereo, "--stereo")) addCamera(options, eye);
+  }
+
+  // Records `cam` with the scene's named cameras, replacing one of the same name.
+  static void addCamera(shade::FrameOptions& options, const store::Camera& cam) {
+    if (cam.name == "world" || cam.name == "frame") fail("--add-camera", "camera name '", cam.name, "' is reserved (name the file otherwise)");
+    auto& cams = options.namedCameras;
+    cams.erase(std::remove_if(cams.begin(), cams.end(), [&](const store::Camera& c) { return c.name == cam.name; }), cams.end());
+    cams.push_back(cam);
   }
 
   int run() const {
@@ -89,6 +94,7 @@ struct ShadeCommand {
       std::string skipped;
       for (const auto& [request, count] : frame.skipped) skipped += cat(skipped.empty() ? "" : ", ", grouped(count), " ", request);
       if (frame.prims.empty() && frame.volumes.empty() && !skipped.empty()) fail(scene, "frame ", n, ": every primitive was skipped (", skipped, "); nothing to shade");
+      for (const std::string& file : addCameras) addCamera(frame.options, shade::readRibCamera(file));
       if (!stereo.empty()) addStereoCameras(frame.options);
       const std::string path = expandFramePattern(output, n);
       shade::StoreResult r = shade::shadeToStore(frame, opt, path);
@@ -159,6 +165,9 @@ void addShadeCommand(CLI::App& app, Registry& registry) {
   sub->add_option("--stereo", cmd->stereo,
                   "Also keep, dice for and record a stereo pair around the camera: cameras 'left' and 'right' BASELINE apart, parallel or "
                   "converged at depth CONVERGENCE (BASELINE:CONVERGENCE); `resample --camera left,right` renders both eyes from this one pass");
+  sub->add_option("--add-camera", cmd->addCameras,
+                  "Also keep, dice for and record the camera a RIB file describes (a snippet of Format, Projection, ScreenWindow and "
+                  "transforms, in the scene's world), named after the file: `resample --camera NAME` renders it. Repeatable");
   sub->add_flag("--view-dependent", cmd->viewDependent,
                 "Keep what re-lighting speculars and headlights for another eye needs (colour less its view-dependent term, the lobe's "
                 "weight, normal and roughness, each light's shadow share), so that renders from other cameras (--camera, --stereo) "

@@ -305,6 +305,11 @@ TEST(CameraRib, ShadedOnceForTwoCamerasTheSecondRendersAsShadingFromIt) {
   const resample::FlatImage fromSnippet = renderTo("both.mps", "snippet.exr", "--camera-rib " + dir.path("right_cam.rib"));
   EXPECT_EQ(fromSnippet.find("R")->f, fromStore.find("R")->f);
   EXPECT_EQ(fromSnippet.find("A")->f, fromStore.find("A")->f);
+  // ... and added to a scene that has no Camera request: the same store, the same image.
+  std::ofstream(dir.path("plain.rib")) << head << world;
+  const CommandResult added = runReshutter("shade " + dir.path("plain.rib") + " --add-camera " + dir.path("right_cam.rib") + " -o " + dir.path("added.mps"));
+  ASSERT_EQ(added.exitCode, 0) << added.err;
+  EXPECT_EQ(renderTo("added.mps", "added.exr", "--camera right_cam").find("R")->f, fromStore.find("R")->f);
   const CommandResult missing = runReshutter("resample " + dir.path("both.mps") + " -o " + dir.path("y.exr") + " --camera-rib " + dir.path("none.rib"));
   EXPECT_NE(missing.exitCode, 0);
   EXPECT_NE(missing.err.find("none.rib"), std::string::npos) << missing.err;
