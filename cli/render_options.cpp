@@ -214,6 +214,30 @@ void RenderOptions::applyTo(resample::RenderSpec& spec) const {
   }
 }
 
+namespace {
+
+resample::ExrOptions exrOptionsOf(const RenderOptions& o) {
+  resample::ExrOptions eo;
+  eo.compression = resample::parseExrCompression(o.compression, "--compression");
+  return eo;
+}
+
+resample::DeepExrOptions deepExrOptionsOf(const RenderOptions& o) {
+  resample::DeepExrOptions deo;
+  deo.compression = resample::parseDeepCompression(o.deepCompression, "--deep-compression");
+  deo.allChannels = o.deepAllChannels;
+  return deo;
+}
+
+/// `path` for view `view`: %v replaced by its name, or the name after the file name's stem.
+std::string pathForView(const std::string& path, const std::string& view) {
+  if (const size_t v = path.find("%v"); v != std::string::npos) return path.substr(0, v) + view + path.substr(v + 2);
+  const std::filesystem::path p(path);
+  return (p.parent_path() / (p.stem().string() + "_" + view + p.extension().string())).string();
+}
+
+}  // namespace
+
 std::vector<store::Camera> RenderOptions::viewCameras(const store::StoreMeta& meta) const {
   std::vector<store::Camera> views;
   for (const std::string& name : cameras) {
@@ -263,36 +287,20 @@ std::vector<RenderOptions::View> RenderOptions::renderViews(const resample::Rend
   return out;
 }
 
-namespace {
-
-/// `path` for view `view`: %v replaced by its name, or the name after the file name's stem.
-std::string pathForView(const std::string& path, const std::string& view) {
-  if (const size_t v = path.find("%v"); v != std::string::npos) return path.substr(0, v) + view + path.substr(v + 2);
-  const std::filesystem::path p(path);
-  return (p.parent_path() / (p.stem().string() + "_" + view + p.extension().string())).string();
-}
-
-}  // namespace
-
 void RenderOptions::writeViews(const std::vector<View>& views, const std::string& exrPath, int64_t frame) const {
   if (views.size() == 1) {
     writeOutputs(views[0].result, exrPath, frame);
     return;
   }
-  resample::ExrOptions eo;
-  eo.compression = resample::parseExrCompression(compression, "--compression");
   if (!exrPath.empty()) {
     std::vector<resample::ExrView> ev;
     for (const View& v : views) ev.push_back({v.name, &v.result.image, &v.result.provenance});
-    resample::writeMultiViewExr(exrPath, ev, eo);
+    resample::writeMultiViewExr(exrPath, ev, exrOptionsOf(*this));
   }
   if (!deep.empty()) {
-    resample::DeepExrOptions deo;
-    deo.compression = resample::parseDeepCompression(deepCompression, "--deep-compression");
-    deo.allChannels = deepAllChannels;
     std::vector<resample::DeepView> dv;
     for (const View& v : views) dv.push_back({v.name, &v.result.deep, &v.result.provenance});
-    resample::writeMultiViewDeepExr(expandFramePattern(deep, frame), dv, deo);
+    resample::writeMultiViewDeepExr(expandFramePattern(deep, frame), dv, deepExrOptionsOf(*this));
   }
   for (const View& v : views) {
     RenderOptions one = *this;
@@ -312,15 +320,8 @@ void RenderOptions::checkOutputs(const std::string& exrPath, int64_t frame) cons
 }
 
 void RenderOptions::writeOutputs(const resample::RenderResult& result, const std::string& exrPath, int64_t frame) const {
-  resample::ExrOptions eo;
-  eo.compression = resample::parseExrCompression(compression, "--compression");
-  if (!exrPath.empty()) resample::writeExr(exrPath, result.image, result.provenance, eo);
-  if (!deep.empty()) {
-    resample::DeepExrOptions deo;
-    deo.compression = resample::parseDeepCompression(deepCompression, "--deep-compression");
-    deo.allChannels = deepAllChannels;
-    resample::writeDeepExr(expandFramePattern(deep, frame), result.deep, result.provenance, deo);
-  }
+  if (!exrPath.empty()) resample::writeExr(exrPath, result.image, result.provenance, exrOptionsOf(*this));
+  if (!deep.empty()) resample::writeDeepExr(expandFramePattern(deep, frame), result.deep, result.provenance, deepExrOptionsOf(*this));
   writePreviews(result.image, frame);
 }
 

@@ -112,6 +112,9 @@ uint64_t ViewRelighting::apply(const store::TilePart& primary, store::TilePart& 
   for (size_t k = 0; k < visibility_.size(); ++k)
     if (visibility_[k] >= 0 && size_t(visibility_[k]) < a.size() && a[size_t(visibility_[k])].f.size() >= primary.numVertices) visibility[k] = a[size_t(visibility_[k])].f.data();
   float* ci = carried.attrs[size_t(ci_)].f.data();
+  std::vector<float*> timed;  // the part's colours at later shading times, where it has them
+  for (int slot : timedCi_)
+    if (slot >= 0 && carried.attrs[size_t(slot)].f.size() >= size_t(primary.numVertices) * 3) timed.push_back(carried.attrs[size_t(slot)].f.data());
   uint64_t relit = 0;
   for (uint32_t i = 0; i < primary.numVertices; ++i) {
     const double r = roughness[i];
@@ -152,8 +155,7 @@ uint64_t ViewRelighting::apply(const store::TilePart& primary, store::TilePart& 
       const float now = std::isfinite(value) ? float(value) : 0.f;
       const float change = now - ci[3 * i + c];
       ci[3 * i + c] = now;
-      for (int slot : timedCi_)
-        if (slot >= 0 && carried.attrs[size_t(slot)].f.size() >= size_t(primary.numVertices) * 3) carried.attrs[size_t(slot)].f[3 * i + c] += change;
+      for (float* t : timed) t[3 * i + c] += change;
     }
     ++relit;
   }
@@ -206,9 +208,8 @@ std::vector<uint8_t> unseenPixels(const store::StoreReader& reader, const store:
   // carried (a rigid move changes depths by at most the distance between the eyes).
   const glm::dmat4 toPrimary = glm::inverse(toView);
   const double shift = glm::length(glm::dvec3(toPrimary[3]));
-  double lo = INFINITY, hi = 0;
-  for (const store::TileEntry& e : reader.entries())
-    for (const store::KnotBounds& kb : e.knots) lo = std::min(lo, double(kb.camera[2])), hi = std::max(hi, double(kb.camera[5]));
+  const store::ViewBounds& stored = reader.primaryBounds();
+  double lo = stored.depths().first, hi = stored.depths().second;
   if (!(hi > 0) || !std::isfinite(hi)) return unseen;
   const double zFar = hi + shift;
   lo = std::max(view.nearClip, lo - shift);
@@ -223,8 +224,7 @@ std::vector<uint8_t> unseenPixels(const store::StoreReader& reader, const store:
     const store::Camera& cam = meta.cameras[c];
     frames.push_back({cam.worldToCamera * glm::inverse(meta.cameras[0].worldToCamera), store::Projector(cam), 0, 0, double(cam.width), double(cam.height)});
   }
-  store::RasterRect kept;
-  for (size_t i = 0; i < reader.entries().size(); ++i) kept.extend(reader.bounds(i, meta.shutterOpen, meta.shutterClose));
+  const store::RasterRect kept = stored.extent();
   if (!kept.empty) frames.push_back({glm::dmat4(1.0), store::Projector(meta.cameras[0]), kept.x0, kept.y0, kept.x1, kept.y1});
   tbb::parallel_for(0, height, [&](int y) {
     for (int x = 0; x < width; ++x) {

@@ -235,7 +235,8 @@ struct Plan {
     rasterOptions.surfaceIds = spec.deep;  // only deep output reads them back
     if (view.lens()) rasterOptions.lensTimeBlocks = lensTimeBlocks(spec);
     // Another camera: each store whose primary camera stands elsewhere is carried into it.
-    const store::Projector projector(atResolution(cam, win.W, win.H));
+    const store::Camera output = atResolution(cam, win.W, win.H);
+    const store::Projector projector(output);
     for (const Source& src : sources) {
       const store::Camera& primary = src.store->meta().cameras[0];
       carried.push_back(spec.camera && !sameView(primary, cam) ? std::make_unique<const CarriedStore>(*src.store, cam, projector, spec.viewDependent) : nullptr);
@@ -244,7 +245,7 @@ struct Plan {
     // Where no shading camera looked: unless the view is one of the store's own cameras.
     const auto& recorded = meta0.cameras;
     if (carried[0] && std::none_of(recorded.begin(), recorded.end(), [&](const store::Camera& c) { return sameView(c, cam); }))
-      unseen = unseenPixels(*sources[0].store, atResolution(cam, win.W, win.H), toView, win.W, win.H);
+      unseen = unseenPixels(*sources[0].store, output, toView, win.W, win.H);
     // The volumes: those the caller adds, and the scene's own the store records.
     volumes = spec.volumes;
     if (!meta0.volumes.empty() && spec.sceneVolumes) {
@@ -380,13 +381,14 @@ Region regionOf(const Plan& plan, const Bucket& bk) {
 /// Lists, into `parts`, every part whose bound over [tMin, tMax] touches the region.
 void gatherParts(const Plan& plan, double tMin, double tMax, const Region& rg, std::vector<std::pair<size_t, size_t>>& parts) {
   parts.clear();
+  // With a lens, a part's samples reach as far as its circle of confusion.
+  const store::Lens lens = plan.view.lens() ? plan.lens : store::Lens{};
   for (size_t si = 0; si < plan.sources.size(); ++si) {
     const Source& src = plan.sources[si];
     const auto& m = src.store->meta();
     const double lo = std::max(tMin - double(src.frame), m.shutterOpen);
     const double hi = std::min(tMax - double(src.frame), m.shutterClose);
     if (lo > hi) continue;
-    const store::Lens lens = plan.view.lens() ? plan.lens : store::Lens{};
     if (plan.carried[si]) {
       const store::RasterRect rect{float(rg.x0), float(rg.y0), float(rg.x0 + rg.w), float(rg.y0 + rg.h), false};
       plan.carried[si]->bounds().visit(rect, lo, hi, [&](size_t e) { parts.push_back({si, e}); }, lens);
@@ -395,7 +397,6 @@ void gatherParts(const Plan& plan, double tMin, double tMax, const Region& rg, s
     const auto& sc = m.cameras[0];
     const float fx = float(sc.width) / float(plan.win.W), fy = float(sc.height) / float(plan.win.H);
     store::RasterRect rect{float(rg.x0) * fx, float(rg.y0) * fy, float(rg.x0 + rg.w) * fx, float(rg.y0 + rg.h) * fy, false};
-    // With a lens, a part's samples reach as far as its circle of confusion.
     src.store->visit(rect, lo, hi, [&](size_t e) { parts.push_back({si, e}); }, lens);
   }
 }
@@ -595,7 +596,6 @@ class BucketFilter {
   }
 };
 
-/// One bucket, start to end: its pixels of the flat (and deep) image, its figures in ts.stats.
 /// The bucket's samples that found nothing in pixels no shading camera looked into.
 uint64_t unseenSamples(const Plan& plan, const Bucket& bk, const Region& rg, const ResolvedSamples& rs) {
   uint64_t n = 0;
@@ -609,6 +609,7 @@ uint64_t unseenSamples(const Plan& plan, const Bucket& bk, const Region& rg, con
   return n;
 }
 
+/// One bucket, start to end: its pixels of the flat (and deep) image, its figures in ts.stats.
 void renderBucket(const Plan& plan, const std::vector<std::vector<int>>& aovImageChannel, size_t b, ThreadState& ts, PartUses& uses, FlatImage& img,
                   DeepFormer* deepFormer) {
   const Bucket& bk = plan.buckets[b];

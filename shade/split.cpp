@@ -117,6 +117,7 @@ class Splitter {
 
  private:
   static constexpr int kTest = 5;
+  using TestPoints = std::array<std::array<glm::dvec3, kTest>, kTest>;  // a piece's test points at one knot
 
   SplitView viewOf(const store::Camera& primary, const store::Camera& cam, bool isPrimary) const {
     SplitView v;
@@ -149,8 +150,10 @@ class Splitter {
 
     // Measured on every camera's raster: the finest rate any of them needs wins.
     double longest = 0, motion = 0, spread = 0, scale = 0;
-    std::vector<std::array<glm::dvec2, kTest>> prev(views_.size());
-    std::vector<std::array<bool, kTest>> prevFront(views_.size(), std::array<bool, kTest>{});
+    // Per camera, the previous knot's projections (scratch kept across calls: no allocation per side).
+    std::vector<std::array<glm::dvec2, kTest>>& prev = sidePrev_;
+    std::vector<std::array<bool, kTest>>& prevFront = sidePrevFront_;
+    prev.assign(views_.size(), {}), prevFront.assign(views_.size(), std::array<bool, kTest>{});
     for (size_t k = 0; k < shapes_.size(); ++k) {
       glm::dvec3 c[kTest];
       glm::dvec3 first(0.0);  // collapsed: one point at every knot (it may move)
@@ -243,7 +246,9 @@ class Splitter {
     UV uv[kTest][kTest];
     for (int j = 0; j < kTest; ++j)
       for (int i = 0; i < kTest; ++i) uv[j][i] = bilinearUV(pc, double(i) / (kTest - 1), double(j) / (kTest - 1));
-    std::vector<std::array<std::array<glm::dvec3, kTest>, kTest>> c(K);
+    // The test points in the primary's space, once for every camera (scratch kept across calls).
+    std::vector<TestPoints>& c = estimatePoints_;
+    c.resize(K);
     for (size_t k = 0; k < K; ++k)
       for (int j = 0; j < kTest; ++j)
         for (int i = 0; i < kTest; ++i) c[k][size_t(j)][size_t(i)] = camera(k, uv[j][i]);
@@ -263,7 +268,7 @@ class Splitter {
     return all;
   }
 
-  Estimate estimateIn(const SplitView& view, const std::vector<std::array<std::array<glm::dvec3, kTest>, kTest>>& cp) const {
+  Estimate estimateIn(const SplitView& view, const std::vector<TestPoints>& cp) const {
     Estimate e;
     const size_t K = shapes_.size();
     glm::dvec2 r[kTest][kTest], prev[kTest][kTest];
@@ -405,6 +410,9 @@ class Splitter {
   std::vector<glm::dmat4> mats_;
   double rate_ = 1, motionFactor_ = 0;
   std::vector<SplitView> views_;  // [0] the primary camera
+  mutable std::vector<TestPoints> estimatePoints_;  // estimate()'s per knot
+  mutable std::vector<std::array<glm::dvec2, kTest>> sidePrev_;
+  mutable std::vector<std::array<bool, kTest>> sidePrevFront_;
   uint64_t micropolygons_ = 0;  // in the leaves so far
   uint64_t visited_ = 0;        // pieces estimated so far
   bool overBudget_ = false;

@@ -16,7 +16,6 @@
 
 #include "common/error.h"
 #include "store/codec.h"
-#include "store/view_bounds.h"
 
 namespace reshutter::store {
 
@@ -255,6 +254,7 @@ CacheStats StoreReader::cacheStats() const {
 }
 
 RasterRect StoreReader::bounds(size_t entry, double t0, double t1) const { return impl_->view.bounds(entry, t0, t1); }
+const ViewBounds& StoreReader::primaryBounds() const { return impl_->view; }
 
 void StoreReader::visit(const RasterRect& rect, double t0, double t1, const std::function<void(size_t)>& fn, const Lens& lens) const {
   impl_->view.visit(rect, t0, t1, fn, lens);

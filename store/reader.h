@@ -12,6 +12,7 @@
 
 #include "store/format.h"
 #include "store/model.h"
+#include "store/view_bounds.h"
 
 namespace reshutter::store {
 
@@ -62,6 +63,8 @@ class StoreReader {
 
   /// Bound of a part over [t0, t1] in the primary camera's raster.
   RasterRect bounds(size_t entry, double t0, double t1) const;
+  /// Every part's bounds in the primary camera (bounds() and visit() are its).
+  const ViewBounds& primaryBounds() const;
   /// Calls fn(entry) for every part whose bound over [t0, t1] overlaps `rect`, in index order.
   /// With a lens (Camera::lens) each bound is first widened by the largest circle of confusion
   /// the part's depths take.

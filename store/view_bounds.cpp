@@ -23,6 +23,18 @@ RasterRect ViewBounds::bounds(size_t i, double t0, double t1) const {
   return boundsOver(e, (*schedules_)[e.schedule], projector_, t0, t1);
 }
 
+RasterRect ViewBounds::extent() const {
+  RasterRect r;
+  for (const RasterRect& b : shutterBounds_) r.extend(b);
+  return r;
+}
+
+std::pair<float, float> ViewBounds::depths() const {
+  std::pair<float, float> d{INFINITY, -INFINITY};
+  for (const auto& [lo, hi] : depthRange_) d.first = std::min(d.first, lo), d.second = std::max(d.second, hi);
+  return d;
+}
+
 void ViewBounds::visit(const RasterRect& rect, double t0, double t1, const std::function<void(size_t)>& fn, const Lens& lens) const {
   for (size_t i = 0; i < entries_->size(); ++i) {
     // A point at depth z moves by a L (1/d - 1/z) on the raster for lens point L: the part's depths

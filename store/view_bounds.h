@@ -6,6 +6,7 @@
 #pragma once
 
 #include <functional>
+#include <utility>
 #include <vector>
 
 #include <glm/mat4x4.hpp>
@@ -28,6 +29,10 @@ class ViewBounds {
   /// lens each bound is first widened by the largest circle of confusion the part's depths take.
   void visit(const RasterRect& rect, double t0, double t1, const std::function<void(size_t)>& fn, const Lens& lens = {}) const;
   const Projector& projector() const { return projector_; }
+  /// The union of every part's bound over the shutter (empty for an empty store).
+  RasterRect extent() const;
+  /// The nearest and farthest camera depth a part reaches at any knot (infinities when empty).
+  std::pair<float, float> depths() const;
 
  private:
   const std::vector<TileEntry>* entries_ = nullptr;
