@@ -2,7 +2,7 @@
 // a fronto-parallel quad by exactly f·b/z pixels, a converged stereo pair leaves its convergence
 // depth in place, any camera agrees sample by sample with a ray caster looking at the scene from
 // there, a look-at placed where the shading camera stands reproduces it, the multi-view OpenEXR
-// holds each view bit for bit, and a RIB scene shaded once for two cameras renders the second as
+// holds each view bit for bit, and a RIB scene shaded once for two cameras renders the other as
 // shading from it would.
 #include <algorithm>
 #include <cmath>
@@ -265,7 +265,7 @@ double channelMax(const resample::FlatImage& im, const char* c) {
 
 }  // namespace
 
-TEST(CameraRib, ShadedOnceForTwoCamerasTheSecondRendersAsShadingFromIt) {
+TEST(CameraRib, ShadedOnceForTwoCamerasRightRendersAsShadingFromIt) {
   // A sphere both cameras see and a green one only the turned camera "right" sees (the primary's
   // frame and overscan end well before it). Shaded once for both, rendered from "right": the
   // image of the same scene shaded with "right" as its camera, within the noise of two seeds.
@@ -295,10 +295,10 @@ TEST(CameraRib, ShadedOnceForTwoCamerasTheSecondRendersAsShadingFromIt) {
   // The set-up holds: only "right" sees the green sphere.
   EXPECT_EQ(channelMax(primary, "G") > 0.6, false) << "the primary camera sees the green sphere: the test is vacuous";
   EXPECT_GT(channelMax(direct, "G"), 0.9);
-  EXPECT_GT(channelMax(fromStore, "G"), 0.9) << "what only the second camera sees was culled at shading";
+  EXPECT_GT(channelMax(fromStore, "G"), 0.9) << "what only camera right sees was culled at shading";
   const double noise = rmseRgba(direct, directSeed), err = rmseRgba(fromStore, direct);
   EXPECT_GT(noise, 0.0);
-  EXPECT_LT(err, 2.0 * noise + 1e-3) << "shaded once for two cameras vs shaded from the second: RMSE " << err << ", two seeds " << noise;
+  EXPECT_LT(err, 2.0 * noise + 1e-3) << "shaded once for two cameras vs shaded from right: RMSE " << err << ", two seeds " << noise;
 
   // The same camera read from a RIB snippet: the same image, bit for bit.
   std::ofstream(dir.path("right_cam.rib")) << head << turn;
@@ -372,7 +372,7 @@ TEST(CameraBounds, CarriedBoundsHoldEveryCarriedVertex) {
   EXPECT_GT(checked, 1000u);
 }
 
-TEST(CameraViewDependent, APlasticHighlightFollowsTheSecondEye) {
+TEST(CameraViewDependent, APlasticHighlightFollowsTheOtherEye) {
   // A plastic sphere under a point light, seen by the primary camera and by "right", which orbits
   // it by 35 degrees: its highlight sits elsewhere for each eye. Shaded once with the view-dependent
   // term's inputs kept, "right" re-lit for its own eye matches shading from "right" within the
@@ -411,6 +411,41 @@ TEST(CameraViewDependent, APlasticHighlightFollowsTheSecondEye) {
   // The primary camera's own image is the stored shading either way.
   EXPECT_EQ(renderTo("both.mps", "primary_on.exr", "").first.find("R")->f, renderTo("plain.mps", "primary_plain.exr", "").first.find("R")->f);
   const double noise = rmseRgba(seed, direct), errOn = rmseRgba(on, direct), errOff = rmseRgba(off, direct);
-  EXPECT_LT(errOn, 2.0 * noise + 2e-3) << "re-lit for the second eye: RMSE " << errOn << ", two seeds " << noise;
+  EXPECT_LT(errOn, 2.0 * noise + 2e-3) << "re-lit for camera right: RMSE " << errOn << ", two seeds " << noise;
   EXPECT_GT(errOff, 3.0 * errOn) << "as shaded for the primary camera: RMSE " << errOff << " (re-lit " << errOn << ")";
+}
+
+TEST(CameraCli, BadCameraRequestsAreOneLineErrorsAndWriteNothing) {
+  // Every camera option a user can get wrong: exit non-zero, one line naming the option or file
+  // at fault, no image and no store left behind.
+  ScratchDir dir;
+  auto reader = writeScene(parallaxScene(), dir.path("s.mps"));
+  std::ofstream(dir.path("scene.rib")) << "Format 32 24 1\nProjection \"perspective\" \"fov\" 40\nWorldBegin\nSurface \"constant\"\n"
+                                          "Translate 0 0 5\nSphere 1 -1 1 360\nWorldEnd\n";
+  std::ofstream(dir.path("world.rib")) << "Projection \"perspective\" \"fov\" 40\n";
+  const std::string out = dir.path("x.exr"), mps = dir.path("x.mps");
+  struct Bad {
+    std::string command, names;
+  };
+  const std::vector<Bad> bad = {
+      {"resample " + dir.path("s.mps") + " -o " + out + " --stereo 0", "--stereo"},
+      {"resample " + dir.path("s.mps") + " -o " + out + " --stereo 1:-2", "--stereo"},
+      {"resample " + dir.path("s.mps") + " -o " + out + " --stereo wide", "--stereo"},
+      {"resample " + dir.path("s.mps") + " -o " + out + " --look-from 0,0,0 --look-at 0,0,0", "--look-at"},
+      {"resample " + dir.path("s.mps") + " -o " + out + " --look-from 0,0,0 --look-at 0,1,0", "--up"},
+      {"resample " + dir.path("s.mps") + " -o " + out + " --look-from 0,0,0 --look-at 0,0,1 --fov 180", "--fov"},
+      {"resample " + dir.path("s.mps") + " -o " + out + " --camera world,world", "--camera"},
+      {"resample " + dir.path("s.mps") + " -o " + out + " --camera world --camera-rib " + dir.path("world.rib"), "--camera-rib"},
+      {"shade " + dir.path("scene.rib") + " -o " + mps + " --add-camera " + dir.path("world.rib"), "--add-camera"},
+      {"shade " + dir.path("scene.rib") + " -o " + mps + " --add-camera " + dir.path("none.rib"), "none.rib"},
+      {"shade " + dir.path("scene.rib") + " -o " + mps + " --stereo -1", "--stereo"},
+  };
+  for (const Bad& b : bad) {
+    const CommandResult r = runReshutter(b.command);
+    EXPECT_NE(r.exitCode, 0) << b.command;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << b.command << ": " << r.err;
+    EXPECT_NE(r.err.find(b.names), std::string::npos) << b.command << ": " << r.err;
+    EXPECT_FALSE(std::filesystem::exists(out)) << b.command;
+    EXPECT_FALSE(std::filesystem::exists(mps)) << b.command;
+  }
 }
