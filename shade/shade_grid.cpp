@@ -58,13 +58,12 @@ glm::dvec3 litOnSide(const SurfaceShader& shader, SurfaceInput in, const glm::dv
   return so.Ci - so.viewDependent;
 }
 
-/// Vertex i's output variables into `attrs` (parallel to the schema).
-void storeOutputs(const ShadeContext& c, const DicedGrid& g, size_t i, const SurfaceInput& in, const SurfaceOutput& so, const ViewInputs& view,
+/// Vertex i's output variables into `attrs` (parallel to the schema), but for the view-dependent
+/// terms' inputs (storeViewInputs).
+void storeOutputs(const std::vector<Var>& vars, const DicedGrid& g, size_t i, const SurfaceInput& in, const SurfaceOutput& so,
                   std::vector<std::vector<float>>& attrs) {
-  const std::vector<Var>& vars = c.vars;
   for (size_t ai = 0; ai < vars.size(); ++ai) {
     auto& dst = attrs[ai];
-    if (dst.empty()) continue;  // absent on this grid
     switch (vars[ai]) {
       case Var::Ci: put3(dst, i, finite(so.Ci)); break;
       case Var::Oi: put3(dst, i, finite(so.Oi)); break;
@@ -79,13 +78,23 @@ void storeOutputs(const ShadeContext& c, const DicedGrid& g, size_t i, const Sur
       case Var::Os: put3(dst, i, in.Os); break;
       case Var::depth: dst[i] = float(g.P[i].z); break;
       case Var::specular: put3(dst, i, finite(so.viewDependent)); break;
-      case Var::Timed: break;
+      default: break;  // Timed: shade_in_time.cpp fills it; the view-dependent inputs: storeViewInputs
+    }
+  }
+}
+
+/// Vertex i's view-dependent terms' inputs into `attrs`, on a grid that has them.
+void storeViewInputs(const ShadeContext& c, size_t i, const SurfaceOutput& so, const ViewInputs& view, std::vector<std::vector<float>>& attrs) {
+  for (size_t ai = 0; ai < c.vars.size(); ++ai) {
+    auto& dst = attrs[ai];
+    switch (c.vars[ai]) {
       case Var::Cvi: put3(dst, i, finite(view.front)); break;
       case Var::CviBack: put3(dst, i, finite(view.back)); break;
       case Var::Kspec: put3(dst, i, finite(so.specWeight)); break;
       case Var::Nspec: put3(dst, i, finite(view.N)); break;
       case Var::roughness: dst[i] = float(so.specRoughness); break;
       case Var::Lvis: dst[i] = view.visibility[size_t(c.varLight[ai])]; break;
+      default: break;
     }
   }
 }
@@ -147,12 +156,12 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
   }
   attrs.resize(c.vars.size());
   // The view-dependent term's inputs only where the shader has such a term (absent elsewhere).
-  const bool viewTerm = viewDependentKind(shader.kind);
+  const bool viewTerm = viewDependentKind(shader.kind), keepView = viewTerm && c.viewInputs;
   for (size_t ai = 0; ai < c.vars.size(); ++ai)
     if (c.vars[ai] != Var::Timed && (viewTerm || c.vars[ai] < Var::Cvi)) attrs[ai].resize(nV * size_t(store::componentCount(c.schema.attrs[ai].type)));
   // Per stored light, its share reaching the vertex: 1 for the grid's lights until a shadow ray
-  // says less, 0 for the others.
-  std::vector<float> visibility(c.lit.size(), 0.f);
+  // says less, 0 for the others (kept only for the view-dependent terms' inputs).
+  std::vector<float> visibility(keepView ? c.lit.size() : 0, 0.f);
   if (reuse && reuse->recording) reuse->visibility.assign(nV * lights.size(), 1.f), reuse->stillBlocked.clear();
   size_t ray = 0;  // reuse: the next ray of the first time's order
   std::vector<ShadowRay> rays;
@@ -169,8 +178,9 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
     return still || (!stillCastersOnly && c.shadows->occludedByMoving(r.origin, r.dir, r.tfar, time));
   };
   for (size_t i = 0; i < nV; ++i) {
-    for (const LitLight& l : lights)
-      if (l.stored < visibility.size()) visibility[l.stored] = 1.f;
+    if (keepView)
+      for (const LitLight& l : lights)
+        if (l.stored < visibility.size()) visibility[l.stored] = 1.f;
     SurfaceInput in;
     in.P = g.P[i], in.N = g.N[i], in.Ng = g.Ng[i];
     in.I = c.perspective ? g.P[i] : glm::dvec3(0, 0, 1);
@@ -221,14 +231,14 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
       in.Cs *= c.textures->rgb(map, float(g.s[i]), t, f.dsdx, shader.textureFlipT ? -f.dtdx : f.dtdx, f.dsdy, shader.textureFlipT ? -f.dtdy : f.dtdy);
     }
     const SurfaceOutput so = shadeSurface(shader, in, vertexLights);
+    storeOutputs(c.vars, g, i, in, so, attrs);
+    if (!keepView) continue;
     ViewInputs view;
-    if (viewTerm && c.viewInputs) {
-      const double nl = glm::length(in.N);
-      view.N = nl > 0 ? in.N / nl : glm::dvec3(0, 0, -1);
-      view.front = litOnSide(shader, in, view.N, vertexLights), view.back = litOnSide(shader, in, -view.N, vertexLights);
-      view.visibility = visibility;
-    }
-    storeOutputs(c, g, i, in, so, view, attrs);
+    const double nl = glm::length(in.N);
+    view.N = nl > 0 ? in.N / nl : glm::dvec3(0, 0, -1);
+    view.front = litOnSide(shader, in, view.N, vertexLights), view.back = litOnSide(shader, in, -view.N, vertexLights);
+    view.visibility = visibility;
+    storeViewInputs(c, i, so, view, attrs);
   }
 }
 
