@@ -91,7 +91,8 @@ std::string cameraLine(const Camera& c) {
              "], clip [", c.nearClip, " ", c.farClip, "]",
              c.lens.active() ? cat(", lens f/", short6(c.lens.fstop), " focal length ", short6(c.lens.focalLength), " focus ", short6(c.lens.focalDistance),
                                    " (aperture radius ", short6(c.lens.radius()), ")")
-                             : std::string(", pinhole"));
+                             : std::string(", pinhole"),
+             c.moving() ? cat(", moving (", c.motionTimes.size(), " times ", c.motionTimes.front(), " to ", c.motionTimes.back(), ")") : std::string());
 }
 
 int runInfo(const std::string& path, bool json) {
@@ -128,6 +129,14 @@ int runInfo(const std::string& path, bool json) {
       j.beginArray("world_to_camera");
       for (int a = 0; a < 4; ++a)
         for (int b = 0; b < 4; ++b) j.value(nullptr, c.worldToCamera[b][a]);  // row-major
+      j.endArray();
+      j.beginArray("motion");  // empty for a camera that stands still
+      for (size_t k = 0; k < c.motionTimes.size(); ++k) {
+        j.beginObject().value("time", c.motionTimes[k]).beginArray("world_to_camera");
+        for (int a = 0; a < 4; ++a)
+          for (int b = 0; b < 4; ++b) j.value(nullptr, c.motionWorldToCamera[k][b][a]);
+        j.endArray().endObject();
+      }
       j.endArray().endObject();
     }
     j.endArray().beginArray("schema");

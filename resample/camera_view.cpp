@@ -29,6 +29,7 @@ store::Camera lookAtCamera(const store::Camera& base, const glm::dvec3& from, co
   store::Camera cam = base;
   cam.name = "look-at";
   cam.worldToCamera = m;
+  cam.motionTimes.clear(), cam.motionWorldToCamera.clear();  // it stands where it is put
   if (fovDegrees) {
     if (!(*fovDegrees > 0 && *fovDegrees < 180)) fail("--fov", "the field of view must lie in (0, 180) degrees, got ", *fovDegrees);
     if (base.projection != store::Projection::Perspective) fail("--fov", "the camera is orthographic: it has no field of view");
@@ -51,6 +52,7 @@ std::vector<store::Camera> stereoPair(const store::Camera& centre, double baseli
     glm::dmat4 shift(1.0);
     shift[3][0] = -dx;
     eye.worldToCamera = shift * centre.worldToCamera;
+    for (glm::dmat4& w : eye.motionWorldToCamera) w = shift * w;  // a moving rig moves both eyes
     if (std::isfinite(convergence) && centre.projection == store::Projection::Perspective) {
       // A point on the centre's axis at the convergence depth is at x = -dx for this eye: screen
       // x -dx / convergence · scale. Shifting the window by that much puts it back in the middle.
@@ -78,10 +80,21 @@ std::vector<store::Camera> stereoPair(const store::Camera& centre, const std::st
 
 glm::dmat4 primaryToView(const store::Camera& primary, const store::Camera& view) { return view.worldToCamera * glm::inverse(primary.worldToCamera); }
 
+std::vector<double> carryTimes(const store::Camera& primary, const store::Camera& view, double open, double close) {
+  const std::vector<double> moves = store::carryTimes(primary, view);
+  if (moves.empty()) return {};
+  std::vector<double> t{open};
+  for (double x : moves)
+    if (x > open && x < close) t.push_back(x);
+  if (close > open) t.push_back(close);
+  return t;
+}
+
 bool sameView(const store::Camera& primary, const store::Camera& view) {
   double a[4], b[4];
   primary.effectiveScreenWindow(a), view.effectiveScreenWindow(b);
-  return primary.worldToCamera == view.worldToCamera && primary.projection == view.projection && primary.fovDegrees == view.fovDegrees &&
+  return primary.worldToCamera == view.worldToCamera && primary.motionTimes == view.motionTimes &&
+         primary.motionWorldToCamera == view.motionWorldToCamera && primary.projection == view.projection && primary.fovDegrees == view.fovDegrees &&
          std::equal(a, a + 4, b) && primary.nearClip == view.nearClip && double(primary.width) * view.height == double(view.width) * primary.height;
 }
 
@@ -162,17 +175,42 @@ uint64_t ViewRelighting::apply(const store::TilePart& primary, store::TilePart& 
   return relit;
 }
 
+namespace {
+
+std::vector<store::CarriedSchedule> carriedSchedules(const store::StoreMeta& meta, const store::Camera& view) {
+  const store::Camera& primary = meta.cameras[0];
+  const std::vector<double> times = carryTimes(primary, view, meta.shutterOpen, meta.shutterClose);
+  std::vector<store::CarriedSchedule> out;
+  if (times.empty()) return out;
+  for (size_t s = 0; s < meta.schedules.size(); ++s)
+    out.push_back(store::carriedSchedule(meta.schedules[s], s == 0, times, [&](double t) { return store::primaryToView(primary, view, t); }));
+  return out;
+}
+
+}  // namespace
+
 CarriedStore::CarriedStore(const store::StoreReader& reader, const store::Camera& view, const store::Projector& projector, bool relight)
     : reader_(reader),
-      toView_(primaryToView(reader.meta().cameras[0], view)),
-      entries_(store::carriedEntries(reader.entries(), toView_, store::Projector(reader.meta().cameras[0]), projector)),
-      bounds_(entries_, reader.meta().schedules, projector, reader.meta().shutterOpen, reader.meta().shutterClose),
+      toView_(store::primaryToView(reader.meta().cameras[0], view, reader.meta().shutterOpen)),
+      carried_(carriedSchedules(reader.meta(), view)),
       relighting_(reader.meta(), toView_, view.projection == store::Projection::Perspective),
-      relight_(relight) {}
+      relight_(relight) {
+  const store::Projector primary(reader.meta().cameras[0]);
+  if (carried_.empty()) {
+    schedules_ = reader.meta().schedules;
+    entries_ = store::carriedEntries(reader.entries(), toView_, primary, projector);
+  } else {
+    for (const store::CarriedSchedule& cs : carried_) schedules_.push_back(cs.times);
+    entries_ = store::carriedEntries(reader.entries(), carried_, primary, projector);
+  }
+  bounds_ = store::ViewBounds(entries_, schedules_, projector, reader.meta().shutterOpen, reader.meta().shutterClose);
+}
 
 std::shared_ptr<const store::TilePart> CarriedStore::part(size_t entry, uint64_t& relit) const {
   const std::shared_ptr<const store::TilePart> primary = reader_.part(entry);
-  auto carried = std::make_shared<store::TilePart>(store::carriedPart(*primary, toView_, reader_.meta().schema));
+  const store::Schema& schema = reader_.meta().schema;
+  auto carried = std::make_shared<store::TilePart>(carried_.empty() ? store::carriedPart(*primary, toView_, schema)
+                                                                    : store::carriedPart(*primary, carried_[reader_.entries()[entry].schedule], schema));
   if (relight_) relit += relighting_.apply(*primary, *carried);
   return carried;
 }

@@ -35,8 +35,14 @@ std::vector<store::Camera> stereoPair(const store::Camera& centre, double baseli
 /// naming `where`.
 std::vector<store::Camera> stereoPair(const store::Camera& centre, const std::string& rig, const std::string& where);
 
-/// The transform from `primary`'s camera space to `view`'s (both cameras of one world).
+/// The transform from `primary`'s camera space to `view`'s (both cameras of one world) at the
+/// shutter's open; store::primaryToView() gives it at any time (the two differ when one moves).
 glm::dmat4 primaryToView(const store::Camera& primary, const store::Camera& view);
+
+/// The times within [open, close] at which the carry from `primary`'s space into `view`'s is
+/// evaluated - the shutter's ends and both cameras' motion times between - or empty when it is
+/// one transform over the whole shutter (store::carryTimes()).
+std::vector<double> carryTimes(const store::Camera& primary, const store::Camera& view, double open, double close);
 
 /// Whether `view` sees what `primary` does: the same world-to-camera transform, projection, field
 /// of view, screen window and near plane, so that the store's own bounds serve it (its resolution
@@ -69,8 +75,15 @@ class ViewRelighting {
 class CarriedStore {
  public:
   CarriedStore(const store::StoreReader& reader, const store::Camera& view, const store::Projector& projector, bool relight);
+  /// The carry at the shutter's open (lights, volumes and the re-lit eye use it).
   const glm::dmat4& toView() const { return toView_; }
   const store::ViewBounds& bounds() const { return bounds_; }
+  /// Part `entry`'s index entry as carried: its knots (and schedule) are the view's.
+  const store::TileEntry& entry(size_t entry) const { return entries_[entry]; }
+  /// The carried knot schedules the entries refer to: the store's own, or - when a camera moves -
+  /// each with the carry's times added.
+  const std::vector<store::Schedule>& schedules() const { return schedules_; }
+  bool moving() const { return !carried_.empty(); }
   /// The decoded part `entry` carried into the view's space; `relit` counts the vertices whose
   /// view-dependent term was re-evaluated.
   std::shared_ptr<const store::TilePart> part(size_t entry, uint64_t& relit) const;
@@ -78,6 +91,8 @@ class CarriedStore {
  private:
   const store::StoreReader& reader_;
   glm::dmat4 toView_;
+  std::vector<store::CarriedSchedule> carried_;  // per store schedule, when a camera moves
+  std::vector<store::Schedule> schedules_;
   std::vector<store::TileEntry> entries_;
   store::ViewBounds bounds_;
   ViewRelighting relighting_;

@@ -100,7 +100,7 @@ void BucketRasterizer::Impl::rasterizeQueued() {
 
 void BucketRasterizer::Impl::rasterizeChunk(const Source& src, const TileEntry& entry, const TilePart& part, const Chunk& ch) {
   const auto& meta = src.store->meta();
-  const auto& knots = meta.schedules[entry.schedule];
+  const auto& knots = src.knots(entry.schedule);
   const HitContext hc = hitContext(meta, entry, part, st.data(), tBase - double(src.frame));
   if (view.lens()) {
     rasterizeLens(src, entry, part, hc, ch);

@@ -55,6 +55,10 @@ struct Source {
   /// frames): a time exactly at coverEnd() is that store's - coverage [start, end) - so a surface
   /// is drawn once, not twice, at a frame boundary (render() sets it).
   bool endShared = false;
+  /// The knot schedules its entries refer to when they are not the store's own (a store carried
+  /// into a camera that moves relative to the one it was shaded from: resample/camera_view.h).
+  const std::vector<store::Schedule>* schedules = nullptr;
+  const store::Schedule& knots(uint32_t schedule) const { return schedules ? (*schedules)[schedule] : store->meta().schedules[schedule]; }
   double coverStart() const { return double(frame) + store->meta().shutterOpen; }
   double coverEnd() const { return double(frame) + store->meta().shutterClose; }
   /// Whether absolute time t (frames) lies in this store's coverage.

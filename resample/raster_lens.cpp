@@ -35,7 +35,7 @@ void productRange(float l0, float l1, float k0, float k1, float& lo, float& hi) 
 }  // namespace
 
 void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileEntry& entry, const TilePart& part, const HitContext& hc, const Chunk& ch) {
-  const auto& knots = src.store->meta().schedules[entry.schedule];
+  const auto& knots = src.knots(entry.schedule);
   const bool moving = (entry.effects & store::kEffectMoving) && part.numKnots > 1 && !ch.still;
   const uint32_t vBase = ch.vLo, nV = ch.vHi - ch.vLo + 1;
   const double F = double(src.frame);

@@ -7,6 +7,7 @@
 #include <sstream>
 
 #include "common/error.h"
+#include "resample/camera_view.h"
 #include "resample/resampler.h"
 
 namespace reshutter::resample {
@@ -80,11 +81,15 @@ int lensTimeBlocks(const RenderSpec& spec) {
   for (const ShutterGroup& g : spec.shutter.groups()) interval = interval || g.length() > 0;
   if (!interval && spec.shutter.rolling().duration == 0) return 1;
   uint64_t moving = 0, all = 0;
-  for (const Source& src : spec.sources)
+  for (const Source& src : spec.sources) {
+    // From a camera that moves against the store's, everything moves.
+    const store::StoreMeta& m = src.store->meta();
+    const bool carriedMoving = spec.camera && !carryTimes(m.cameras[0], *spec.camera, m.shutterOpen, m.shutterClose).empty();
     for (const store::TileEntry& e : src.store->entries()) {
       all += e.numMicropolygons;
-      if (e.effects & store::kEffectMoving) moving += e.numMicropolygons;
+      if (carriedMoving || (e.effects & store::kEffectMoving)) moving += e.numMicropolygons;
     }
+  }
   return 4 * moving >= all && moving > 0 ? N / 4 : 1;
 }
 

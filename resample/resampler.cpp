@@ -237,9 +237,10 @@ struct Plan {
     // Another camera: each store whose primary camera stands elsewhere is carried into it.
     const store::Camera output = atResolution(cam, win.W, win.H);
     const store::Projector projector(output);
-    for (const Source& src : sources) {
+    for (Source& src : sources) {
       const store::Camera& primary = src.store->meta().cameras[0];
       carried.push_back(spec.camera && !sameView(primary, cam) ? std::make_unique<const CarriedStore>(*src.store, cam, projector, spec.viewDependent) : nullptr);
+      if (carried.back() && carried.back()->moving()) src.schedules = &carried.back()->schedules();
     }
     const glm::dmat4 toView = carried[0] ? carried[0]->toView() : glm::dmat4(1.0);
     // Where no shading camera looked: unless the view is one of the store's own cameras.
@@ -274,7 +275,7 @@ struct Plan {
   std::unique_ptr<const VolumeLighting> volumeLighting;  // with volumes and lights
 
   const RenderSpec& spec;
-  const std::vector<Source> sources;  // spec.sources, with the ends they share marked
+  std::vector<Source> sources;  // spec.sources, with the ends they share marked (and carried schedules)
   const store::StoreMeta& meta0;
   const store::Camera cam;  // the camera rendered from (RenderSpec::camera, or the store's primary)
   const Window win;
@@ -467,7 +468,7 @@ double rasterizeParts(const Plan& plan, BucketRasterizer& r, ThreadState& ts) {
   uint64_t queuedBytes = 0;
   for (auto [si, e] : ts.parts) {
     const Source& src = plan.sources[si];
-    const store::TileEntry& entry = src.store->entries()[e];
+    const store::TileEntry& entry = plan.carried[si] ? plan.carried[si]->entry(e) : src.store->entries()[e];
     if (queuedBytes > 0 && queuedBytes + entry.rawSize > kQueuedBytes) {
       r.rasterizeQueued();
       ts.held.clear(), queuedBytes = 0;

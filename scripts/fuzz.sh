@@ -36,13 +36,21 @@ if [ "$target" = store ]; then
     { printf '\x01'; cat "$f"; } > "$work/corpus/seed-$(basename "$f")"
     rm -f "$f"
   done
-  # A format-4 store (recorded lights, a scene volume and a lens), shaded from a tiny RIB.
+  # A format-5 store (recorded lights, a scene volume, a lens and a moving second camera), shaded
+  # from a tiny RIB.
   "$build"/reshutter -q smoke -o "$work/seed.vdb" --radius 1 --resolution 8
   cat > "$work/seed.rib" <<RIB
 Format 24 16 1
 Projection "perspective" "fov" [50]
 Shutter 0 1
 DepthOfField 2.8 0.5 5
+MotionBegin [0 0.5 1]
+Rotate 0 0 1 0
+Rotate 4 0 1 0
+Rotate 10 0 1 0
+MotionEnd
+Camera "pan"
+Identity
 WorldBegin
 LightSource "pointlight" 1 "from" [0 2 0] "intensity" [4]
 LightSource "distantlight" 2 "to" [0 0 1]
@@ -57,9 +65,9 @@ Volume "blobbydso:impl_openvdb" [-1 1 -1 1 -1 1] [0 0 0] "constant string[2] blo
 AttributeEnd
 WorldEnd
 RIB
-  "$build"/reshutter -q shade "$work/seed.rib" -o "$work/seed-v4.mps"
-  { printf '\x01'; cat "$work/seed-v4.mps"; } > "$work/corpus/seed-v4.mps"
-  rm -f "$work/seed-v4.mps" "$work/seed.rib"
+  "$build"/reshutter -q shade "$work/seed.rib" -o "$work/seed-v5.mps"
+  { printf '\x01'; cat "$work/seed-v5.mps"; } > "$work/corpus/seed-v5.mps"
+  rm -f "$work/seed-v5.mps" "$work/seed.rib"
 fi
 "$bin" -max_total_time="$seconds" -max_len=65536 -timeout=10 -rss_limit_mb=2048 \
   -artifact_prefix="$build/findings-$target/" "$work/corpus" 2>&1 | tail -n 5

@@ -100,6 +100,7 @@ StoreMeta DumpHandler::scannedMeta(const std::string& file) const {
   if (!haveCamera_) fail(file, "has no WorldBegin: no camera to ingest against");
   m.shutterOpen = cameraOpen_, m.shutterClose = cameraClose_;
   m.cameras = {camera_};
+  m.cameras[0].clipMotion(m.shutterOpen, m.shutterClose);
   // Ci and Oi first, then the other variables in order of appearance.
   auto add = [&](const std::string& n) {
     const auto& e = schema_.at(n);

@@ -11,6 +11,7 @@
 #include "common/error.h"
 #include "common/log.h"
 #include "shade/rib_state.h"
+#include "store/view_bounds.h"
 
 namespace reshutter::shade {
 
@@ -488,18 +489,25 @@ bool RibSceneHandler::handle(const rib::Request& r, const Args& a) {
 
 namespace {
 
-// Whether camera `cam` (reached from the primary camera's space by `fromPrimary`) cannot see the
-// object-space box `b` under the transform `ctm` (object → primary camera) at any of its knots.
-bool boundOutOfView(const std::array<double, 6>& b, const MotionXform& ctm, const store::Camera& cam, const glm::dmat4& fromPrimary, double cullMargin) {
+// Whether camera `cam` cannot see the object-space box `b` under the transform `ctm` (object →
+// `primary`'s camera space) at any of its knots, nor - when the camera moves against the primary -
+// at any of its motion times.
+bool boundOutOfView(const std::array<double, 6>& b, const MotionXform& ctm, const store::Camera& cam, const store::Camera& primary, double cullMargin) {
+  const std::vector<double> moves = &cam == &primary ? std::vector<double>{} : store::carryTimes(primary, cam);
+  const glm::dmat4 fixed = &cam == &primary ? glm::dmat4(1.0) : cam.worldToCamera * glm::inverse(primary.worldToCamera);
   const store::Projector proj(cam);
   const bool perspective = cam.projection == store::Projection::Perspective;
   const double mx = cullMargin * cam.width, my = cullMargin * cam.height;
   // Per knot, where the box's eight corners lie; culled only where one reason holds at every
   // knot (between knots the box moves linearly, so it stays on that side).
   bool behind = true, beyond = true, left = true, right = true, above = true, below = true;
-  const std::vector<double> times = ctm.times.empty() ? std::vector<double>{0.0} : ctm.times;
+  std::vector<double> times = ctm.times;
+  times.insert(times.end(), moves.begin(), moves.end());
+  std::sort(times.begin(), times.end());
+  times.erase(std::unique(times.begin(), times.end()), times.end());
+  if (times.empty()) times.push_back(0.0);
   for (double t : times) {
-    const glm::dmat4 m = fromPrimary * ctm.at(t);
+    const glm::dmat4 m = (moves.empty() ? fixed : store::primaryToView(primary, cam, t)) * ctm.at(t);
     bool allBehind = true, anyBehind = false, allBeyond = true;
     double box[4] = {1e300, -1e300, 1e300, -1e300}, zLo = 1e300, zHi = -1e300;
     for (int i = 0; i < 8; ++i) {
@@ -533,9 +541,9 @@ bool RibSceneHandler::cullsBound(const std::array<double, 6>& b) {
   const auto& options = scene_.world().options;
   const MotionXform& ctm = scene_.currentTransform();
   // Culled only when no camera the store records can see it.
-  if (!boundOutOfView(b, ctm, options.camera, glm::dmat4(1.0), cullMargin_)) return false;
+  if (!boundOutOfView(b, ctm, options.camera, options.camera, cullMargin_)) return false;
   for (const store::Camera& other : options.namedCameras)
-    if (!boundOutOfView(b, ctm, other, other.worldToCamera * glm::inverse(options.camera.worldToCamera), cullMargin_)) return false;
+    if (!boundOutOfView(b, ctm, other, options.camera, cullMargin_)) return false;
   scene_.archiveCulled();
   return true;
 }
@@ -549,7 +557,11 @@ void readRibScene(const std::string& path, Scene& scene, double cullMargin) {
 store::Camera readRibCamera(const std::string& path) {
   std::optional<store::Camera> camera;
   Scene scene([&](FrameScene& frame) {
-    if (!camera) camera = frame.options.camera;
+    if (!camera) {
+      camera = frame.options.camera;
+      // Given after the fact, for a store whose shutter this file need not know: its whole motion.
+      recordCameraMotion(*camera, frame.worldToCamera, 1, 0);
+    }
   });
   readRibScene(path, scene);
   if (!camera) {

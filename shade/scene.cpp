@@ -59,6 +59,16 @@ glm::dmat4 MotionXform::at(double t) const {
   return mats[i] * (1.0 - w) + mats[i + 1] * w;
 }
 
+void recordCameraMotion(store::Camera& camera, const MotionXform& worldToCamera, double open, double close) {
+  camera.worldToCamera = worldToCamera.at(worldToCamera.times.empty() ? 0.0 : worldToCamera.times.front());
+  camera.motionTimes.clear(), camera.motionWorldToCamera.clear();
+  if (worldToCamera.moving()) {
+    camera.motionTimes = worldToCamera.times;
+    for (double t : worldToCamera.times) camera.motionWorldToCamera.push_back(worldToCamera.at(t));
+  }
+  if (open <= close) camera.clipMotion(open, close);
+}
+
 MotionXform MotionXform::then(const MotionXform& rhs) const {
   if (!moving() && !rhs.moving()) return MotionXform(mats[0] * rhs.mats[0]);
   std::vector<double> t = unionTimes(times, rhs.times);
@@ -346,7 +356,7 @@ void Scene::camera(const std::string& name) {
   if (name == "frame") error(cat("camera name '", name, "' is reserved"));
   store::Camera c = options_.camera;
   c.name = name;
-  c.worldToCamera = cur_.ctm.at(options_.shutterOpen);
+  recordCameraMotion(c, cur_.ctm, options_.shutterOpen, options_.shutterClose);
   auto& cams = options_.namedCameras;
   cams.erase(std::remove_if(cams.begin(), cams.end(), [&](const store::Camera& o) { return o.name == name; }), cams.end());
   cams.push_back(c);
@@ -400,7 +410,7 @@ void Scene::worldBegin() {
     else sw[0] = -1, sw[1] = 1, sw[2] = -1 / a, sw[3] = 1 / a;
   }
   cam.name = "world";
-  cam.worldToCamera = cur_.ctm.at(options_.shutterOpen);
+  recordCameraMotion(cam, cur_.ctm, options_.shutterOpen, options_.shutterClose);
   frame_.worldToCamera = cur_.ctm;
   push(Block::World);
   coordSystems_["world"] = cur_.ctm;

@@ -74,6 +74,7 @@ store::StoreMeta storeMeta(const FrameScene& scene, const ShadeOptions& o) {
   m.cameras = {scene.options.camera};
   m.cameras[0].name = "world";
   for (const auto& c : scene.options.namedCameras) m.cameras.push_back(c);
+  for (store::Camera& c : m.cameras) c.clipMotion(iv.open, iv.close);  // the cameras over the interval shaded
   m.tileSize = o.tileSize;
   m.schema.attrs = {{"Ci", store::AttrType::Color, store::AttrRate::Vertex, store::AttrCodec::Lossless},
                     {"Oi", store::AttrType::Color, store::AttrRate::Vertex, store::AttrCodec::Lossless}};

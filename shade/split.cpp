@@ -8,6 +8,7 @@
 #include <glm/geometric.hpp>
 
 #include "shade/dice.h"
+#include "store/view_bounds.h"
 
 namespace reshutter::shade {
 
@@ -82,10 +83,13 @@ struct Estimate {
 struct SplitView {
   store::Projector proj;
   const store::Camera* cam = nullptr;
-  glm::dmat4 fromPrimary{1.0};
+  std::vector<glm::dmat4> fromPrimary;  // at each of the splitter's times (one when it never changes)
   bool primary = true;
   double window[4] = {0, 0, 0, 0};  // raster x0 x1 y0 y1 kept (the screen and the cull margin)
-  glm::dvec3 in(const glm::dvec3& c) const { return primary ? c : glm::dvec3(fromPrimary * glm::dvec4(c, 1.0)); }
+  /// Point c of the primary's camera space at the splitter's time k, in this camera's space.
+  glm::dvec3 in(size_t k, const glm::dvec3& c) const {
+    return primary ? c : glm::dvec3(fromPrimary[fromPrimary.size() > 1 ? k : 0] * glm::dvec4(c, 1.0));
+  }
 };
 
 class Splitter {
@@ -93,13 +97,23 @@ class Splitter {
   Splitter(const Primitive& p, const std::vector<double>& knots, const store::Camera& cam, const std::vector<store::Camera>& others, const DiceOptions& o,
            std::vector<Leaf>& out, DiceStats& stats)
       : p_(p), o_(o), out_(out), stats_(stats) {
-    if (knots.empty()) {
+    // Measured and culled at the piece's knots, and - for a camera that moves against the primary
+    // (the piece's knots hold the primary's own motion) - at that camera's motion times too.
+    times_ = knots;
+    for (const store::Camera& c : others) {
+      const std::vector<double> t = store::carryTimes(cam, c);
+      times_.insert(times_.end(), t.begin(), t.end());
+    }
+    std::sort(times_.begin(), times_.end());
+    times_.erase(std::unique(times_.begin(), times_.end()), times_.end());
+    if (times_.empty()) {
       shapes_.push_back(p.keys.empty() ? Shape{} : p.keys[0]);
       mats_.push_back(p.xform->at(0));
     }
-    for (double t : knots) {
-      shapes_.push_back(p.shapeAt(t));
-      mats_.push_back(p.xform->at(t));
+    const bool still = knots.empty();  // where it is in the primary's space at every time
+    for (double t : times_) {
+      shapes_.push_back(still ? (p.keys.empty() ? Shape{} : p.keys[0]) : p.shapeAt(t));
+      mats_.push_back(p.xform->at(still ? 0.0 : t));
     }
     const Attributes& a = *p.attrs;
     motionFactor_ = o.motionFactor ? *o.motionFactor : a.motionFactor;
@@ -124,7 +138,9 @@ class Splitter {
     v.proj = store::Projector(cam);
     v.cam = &cam;
     v.primary = isPrimary;
-    v.fromPrimary = cam.worldToCamera * glm::inverse(primary.worldToCamera);
+    if (store::carryTimes(primary, cam).empty()) v.fromPrimary = {cam.worldToCamera * glm::inverse(primary.worldToCamera)};
+    else
+      for (double t : times_) v.fromPrimary.push_back(store::primaryToView(primary, cam, t));
     const double mx = o_.cullMargin * cam.width, my = o_.cullMargin * cam.height;
     v.window[0] = -mx, v.window[1] = cam.width + mx, v.window[2] = -my, v.window[3] = cam.height + my;
     return v;
@@ -169,7 +185,7 @@ class Splitter {
         glm::dvec2 r[kTest];
         bool front[kTest];
         for (int i = 0; i < kTest; ++i) {
-          const glm::dvec3 cv = view.in(c[i]);
+          const glm::dvec3 cv = view.in(k, c[i]);
           front[i] = inFront(view, cv);
           r[i] = front[i] ? view.proj.project(cv) : glm::dvec2(0.0);
           if (front[i] && prevFront[v][size_t(i)]) motion = std::max(motion, glm::length(r[i] - prev[v][size_t(i)]));
@@ -280,7 +296,7 @@ class Splitter {
       int nFront = 0;
       for (int j = 0; j < kTest; ++j)
         for (int i = 0; i < kTest; ++i) {
-          c[j][i] = view.in(cp[k][size_t(j)][size_t(i)]);
+          c[j][i] = view.in(k, cp[k][size_t(j)][size_t(i)]);
           fr[j][i] = inFront(view, c[j][i]);
           if (c[j][i].z <= view.cam->farClip) e.beyondFar = false;
           r[j][i] = glm::dvec2(0.0);
@@ -408,6 +424,7 @@ class Splitter {
   DiceStats& stats_;
   std::vector<Shape> shapes_;
   std::vector<glm::dmat4> mats_;
+  std::vector<double> times_;  // of shapes_ and mats_ (empty: one, the piece stands still)
   double rate_ = 1, motionFactor_ = 0;
   std::vector<SplitView> views_;  // [0] the primary camera
   mutable std::vector<TestPoints> estimatePoints_;  // estimate()'s per knot

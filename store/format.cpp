@@ -206,9 +206,20 @@ void writeMeta(const StoreMeta& m, ByteWriter& w) {
       const Lens lens = c.lens.active() ? c.lens : Lens{};  // an inactive lens is stored as the pinhole
       w.put<double>(lens.fstop), w.put<double>(lens.focalLength), w.put<double>(lens.focalDistance);
     }
+  if (version >= 5)
+    for (const Camera& c : m.cameras) {
+      w.put<uint32_t>(uint32_t(c.motionTimes.size()));
+      for (size_t k = 0; k < c.motionTimes.size(); ++k) {
+        w.put<double>(c.motionTimes[k]);
+        for (int i = 0; i < 4; ++i)
+          for (int j = 0; j < 4; ++j) w.put<double>(c.motionWorldToCamera[k][i][j]);
+      }
+    }
 }
 
 uint32_t formatVersionFor(const StoreMeta& m) {
+  for (const Camera& c : m.cameras)
+    if (c.moving()) return 5;
   for (const Camera& c : m.cameras)
     if (c.lens.active()) return 4;
   if (!m.lights.empty() || !m.volumes.empty()) return 3;
@@ -289,6 +300,17 @@ StoreMeta readMeta(ByteReader& r, uint32_t version) {
       c.lens.fstop = r.get<double>(), c.lens.focalLength = r.get<double>(), c.lens.focalDistance = r.get<double>();
       const bool pinhole = c.lens.fstop == 0 && c.lens.focalLength == 0 && c.lens.focalDistance == 0;
       if (!pinhole && !c.lens.active()) fail(r.context(), "camera '", c.name, "' has an invalid lens");
+    }
+  }
+  if (version >= 5) {
+    for (Camera& c : m.cameras) {
+      const size_t n = r.getCount(136);
+      c.motionTimes.resize(n), c.motionWorldToCamera.resize(n);
+      for (size_t k = 0; k < n; ++k) {
+        c.motionTimes[k] = r.get<double>();
+        for (int i = 0; i < 4; ++i)
+          for (int j = 0; j < 4; ++j) c.motionWorldToCamera[k][i][j] = r.get<double>();
+      }
     }
   }
   if (!r.atEnd()) fail(r.context(), "unexpected bytes after the metadata");

@@ -28,10 +28,10 @@ namespace reshutter::store {
 constexpr char kHeaderMagic[8] = {'R', 'S', 'H', 'U', 'T', 'M', 'P', 'S'};
 constexpr char kFooterMagic[8] = {'R', 'S', 'H', 'U', 'T', 'E', 'N', 'D'};
 /// Version 2 adds StoreMeta::shadingTimes, version 3 the lights and the scene's volumes, version 4
-/// each camera's lens (depth of field); a store
+/// each camera's lens (depth of field), version 5 each camera's motion; a store
 /// is written as the lowest version that holds its metadata, so stores without them stay readable
 /// by older builds, byte for byte as before.
-constexpr uint32_t kFormatVersion = 4;
+constexpr uint32_t kFormatVersion = 5;
 constexpr size_t kHeaderSize = 16;
 constexpr size_t kFooterSize = 64;
 /// Tile coordinate of micropolygons that never lie in front of the primary camera's near plane

@@ -82,7 +82,33 @@ bool Camera::operator==(const Camera& o) const {
   for (int i = 0; i < 4; ++i)
     if (screenWindow[i] != o.screenWindow[i]) return false;
   return name == o.name && projection == o.projection && fovDegrees == o.fovDegrees && width == o.width && height == o.height && pixelAspect == o.pixelAspect &&
-         nearClip == o.nearClip && farClip == o.farClip && worldToCamera == o.worldToCamera && lens == o.lens;
+         nearClip == o.nearClip && farClip == o.farClip && worldToCamera == o.worldToCamera && lens == o.lens && motionTimes == o.motionTimes &&
+         motionWorldToCamera == o.motionWorldToCamera;
+}
+
+glm::dmat4 Camera::worldToCameraAt(double t) const {
+  if (!moving()) return worldToCamera;
+  const auto& T = motionTimes;
+  if (t <= T.front()) return motionWorldToCamera.front();
+  if (t >= T.back()) return motionWorldToCamera.back();
+  const size_t i = size_t(std::upper_bound(T.begin(), T.end(), t) - T.begin()) - 1;
+  const double w = (t - T[i]) / (T[i + 1] - T[i]);
+  if (w == 0) return motionWorldToCamera[i];
+  return motionWorldToCamera[i] * (1.0 - w) + motionWorldToCamera[i + 1] * w;
+}
+
+void Camera::clipMotion(double open, double close) {
+  if (!moving()) return;
+  std::vector<double> times{open};
+  for (double t : motionTimes)
+    if (t > open && t < close) times.push_back(t);
+  if (close > open) times.push_back(close);
+  std::vector<glm::dmat4> mats;
+  for (double t : times) mats.push_back(worldToCameraAt(t));
+  worldToCamera = mats[0];
+  const bool still = std::all_of(mats.begin(), mats.end(), [&](const glm::dmat4& m) { return m == mats[0]; });
+  motionTimes = still ? std::vector<double>{} : std::move(times);
+  motionWorldToCamera = still ? std::vector<glm::dmat4>{} : std::move(mats);
 }
 
 double circleOfConfusion(const Lens& lens, double z0, double z1) {
@@ -202,6 +228,17 @@ void StoreMeta::validate(const std::string& where) const {
     for (int i = 0; i < 4; ++i)
       for (int j = 0; j < 4; ++j)
         if (!std::isfinite(c.worldToCamera[i][j])) fail(where, "camera '", c.name, "': world-to-camera matrix not finite");
+    if (c.motionTimes.size() != c.motionWorldToCamera.size() || c.motionTimes.size() == 1 || c.motionTimes.size() > 64)
+      fail(where, "camera '", c.name, "': ", c.motionTimes.size(), " motion times for ", c.motionWorldToCamera.size(), " transforms (2 to 64 of each, or none)");
+    for (size_t k = 0; k < c.motionTimes.size(); ++k) {
+      const double t = c.motionTimes[k];
+      if (!std::isfinite(t) || t < shutterOpen || t > shutterClose)
+        fail(where, "camera '", c.name, "': motion time ", t, " lies outside the shutter [", shutterOpen, ", ", shutterClose, "]");
+      if (k > 0 && !(t > c.motionTimes[k - 1])) fail(where, "camera '", c.name, "': motion times not strictly increasing");
+      for (int i = 0; i < 4; ++i)
+        for (int j = 0; j < 4; ++j)
+          if (!std::isfinite(c.motionWorldToCamera[k][i][j])) fail(where, "camera '", c.name, "': world-to-camera matrix at time ", t, " not finite");
+    }
   }
   if (tileSize < 4 || tileSize > 4096) fail(where, "tile size ", tileSize, " out of range (4 to 4096)");
   if (schema.attrs.size() > Schema::kMaxAttributes) fail(where, "schema has ", schema.attrs.size(), " attributes (at most ", Schema::kMaxAttributes, ")");

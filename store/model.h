@@ -79,8 +79,21 @@ struct Camera {
   double pixelAspect = 1.0;
   double screenWindow[4] = {0, 0, 0, 0};  // left right bottom top; all zero = RenderMan default
   double nearClip = 1e-4, farClip = 1e30;
-  glm::dmat4 worldToCamera{1.0};
-  Lens lens;  // format version 4
+  glm::dmat4 worldToCamera{1.0};  // at the shutter's open (for a moving camera, motionWorldToCamera[0])
+  Lens lens;                      // format version 4
+  /// A moving camera (format version 5): its world-to-camera transform at `motionTimes`
+  /// (frame-relative, strictly increasing, from the shutter's open to its close), elementwise
+  /// linear between them as RenderMan's moving transforms are. Empty for a camera that stands
+  /// still. Positions in the store are in the primary camera's space of their own knot time.
+  std::vector<double> motionTimes;
+  std::vector<glm::dmat4> motionWorldToCamera;
+
+  bool moving() const { return motionTimes.size() > 1; }
+  /// The world-to-camera transform at frame-relative time t (held outside the motion's times).
+  glm::dmat4 worldToCameraAt(double t) const;
+  /// Keeps the motion over [open, close] only: the transforms at its ends and at the motion's
+  /// times between; worldToCamera becomes the one at `open`. Standing still there: no motion.
+  void clipMotion(double open, double close);
 
   /// Screen window after applying RenderMan's default (the frame aspect ratio over [-1,1]).
   void effectiveScreenWindow(double out[4]) const;

@@ -130,6 +130,25 @@ KnotBounds carriedKnot(const KnotBounds& kb, const glm::dmat4& m, const Projecto
 
 }  // namespace
 
+glm::dmat4 primaryToView(const Camera& primary, const Camera& view, double t) { return view.worldToCameraAt(t) * glm::inverse(primary.worldToCameraAt(t)); }
+
+std::vector<double> carryTimes(const Camera& primary, const Camera& view) {
+  if (!primary.moving() && !view.moving()) return {};
+  std::vector<double> t = primary.motionTimes;
+  t.insert(t.end(), view.motionTimes.begin(), view.motionTimes.end());
+  std::sort(t.begin(), t.end());
+  t.erase(std::unique(t.begin(), t.end()), t.end());
+  // Both are linear between these times: one transform at all of them is one at every time.
+  const glm::dmat4 first = primaryToView(primary, view, t[0]);
+  for (double x : t) {
+    const glm::dmat4 m = primaryToView(primary, view, x);
+    for (int i = 0; i < 4; ++i)
+      for (int j = 0; j < 4; ++j)
+        if (std::abs(m[i][j] - first[i][j]) > 1e-12 * (1.0 + std::abs(first[i][j]))) return t;
+  }
+  return {};
+}
+
 std::vector<TileEntry> carriedEntries(const std::vector<TileEntry>& entries, const glm::dmat4& primaryToView, const Projector& primary, const Projector& projector) {
   std::vector<TileEntry> out = entries;
   for (TileEntry& e : out)
@@ -137,11 +156,12 @@ std::vector<TileEntry> carriedEntries(const std::vector<TileEntry>& entries, con
   return out;
 }
 
-TilePart carriedPart(const TilePart& part, const glm::dmat4& primaryToView, const Schema& schema) {
-  TilePart out = part;
+namespace {
+
+// Point, vector and normal attributes carried by `primaryToView`.
+void carryAttributes(TilePart& out, const glm::dmat4& primaryToView, const Schema& schema) {
   const glm::dmat3 linear(primaryToView);
   const glm::dmat3 normals = glm::transpose(glm::inverse(linear));
-  for (glm::vec3& p : out.positions) p = glm::vec3(primaryToView * glm::dvec4(glm::dvec3(p), 1.0));
   for (size_t a = 0; a < schema.attrs.size() && a < out.attrs.size(); ++a) {
     const AttrType type = schema.attrs[a].type;
     if (type != AttrType::Point && type != AttrType::Vector && type != AttrType::Normal) continue;
@@ -152,6 +172,84 @@ TilePart carriedPart(const TilePart& part, const glm::dmat4& primaryToView, cons
       f[i] = float(w.x), f[i + 1] = float(w.y), f[i + 2] = float(w.z);
     }
   }
+}
+
+}  // namespace
+
+TilePart carriedPart(const TilePart& part, const glm::dmat4& primaryToView, const Schema& schema) {
+  TilePart out = part;
+  for (glm::vec3& p : out.positions) p = glm::vec3(primaryToView * glm::dvec4(glm::dvec3(p), 1.0));
+  carryAttributes(out, primaryToView, schema);
+  return out;
+}
+
+CarriedSchedule carriedSchedule(const Schedule& schedule, bool stillSchedule, const std::vector<double>& carryTimes, const std::function<glm::dmat4(double)>& carry) {
+  CarriedSchedule out;
+  std::vector<double> t = carryTimes;
+  if (!stillSchedule) t.insert(t.end(), schedule.begin(), schedule.end());
+  std::sort(t.begin(), t.end());
+  t.erase(std::unique(t.begin(), t.end()), t.end());
+  for (double time : t) {
+    uint32_t k = 0;
+    double w = 0;
+    if (!stillSchedule && schedule.size() > 1) {
+      while (k + 2 < schedule.size() && schedule[k + 1] <= time) ++k;
+      w = std::clamp((time - schedule[k]) / (schedule[k + 1] - schedule[k]), 0.0, 1.0);
+      if (w == 1) ++k, w = 0;
+    }
+    out.times.push_back(time), out.toView.push_back(carry(time)), out.segment.push_back(k), out.weight.push_back(w);
+  }
+  return out;
+}
+
+std::vector<TileEntry> carriedEntries(const std::vector<TileEntry>& entries, const std::vector<CarriedSchedule>& schedules, const Projector& primary,
+                                      const Projector& projector) {
+  std::vector<TileEntry> out = entries;
+  for (TileEntry& e : out) {
+    const CarriedSchedule& cs = schedules[e.schedule];
+    std::vector<KnotBounds> knots;
+    for (size_t j = 0; j < cs.times.size(); ++j) {
+      const uint32_t k = cs.segment[j];
+      KnotBounds kb = e.knots[k];
+      if (cs.weight[j] > 0) {
+        // Between two knots a vertex lies on the segment joining its two positions: in the box
+        // lerped between the knots' boxes, and - both ends in front - in the union of their
+        // raster bounds (a perspective projection maps the segment to the one joining theirs).
+        const KnotBounds& b = e.knots[k + 1];
+        const double w = cs.weight[j];
+        for (int i = 0; i < 6; ++i) {
+          const double v = double(kb.camera[i]) + w * (double(b.camera[i]) - double(kb.camera[i]));
+          const double pad = 1e-6 * std::abs(v) + 1e-30;
+          kb.camera[i] = i < 3 ? std::nextafter(float(v - pad), -INFINITY) : std::nextafter(float(v + pad), INFINITY);
+        }
+        kb.rasterFinite = kb.rasterFinite && b.rasterFinite;
+        if (kb.rasterFinite)
+          for (int i = 0; i < 2; ++i) kb.raster[i] = std::min(kb.raster[i], b.raster[i]), kb.raster[i + 2] = std::max(kb.raster[i + 2], b.raster[i + 2]);
+      }
+      knots.push_back(carriedKnot(kb, cs.toView[j], primary, projector));
+    }
+    e.knots = std::move(knots);
+    if (e.knots.size() > 1) e.effects |= kEffectMoving;
+  }
+  return out;
+}
+
+TilePart carriedPart(const TilePart& part, const CarriedSchedule& schedule, const Schema& schema) {
+  TilePart out = part;
+  const uint32_t K = uint32_t(schedule.times.size()), nV = part.numVertices;
+  out.numKnots = K;
+  out.positions.resize(size_t(K) * nV);
+  for (uint32_t j = 0; j < K; ++j) {
+    const uint32_t k = std::min(schedule.segment[j], part.numKnots - 1);
+    const double w = k + 1 < part.numKnots ? schedule.weight[j] : 0.0;
+    const glm::dmat4& m = schedule.toView[j];
+    for (uint32_t v = 0; v < nV; ++v) {
+      glm::dvec3 p(part.position(k, v));
+      if (w > 0) p += w * (glm::dvec3(part.position(k + 1, v)) - p);
+      out.positions[size_t(j) * nV + v] = glm::vec3(m * glm::dvec4(p, 1.0));
+    }
+  }
+  carryAttributes(out, schedule.toView[0], schema);
   return out;
 }
 

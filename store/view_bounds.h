@@ -42,6 +42,15 @@ class ViewBounds {
   std::vector<std::pair<float, float>> depthRange_;  // per part: nearest and farthest camera depth at any knot
 };
 
+/// The transform from `primary`'s camera space at frame-relative time t to `view`'s at t (two
+/// cameras of one world).
+glm::dmat4 primaryToView(const Camera& primary, const Camera& view, double t);
+
+/// The times at which the carry from `primary`'s space into `view`'s changes slope - every motion
+/// time of either camera - or empty when it is one transform at all times (neither moves, or
+/// they move as one rig, as a stereo pair of a moving camera does).
+std::vector<double> carryTimes(const Camera& primary, const Camera& view);
+
 /// `entries` (bounded for the camera `primary` projects for) with their knot bounds carried by
 /// `primaryToView` (primary camera space → another camera's space, affine) and projected by that
 /// camera's `projector`. A knot's points lie in its camera box and, where its primary raster bound
@@ -55,5 +64,32 @@ std::vector<TileEntry> carriedEntries(const std::vector<TileEntry>& entries, con
 /// by `primaryToView`, vectors by its linear part, normals by that part's inverse transpose (a
 /// rigid camera change keeps their lengths).
 TilePart carriedPart(const TilePart& part, const glm::dmat4& primaryToView, const Schema& schema);
+
+/// A schedule carried into a camera whose carry changes over the shutter (one of the two cameras
+/// moves): the part's own knots and the carry's times together, the carry at each, and where each
+/// lies among the part's own knots (between knot `segment` and the next, `weight` of the way).
+/// Between its times the carried positions are linear in the view's camera space, as every
+/// store's are in its own; at the part's knots and the carry's times they are exact.
+struct CarriedSchedule {
+  Schedule times;
+  std::vector<glm::dmat4> toView;  // primary camera space at each time → the view's
+  std::vector<uint32_t> segment;
+  std::vector<double> weight;
+};
+
+/// `schedule` (a store's; store schedule 0 is a part that stands still) carried through
+/// `carry(t)`: its own knots and every time of `carryTimes` (increasing, within the shutter).
+CarriedSchedule carriedSchedule(const Schedule& schedule, bool stillSchedule, const std::vector<double>& carryTimes, const std::function<glm::dmat4(double)>& carry);
+
+/// `entries` carried through moving carries: entry e's knots become those of
+/// `schedules[e.schedule]` (the carried schedule of the store's schedule of the same index), each
+/// bound as carriedEntries() bounds a knot, from the part's bound at that time; a part that stood
+/// still moves.
+std::vector<TileEntry> carriedEntries(const std::vector<TileEntry>& entries, const std::vector<CarriedSchedule>& schedules, const Projector& primary,
+                                      const Projector& projector);
+
+/// A copy of `part` carried through `schedule`: positions at each of its times; point, vector and
+/// normal attributes by its first time's carry (the shutter's open).
+TilePart carriedPart(const TilePart& part, const CarriedSchedule& schedule, const Schema& schema);
 
 }  // namespace reshutter::store

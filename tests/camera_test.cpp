@@ -8,6 +8,7 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 
 #include <OpenEXR/ImfCheckFile.h>
 #include <glm/gtc/matrix_transform.hpp>
@@ -43,6 +44,48 @@ TestScene seenFrom(const TestScene& s, const store::Camera& view) {
       for (glm::dvec3& p : knot) p = glm::dvec3(m * glm::dvec4(p, 1.0));
   out.meta.cameras[0] = view;
   return out;
+}
+
+// The scene as a camera that moves against the primary (either of them moving) sees it: at the
+// scene's knots and both cameras' motion times, each corner where it is in the primary's space at
+// that time (linear between the scene's knots) carried by the transform between them at that time.
+TestScene seenFromMoving(const TestScene& s, const store::Camera& view) {
+  const store::Camera& primary = s.meta.cameras[0];
+  std::vector<double> times = s.knotTimes;
+  for (const store::Camera* c : {&primary, &view}) times.insert(times.end(), c->motionTimes.begin(), c->motionTimes.end());
+  std::sort(times.begin(), times.end());
+  times.erase(std::unique(times.begin(), times.end()), times.end());
+  TestScene out = s;
+  out.knotTimes = times;
+  for (size_t m = 0; m < s.mps.size(); ++m) {
+    const auto& knots = s.mps[m].knots;
+    auto& carried = out.mps[m].knots;
+    carried.clear();
+    for (double t : times) {
+      size_t k = 0;
+      while (k + 2 < s.knotTimes.size() && s.knotTimes[k + 1] <= t) ++k;
+      const double w = knots.size() < 2 ? 0.0 : std::clamp((t - s.knotTimes[k]) / (s.knotTimes[k + 1] - s.knotTimes[k]), 0.0, 1.0);
+      const glm::dmat4 toView = store::primaryToView(primary, view, t);
+      std::array<glm::dvec3, 4> q;
+      for (int c = 0; c < 4; ++c) {
+        const glm::dvec3 p = knots.size() < 2 ? knots[0][size_t(c)] : knots[k][size_t(c)] + w * (knots[k + 1][size_t(c)] - knots[k][size_t(c)]);
+        q[size_t(c)] = glm::dvec3(toView * glm::dvec4(p, 1.0));
+      }
+      carried.push_back(q);
+    }
+  }
+  out.meta.cameras[0] = view;
+  return out;
+}
+
+// `c` moving: at each of `times` where `at(time)` puts it.
+store::Camera movingCamera(store::Camera c, const std::vector<double>& times, const std::function<glm::dmat4(double)>& at, const char* name) {
+  c.name = name;
+  c.motionTimes = times;
+  c.motionWorldToCamera.clear();
+  for (double t : times) c.motionWorldToCamera.push_back(at(t));
+  c.worldToCamera = c.motionWorldToCamera[0];
+  return c;
 }
 
 // A red quad at depth 4 over raster [40, 100) × [20, 60) in front of a blue one at depth 16 over
@@ -370,6 +413,182 @@ TEST(CameraBounds, CarriedBoundsHoldEveryCarriedVertex) {
     }
   }
   EXPECT_GT(checked, 1000u);
+
+  // Cameras that move against the primary: every carried knot - the parts' own and the motion's
+  // between them - holds its carried vertices, the still parts' included.
+  const store::Camera swing = movingCamera(primary, {0.0, 0.25, 0.7, 1.0}, [&](double t) {
+    return lookAtCamera(primary, {3 * std::sin(2 * t), 1 - t, -3 + 2 * t}, {0, 0, 15}, {0, 1, 0}, 70.0).worldToCamera;
+  }, "swing");
+  const store::Projector proj(swing);
+  std::vector<store::CarriedSchedule> schedules;
+  for (size_t k = 0; k < reader->meta().schedules.size(); ++k)
+    schedules.push_back(store::carriedSchedule(reader->meta().schedules[k], k == 0, carryTimes(primary, swing, 0, 1),
+                                               [&](double t) { return store::primaryToView(primary, swing, t); }));
+  const std::vector<store::TileEntry> carried = store::carriedEntries(reader->entries(), schedules, store::Projector(primary), proj);
+  uint64_t movingChecked = 0, stillParts = 0;
+  for (size_t e = 0; e < carried.size(); ++e) {
+    const store::TilePart part = store::carriedPart(reader->decode(e), schedules[reader->entries()[e].schedule], reader->meta().schema);
+    ASSERT_EQ(part.numKnots, carried[e].knots.size());
+    if (reader->entries()[e].schedule == 0) ++stillParts;
+    for (uint32_t k = 0; k < part.numKnots; ++k) {
+      const store::KnotBounds& kb = carried[e].knots[k];
+      for (uint32_t i = 0; i < part.numVertices; ++i) {
+        const glm::vec3 p = part.position(k, i);
+        for (int a = 0; a < 3; ++a) EXPECT_TRUE(p[a] >= kb.camera[a] && p[a] <= kb.camera[a + 3]) << "part " << e << " knot " << k;
+        if (!kb.rasterFinite) continue;
+        const glm::dvec2 r = proj.project(glm::dvec3(p));
+        EXPECT_TRUE(r.x >= kb.raster[0] && r.x <= kb.raster[2] && r.y >= kb.raster[1] && r.y <= kb.raster[3]) << "part " << e << " knot " << k;
+        ++movingChecked;
+      }
+    }
+  }
+  EXPECT_GT(movingChecked, 500u);
+  EXPECT_GT(stillParts, 0u) << "no still part was carried into the moving camera";
+}
+
+TEST(CameraMoving, ATruckingCameraSweepsEachDepthByItsOwnParallax) {
+  // Static quads seen by a camera that trucks right by b over the shutter: in its raster the red
+  // quad (depth 4) slides left by ax·b/4 = 8 px and the blue one (depth 16) by 2 px, linearly in
+  // time. Each pixel's coverage is the time average of its overlap with the sliding quads.
+  ScratchDir dir;
+  TestScene s = parallaxScene();
+  s.meta.shutterOpen = 0, s.meta.shutterClose = 1;
+  auto reader = writeScene(s, dir.path("p.mps"));
+  const store::Camera& primary = s.meta.cameras[0];
+  const double ax = store::Projector(primary).ax, b = 8.0 * 4.0 / ax;
+  const store::Camera truck = movingCamera(primary, {0.0, 1.0}, [&](double t) { return glm::translate(glm::dmat4(1.0), glm::dvec3(-b * t, 0, 0)) * primary.worldToCamera; }, "truck");
+  RenderSpec spec = specFor(reader, 0, 1, 16, 16);
+  spec.camera = truck;
+  const RenderResult r = render(spec);
+  EXPECT_GT(r.stats.partsCarried, 0u);
+  EXPECT_GT(r.stats.raster.linearMicropolygons, 0u) << "the parts did not move in the view";
+  EXPECT_EQ(r.stats.raster.staticMicropolygons, 0u) << "a part stood still in the moving view";
+  // Exact coverage, integrated over time in 4096 steps (the overlap is piecewise linear in t).
+  auto overlap = [](double a0, double a1, double b0, double b1) { return std::max(0.0, std::min(a1, b1) - std::max(a0, b0)); };
+  const auto &R = channel(r, "R").f, &B = channel(r, "B").f;
+  double worst = 0, redCentroid = 0, redArea = 0;
+  for (int x = 0; x < 160; ++x) {
+    double red = 0, blue = 0;
+    for (int i = 0; i < 4096; ++i) {
+      const double t = (i + 0.5) / 4096;
+      const double r0 = 40 - 8 * t, r1 = 100 - 8 * t, b0 = 8 - 2 * t, b1 = 152 - 2 * t;
+      const double rc = overlap(x, x + 1, r0, r1);
+      red += rc / 4096, blue += (overlap(x, x + 1, b0, b1) - overlap(x, x + 1, std::max(r0, b0), std::min(r1, b1))) / 4096;
+    }
+    for (int y = 20; y < 60; ++y) {  // the rows through both quads
+      const size_t i = size_t(y) * 160 + size_t(x);
+      worst = std::max({worst, std::abs(R[i] - red), std::abs(B[i] - blue)});
+      redCentroid += R[i] * (x + 0.5), redArea += R[i];
+    }
+  }
+  EXPECT_LT(worst, 0.08) << "a pixel's coverage is off the swept area";
+  EXPECT_NEAR(redArea / 40, 60.0, 0.02) << "the red quad's area";
+  EXPECT_NEAR(redCentroid / redArea, 70.0 - 4.0, 0.01) << "the red quad's mean position over the shutter: its centre 70 less half its 8 px sweep";
+  // At the shutter's close the trucked camera stands where a camera moved by b does: the same image.
+  spec.shutter = ShutterModel::progressive(2.0, 2.0);
+  expectQuadsAt(render(spec), 32, 92, 6, 150, "the trucking camera at the close");
+  spec.shutter = ShutterModel::progressive(1.0, 1.0);
+  expectQuadsAt(render(spec), 40, 100, 8, 152, "the trucking camera at the open");
+}
+
+TEST(CameraMoving, MovingCamerasAgreeWithTheRayCasterLookingFromThere) {
+  // A camera that pans and dollies over the shutter (three motion times, one between the scene's
+  // knots), and a store whose own camera moves: against the ray caster looking at the scene as the
+  // moving camera sees it at each knot and motion time - full shutter, a sub-interval, fields, a lens.
+  ScratchDir dir;
+  const TestScene s = randomQuadScene(31, true);
+  auto reader = writeScene(s, dir.path("m.mps"));
+  const store::Camera& primary = s.meta.cameras[0];
+  const store::Camera pan = movingCamera(primary, {0.0, 0.7, 1.0}, [&](double t) {
+    return lookAtCamera(primary, {0.5 * t, -0.2, -0.5 + 0.8 * t}, {-0.6 + 1.2 * t, 0.3, 14.0}, {0.1, 1, 0}, 56.0).worldToCamera;
+  }, "pan");
+  const TestScene seen = seenFromMoving(s, pan);
+  ASSERT_EQ(seen.knotTimes, (std::vector<double>{0.0, 0.4, 0.7, 1.0}));
+  struct Case {
+    const char* what;
+    ShutterModel shutter;
+  };
+  const std::vector<Case> cases = {{"full shutter", ShutterModel::progressive(1.0, 2.0)},
+                                   {"sub-interval", ShutterModel::progressive(1.55, 1.85)},
+                                   {"fields", ShutterModel::fields({1.0, 1.25}, {1.5, 1.75}, 0)}};
+  for (const Case& c : cases) {
+    RenderSpec spec = specFor(reader, 0, 1, 4, 4, 3);
+    spec.shutter = c.shutter;
+    spec.camera = pan;
+    const RenderResult r = render(spec);
+    EXPECT_GT(r.stats.partsCarried, 0u) << c.what;
+    EXPECT_GT(r.stats.raster.hits, 1000u) << c.what << ": the view sees too little to test";
+    expectRayCasterAgrees(seen, spec, r, 40, 28, c.what);
+  }
+  RenderSpec lensSpec = specFor(reader, 0, 1, 4, 4, 5);
+  lensSpec.camera = pan;
+  lensSpec.lens.fstop = 4, lensSpec.lens.focalLength = 1, lensSpec.lens.focalDistance = 9;
+  const RenderResult lensed = render(lensSpec);
+  EXPECT_GT(lensed.stats.raster.lensMicropolygons, 0u);
+  expectRayCasterAgrees(seen, lensSpec, lensed, 40, 28, "through a lens");
+
+  // The store's own camera moves (format 5 keeps its motion); the view stands still.
+  TestScene m = s;
+  m.meta.cameras[0] = movingCamera(primary, {0.0, 1.0}, [&](double t) { return glm::rotate(glm::dmat4(1.0), -0.2 * t, glm::dvec3(0, 1, 0)); }, "world");
+  auto movingReader = writeScene(m, dir.path("moving_primary.mps"));
+  EXPECT_TRUE(movingReader->meta().cameras[0] == m.meta.cameras[0]) << "the store lost its camera's motion";
+  const store::Camera still = lookAtCamera(primary, {0.3, 0, 0}, {0.3, 0, 1}, {0, 1, 0}, std::nullopt);
+  RenderSpec spec = specFor(movingReader, 0, 1, 4, 4, 3);
+  spec.camera = still;
+  const RenderResult r = render(spec);
+  EXPECT_GT(r.stats.partsCarried, 0u);
+  expectRayCasterAgrees(seenFromMoving(m, still), spec, r, 40, 28, "a still camera, the store's moving");
+
+  // A stereo pair of a moving camera moves with it: the store's own camera's rig carries nothing in time.
+  const std::vector<store::Camera> eyes = stereoPair(m.meta.cameras[0], 0.2, INFINITY);
+  EXPECT_TRUE(carryTimes(m.meta.cameras[0], eyes[1], 0, 1).empty()) << "a rig moving as one was carried in time";
+  spec.camera = eyes[1];
+  expectRayCasterAgrees(seenFromMoving(m, eyes[1]), spec, render(spec), 40, 28, "the right eye of the moving camera");
+}
+
+TEST(CameraMoving, ShadedOnceWithAPanningCameraItRendersAsShadingFromIt) {
+  // A camera "pan" that turns 30° over the shutter, recorded in a RIB scene shaded from a still
+  // primary: rendered from "pan", the image of the same scene shaded with "pan" as its camera,
+  // within the noise of two seeds - including a green sphere only the end of the pan sees (kept
+  // only if the shading pass culls for the camera at its motion times, not where it starts).
+  ScratchDir dir;
+  const std::string world = "WorldBegin\nSurface \"constant\"\nColor [1 0.5 0.2]\nTranslate 0 0 6\nSphere 1 -1 1 360\n"
+                            "AttributeBegin\nColor [0 1 0]\nTranslate 5.5 0 0\nSphere 0.6 -0.6 0.6 360\nAttributeEnd\nWorldEnd\n";
+  const std::string head = "Format 96 64 1\nProjection \"perspective\" \"fov\" 40\nShutter 0 1\n";
+  const std::string pan = "MotionBegin [0 1]\nRotate 0 0 1 0\nRotate -30 0 1 0\nMotionEnd\n";
+  std::ofstream(dir.path("both.rib")) << head << pan << "Camera \"pan\"\nIdentity\n" << world;
+  std::ofstream(dir.path("pan.rib")) << head << pan << world;
+  ASSERT_EQ(runReshutter("shade " + dir.path("both.rib") + " -o " + dir.path("both.mps")).exitCode, 0);
+  ASSERT_EQ(runReshutter("shade " + dir.path("pan.rib") + " -o " + dir.path("pan.mps")).exitCode, 0);
+  const CommandResult info = runReshutter("info " + dir.path("both.mps"));
+  EXPECT_NE(info.out.find("moving"), std::string::npos) << "info does not say the camera moves: " << info.out;
+  auto renderTo = [&](const std::string& mps, const std::string& exr, const std::string& extra) {
+    const CommandResult r = runReshutter("resample " + dir.path(mps) + " -o " + dir.path(exr) + " --spp 16 " + extra);
+    EXPECT_EQ(r.exitCode, 0) << r.err;
+    return readFlatExr(dir.path(exr));
+  };
+  const resample::FlatImage fromStore = renderTo("both.mps", "from_store.exr", "--camera pan");
+  const resample::FlatImage direct = renderTo("pan.mps", "direct.exr", "");
+  const resample::FlatImage directSeed = renderTo("pan.mps", "direct_seed.exr", "--seed 7");
+  const resample::FlatImage primary = renderTo("both.mps", "primary.exr", "");
+  // Green: G above R (the orange sphere has G = R / 2).
+  auto greenest = [](const resample::FlatImage& img) {
+    const auto &R = img.find("R")->f, &G = img.find("G")->f;
+    double most = -1;
+    for (size_t i = 0; i < R.size(); ++i) most = std::max(most, double(G[i]) - double(R[i]));
+    return most;
+  };
+  EXPECT_LE(greenest(primary), 0.0) << "the still camera sees the green sphere: the test is vacuous";
+  EXPECT_GT(greenest(direct), 0.2);
+  EXPECT_GT(greenest(fromStore), 0.2) << "what only the end of the pan sees was culled at shading";
+  const double noise = rmseRgba(direct, directSeed), err = rmseRgba(fromStore, direct);
+  EXPECT_GT(noise, 0.0);
+  EXPECT_LT(err, 2.0 * noise + 1e-3) << "shaded once vs shaded from the panning camera: RMSE " << err << ", two seeds " << noise;
+  // The same moving camera read from a RIB snippet: the same image, bit for bit.
+  std::ofstream(dir.path("pan_cam.rib")) << head << pan;
+  const resample::FlatImage fromSnippet = renderTo("both.mps", "snippet.exr", "--camera-rib " + dir.path("pan_cam.rib"));
+  EXPECT_EQ(fromSnippet.find("R")->f, fromStore.find("R")->f) << "the moving camera read from a RIB snippet renders otherwise";
+  EXPECT_EQ(fromSnippet.find("A")->f, fromStore.find("A")->f);
 }
 
 TEST(CameraViewDependent, APlasticHighlightFollowsTheOtherEye) {

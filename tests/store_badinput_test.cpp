@@ -69,6 +69,8 @@ void rewrite(const std::string& path, Edit edit) {
   writeMeta(meta, mw);
   writeIndex(entries, meta, iw);
   std::vector<uint8_t> out(bytes.begin(), bytes.begin() + long(f.metaOffset));
+  const uint32_t version = formatVersionFor(meta);  // the edit may need a later format
+  std::memcpy(out.data() + 8, &version, 4);
   Footer nf{f.metaOffset, mw.size(), checksum(mw.bytes()), f.metaOffset + mw.size(), iw.size(), checksum(iw.bytes())};
   out.insert(out.end(), mw.bytes().begin(), mw.bytes().end());
   out.insert(out.end(), iw.bytes().begin(), iw.bytes().end());
@@ -209,6 +211,49 @@ TEST(StoreBadInput, KnotTimesNotIncreasing) {
   std::string path = goodStore(dir);
   rewrite(path, [](StoreMeta& m, std::vector<TileEntry>&) { m.schedules[1] = {0.7, 0.3}; });
   expectRejected(path, "not strictly increasing");
+}
+
+TEST(StoreBadInput, CameraMotionRoundTripsAndIsChecked) {
+  // A moving camera is kept (format 5) and read back exactly; a store without one stays at the
+  // format it had, so older builds still read it; motion that is not a motion is refused.
+  test::ScratchDir dir;
+  const std::string still = goodStore(dir, "still.mps");
+  EXPECT_LT(test::readBytes(still)[8], 5) << "a store without camera motion was written as format 5";
+  const Schema schema = test::fullSchema();
+  StoreMeta meta = test::testMeta(schema);
+  Camera& c = meta.cameras[0];
+  c.motionTimes = {0.0, 0.25, 1.0};
+  for (double t : c.motionTimes) {
+    glm::dmat4 m(1.0);
+    m[3][0] = -2 * t, m[3][2] = 0.5 * t * t;
+    c.motionWorldToCamera.push_back(m);
+  }
+  c.worldToCamera = c.motionWorldToCamera[0];
+  {
+    StoreWriter w(dir.path("moving.mps"), meta);
+    w.close();
+  }
+  EXPECT_EQ(test::readBytes(dir.path("moving.mps"))[8], 5);
+  StoreReader r(dir.path("moving.mps"));
+  EXPECT_TRUE(r.meta().cameras[0] == c);
+  EXPECT_EQ(r.meta().cameras[0].worldToCameraAt(0.625)[3][0], -2 * 0.625) << "between motion times the transform is linear";
+  EXPECT_EQ(r.meta().cameras[0].worldToCameraAt(7.0), c.motionWorldToCamera.back()) << "after the last time it is held";
+
+  auto bad = [&](const char* name, const std::vector<double>& times, size_t mats, const std::string& needle) {
+    const std::string path = goodStore(dir, name);
+    rewrite(path, [&](StoreMeta& m, std::vector<TileEntry>&) {
+      m.cameras[0].motionTimes = times;
+      m.cameras[0].motionWorldToCamera.assign(mats, glm::dmat4(1.0));
+      m.cameras[0].motionWorldToCamera.back()[3][0] = 1;
+    });
+    expectRejected(path, needle);
+  };
+  bad("outside.mps", {0.0, 2.0}, 2, "outside the shutter");
+  bad("backwards.mps", {0.5, 0.2}, 2, "not strictly increasing");
+  StoreMeta unpaired = meta;  // the file cannot say this: the writer refuses it
+  unpaired.cameras[0].motionWorldToCamera.pop_back();
+  EXPECT_THROW(StoreWriter(dir.path("unpaired.mps"), unpaired), Error);
+  EXPECT_FALSE(std::filesystem::exists(dir.path("unpaired.mps")));
 }
 
 TEST(StoreBadInputHard, NonFinitePositionsAreRejectedOnWriteAndOnRead) {
