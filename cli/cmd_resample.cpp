@@ -104,7 +104,8 @@ void addResampleCommand(CLI::App& app, Registry& registry) {
       "  reshutter resample frame.mps -o right.exr --camera right             # from a camera the RIB recorded (Camera \"right\")\n"
       "  reshutter resample frame.mps -o stereo.exr --stereo 0.065:4          # a stereo pair, one multi-view OpenEXR (left, right)\n"
       "  reshutter resample frame.mps -o wide.exr --look-from 3,1,-6 --look-at 0,0,0 --fov 50   # a camera given after the fact\n"
-      "  reshutter resample frame.mps -o witness.exr --camera-rib witness.rib --stats   # the camera a RIB snippet describes\n"
+      "  reshutter resample frame.mps -o dolly.exr --look-from 0,0,-1,0,0,-0.5 --look-at 0,0,1   # a camera dollying in over the shutter\n"
+      "  reshutter resample frame.mps -o witness.exr --camera-rib witness.rib --stats   # the camera a RIB snippet describes (MotionBegin: moving)\n"
       "  reshutter resample shot.####.mps --frames 1-100 --shutter 0:0.25 -o quarter.####.exr   # every frame of a shot");
   registry.add(sub, [cmd, hook = registry.sequenceHook] { return cmd->run(hook); });
 }

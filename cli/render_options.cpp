@@ -106,11 +106,13 @@ void RenderOptions::addTo(CLI::App* app) {
                   "without re-shading: NAME or NAME,NAME,... (several: one multi-view OpenEXR, a view per camera)")
       ->delimiter(',')
       ->group("Camera");
-  auto* lf = app->add_option("--look-from", lookFrom, "Render from a camera given after the fact at X,Y,Z (the store camera's world space)")
+  auto* lf = app->add_option("--look-from", lookFrom,
+                             "Render from a camera given after the fact at X,Y,Z (the store camera's world space); X,Y,Z,X,Y,Z: "
+                             "moving from the first point at the shutter's open to the second at its close")
                  ->delimiter(',')
-                 ->expected(3)
+                 ->expected(3, 6)
                  ->group("Camera");
-  auto* la = app->add_option("--look-at", lookAt, "... looking at X,Y,Z")->delimiter(',')->expected(3)->group("Camera");
+  auto* la = app->add_option("--look-at", lookAt, "... looking at X,Y,Z (X,Y,Z,X,Y,Z: at the open, then at the close)")->delimiter(',')->expected(3, 6)->group("Camera");
   lf->needs(la), la->needs(lf);
   app->add_option("--up", up, "... with X,Y,Z towards the top of the image (default 0,1,0)")->delimiter(',')->expected(3)->needs(lf)->group("Camera");
   app->add_option("--fov", fov, "... with this field of view in degrees (default: the store camera's)")->needs(lf)->group("Camera");
@@ -259,7 +261,15 @@ std::vector<store::Camera> RenderOptions::viewCameras(const store::StoreMeta& me
   if (!lookFrom.empty()) {
     if (!views.empty()) fail("--look-from", "give either --camera or --look-from");
     const glm::dvec3 u = up.empty() ? glm::dvec3(0, 1, 0) : glm::dvec3(up[0], up[1], up[2]);
-    views.push_back(resample::lookAtCamera(meta.cameras[0], {lookFrom[0], lookFrom[1], lookFrom[2]}, {lookAt[0], lookAt[1], lookAt[2]}, u, fov));
+    // One point each, or one at the open and one at the close (a camera that moves).
+    auto ends = [](const std::vector<double>& v, const char* option, glm::dvec3 out[2]) {
+      if (v.size() != 3 && v.size() != 6) fail(option, "expected X,Y,Z or X,Y,Z,X,Y,Z (open, close), got ", v.size(), " numbers");
+      out[0] = {v[0], v[1], v[2]};
+      out[1] = v.size() == 6 ? glm::dvec3(v[3], v[4], v[5]) : out[0];
+    };
+    glm::dvec3 from[2], to[2];
+    ends(lookFrom, "--look-from", from), ends(lookAt, "--look-at", to);
+    views.push_back(resample::movingLookAtCamera(meta.cameras[0], from, to, u, fov, meta.shutterOpen, meta.shutterClose));
   }
   if (!cameraRib.empty()) {
     if (!views.empty()) fail("--camera-rib", "give one of --camera, --look-from and --camera-rib");

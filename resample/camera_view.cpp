@@ -38,6 +38,22 @@ store::Camera lookAtCamera(const store::Camera& base, const glm::dvec3& from, co
   return cam;
 }
 
+store::Camera movingLookAtCamera(const store::Camera& base, const glm::dvec3 from[2], const glm::dvec3 to[2], const glm::dvec3& up, std::optional<double> fovDegrees,
+                                 double open, double close) {
+  store::Camera cam = lookAtCamera(base, from[0], to[0], up, fovDegrees);
+  if (from[0] == from[1] && to[0] == to[1]) return cam;
+  if (!(close > open)) return cam;  // a zero-length shutter: where it is at the open
+  const bool turns = glm::normalize(to[1] - from[1]) != glm::normalize(to[0] - from[0]);
+  const int steps = turns ? kTurnSteps : 1;
+  for (int i = 0; i <= steps; ++i) {
+    const double w = double(i) / steps;
+    cam.motionTimes.push_back(i == steps ? close : open + w * (close - open));
+    cam.motionWorldToCamera.push_back(lookAtCamera(base, from[0] + w * (from[1] - from[0]), to[0] + w * (to[1] - to[0]), up, fovDegrees).worldToCamera);
+  }
+  cam.worldToCamera = cam.motionWorldToCamera[0];
+  return cam;
+}
+
 std::vector<store::Camera> stereoPair(const store::Camera& centre, double baseline, double convergence) {
   if (!(baseline > 0) || !std::isfinite(baseline)) fail("stereo", "the baseline must be a positive distance, got ", baseline);
   if (!(convergence > 0)) fail("stereo", "the convergence distance must be positive, got ", convergence);

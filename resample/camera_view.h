@@ -26,6 +26,14 @@ namespace reshutter::resample {
 /// Error naming the option when from == to or up is parallel to the view direction.
 store::Camera lookAtCamera(const store::Camera& base, const glm::dvec3& from, const glm::dvec3& to, const glm::dvec3& up, std::optional<double> fovDegrees);
 
+/// A look-at camera that moves over [open, close]: from `from[0]` looking at `to[0]` at the open
+/// to `from[1]` looking at `to[1]` at the close, eye and target moving linearly. A camera that
+/// only translates keeps its two ends (exact: a translation is linear); one that turns is sampled
+/// at kTurnSteps + 1 times, each a true look-at. Throws as lookAtCamera() does.
+store::Camera movingLookAtCamera(const store::Camera& base, const glm::dvec3 from[2], const glm::dvec3 to[2], const glm::dvec3& up, std::optional<double> fovDegrees,
+                                 double open, double close);
+constexpr int kTurnSteps = 16;
+
 /// The two eyes of a stereo pair around `centre`, named "left" and "right": each moved half of
 /// `baseline` (camera-space units) along centre's x axis, axes parallel. A finite `convergence`
 /// (camera depth, > 0) shifts each eye's screen window so that points at that depth land where the

@@ -464,26 +464,34 @@ TEST(CameraMoving, ATruckingCameraSweepsEachDepthByItsOwnParallax) {
   EXPECT_GT(r.stats.raster.linearMicropolygons, 0u) << "the parts did not move in the view";
   EXPECT_EQ(r.stats.raster.staticMicropolygons, 0u) << "a part stood still in the moving view";
   // Exact coverage, integrated over time in 4096 steps (the overlap is piecewise linear in t).
-  auto overlap = [](double a0, double a1, double b0, double b1) { return std::max(0.0, std::min(a1, b1) - std::max(a0, b0)); };
-  const auto &R = channel(r, "R").f, &B = channel(r, "B").f;
-  double worst = 0, redCentroid = 0, redArea = 0;
-  for (int x = 0; x < 160; ++x) {
-    double red = 0, blue = 0;
-    for (int i = 0; i < 4096; ++i) {
-      const double t = (i + 0.5) / 4096;
-      const double r0 = 40 - 8 * t, r1 = 100 - 8 * t, b0 = 8 - 2 * t, b1 = 152 - 2 * t;
-      const double rc = overlap(x, x + 1, r0, r1);
-      red += rc / 4096, blue += (overlap(x, x + 1, b0, b1) - overlap(x, x + 1, std::max(r0, b0), std::min(r1, b1))) / 4096;
+  auto expectSwept = [](const std::vector<float>& R, const std::vector<float>& B, const std::string& what) {
+    auto overlap = [](double a0, double a1, double b0, double b1) { return std::max(0.0, std::min(a1, b1) - std::max(a0, b0)); };
+    double worst = 0, redCentroid = 0, redArea = 0;
+    for (int x = 0; x < 160; ++x) {
+      double red = 0, blue = 0;
+      for (int i = 0; i < 4096; ++i) {
+        const double t = (i + 0.5) / 4096;
+        const double r0 = 40 - 8 * t, r1 = 100 - 8 * t, b0 = 8 - 2 * t, b1 = 152 - 2 * t;
+        red += overlap(x, x + 1, r0, r1) / 4096, blue += (overlap(x, x + 1, b0, b1) - overlap(x, x + 1, std::max(r0, b0), std::min(r1, b1))) / 4096;
+      }
+      for (int y = 20; y < 60; ++y) {  // the rows through both quads
+        const size_t i = size_t(y) * 160 + size_t(x);
+        worst = std::max({worst, std::abs(R[i] - red), std::abs(B[i] - blue)});
+        redCentroid += R[i] * (x + 0.5), redArea += R[i];
+      }
     }
-    for (int y = 20; y < 60; ++y) {  // the rows through both quads
-      const size_t i = size_t(y) * 160 + size_t(x);
-      worst = std::max({worst, std::abs(R[i] - red), std::abs(B[i] - blue)});
-      redCentroid += R[i] * (x + 0.5), redArea += R[i];
-    }
-  }
-  EXPECT_LT(worst, 0.08) << "a pixel's coverage is off the swept area";
-  EXPECT_NEAR(redArea / 40, 60.0, 0.02) << "the red quad's area";
-  EXPECT_NEAR(redCentroid / redArea, 70.0 - 4.0, 0.01) << "the red quad's mean position over the shutter: its centre 70 less half its 8 px sweep";
+    EXPECT_LT(worst, 0.08) << what << ": a pixel's coverage is off the swept area";
+    EXPECT_NEAR(redArea / 40, 60.0, 0.02) << what << ": the red quad's area";
+    EXPECT_NEAR(redCentroid / redArea, 70.0 - 4.0, 0.01) << what << ": the red quad's mean position over the shutter: its centre 70 less half its 8 px sweep";
+  };
+  expectSwept(channel(r, "R").f, channel(r, "B").f, "the trucking camera");
+  // The same camera on the command line: a look-at whose eye and target move over the shutter.
+  const std::string exr = dir.path("truck.exr");
+  const CommandResult cli = runReshutter("resample " + dir.path("p.mps") + " -o " + exr + " --spp 256 --filter box:1x1 --look-from 0,0,0," + std::to_string(b) +
+                                         ",0,0 --look-at 0,0,1," + std::to_string(b) + ",0,1");
+  ASSERT_EQ(cli.exitCode, 0) << cli.err;
+  const resample::FlatImage fromCli = readFlatExr(exr);
+  expectSwept(fromCli.find("R")->f, fromCli.find("B")->f, "--look-from and --look-at moving");
   // At the shutter's close the trucked camera stands where a camera moved by b does: the same image.
   spec.shutter = ShutterModel::progressive(2.0, 2.0);
   expectQuadsAt(render(spec), 32, 92, 6, 150, "the trucking camera at the close");
@@ -653,6 +661,8 @@ TEST(CameraCli, BadCameraRequestsAreOneLineErrorsAndWriteNothing) {
       {"resample " + dir.path("s.mps") + " -o " + out + " --look-from 0,0,0 --look-at 0,0,0", "--look-at"},
       {"resample " + dir.path("s.mps") + " -o " + out + " --look-from 0,0,0 --look-at 0,1,0", "--up"},
       {"resample " + dir.path("s.mps") + " -o " + out + " --look-from 0,0,0 --look-at 0,0,1 --fov 180", "--fov"},
+      {"resample " + dir.path("s.mps") + " -o " + out + " --look-from 0,0,0,1 --look-at 0,0,1", "--look-from"},
+      {"resample " + dir.path("s.mps") + " -o " + out + " --look-from 0,0,0,1,0,0 --look-at 0,0,1,1,0,0", "--look-at"},  // at the close it looks from where it looks at
       {"resample " + dir.path("s.mps") + " -o " + out + " --camera world,world", "--camera"},
       {"resample " + dir.path("s.mps") + " -o " + out + " --camera world --camera-rib " + dir.path("world.rib"), "--camera-rib"},
       {"shade " + dir.path("scene.rib") + " -o " + mps + " --add-camera " + dir.path("world.rib"), "--add-camera"},
