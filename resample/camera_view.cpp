@@ -43,8 +43,9 @@ store::Camera movingLookAtCamera(const store::Camera& base, const glm::dvec3 fro
   store::Camera cam = lookAtCamera(base, from[0], to[0], up, fovDegrees);
   if (from[0] == from[1] && to[0] == to[1]) return cam;
   if (!(close > open)) return cam;  // a zero-length shutter: where it is at the open
-  const bool turns = glm::normalize(to[1] - from[1]) != glm::normalize(to[0] - from[0]);
-  const int steps = turns ? kTurnSteps : 1;
+  const double cosTurn = std::clamp(glm::dot(glm::normalize(to[1] - from[1]), glm::normalize(to[0] - from[0])), -1.0, 1.0);
+  const double turnDegrees = std::acos(cosTurn) * 180.0 / M_PI;
+  const int steps = std::clamp(int(std::ceil(turnDegrees / kTurnStepDegrees - 1e-4)), 1, 36);  // 10.00001 degrees is one step
   for (int i = 0; i <= steps; ++i) {
     const double w = double(i) / steps;
     cam.motionTimes.push_back(i == steps ? close : open + w * (close - open));

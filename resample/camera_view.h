@@ -29,10 +29,14 @@ store::Camera lookAtCamera(const store::Camera& base, const glm::dvec3& from, co
 /// A look-at camera that moves over [open, close]: from `from[0]` looking at `to[0]` at the open
 /// to `from[1]` looking at `to[1]` at the close, eye and target moving linearly. A camera that
 /// only translates keeps its two ends (exact: a translation is linear); one that turns is sampled
-/// at kTurnSteps + 1 times, each a true look-at. Throws as lookAtCamera() does.
+/// every kTurnStepDegrees of its turn, each time a true look-at. Between them positions are linear
+/// in camera space, as in every store: a chord of a point's arc about the eye projects onto the
+/// arc's own raster path, so a pan's image is off only in timing: at most 0.005 degrees in a
+/// 10-degree step (0.12 px for the bench's 1080p camera), falling as the step's cube. Throws as
+/// lookAtCamera() does.
 store::Camera movingLookAtCamera(const store::Camera& base, const glm::dvec3 from[2], const glm::dvec3 to[2], const glm::dvec3& up, std::optional<double> fovDegrees,
                                  double open, double close);
-constexpr int kTurnSteps = 16;
+constexpr double kTurnStepDegrees = 10.0;
 
 /// The two eyes of a stereo pair around `centre`, named "left" and "right": each moved half of
 /// `baseline` (camera-space units) along centre's x axis, axes parallel. A finite `convergence`
