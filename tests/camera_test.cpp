@@ -599,6 +599,34 @@ TEST(CameraMoving, ShadedOnceWithAPanningCameraItRendersAsShadingFromIt) {
   EXPECT_EQ(fromSnippet.find("A")->f, fromStore.find("A")->f);
 }
 
+TEST(CameraMoving, AStillCameraTakesTheCameraMotionOutOfAStoredFrame) {
+  // A shared scene whose camera trucks 49 units over the shutter past a still world
+  // (aqsis_mb_camera.rib): the store records the camera's motion, and rendered from a still
+  // camera where it stood at the open, the whole shutter is that instant's image - the camera
+  // motion blur taken out after the fact - while the stored frame itself is blurred.
+  ScratchDir dir;
+  const std::string rib = sharedDir() + "/data/rib/aqsis_mb_camera.rib";
+  ASSERT_EQ(runReshutter("shade " + rib + " -o " + dir.path("mb.mps")).exitCode, 0);
+  const CommandResult info = runReshutter("info " + dir.path("mb.mps"));
+  EXPECT_NE(info.out.find("world: perspective fov 36, 480x360, pixel aspect 1, screen [-1.33333333 1.33333333 -1 1], clip [0.0001 1e+30], pinhole, moving (2 times 0 to 1)"),
+            std::string::npos)
+      << info.out;
+  std::ofstream(dir.path("open.rib")) << "Orientation \"lh\"\nFormat 480 360 1\nShutter 0 1\nProjection \"perspective\" \"fov\" [36.0]\nRotate 180 0 1 0\n"
+                                         "Translate 1 10 -440\nScale 1 -1 1\n";
+  auto renderTo = [&](const std::string& exr, const std::string& extra) {
+    const CommandResult r = runReshutter("resample " + dir.path("mb.mps") + " -o " + dir.path(exr) + " --spp 16 " + extra);
+    EXPECT_EQ(r.exitCode, 0) << r.err;
+    return readFlatExr(dir.path(exr));
+  };
+  const resample::FlatImage atOpen = renderTo("open.exr", "--shutter 0:0");
+  const resample::FlatImage blurred = renderTo("blurred.exr", "");
+  const resample::FlatImage still = renderTo("still.exr", "--camera-rib " + dir.path("open.rib"));
+  const resample::FlatImage stillSeed = renderTo("still_seed.exr", "--camera-rib " + dir.path("open.rib") + " --seed 5");
+  const double noise = rmseRgba(still, stillSeed), err = rmseRgba(still, atOpen), blur = rmseRgba(blurred, atOpen);
+  EXPECT_GT(blur, 5 * noise) << "the stored frame is not blurred by its camera's motion: the test is vacuous";
+  EXPECT_LT(err, 2 * noise + 1e-3) << "a still camera at the open vs the instant at the open: RMSE " << err << ", two seeds " << noise;
+}
+
 TEST(CameraViewDependent, APlasticHighlightFollowsTheOtherEye) {
   // A plastic sphere under a point light, seen by the primary camera and by "right", which orbits
   // it by 35 degrees: its highlight sits elsewhere for each eye. Shaded once with the view-dependent
