@@ -142,6 +142,30 @@ RasterRect boundsOver(const TileEntry& e, const Schedule& s, const Projector& p,
   return out;
 }
 
+namespace {
+// A 4×4 matrix as 16 doubles, column by column (glm's order).
+void putMatrix(ByteWriter& w, const glm::dmat4& m) {
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) w.put<double>(m[i][j]);
+}
+glm::dmat4 getMatrix(ByteReader& r) {
+  glm::dmat4 m;
+  for (int i = 0; i < 4; ++i)
+    for (int j = 0; j < 4; ++j) m[i][j] = r.get<double>();
+  return m;
+}
+// A count, then per time the time and its matrix (a volume's placement, a camera's motion).
+void putTimedMatrices(ByteWriter& w, const std::vector<double>& times, const std::vector<glm::dmat4>& mats) {
+  w.put<uint32_t>(uint32_t(times.size()));
+  for (size_t k = 0; k < times.size(); ++k) w.put<double>(times[k]), putMatrix(w, mats[k]);
+}
+void getTimedMatrices(ByteReader& r, std::vector<double>& times, std::vector<glm::dmat4>& mats) {
+  const size_t n = r.getCount(136);
+  times.resize(n), mats.resize(n);
+  for (size_t k = 0; k < n; ++k) times[k] = r.get<double>(), mats[k] = getMatrix(r);
+}
+}  // namespace
+
 void writeMeta(const StoreMeta& m, ByteWriter& w) {
   w.put<int64_t>(m.frame);
   w.put<int64_t>(m.fps.num);
@@ -164,8 +188,7 @@ void writeMeta(const StoreMeta& m, ByteWriter& w) {
     for (double v : c.screenWindow) w.put<double>(v);
     w.put<double>(c.nearClip);
     w.put<double>(c.farClip);
-    for (int i = 0; i < 4; ++i)
-      for (int j = 0; j < 4; ++j) w.put<double>(c.worldToCamera[i][j]);
+    putMatrix(w, c.worldToCamera);
   }
   w.put<uint32_t>(uint32_t(m.schema.attrs.size()));
   for (const auto& a : m.schema.attrs) {
@@ -193,12 +216,7 @@ void writeMeta(const StoreMeta& m, ByteWriter& w) {
     w.put<uint32_t>(uint32_t(m.volumes.size()));
     for (const StoredVolume& v : m.volumes) {
       w.putString(v.path), w.putString(v.density);
-      w.put<uint32_t>(uint32_t(v.times.size()));
-      for (size_t k = 0; k < v.times.size(); ++k) {
-        w.put<double>(v.times[k]);
-        for (int i = 0; i < 4; ++i)
-          for (int j = 0; j < 4; ++j) w.put<double>(v.fileToCamera[k][i][j]);
-      }
+      putTimedMatrices(w, v.times, v.fileToCamera);
     }
   }
   if (version >= 4)
@@ -207,14 +225,7 @@ void writeMeta(const StoreMeta& m, ByteWriter& w) {
       w.put<double>(lens.fstop), w.put<double>(lens.focalLength), w.put<double>(lens.focalDistance);
     }
   if (version >= 5)
-    for (const Camera& c : m.cameras) {
-      w.put<uint32_t>(uint32_t(c.motionTimes.size()));
-      for (size_t k = 0; k < c.motionTimes.size(); ++k) {
-        w.put<double>(c.motionTimes[k]);
-        for (int i = 0; i < 4; ++i)
-          for (int j = 0; j < 4; ++j) w.put<double>(c.motionWorldToCamera[k][i][j]);
-      }
-    }
+    for (const Camera& c : m.cameras) putTimedMatrices(w, c.motionTimes, c.motionWorldToCamera);
 }
 
 uint32_t formatVersionFor(const StoreMeta& m) {
@@ -251,8 +262,7 @@ StoreMeta readMeta(ByteReader& r, uint32_t version) {
     for (double& v : c.screenWindow) v = r.get<double>();
     c.nearClip = r.get<double>();
     c.farClip = r.get<double>();
-    for (int i = 0; i < 4; ++i)
-      for (int j = 0; j < 4; ++j) c.worldToCamera[i][j] = r.get<double>();
+    c.worldToCamera = getMatrix(r);
   }
   m.schema.attrs.resize(r.getCount(7));
   for (auto& a : m.schema.attrs) {
@@ -286,13 +296,7 @@ StoreMeta readMeta(ByteReader& r, uint32_t version) {
     m.volumes.resize(r.getCount(12));
     for (StoredVolume& v : m.volumes) {
       v.path = r.getString(4096), v.density = r.getString(4096);
-      const size_t n = r.getCount(136);
-      v.times.resize(n), v.fileToCamera.resize(n);
-      for (size_t k = 0; k < n; ++k) {
-        v.times[k] = r.get<double>();
-        for (int i = 0; i < 4; ++i)
-          for (int j = 0; j < 4; ++j) v.fileToCamera[k][i][j] = r.get<double>();
-      }
+      getTimedMatrices(r, v.times, v.fileToCamera);
     }
   }
   if (version >= 4) {
@@ -303,15 +307,7 @@ StoreMeta readMeta(ByteReader& r, uint32_t version) {
     }
   }
   if (version >= 5) {
-    for (Camera& c : m.cameras) {
-      const size_t n = r.getCount(136);
-      c.motionTimes.resize(n), c.motionWorldToCamera.resize(n);
-      for (size_t k = 0; k < n; ++k) {
-        c.motionTimes[k] = r.get<double>();
-        for (int i = 0; i < 4; ++i)
-          for (int j = 0; j < 4; ++j) c.motionWorldToCamera[k][i][j] = r.get<double>();
-      }
-    }
+    for (Camera& c : m.cameras) getTimedMatrices(r, c.motionTimes, c.motionWorldToCamera);
   }
   if (!r.atEnd()) fail(r.context(), "unexpected bytes after the metadata");
   m.validate(r.context());

@@ -78,6 +78,32 @@ TestScene seenFromMoving(const TestScene& s, const store::Camera& view) {
   return out;
 }
 
+struct ShutterCase {
+  const char* what;
+  ShutterModel shutter;
+};
+
+// Renders `reader` from `view` over each of `cases` and through a lens, each against the ray
+// caster looking at `seen` (the scene as `view` sees it).
+void expectRayCasterAgreesOnEveryPath(std::shared_ptr<const store::StoreReader> reader, const store::Camera& view, const TestScene& seen,
+                                      const std::vector<ShutterCase>& cases) {
+  for (const ShutterCase& c : cases) {
+    RenderSpec spec = specFor(reader, 0, 1, 4, 4, 3);
+    spec.shutter = c.shutter;
+    spec.camera = view;
+    const RenderResult r = render(spec);
+    EXPECT_GT(r.stats.partsCarried, 0u) << c.what;
+    EXPECT_GT(r.stats.raster.hits, 1000u) << c.what << ": the view sees too little to test";
+    expectRayCasterAgrees(seen, spec, r, 40, 28, c.what);
+  }
+  RenderSpec spec = specFor(reader, 0, 1, 4, 4, 5);
+  spec.camera = view;
+  spec.lens.fstop = 4, spec.lens.focalLength = 1, spec.lens.focalDistance = 9;
+  const RenderResult r = render(spec);
+  EXPECT_GT(r.stats.raster.lensMicropolygons, 0u);
+  expectRayCasterAgrees(seen, spec, r, 40, 28, "through a lens");
+}
+
 // `c` moving: at each of `times` where `at(time)` puts it.
 store::Camera movingCamera(store::Camera c, const std::vector<double>& times, const std::function<glm::dmat4(double)>& at, const char* name) {
   c.name = name;
@@ -164,30 +190,11 @@ TEST(CameraReference, AnyCameraAgreesWithTheRayCasterLookingFromThere) {
   const TestScene s = randomQuadScene(11, true);
   auto reader = writeScene(s, dir.path("r.mps"));
   const store::Camera view = lookAtCamera(s.meta.cameras[0], {0.6, -0.3, -0.4}, {-0.5, 0.4, 14.0}, {0.15, 1, 0}, 56.0);
-  const TestScene seen = seenFrom(s, view);
-  struct Case {
-    const char* what;
-    ShutterModel shutter;
-  };
-  const std::vector<Case> cases = {{"full shutter", ShutterModel::progressive(1.0, 2.0)},
-                                   {"instant", ShutterModel::progressive(1.35, 1.35)},
-                                   {"sub-interval", ShutterModel::progressive(1.2, 1.45)},
-                                   {"fields", ShutterModel::fields({1.0, 1.25}, {1.5, 1.75}, 0)}};
-  for (const Case& c : cases) {
-    RenderSpec spec = specFor(reader, 0, 1, 4, 4, 3);
-    spec.shutter = c.shutter;
-    spec.camera = view;
-    const RenderResult r = render(spec);
-    EXPECT_GT(r.stats.partsCarried, 0u) << c.what;
-    EXPECT_GT(r.stats.raster.hits, 1000u) << c.what << ": the view sees too little to test";
-    expectRayCasterAgrees(seen, spec, r, 40, 28, c.what);
-  }
-  RenderSpec spec = specFor(reader, 0, 1, 4, 4, 5);
-  spec.camera = view;
-  spec.lens.fstop = 4, spec.lens.focalLength = 1, spec.lens.focalDistance = 9;
-  const RenderResult r = render(spec);
-  EXPECT_GT(r.stats.raster.lensMicropolygons, 0u);
-  expectRayCasterAgrees(seen, spec, r, 40, 28, "through a lens");
+  expectRayCasterAgreesOnEveryPath(reader, view, seenFrom(s, view),
+                                   {{"full shutter", ShutterModel::progressive(1.0, 2.0)},
+                                    {"instant", ShutterModel::progressive(1.35, 1.35)},
+                                    {"sub-interval", ShutterModel::progressive(1.2, 1.45)},
+                                    {"fields", ShutterModel::fields({1.0, 1.25}, {1.5, 1.75}, 0)}});
 }
 
 TEST(CameraLookAt, PlacedWhereTheShadingCameraStandsItRendersItsImage) {
@@ -512,28 +519,11 @@ TEST(CameraMoving, MovingCamerasAgreeWithTheRayCasterLookingFromThere) {
   }, "pan");
   const TestScene seen = seenFromMoving(s, pan);
   ASSERT_EQ(seen.knotTimes, (std::vector<double>{0.0, 0.4, 0.7, 1.0}));
-  struct Case {
-    const char* what;
-    ShutterModel shutter;
-  };
-  const std::vector<Case> cases = {{"full shutter", ShutterModel::progressive(1.0, 2.0)},
-                                   {"sub-interval", ShutterModel::progressive(1.55, 1.85)},
-                                   {"fields", ShutterModel::fields({1.0, 1.25}, {1.5, 1.75}, 0)}};
-  for (const Case& c : cases) {
-    RenderSpec spec = specFor(reader, 0, 1, 4, 4, 3);
-    spec.shutter = c.shutter;
-    spec.camera = pan;
-    const RenderResult r = render(spec);
-    EXPECT_GT(r.stats.partsCarried, 0u) << c.what;
-    EXPECT_GT(r.stats.raster.hits, 1000u) << c.what << ": the view sees too little to test";
-    expectRayCasterAgrees(seen, spec, r, 40, 28, c.what);
-  }
-  RenderSpec lensSpec = specFor(reader, 0, 1, 4, 4, 5);
-  lensSpec.camera = pan;
-  lensSpec.lens.fstop = 4, lensSpec.lens.focalLength = 1, lensSpec.lens.focalDistance = 9;
-  const RenderResult lensed = render(lensSpec);
-  EXPECT_GT(lensed.stats.raster.lensMicropolygons, 0u);
-  expectRayCasterAgrees(seen, lensSpec, lensed, 40, 28, "through a lens");
+  expectRayCasterAgreesOnEveryPath(reader, pan, seen,
+                                   {{"full shutter", ShutterModel::progressive(1.0, 2.0)},
+                                    {"instant", ShutterModel::progressive(1.55, 1.55)},
+                                    {"sub-interval", ShutterModel::progressive(1.55, 1.85)},
+                                    {"fields", ShutterModel::fields({1.0, 1.25}, {1.5, 1.75}, 0)}});
 
   // The store's own camera moves (format 5 keeps its motion); the view stands still.
   TestScene m = s;
