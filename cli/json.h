@@ -48,7 +48,8 @@ class JsonWriter {
     if (!first_.empty()) {
       if (!first_.back()) out_ += ",";
       first_.back() = false;
-      out_ += "\n" + std::string(first_.size() * 2, ' ');
+      out_ += '\n';
+      out_.append(first_.size() * 2, ' ');  // not "\n" + std::string(...): GCC 12 warns of a bogus overflow there
     }
     if (key) out_ += quote(key) + ": ";
   }
