@@ -111,8 +111,9 @@ void RenderOptions::addTo(CLI::App* app) {
                              "moving from the first point at the shutter's open to the second at its close")
                  ->delimiter(',')
                  ->expected(3, 6)
+                 ->type_name("X,Y,Z[,X,Y,Z]")
                  ->group("Camera");
-  auto* la = app->add_option("--look-at", lookAt, "... looking at X,Y,Z (X,Y,Z,X,Y,Z: at the open, then at the close)")->delimiter(',')->expected(3, 6)->group("Camera");
+  auto* la = app->add_option("--look-at", lookAt, "... looking at X,Y,Z (X,Y,Z,X,Y,Z: at the open, then at the close)")->delimiter(',')->expected(3, 6)->type_name("X,Y,Z[,X,Y,Z]")->group("Camera");
   lf->needs(la), la->needs(lf);
   app->add_option("--up", up, "... with X,Y,Z towards the top of the image (default 0,1,0)")->delimiter(',')->expected(3)->needs(lf)->group("Camera");
   app->add_option("--fov", fov, "... with this field of view in degrees (default: the store camera's)")->needs(lf)->group("Camera");
