@@ -95,16 +95,9 @@ std::vector<store::Camera> stereoPair(const store::Camera& centre, const std::st
   }
 }
 
-glm::dmat4 primaryToView(const store::Camera& primary, const store::Camera& view) { return view.worldToCamera * glm::inverse(primary.worldToCamera); }
-
 std::vector<double> carryTimes(const store::Camera& primary, const store::Camera& view, double open, double close) {
   const std::vector<double> moves = store::carryTimes(primary, view);
-  if (moves.empty()) return {};
-  std::vector<double> t{open};
-  for (double x : moves)
-    if (x > open && x < close) t.push_back(x);
-  if (close > open) t.push_back(close);
-  return t;
+  return moves.empty() ? moves : store::timesWithin(moves, open, close);
 }
 
 bool sameView(const store::Camera& primary, const store::Camera& view) {
@@ -277,7 +270,7 @@ std::vector<uint8_t> unseenPixels(const store::StoreReader& reader, const store:
   std::vector<Frame> frames;
   for (size_t c = 0; c < meta.cameras.size(); ++c) {
     const store::Camera& cam = meta.cameras[c];
-    frames.push_back({cam.worldToCamera * glm::inverse(meta.cameras[0].worldToCamera), store::Projector(cam), 0, 0, double(cam.width), double(cam.height)});
+    frames.push_back({store::primaryToView(meta.cameras[0], cam), store::Projector(cam), 0, 0, double(cam.width), double(cam.height)});
   }
   const store::RasterRect kept = stored.extent();
   if (!kept.empty) frames.push_back({glm::dmat4(1.0), store::Projector(meta.cameras[0]), kept.x0, kept.y0, kept.x1, kept.y1});

@@ -47,10 +47,6 @@ std::vector<store::Camera> stereoPair(const store::Camera& centre, double baseli
 /// naming `where`.
 std::vector<store::Camera> stereoPair(const store::Camera& centre, const std::string& rig, const std::string& where);
 
-/// The transform from `primary`'s camera space to `view`'s (both cameras of one world) at the
-/// shutter's open; store::primaryToView() gives it at any time (the two differ when one moves).
-glm::dmat4 primaryToView(const store::Camera& primary, const store::Camera& view);
-
 /// The times within [open, close] at which the carry from `primary`'s space into `view`'s is
 /// evaluated - the shutter's ends and both cameras' motion times between - or empty when it is
 /// one transform over the whole shutter (store::carryTimes()).

@@ -494,17 +494,14 @@ namespace {
 // at any of its motion times.
 bool boundOutOfView(const std::array<double, 6>& b, const MotionXform& ctm, const store::Camera& cam, const store::Camera& primary, double cullMargin) {
   const std::vector<double> moves = &cam == &primary ? std::vector<double>{} : store::carryTimes(primary, cam);
-  const glm::dmat4 fixed = &cam == &primary ? glm::dmat4(1.0) : cam.worldToCamera * glm::inverse(primary.worldToCamera);
+  const glm::dmat4 fixed = &cam == &primary ? glm::dmat4(1.0) : store::primaryToView(primary, cam);
   const store::Projector proj(cam);
   const bool perspective = cam.projection == store::Projection::Perspective;
   const double mx = cullMargin * cam.width, my = cullMargin * cam.height;
   // Per knot, where the box's eight corners lie; culled only where one reason holds at every
   // knot (between knots the box moves linearly, so it stays on that side).
   bool behind = true, beyond = true, left = true, right = true, above = true, below = true;
-  std::vector<double> times = ctm.times;
-  times.insert(times.end(), moves.begin(), moves.end());
-  std::sort(times.begin(), times.end());
-  times.erase(std::unique(times.begin(), times.end()), times.end());
+  std::vector<double> times = store::unionTimes(ctm.times, moves);
   if (times.empty()) times.push_back(0.0);
   for (double t : times) {
     const glm::dmat4 m = (moves.empty() ? fixed : store::primaryToView(primary, cam, t)) * ctm.at(t);
@@ -560,7 +557,7 @@ store::Camera readRibCamera(const std::string& path) {
     if (!camera) {
       camera = frame.options.camera;
       // Given after the fact, for a store whose shutter this file need not know: its whole motion.
-      recordCameraMotion(*camera, frame.worldToCamera, 1, 0);
+      recordCameraMotion(*camera, frame.worldToCamera);
     }
   });
   readRibScene(path, scene);

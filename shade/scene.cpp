@@ -17,14 +17,6 @@ namespace reshutter::shade {
 
 namespace {
 
-std::vector<double> unionTimes(const std::vector<double>& a, const std::vector<double>& b) {
-  std::vector<double> t(a);
-  t.insert(t.end(), b.begin(), b.end());
-  std::sort(t.begin(), t.end());
-  t.erase(std::unique(t.begin(), t.end()), t.end());
-  return t;
-}
-
 glm::dvec3 lerpValue(const glm::dvec3& a, const glm::dvec3& b, double w) { return a + (b - a) * w; }
 SurfaceShader lerpValue(const SurfaceShader& a, const SurfaceShader& b, double w) { return a.lerp(b, w); }
 
@@ -59,19 +51,17 @@ glm::dmat4 MotionXform::at(double t) const {
   return mats[i] * (1.0 - w) + mats[i + 1] * w;
 }
 
-void recordCameraMotion(store::Camera& camera, const MotionXform& worldToCamera, double open, double close) {
+void recordCameraMotion(store::Camera& camera, const MotionXform& worldToCamera) {
   camera.worldToCamera = worldToCamera.at(worldToCamera.times.empty() ? 0.0 : worldToCamera.times.front());
   camera.motionTimes.clear(), camera.motionWorldToCamera.clear();
-  if (worldToCamera.moving()) {
-    camera.motionTimes = worldToCamera.times;
-    for (double t : worldToCamera.times) camera.motionWorldToCamera.push_back(worldToCamera.at(t));
-  }
-  if (open <= close) camera.clipMotion(open, close);
+  if (!worldToCamera.moving()) return;
+  camera.motionTimes = worldToCamera.times;
+  for (double t : worldToCamera.times) camera.motionWorldToCamera.push_back(worldToCamera.at(t));
 }
 
 MotionXform MotionXform::then(const MotionXform& rhs) const {
   if (!moving() && !rhs.moving()) return MotionXform(mats[0] * rhs.mats[0]);
-  std::vector<double> t = unionTimes(times, rhs.times);
+  std::vector<double> t = store::unionTimes(times, rhs.times);
   std::vector<glm::dmat4> m;
   m.reserve(t.size());
   for (double ti : t) m.push_back(at(ti) * rhs.at(ti));
@@ -250,7 +240,7 @@ bool Primitive::cornerST(std::array<glm::dvec2, 4>& out) const {
   return true;
 }
 
-std::vector<double> Primitive::knotTimes() const { return unionTimes(times, xform->times); }
+std::vector<double> Primitive::knotTimes() const { return store::unionTimes(times, xform->times); }
 
 const std::vector<OutputVar>& knownOutputVars() {
   using store::AttrType;
@@ -356,7 +346,8 @@ void Scene::camera(const std::string& name) {
   if (name == "frame") error(cat("camera name '", name, "' is reserved"));
   store::Camera c = options_.camera;
   c.name = name;
-  recordCameraMotion(c, cur_.ctm, options_.shutterOpen, options_.shutterClose);
+  recordCameraMotion(c, cur_.ctm);
+  c.clipMotion(options_.shutterOpen, options_.shutterClose);
   auto& cams = options_.namedCameras;
   cams.erase(std::remove_if(cams.begin(), cams.end(), [&](const store::Camera& o) { return o.name == name; }), cams.end());
   cams.push_back(c);
@@ -410,7 +401,8 @@ void Scene::worldBegin() {
     else sw[0] = -1, sw[1] = 1, sw[2] = -1 / a, sw[3] = 1 / a;
   }
   cam.name = "world";
-  recordCameraMotion(cam, cur_.ctm, options_.shutterOpen, options_.shutterClose);
+  recordCameraMotion(cam, cur_.ctm);
+  cam.clipMotion(options_.shutterOpen, options_.shutterClose);
   frame_.worldToCamera = cur_.ctm;
   push(Block::World);
   coordSystems_["world"] = cur_.ctm;

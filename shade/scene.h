@@ -46,11 +46,10 @@ struct MotionXform {
   MotionXform then(const MotionXform& rhs) const;
 };
 
-/// Records on `camera` the transform `worldToCamera` gives it: where it stands at `open`, and - when
-/// it moves - its transforms at `open`, `close` and the motion's times between (a zero-length
-/// shutter, or one the motion does not change over, leaves it standing). `open` > `close`: every
-/// time of the motion, unclipped (a camera read for a store whose shutter is not yet known).
-void recordCameraMotion(store::Camera& camera, const MotionXform& worldToCamera, double open, double close);
+/// Records on `camera` the transform `worldToCamera` gives it: where it stands at the motion's first
+/// time, and - when it moves - its transform at each of the motion's times (Camera::clipMotion()
+/// keeps a shutter's worth).
+void recordCameraMotion(store::Camera& camera, const MotionXform& worldToCamera);
 
 /// Segment i and weight w of time t in increasing `times` (at least two): t lies w of the way
 /// from times[i] to times[i + 1], clamped at the ends (RenderMan holds the first and last knot's

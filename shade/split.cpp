@@ -100,12 +100,12 @@ class Splitter {
     // Measured and culled at the piece's knots, and - for a camera that moves against the primary
     // (the piece's knots hold the primary's own motion) - at that camera's motion times too.
     times_ = knots;
+    std::vector<bool> moves;  // per other camera
     for (const store::Camera& c : others) {
       const std::vector<double> t = store::carryTimes(cam, c);
-      times_.insert(times_.end(), t.begin(), t.end());
+      moves.push_back(!t.empty());
+      if (!t.empty()) times_ = store::unionTimes(times_, t);
     }
-    std::sort(times_.begin(), times_.end());
-    times_.erase(std::unique(times_.begin(), times_.end()), times_.end());
     if (times_.empty()) {
       shapes_.push_back(p.keys.empty() ? Shape{} : p.keys[0]);
       mats_.push_back(p.xform->at(0));
@@ -118,8 +118,8 @@ class Splitter {
     const Attributes& a = *p.attrs;
     motionFactor_ = o.motionFactor ? *o.motionFactor : a.motionFactor;
     rate_ = a.shadingRate * o.shadingRateScale;
-    views_.push_back(viewOf(cam, cam, true));
-    for (const store::Camera& c : others) views_.push_back(viewOf(cam, c, false));
+    views_.push_back(viewOf(cam, cam, true, false));
+    for (size_t i = 0; i < others.size(); ++i) views_.push_back(viewOf(cam, others[i], false, moves[i]));
   }
 
   void run() {
@@ -133,12 +133,13 @@ class Splitter {
   static constexpr int kTest = 5;
   using TestPoints = std::array<std::array<glm::dvec3, kTest>, kTest>;  // a piece's test points at one knot
 
-  SplitView viewOf(const store::Camera& primary, const store::Camera& cam, bool isPrimary) const {
+  // `moves`: the carry from the primary into `cam` changes over the shutter (store::carryTimes()).
+  SplitView viewOf(const store::Camera& primary, const store::Camera& cam, bool isPrimary, bool moves) const {
     SplitView v;
     v.proj = store::Projector(cam);
     v.cam = &cam;
     v.primary = isPrimary;
-    if (store::carryTimes(primary, cam).empty()) v.fromPrimary = {cam.worldToCamera * glm::inverse(primary.worldToCamera)};
+    if (!moves) v.fromPrimary = {store::primaryToView(primary, cam)};
     else
       for (double t : times_) v.fromPrimary.push_back(store::primaryToView(primary, cam, t));
     const double mx = o_.cullMargin * cam.width, my = o_.cullMargin * cam.height;

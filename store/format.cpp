@@ -75,20 +75,19 @@ void knotRange(const Schedule& s, double t0, double t1, size_t& first, size_t& l
 }
 
 namespace {
-// The camera-space box of a part at time t inside knot segment [k, k + 1]: positions are linear
-// in camera space there, so the box lerped between the knots' boxes holds every vertex at t.
-// Widened by a relative 1e-6 for the float arithmetic that interpolates positions downstream.
+// The camera-space box of a part at time t inside knot segment [k, k + 1].
 void lerpedBox(const TileEntry& e, const Schedule& s, size_t k, double t, float out[6]) {
-  const float* a = e.knots[k].camera;
-  const float* b = e.knots[k + 1].camera;
-  const double f = std::clamp((t - s[k]) / (s[k + 1] - s[k]), 0.0, 1.0);
+  lerpedCameraBox(e.knots[k].camera, e.knots[k + 1].camera, std::clamp((t - s[k]) / (s[k + 1] - s[k]), 0.0, 1.0), out);
+}
+}  // namespace
+
+void lerpedCameraBox(const float a[6], const float b[6], double f, float out[6]) {
   for (int i = 0; i < 6; ++i) {
     const double v = double(a[i]) + f * (double(b[i]) - double(a[i]));
     const double pad = 1e-6 * std::abs(v) + 1e-30;
     out[i] = i < 3 ? down(v - pad) : up(v + pad);
   }
 }
-}  // namespace
 
 RasterRect boundsOver(const TileEntry& e, const Schedule& s, const Projector& p, double t0, double t1) {
   size_t first, last;

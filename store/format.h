@@ -85,6 +85,11 @@ struct RasterRect {
 /// positions are linear in camera space, so while every vertex stays in front of the near plane
 /// the screen path of each vertex is a straight segment and the union of the knots' raster boxes
 /// bounds the interval; otherwise the near-clipped camera-space box is projected instead.
+/// The camera-space box of a part `f` of the way between two knots' boxes `a` and `b`: positions
+/// are linear in camera space there, so it holds every vertex at that time. Widened by a relative
+/// 1e-6 for the float arithmetic that interpolates positions downstream.
+void lerpedCameraBox(const float a[6], const float b[6], double f, float out[6]);
+
 RasterRect boundsOver(const TileEntry& entry, const Schedule& schedule, const Projector& projector, double t0, double t1);
 
 /// Projects a camera-space box clipped to z >= near (perspective) or as is (orthographic).

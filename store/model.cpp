@@ -97,12 +97,25 @@ glm::dmat4 Camera::worldToCameraAt(double t) const {
   return motionWorldToCamera[i] * (1.0 - w) + motionWorldToCamera[i + 1] * w;
 }
 
+std::vector<double> unionTimes(const std::vector<double>& a, const std::vector<double>& b) {
+  std::vector<double> t(a);
+  t.insert(t.end(), b.begin(), b.end());
+  std::sort(t.begin(), t.end());
+  t.erase(std::unique(t.begin(), t.end()), t.end());
+  return t;
+}
+
+std::vector<double> timesWithin(const std::vector<double>& times, double open, double close) {
+  std::vector<double> t{open};
+  for (double x : times)
+    if (x > open && x < close) t.push_back(x);
+  if (close > open) t.push_back(close);
+  return t;
+}
+
 void Camera::clipMotion(double open, double close) {
   if (!moving()) return;
-  std::vector<double> times{open};
-  for (double t : motionTimes)
-    if (t > open && t < close) times.push_back(t);
-  if (close > open) times.push_back(close);
+  std::vector<double> times = timesWithin(motionTimes, open, close);
   std::vector<glm::dmat4> mats;
   for (double t : times) mats.push_back(worldToCameraAt(t));
   worldToCamera = mats[0];

@@ -139,6 +139,11 @@ bool parseRational(const std::string& s, Rational& out);
 /// per-micropolygon times or a resampled union.
 using Schedule = std::vector<double>;
 
+/// Every time of `a` and `b`, increasing, each once.
+std::vector<double> unionTimes(const std::vector<double>& a, const std::vector<double>& b);
+/// `open`, the times of `times` strictly inside (open, close), and `close` (when later than open).
+std::vector<double> timesWithin(const std::vector<double>& times, double open, double close);
+
 // ---------------------------------------------------------------------------------------------
 // Store metadata
 

@@ -130,14 +130,13 @@ KnotBounds carriedKnot(const KnotBounds& kb, const glm::dmat4& m, const Projecto
 
 }  // namespace
 
+glm::dmat4 primaryToView(const Camera& primary, const Camera& view) { return view.worldToCamera * glm::inverse(primary.worldToCamera); }
+
 glm::dmat4 primaryToView(const Camera& primary, const Camera& view, double t) { return view.worldToCameraAt(t) * glm::inverse(primary.worldToCameraAt(t)); }
 
 std::vector<double> carryTimes(const Camera& primary, const Camera& view) {
   if (!primary.moving() && !view.moving()) return {};
-  std::vector<double> t = primary.motionTimes;
-  t.insert(t.end(), view.motionTimes.begin(), view.motionTimes.end());
-  std::sort(t.begin(), t.end());
-  t.erase(std::unique(t.begin(), t.end()), t.end());
+  const std::vector<double> t = unionTimes(primary.motionTimes, view.motionTimes);
   // Both are linear between these times: one transform at all of them is one at every time.
   const glm::dmat4 first = primaryToView(primary, view, t[0]);
   for (double x : t) {
@@ -185,11 +184,7 @@ TilePart carriedPart(const TilePart& part, const glm::dmat4& primaryToView, cons
 
 CarriedSchedule carriedSchedule(const Schedule& schedule, bool stillSchedule, const std::vector<double>& carryTimes, const std::function<glm::dmat4(double)>& carry) {
   CarriedSchedule out;
-  std::vector<double> t = carryTimes;
-  if (!stillSchedule) t.insert(t.end(), schedule.begin(), schedule.end());
-  std::sort(t.begin(), t.end());
-  t.erase(std::unique(t.begin(), t.end()), t.end());
-  for (double time : t) {
+  for (double time : stillSchedule ? carryTimes : unionTimes(carryTimes, schedule)) {
     uint32_t k = 0;
     double w = 0;
     if (!stillSchedule && schedule.size() > 1) {
@@ -216,12 +211,7 @@ std::vector<TileEntry> carriedEntries(const std::vector<TileEntry>& entries, con
         // lerped between the knots' boxes, and - both ends in front - in the union of their
         // raster bounds (a perspective projection maps the segment to the one joining theirs).
         const KnotBounds& b = e.knots[k + 1];
-        const double w = cs.weight[j];
-        for (int i = 0; i < 6; ++i) {
-          const double v = double(kb.camera[i]) + w * (double(b.camera[i]) - double(kb.camera[i]));
-          const double pad = 1e-6 * std::abs(v) + 1e-30;
-          kb.camera[i] = i < 3 ? std::nextafter(float(v - pad), -INFINITY) : std::nextafter(float(v + pad), INFINITY);
-        }
+        lerpedCameraBox(e.knots[k].camera, b.camera, cs.weight[j], kb.camera);
         kb.rasterFinite = kb.rasterFinite && b.rasterFinite;
         if (kb.rasterFinite)
           for (int i = 0; i < 2; ++i) kb.raster[i] = std::min(kb.raster[i], b.raster[i]), kb.raster[i + 2] = std::max(kb.raster[i + 2], b.raster[i + 2]);

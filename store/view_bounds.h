@@ -42,8 +42,9 @@ class ViewBounds {
   std::vector<std::pair<float, float>> depthRange_;  // per part: nearest and farthest camera depth at any knot
 };
 
-/// The transform from `primary`'s camera space at frame-relative time t to `view`'s at t (two
-/// cameras of one world).
+/// The transform from `primary`'s camera space to `view`'s (two cameras of one world): where they
+/// stand at the shutter's open, or at frame-relative time t (the two differ when one moves).
+glm::dmat4 primaryToView(const Camera& primary, const Camera& view);
 glm::dmat4 primaryToView(const Camera& primary, const Camera& view, double t);
 
 /// The times at which the carry from `primary`'s space into `view`'s changes slope - every motion

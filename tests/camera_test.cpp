@@ -297,6 +297,13 @@ TEST(CameraMultiView, TheStereoFileHoldsEachViewBitForBit) {
 
 namespace {
 
+// Store `mps` in `dir` re-sampled at 16 spp with `extra` options into `exr` there, read back.
+resample::FlatImage resampled(const ScratchDir& dir, const std::string& mps, const std::string& exr, const std::string& extra) {
+  const CommandResult r = runReshutter("resample " + dir.path(mps) + " -o " + dir.path(exr) + " --spp 16 " + extra);
+  EXPECT_EQ(r.exitCode, 0) << r.err;
+  return readFlatExr(dir.path(exr));
+}
+
 double rmseRgba(const resample::FlatImage& a, const resample::FlatImage& b) {
   double sum = 0;
   size_t n = 0;
@@ -333,11 +340,7 @@ TEST(CameraRib, ShadedOnceForTwoCamerasRightRendersAsShadingFromIt) {
   const CommandResult info = runReshutter("info " + dir.path("both.mps"));
   EXPECT_NE(info.out.find("right"), std::string::npos) << info.out;
 
-  auto renderTo = [&](const std::string& mps, const std::string& exr, const std::string& extra) {
-    const CommandResult r = runReshutter("resample " + dir.path(mps) + " -o " + dir.path(exr) + " --spp 16 " + extra);
-    EXPECT_EQ(r.exitCode, 0) << r.err;
-    return readFlatExr(dir.path(exr));
-  };
+  auto renderTo = [&](const std::string& mps, const std::string& exr, const std::string& extra) { return resampled(dir, mps, exr, extra); };
   const resample::FlatImage primary = renderTo("both.mps", "primary.exr", "");
   const resample::FlatImage fromStore = renderTo("both.mps", "from_store.exr", "--camera right");
   const resample::FlatImage direct = renderTo("right.mps", "direct.exr", "");
@@ -560,11 +563,7 @@ TEST(CameraMoving, ShadedOnceWithAPanningCameraItRendersAsShadingFromIt) {
   ASSERT_EQ(runReshutter("shade " + dir.path("pan.rib") + " -o " + dir.path("pan.mps")).exitCode, 0);
   const CommandResult info = runReshutter("info " + dir.path("both.mps"));
   EXPECT_NE(info.out.find("moving"), std::string::npos) << "info does not say the camera moves: " << info.out;
-  auto renderTo = [&](const std::string& mps, const std::string& exr, const std::string& extra) {
-    const CommandResult r = runReshutter("resample " + dir.path(mps) + " -o " + dir.path(exr) + " --spp 16 " + extra);
-    EXPECT_EQ(r.exitCode, 0) << r.err;
-    return readFlatExr(dir.path(exr));
-  };
+  auto renderTo = [&](const std::string& mps, const std::string& exr, const std::string& extra) { return resampled(dir, mps, exr, extra); };
   const resample::FlatImage fromStore = renderTo("both.mps", "from_store.exr", "--camera pan");
   const resample::FlatImage direct = renderTo("pan.mps", "direct.exr", "");
   const resample::FlatImage directSeed = renderTo("pan.mps", "direct_seed.exr", "--seed 7");
@@ -603,11 +602,7 @@ TEST(CameraMoving, AStillCameraTakesTheCameraMotionOutOfAStoredFrame) {
       << info.out;
   std::ofstream(dir.path("open.rib")) << "Orientation \"lh\"\nFormat 480 360 1\nShutter 0 1\nProjection \"perspective\" \"fov\" [36.0]\nRotate 180 0 1 0\n"
                                          "Translate 1 10 -440\nScale 1 -1 1\n";
-  auto renderTo = [&](const std::string& exr, const std::string& extra) {
-    const CommandResult r = runReshutter("resample " + dir.path("mb.mps") + " -o " + dir.path(exr) + " --spp 16 " + extra);
-    EXPECT_EQ(r.exitCode, 0) << r.err;
-    return readFlatExr(dir.path(exr));
-  };
+  auto renderTo = [&](const std::string& exr, const std::string& extra) { return resampled(dir, "mb.mps", exr, extra); };
   const resample::FlatImage atOpen = renderTo("open.exr", "--shutter 0:0");
   const resample::FlatImage blurred = renderTo("blurred.exr", "");
   const resample::FlatImage still = renderTo("still.exr", "--camera-rib " + dir.path("open.rib"));
