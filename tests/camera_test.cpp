@@ -297,6 +297,11 @@ TEST(CameraMultiView, TheStereoFileHoldsEachViewBitForBit) {
 
 namespace {
 
+// An orange sphere ahead of the eye and a green one 5.5 to its side, past a 40° frame's edge.
+const char* const kTwoSpheres =
+    "WorldBegin\nSurface \"constant\"\nColor [1 0.5 0.2]\nTranslate 0 0 6\nSphere 1 -1 1 360\n"
+    "AttributeBegin\nColor [0 1 0]\nTranslate 5.5 0 0\nSphere 0.6 -0.6 0.6 360\nAttributeEnd\nWorldEnd\n";
+
 // Store `mps` in `dir` re-sampled at 16 spp with `extra` options into `exr` there, read back.
 resample::FlatImage resampled(const ScratchDir& dir, const std::string& mps, const std::string& exr, const std::string& extra) {
   const CommandResult r = runReshutter("resample " + dir.path(mps) + " -o " + dir.path(exr) + " --spp 16 " + extra);
@@ -327,8 +332,7 @@ TEST(CameraRib, ShadedOnceForTwoCamerasRightRendersAsShadingFromIt) {
   // frame and overscan end well before it). Shaded once for both, rendered from "right": the
   // image of the same scene shaded with "right" as its camera, within the noise of two seeds.
   ScratchDir dir;
-  const std::string world = "WorldBegin\nSurface \"constant\"\nColor [1 0.5 0.2]\nTranslate 0 0 6\nSphere 1 -1 1 360\n"
-                            "AttributeBegin\nColor [0 1 0]\nTranslate 5.5 0 0\nSphere 0.6 -0.6 0.6 360\nAttributeEnd\nWorldEnd\n";
+  const std::string world = kTwoSpheres;
   const std::string head = "Format 96 64 1\nProjection \"perspective\" \"fov\" 40\n";
   const std::string turn = "Rotate -30 0 1 0\n";
   std::ofstream(dir.path("both.rib")) << head << turn << "Camera \"right\"\nIdentity\n" << world;
@@ -553,8 +557,7 @@ TEST(CameraMoving, ShadedOnceWithAPanningCameraItRendersAsShadingFromIt) {
   // within the noise of two seeds - including a green sphere only the end of the pan sees (kept
   // only if the shading pass culls for the camera at its motion times, not where it starts).
   ScratchDir dir;
-  const std::string world = "WorldBegin\nSurface \"constant\"\nColor [1 0.5 0.2]\nTranslate 0 0 6\nSphere 1 -1 1 360\n"
-                            "AttributeBegin\nColor [0 1 0]\nTranslate 5.5 0 0\nSphere 0.6 -0.6 0.6 360\nAttributeEnd\nWorldEnd\n";
+  const std::string world = kTwoSpheres;
   const std::string head = "Format 96 64 1\nProjection \"perspective\" \"fov\" 40\nShutter 0 1\n";
   const std::string pan = "MotionBegin [0 1]\nRotate 0 0 1 0\nRotate -30 0 1 0\nMotionEnd\n";
   std::ofstream(dir.path("both.rib")) << head << pan << "Camera \"pan\"\nIdentity\n" << world;
