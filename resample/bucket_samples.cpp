@@ -34,8 +34,6 @@ void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
   std::vector<glm::vec2> disk(static_cast<size_t>(N));
   if (lensPlanes) {
     lx.resize(slots + kPad), ly.resize(slots + kPad);
-    lensLoX.assign(size_t(N), INFINITY), lensHiX.assign(size_t(N), -INFINITY);
-    lensLoY.assign(size_t(N), INFINITY), lensHiY.assign(size_t(N), -INFINITY);
   }
   tMin = INFINITY, tMax = -INFINITY;
   // Time range of each stratum over this region's rows (rolling shutter widens it), widened to
@@ -70,8 +68,6 @@ void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
         if (lensPlanes) {
           const glm::vec2 l = disk[size_t(i)];
           lx[idx] = l.x, ly[idx] = l.y;
-          lensLoX[plane] = std::min(lensLoX[plane], l.x), lensHiX[plane] = std::max(lensHiX[plane], l.x);
-          lensLoY[plane] = std::min(lensLoY[plane], l.y), lensHiY[plane] = std::max(lensHiY[plane], l.y);
         }
         glm::vec2 o = pattern.offset(pat, i);
         const float x = float(gx) + o.x, y = float(gy) + o.y;

@@ -62,11 +62,10 @@ struct BucketSamples {
   const ShutterModel& shutter;
   const int N;  // samples per pixel = time strata (= lens strata)
   /// Depth of field: with lensTimeBlocks 1, plane s holds each pixel's sample in lens stratum s (its
-  /// time stratum is the pixel's own permutation), so a plane's lens positions lie in one small
-  /// cell and the lens path bounds a micropolygon's defocus per plane; its times span the whole
-  /// shutter, which the path bounds per sample. With A > 1 time blocks, plane s pairs time block
-  /// s / (N/A) with a quadrant of the lens (SamplePattern::lensPlanes): for moving scenes. Without
-  /// a lens, planes are time strata.
+  /// time stratum is the pixel's own permutation); with A > 1 time blocks, plane s pairs time block
+  /// s / (N/A) with a quadrant of the lens (SamplePattern::lensPlanes): for moving scenes. Which
+  /// lens point and time each sample gets follows from it; the lens path's search does not use
+  /// the planes (it sorts the samples by depth layer). Without a lens, planes are time strata.
   const bool lensPlanes;
   const int lensTimeBlocks;
 
@@ -80,7 +79,6 @@ struct BucketSamples {
   SkewedArray<float> sx{0}, sy{8}, st{16};  // stratum-major: [s * PS + p]
   std::vector<uint32_t> idxOf;              // [p * N + i] → s * PS + p (sample i of pixel p lies in stratum s)
   SkewedArray<float> lx{40}, ly{48};        // lensPlanes: the sample's point on the unit disk, [s * PS + p]
-  std::vector<float> lensLoX, lensHiX, lensLoY, lensHiY;  // lensPlanes: per plane, the extremes of its samples' lx, ly in this region
   std::vector<uint8_t> rowGroup;            // per region row
   std::vector<uint8_t> groupPresent;
   bool multiGroup = false;                   // more than one shutter group (fields): rows differ

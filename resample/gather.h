@@ -77,11 +77,28 @@ struct LensBox {
   }
 };
 
-/// Appends to `out` from position n the samples of `rows` (one plane; rowGroup is ignored) that
-/// the lens box admits at their lens points (lensX, lensY, indexed like the samples) and that pass
-/// the early depth test; returns the new count. Reads up to 7 floats past a row's end and writes
-/// up to 7 entries past the returned count.
-size_t gatherLens(Isa isa, const SampleRows& rows, const float* lensX, const float* lensY, const LensBox& box, const Candidates& out, size_t n);
+/// A layer's samples sorted into cells by their sheared positions (raster_lens.cpp): cell c's
+/// samples are [start[c], start[c + 1]) of the sorted arrays - each one's time, position, lens
+/// point and slot - cells row-major, `stride` to a row. The arrays have kPad entries of room past
+/// their last sample.
+struct LensCells {
+  const float *t, *x, *y, *u, *v;
+  const uint32_t* index;
+  const uint32_t* start;
+};
+
+/// The lens path's candidates: each one's slot, time, position and lens point (copies, so that
+/// the exact test reads them in order).
+struct LensCandidates {
+  uint32_t* index;
+  float *t, *x, *y, *u, *v;
+};
+
+/// Appends to `out` from position n the samples in cells [c0, c1] × [r0, r1] that the lens box
+/// admits at their lens points, in sorted order; returns the new count. Reads up to 15 entries
+/// past a row's last sample (the arrays' room) and writes up to 15 entries past the returned count.
+size_t gatherLensCells(Isa isa, const LensCells& cells, size_t stride, int c0, int r0, int c1, int r1, const LensBox& box, const LensCandidates& out,
+                       size_t n);
 
 /// The strata of one moving box: stratum s covers box times u in [u0[s], u1[s]] and its
 /// samples are plane s of `rows` (whose first/cols/rows describe the whole region).

@@ -26,6 +26,7 @@ void RasterStats::add(const RasterStats& o) {
   chunkGatheredMicropolygons += o.chunkGatheredMicropolygons;
   lensMicropolygons += o.lensMicropolygons;
   lensScanned += o.lensScanned;
+  lensLayers += o.lensLayers;
   transparentParts += o.transparentParts;
 }
 
@@ -49,6 +50,12 @@ void BucketRasterizer::Impl::begin(int rx0, int ry0, int rw, int rh) {
   for (auto* a : {&chunkIndex, &sortedIndex}) a->resize(slots + kPad);
   for (auto* a : {&chunkT, &chunkX, &chunkY, &sortedT, &sortedX, &sortedY}) a->resize(slots + kPad);
   cellScratch.resize(slots + kPad);
+  if (lensPlanes) {
+    lensCellOf.resize(slots);
+    lensSortedIndex.resize(slots + kPad);
+    for (auto* a : {&lensSortedT, &lensSortedX, &lensSortedY, &lensSortedU, &lensSortedV, &candU, &candV}) a->resize(slots + kPad);
+    lensDraws.clear(), lensChunks.clear();
+  }
   reset(slots);
   stats = RasterStats{};
   volumesHere = volumes && volumes->touches(double(x0), double(y0), double(x0 + w), double(y0 + h));
@@ -95,6 +102,7 @@ void BucketRasterizer::Impl::rasterizeQueued() {
     const QueuedPart& q = queued[ch.part];
     rasterizeChunk(*q.src, *q.entry, *q.part, ch);
   }
+  if (view.lens()) drawLensQueued();  // the lens path queues every micropolygon, to draw them by layer
   queued.clear(), chunks.clear();
 }
 

@@ -124,7 +124,8 @@ struct RasterStats {
   uint64_t chunkGatheredMicropolygons = 0;  // linear-path ones whose candidates came from their chunk's one gather
   uint64_t generalHits = 0;                 // hits through the general attribute lookup (output variables, other attribute layouts)
   uint64_t lensMicropolygons = 0;           // drawn on the lens path (depth of field)
-  uint64_t lensScanned = 0;                 // samples the lens path's gathers examined (its search boxes' area, plane by plane)
+  uint64_t lensScanned = 0;                 // samples the lens path's gathers examined (in the cells of their search boxes)
+  uint64_t lensLayers = 0;                  // times the lens path sorted a bucket's samples for a layer of depths
   void add(const RasterStats& o);
 };
 

@@ -212,11 +212,13 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   // ------------------------------------------------------------------------------------------
   // The lens path (raster_lens.cpp): every micropolygon when the view has a lens
 
-  // What a chunk's micropolygons share on the lens path.
+  // What a chunk's micropolygons share on the lens path (kept until the bucket's layers are drawn).
   struct LensChunk {
-    const store::TilePart& part;
-    const store::Schedule& knots;
-    const HitContext& hc;
+    const store::TilePart* part;
+    const store::Schedule* knots;
+    HitContext hc;
+    const Source* src;
+    const store::TileEntry* entry;
     bool moving;
     uint32_t vBase, nV;
     size_t C;                // bound times: cullX/Y/Z hold [time * nV + v - vBase]
@@ -227,12 +229,50 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
     double toLocal;          // local time = st + toLocal
     float thetaA, invLen;    // invLen > 0: one knot segment, the boxes lerp by (st - thetaA) invLen between the two bound times
     float uErr;              // the rounding of that parameter
+    uint32_t blockF;         // invLen > 0: lensBlockF[blockF + 2 b], [.. + 1] is time block b's span of the lerp parameter
+  };
+  // One queued micropolygon: its per-sample box and its layer (INT32_MIN: unbounded, every
+  // sample). Its samples' positions sheared by the layer's middle k (kl) lie in the box (over its
+  // motion) widened by ex, ey (what its own displacement strays from the layer's) and qm (rounding).
+  struct LensDraw {
+    uint32_t chunk, m;
+    int32_t layer;
+    float zCull, kl;
+    kernels::LensBox box;
+    float ex, ey, qm;
+  };
+  // The cells a layer's samples are sorted into: pixels of the region widened by the shear, once
+  // per time block (BucketSamples::lensTimeBlocks), block-major.
+  struct LensGrid {
+    int x0 = 0, y0 = 0, cols = 0, rows = 0;
+    size_t cells = 0;  // per block
   };
   void rasterizeLens(const Source& src, const store::TileEntry& entry, const store::TilePart& part, const HitContext& hc, const Chunk& ch);
-  void drawLens(const LensChunk& lc, uint32_t m);
-  void testLens(const LensChunk& lc, uint32_t m, const uint32_t* c, bool tri, uint8_t flags, uint32_t idx);
-  std::vector<double> lensTimes;                // a chunk's bound times (local)
-  std::vector<float> lensPlaneF0, lensPlaneF1;  // with two bound times: each plane's span of the lerp parameter
+  void queueLens(const LensChunk& lc, uint32_t chunk, uint32_t m);
+  void sortLensLayer(float cxl, float cyl, float zMin);
+  void drawLensQueued();
+  struct LensSample {  // a candidate: its slot and its copies of the sample's time, position and lens point
+    uint32_t slot;
+    float t, x, y, u, v;
+  };
+  void testLens(const LensChunk& lc, const HitContext& hc, uint32_t m, const uint32_t* c, bool tri, uint8_t flags, const LensSample& ls);
+  void lensEdges(const store::TilePart& part, const uint32_t* c, bool tri);
+  void testStillLens(const HitContext& hc, uint32_t m, const uint32_t* c, bool tri, uint8_t flags, const LensSample& ls);
+  struct StillLensEdges {  // a still micropolygon's raster edges e0 + Lx ex + Ly ey, and corner depths
+    glm::dvec3 e0[5], ex[5], ey[5];
+    float z[4];
+  } stillLens;
+  std::vector<double> lensTimes;  // a chunk's bound times (local)
+  std::vector<LensChunk> lensChunks;
+  std::vector<LensDraw> lensDraws;
+  std::vector<uint32_t> lensOrder;  // lensDraws by layer
+  std::vector<float> lensBlockF;    // the lerping chunks' time blocks' spans of their lerp parameter
+  LensGrid lensGrid;
+  std::vector<uint32_t> lensCellStart, lensCursor;  // [cell]: the cell's first sorted sample; the scatter's cursors
+  std::vector<uint32_t> lensCellOf;                 // [sample slot]: its cell in the layer being sorted
+  SkewedArray<uint32_t> lensSortedIndex{4};         // the sorted samples' slots, times, positions and lens points
+  SkewedArray<float> lensSortedT{12}, lensSortedX{20}, lensSortedY{28}, lensSortedU{36}, lensSortedV{44};
+  SkewedArray<float> candU{60}, candV{2};  // the lens path's candidates' lens points (candidates, candT, candX, candY hold the rest)
 
   // ------------------------------------------------------------------------------------------
   // The linear path and chunk gathers (raster_linear.cpp)

@@ -6,15 +6,22 @@
 // are sheared by the same arithmetic in both neighbours, so shared edges stay exactly negated and
 // the test stays watertight.
 //
-// Bounds: on the raster the shear displaces a point at depth z by a L (1/d - 1/z), which over a
-// micropolygon's depths [z0, z1] lies between a L k(z0) and a L k(z1), k(z) = 1/d - 1/z rising with
-// z. The bucket's planes are lens strata (BucketSamples::lensPlanes), so each plane's lens points
-// lie in one cell of the aperture: the micropolygon's pinhole box (over the render's times)
-// widened by that cell's displacement is the plane's search box, and each sample in it is then
-// held to the box displaced by its own lens point before the exact test (the dual-space test of
-// stochastic rasterization, in x-u and y-v).
+// Which samples to test: on the raster the shear displaces a point at depth z by a L k(z),
+// k(z) = 1/d - 1/z. A sample at raster x with lens point u sees a micropolygon whose pinhole box
+// holds x - a u k: for a micropolygon at one depth, the samples to test are those whose sheared
+// position x - a u k lies in its pinhole box - a box as small as the pinhole's, whatever the
+// circle of confusion. So the bucket's micropolygons are queued, grouped into layers of nearly
+// equal k (kLayerWidth pixels of displacement per unit of lens), and for each layer the
+// bucket's samples are sorted into pixel cells of their position sheared by the layer's middle
+// k: a micropolygon then searches the cells of its pinhole box widened by what its own k range
+// strays from the layer's (at most half a layer, for a small one) and by its motion, and each
+// sample found is held to its own box - the pinhole box displaced by the sample's lens point and
+// lerped to its time - before the exact test (the dual-space test of stochastic rasterization,
+// Laine et al. 2011, with the lens dimension sorted per layer instead of bounded per stratum).
+// Layers are drawn in increasing k, which is increasing depth: nearest first, as chunks are.
 #include <algorithm>
 #include <cmath>
+#include <numeric>
 
 #include "resample/raster_impl.h"
 
@@ -31,6 +38,15 @@ void productRange(float l0, float l1, float k0, float k1, float& lo, float& hi) 
   lo = std::min(std::min(a, b), std::min(c, d));
   hi = std::max(std::max(a, b), std::max(c, d));
 }
+
+// The layers' width, in raster pixels of displacement per unit of lens (a circle of confusion's
+// radius): a micropolygon searches about one more pixel each way than its pinhole box, and a
+// bucket sorts its samples once per layer that holds micropolygons (bench/RESULTS.md, "Depth
+// of field", chose it).
+constexpr float kLayerWidth = 4.f;
+
+// A sample left out of a layer's cells (sortLensLayer()).
+constexpr uint32_t kHidden = ~0u;
 
 }  // namespace
 
@@ -83,27 +99,33 @@ void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileE
   // a sample is held to the lerp of the end boxes at its own time (MovingBox's idea), widened by
   // the perspective lag and the rounding of its time.
   float thetaA = 0, invLen = 0, uErr = 0;
+  const int blocks = lensTimeBlocks, perBlock = N / blocks;
+  const uint32_t blockF = uint32_t(lensBlockF.size());
   if (moving && C == 2) {
     const double len = lensTimes[1] - lensTimes[0], toLocal = tBase - F;
     thetaA = float(lensTimes[0] - toLocal), invLen = float(1.0 / len);
     uErr = float(5e-7 * std::max({1.0, std::abs(lensTimes[0]), std::abs(lensTimes[1]), std::abs(toLocal)}) / len);
-    // Each plane's times (a block of the shutter when planes pair time and lens), as the span of
-    // the lerp parameter its samples take: the plane's search box covers that part of the path.
-    lensPlaneF0.assign(size_t(N), 1.f), lensPlaneF1.assign(size_t(N), 0.f);
-    for (int s = 0; s < N; ++s)
+    // Each time block's span of the lerp parameter (its planes' times over the region's groups),
+    // widened for the rounding of a sample's parameter: its samples search that part of the path.
+    for (int b = 0; b < blocks; ++b) {
+      float f0 = 1.f, f1 = 0.f;
       for (size_t g = 0; g < groupPresent.size(); ++g) {
         if (!groupPresent[g]) continue;
-        const double f0 = (stratumLo[g * N + size_t(s)] - F - lensTimes[0]) / len, f1 = (stratumHi[g * N + size_t(s)] - F - lensTimes[0]) / len;
-        lensPlaneF0[size_t(s)] = std::min(lensPlaneF0[size_t(s)], std::clamp(float(f0) - 1e-6f, 0.f, 1.f));
-        lensPlaneF1[size_t(s)] = std::max(lensPlaneF1[size_t(s)], std::clamp(float(f1) + 1e-6f, 0.f, 1.f));
+        const size_t gs = g * size_t(N) + size_t(b * perBlock);
+        const double lo = (stratumLo[gs] - F - lensTimes[0]) / len, hi = (stratumHi[gs] - F - lensTimes[0]) / len;
+        f0 = std::min(f0, std::clamp(float(lo) - 1e-6f, 0.f, 1.f)), f1 = std::max(f1, std::clamp(float(hi) + 1e-6f, 0.f, 1.f));
       }
+      lensBlockF.push_back(f0), lensBlockF.push_back(f1);
+    }
   }
   const double covLo = src.coverStart(), covHi = src.coverEnd();
   // The displacement coefficients' own rounding: k = 1/d - 1/z cancels near the focal plane.
   const float kMag = std::max(std::abs(lensAx), std::abs(lensAy)) * (invD + (zLo > 0 ? 1.f / zLo : 0.f));
-  const LensChunk lc{part,
-                     knots,
+  const LensChunk lc{&part,
+                     &knots,
                      hc,
+                     &src,
+                     &entry,
                      moving,
                      vBase,
                      nV,
@@ -117,15 +139,18 @@ void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileE
                      tBase - F,
                      thetaA,
                      invLen,
-                     uErr};
-  for (uint32_t m = ch.m0; m < ch.m1; ++m) drawLens(lc, m);
+                     uErr,
+                     invLen > 0 ? blockF : ~0u};
+  lensChunks.push_back(lc);
+  for (uint32_t m = ch.m0; m < ch.m1; ++m) queueLens(lc, uint32_t(lensChunks.size() - 1), m);
 }
 
-void BucketRasterizer::Impl::drawLens(const LensChunk& lc, uint32_t m) {
-  const TilePart& part = lc.part;
+// A micropolygon's box for the per-sample test and its layer, from the chunk's bound positions
+// (cullX/Y/Z): queued until the bucket's chunks are all in (drawLensQueued()).
+void BucketRasterizer::Impl::queueLens(const LensChunk& lc, uint32_t chunk, uint32_t m) {
+  const TilePart& part = *lc.part;
   const uint32_t* c = &part.corners[size_t(m) * 4];
-  const bool tri = c[3] == kNoCorner;
-  const int nc = tri ? 3 : 4;
+  const int nc = c[3] == kNoCorner ? 3 : 4;
   float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY, zLo = INFINITY, zHi = -INFINITY;
   bool bounded = true;
   for (size_t ci = 0; ci < lc.C; ++ci)
@@ -137,18 +162,24 @@ void BucketRasterizer::Impl::drawLens(const LensChunk& lc, uint32_t m) {
       zLo = std::min(zLo, cullZ[k]), zHi = std::max(zHi, cullZ[k]);
     }
   ++stats.lensMicropolygons;
-  const float zCull = cullDepth(zLo);
+  LensDraw d;
+  d.chunk = chunk, d.m = m, d.zCull = cullDepth(zLo);
+  if (!bounded) {
+    // A corner before the near plane: every sample is tested, in the layer drawn first.
+    d.layer = INT32_MIN;
+    d.box = kernels::LensBox{-INFINITY, INFINITY, -INFINITY, INFINITY, 0.f, 0.f, 0.f, 0.f};
+    lensDraws.push_back(d);
+    return;
+  }
   // Per lens unit the raster displacement lies in [cx0, cx1] (x) and [cy0, cy1] (y) for every
   // depth the micropolygon takes.
-  float kLo = 0, kHi = 0;
-  if (bounded) kLo = lc.invD - 1.f / zLo, kHi = lc.invD - 1.f / zHi;
+  const float kLo = lc.invD - 1.f / zLo, kHi = lc.invD - 1.f / zHi;
   float cx0, cx1, cy0, cy1;
   productRange(lc.lensAx, lc.lensAx, kLo, kHi, cx0, cx1);
   productRange(lc.lensAy, lc.lensAy, kLo, kHi, cy0, cy1);
-  const uint8_t flags = part.flags[m];
   // With two bound times: the box at each end, for the per-sample lerp.
   float e0[4] = {0, 0, 0, 0}, e1[4] = {0, 0, 0, 0}, lag = 0;
-  const bool lerp = bounded && lc.invLen > 0;
+  const bool lerp = lc.invLen > 0;
   if (lerp) {
     for (int end = 0; end < 2; ++end) {
       float* e = end ? e1 : e0;
@@ -162,72 +193,257 @@ void BucketRasterizer::Impl::drawLens(const LensChunk& lc, uint32_t m) {
   }
   // What the lerped boxes are widened by (perspective lag, the rounding of the sample's time),
   // and the rounding margin of the projections and of any displacement the lens gives (|lens
-  // point| <= 1 bounds every plane's): the same for every plane.
+  // point| <= 1).
   const float lagX = (lag + lc.uErr + 1e-5f) * (bx1 - bx0), lagY = (lag + lc.uErr + 1e-5f) * (by1 - by0);
   const float mag = std::max({std::abs(bx0), std::abs(bx1), std::abs(by0), std::abs(by1), std::abs(cx0), std::abs(cx1), std::abs(cy0), std::abs(cy1)});
   const float margin = 2e-3f + 4e-6f * (mag + lc.kMag);
-  kernels::LensBox box = bounded ? kernels::LensBox{bx0 - margin, bx1 + margin, by0 - margin, by1 + margin, cx0, cx1, cy0, cy1}
-                                 : kernels::LensBox{-INFINITY, INFINITY, -INFINITY, INFINITY, 0.f, 0.f, 0.f, 0.f};
+  kernels::LensBox& box = d.box;
+  box = kernels::LensBox{bx0 - margin, bx1 + margin, by0 - margin, by1 + margin, cx0, cx1, cy0, cy1};
   if (lerp) {
     box.x0 = e0[0] - (margin + lagX), box.y0 = e0[1] - (margin + lagY), box.x1 = e0[2] + (margin + lagX), box.y1 = e0[3] + (margin + lagY);
     box.mx0 = e1[0] - e0[0], box.my0 = e1[1] - e0[1], box.mx1 = e1[2] - e0[2], box.my1 = e1[3] - e0[3];
     box.thetaA = lc.thetaA, box.invLen = lc.invLen;
   }
-  for (int s = 0; s < N; ++s) {
-    TestArea ta;
-    float shxLo = 0, shxHi = 0, shyLo = 0, shyHi = 0;
-    if (bounded) {
-      productRange(lensLoX[size_t(s)], lensHiX[size_t(s)], cx0, cx1, shxLo, shxHi);
-      productRange(lensLoY[size_t(s)], lensHiY[size_t(s)], cy0, cy1, shyLo, shyHi);
+  // The layer: from the micropolygon's depths at its knots, which every bucket sees alike (the
+  // bound times above are the region's), so that the draw order - and with it which of two
+  // surfaces at exactly one depth a sample keeps - does not depend on the bucketing.
+  float zkLo = zLo, zkHi = zHi;
+  if (lc.moving) {
+    float lo = INFINITY, hi = -INFINITY;
+    for (uint32_t k = 0; k < part.numKnots; ++k)
+      for (int j = 0; j < nc; ++j) lo = std::min(lo, part.position(k, c[j]).z), hi = std::max(hi, part.position(k, c[j]).z);
+    if (lo >= view.nearClip) zkLo = lo, zkHi = hi;  // else (a knot before the near plane) the region's depths
+  }
+  const float kMid = 0.5f * ((lc.invD - 1.f / zkLo) + (lc.invD - 1.f / zkHi));
+  const float layerScale = std::max(std::abs(lc.lensAx), std::abs(lc.lensAy)) / kLayerWidth;
+  const float layerF = std::floor(kMid * layerScale);
+  d.layer = std::isfinite(layerF) ? int32_t(std::clamp(layerF, -1e9f, 1e9f)) : 0;
+  // The sheared positions a sample must have: x - cxl u lies in the box (over its motion)
+  // widened by what the displacement strays from the layer's, |c - cxl| |u| with |u| <= 1.
+  const float kl = (float(d.layer) + 0.5f) / layerScale, cxl = lc.lensAx * kl, cyl = lc.lensAy * kl;
+  const float ex = std::max(std::abs(cx0 - cxl), std::abs(cx1 - cxl)), ey = std::max(std::abs(cy0 - cyl), std::abs(cy1 - cyl));
+  // Over the whole motion here; drawLensQueued() narrows it to each time block's part of it.
+  const float qx0 = box.x0 + std::min(0.f, box.mx0) - ex, qx1 = box.x1 + std::max(0.f, box.mx1) + ex;
+  const float qy0 = box.y0 + std::min(0.f, box.my0) - ey, qy1 = box.y1 + std::max(0.f, box.my1) + ey;
+  // The rounding of the sheared positions and of the per-sample box.
+  d.qm = 2e-3f + 1e-5f * std::max({std::abs(qx0), std::abs(qx1), std::abs(qy0), std::abs(qy1), std::abs(cxl), std::abs(cyl), mag + lc.kMag});
+  d.ex = ex, d.ey = ey, d.kl = kl;
+  lensDraws.push_back(d);
+}
+
+// Sorts the bucket's samples into pixel cells of their positions sheared by displacement
+// (cxl, cyl) per unit of lens (a layer's middle), stably (slot order within a cell), leaving out
+// those whose nearest opaque surface so far is no farther than zMin.
+void BucketRasterizer::Impl::sortLensLayer(float cxl, float cyl, float zMin) {
+  // A layer's shear moves samples by up to |cxl| (|lens point| <= 1); beyond a region's size
+  // they pile into the edge cells instead of growing the grid.
+  const float maxPad = float(std::max(w, h));
+  const int padX = int(std::ceil(std::min(std::abs(cxl), maxPad))) + 2, padY = int(std::ceil(std::min(std::abs(cyl), maxPad))) + 2;
+  LensGrid& g = lensGrid;
+  g.x0 = x0 - padX, g.y0 = y0 - padY, g.cols = w + 2 * padX, g.rows = h + 2 * padY;
+  const size_t cells = size_t(g.cols) * size_t(g.rows), blocks = size_t(lensTimeBlocks), perBlock = size_t(N) / blocks;
+  g.cells = cells;
+  // Keyed by time block, then cell: block b's cells are [b cells, (b + 1) cells).
+  lensCellStart.assign(blocks * cells + 1, 0);
+  lensCursor.resize(blocks * cells);
+  // Locals the compiler knows do not alias the arrays written.
+  uint32_t* __restrict start = lensCellStart.data();
+  uint32_t* __restrict cursor = lensCursor.data();
+  uint32_t* __restrict cellOf = lensCellOf.data();
+  const float* __restrict xs = sx.data();
+  const float* __restrict ys = sy.data();
+  const float* __restrict ts = st.data();
+  const float* __restrict us = lx.data();
+  const float* __restrict vs = ly.data();
+  const float* __restrict depth = zbuf.data();
+  uint32_t* __restrict outIndex = lensSortedIndex.data();
+  float* __restrict outT = lensSortedT.data();
+  float* __restrict outX = lensSortedX.data();
+  float* __restrict outY = lensSortedY.data();
+  float* __restrict outU = lensSortedU.data();
+  float* __restrict outV = lensSortedV.data();
+  const size_t planeStride = PS, count = size_t(P), planes = size_t(N);
+  const uint32_t cols = uint32_t(g.cols);
+  const float gx0 = float(g.x0), gy0 = float(g.y0), maxCol = float(g.cols - 1), maxRow = float(g.rows - 1);
+  // Clamped into the grid (a NaN goes to its first cell): every sample has a cell, and a search
+  // that reaches the grid's edge (or lies beyond it) finds it there.
+  auto clampTo = [](float v, float hi) { return v >= 0.f ? (v <= hi ? v : hi) : 0.f; };
+  for (size_t s = 0; s < planes; ++s) {
+    const size_t base = s * planeStride;
+    for (size_t p = 0; p < count; ++p) {
+      const size_t j = base + p;
+      const float col = clampTo(xs[j] - cxl * us[j] - gx0, maxCol), row = clampTo(ys[j] - cyl * vs[j] - gy0, maxRow);
+      cellOf[j] = depth[j] > zMin ? uint32_t(s / perBlock * cells) + uint32_t(int(row)) * cols + uint32_t(int(col)) : kHidden;
     }
-    // The pinhole box over the plane's times: the lerped boxes at its first and last (their
-    // union bounds the lerp between), widened as the per-sample test is.
-    float px0 = bx0, py0 = by0, px1 = bx1, py1 = by1;
-    if (lerp) {
-      const float f0 = lensPlaneF0[size_t(s)], f1 = lensPlaneF1[size_t(s)];
-      if (f0 > f1) continue;  // no sample of this plane in the region's groups
-      auto at = [](float a, float b, float f) { return a + f * (b - a); };
-      px0 = std::min(at(e0[0], e1[0], f0), at(e0[0], e1[0], f1)) - lagX, px1 = std::max(at(e0[2], e1[2], f0), at(e0[2], e1[2], f1)) + lagX;
-      py0 = std::min(at(e0[1], e1[1], f0), at(e0[1], e1[1], f1)) - lagY, py1 = std::max(at(e0[3], e1[3], f0), at(e0[3], e1[3], f1)) + lagY;
-    }
-    // The plane's search box; each sample in it is then held to `box` displaced by its own lens point.
-    if (!testArea(bounded, px0 + shxLo, py0 + shyLo, px1 + shxHi, py1 + shyHi, ta)) continue;
-    const size_t first = size_t(s) * PS + size_t(ta.py0 - y0) * w + size_t(ta.px0 - x0);
-    const int cols = ta.px1 - ta.px0 + 1, rows = ta.py1 - ta.py0 + 1;
-    stats.lensScanned += uint64_t(cols) * uint64_t(rows);
-    size_t n = 0;
-    if (vectorKernels) {
-      const kernels::SampleRows sr{st.data(), sx.data(), sy.data(), first, size_t(w), cols, rows, nullptr, 0, 1, PS, zbuf.data(), zCull};
-      n = kernels::gatherLens(isa, sr, lx.data(), ly.data(), box, candidateList(), 0);
-    } else {
-      uint32_t* __restrict cand = candidates.data();
-      for (int row = 0; row < rows; ++row)
-        for (int col = 0; col < cols; ++col) {
-          const uint32_t idx = uint32_t(first + size_t(row) * w + size_t(col));
-          cand[n] = idx;
-          n += (zbuf[idx] > zCull) & box.admits(st[idx], sx[idx], sy[idx], lx[idx], ly[idx]);  // the early depth test, then the lens box
-        }
-    }
-    const uint32_t* cand = candidates.data();
-    for (size_t i = 0; i < n; ++i) {
-      const uint32_t idx = cand[i];
-      if (lc.cover.check && !Source::covers(double(st[idx]), lc.cover.lo, lc.cover.hi, lc.cover.openEnd)) continue;
-      ++stats.sampleTests;
-      testLens(lc, m, c, tri, flags, idx);
+    for (size_t p = 0; p < count; ++p) ++start[cellOf[base + p] + 1];  // kHidden + 1 wraps to 0: the slot nobody reads
+  }
+  start[0] = 0;
+  std::partial_sum(start, start + blocks * cells + 1, start);
+  // Scatter: each cell's samples in slot order, with the copies the gather reads.
+  std::copy(start, start + blocks * cells, cursor);
+  for (size_t s = 0; s < planes; ++s) {
+    const size_t base = s * planeStride;
+    for (size_t p = 0; p < count; ++p) {
+      const size_t j = base + p;
+      if (cellOf[j] == kHidden) continue;
+      const uint32_t at = cursor[cellOf[j]]++;
+      outIndex[at] = uint32_t(j);
+      outT[at] = ts[j], outX[at] = xs[j], outY[at] = ys[j], outU[at] = us[j], outV[at] = vs[j];
     }
   }
 }
 
-// Exact coverage of micropolygon m for one sample: its corners at the sample's time, sheared for
-// its lens point, through the static path's edge test.
-void BucketRasterizer::Impl::testLens(const LensChunk& lc, uint32_t m, const uint32_t* c, bool tri, uint8_t flags, uint32_t idx) {
-  const TilePart& part = lc.part;
+// Draws the queued micropolygons layer by layer (nearest first; queue order - chunks nearest
+// first - within a layer).
+void BucketRasterizer::Impl::drawLensQueued() {
+  if (lensDraws.empty()) return;
+  lensOrder.resize(lensDraws.size());
+  std::iota(lensOrder.begin(), lensOrder.end(), 0u);
+  std::stable_sort(lensOrder.begin(), lensOrder.end(), [&](uint32_t a, uint32_t b) { return lensDraws[a].layer < lensDraws[b].layer; });
+  uint32_t currentChunk = ~0u;
+  HitContext hc{};
+  int32_t sortedLayer = INT32_MIN;
+  for (size_t oi = 0; oi < lensOrder.size(); ++oi) {
+    const LensDraw& d = lensDraws[lensOrder[oi]];
+    const LensChunk& lc = lensChunks[d.chunk];
+    if (d.chunk != currentChunk) {
+      currentChunk = d.chunk;
+      // A context that points at per-store scratch is made afresh: the chunks of other stores
+      // may have replaced it since this one was queued.
+      hc = lc.hc.timedAov ? hitContext(lc.src->store->meta(), *lc.entry, *lc.part, st.data(), lc.hc.toLocal) : lc.hc;
+    }
+    size_t n = 0;
+    const kernels::LensCandidates cand{candidates.data(), candT.data(), candX.data(), candY.data(), candU.data(), candV.data()};
+    if (d.layer == INT32_MIN) {
+      // Unbounded: every sample of the region.
+      for (int s = 0; s < N; ++s)
+        for (size_t p = 0; p < size_t(P); ++p, ++n) {
+          const size_t j = size_t(s) * PS + p;
+          cand.index[n] = uint32_t(j), cand.t[n] = st[j], cand.x[n] = sx[j], cand.y[n] = sy[j], cand.u[n] = lx[j], cand.v[n] = ly[j];
+        }
+      stats.lensScanned += n;
+    } else {
+      if (d.layer != sortedLayer) {
+        // The layer's nearest culling depth: a sample whose nearest opaque surface so far is no
+        // farther cannot change (every micropolygon of the layer would fail its early depth
+        // test), so it is left out of the layer's cells. Exact, as the early depth test is.
+        float zMin = d.zCull;
+        for (size_t oj = oi + 1; oj < lensOrder.size() && lensDraws[lensOrder[oj]].layer == d.layer; ++oj) zMin = std::min(zMin, lensDraws[lensOrder[oj]].zCull);
+        sortLensLayer(lc.lensAx * d.kl, lc.lensAy * d.kl, zMin);
+        sortedLayer = d.layer;
+        ++stats.lensLayers;
+      }
+      const LensGrid& g = lensGrid;
+      // The cells the sheared box touches, time block by time block (for a micropolygon that
+      // lerps, over that block's part of its path); a box beyond the grid's edge takes the edge
+      // cells, which hold every sample sheared beyond it.
+      auto cellAt = [](float v, int count) { return v >= 0.f ? (v < float(count) ? int(v) : count - 1) : 0; };
+      const kernels::LensBox& box = d.box;
+      for (int b = 0; b < lensTimeBlocks; ++b) {
+        float f0 = 0.f, f1 = 1.f;
+        if (lc.blockF != ~0u) {
+          f0 = lensBlockF[lc.blockF + 2 * size_t(b)], f1 = lensBlockF[lc.blockF + 2 * size_t(b) + 1];
+          if (f0 > f1) continue;  // no sample of this block in the region's groups
+        }
+        const float qx0 = box.x0 + std::min(f0 * box.mx0, f1 * box.mx0) - d.ex - d.qm, qx1 = box.x1 + std::max(f0 * box.mx1, f1 * box.mx1) + d.ex + d.qm;
+        const float qy0 = box.y0 + std::min(f0 * box.my0, f1 * box.my0) - d.ey - d.qm, qy1 = box.y1 + std::max(f0 * box.my1, f1 * box.my1) + d.ey + d.qm;
+        const int c0 = cellAt(qx0 - float(g.x0), g.cols), c1 = cellAt(qx1 - float(g.x0), g.cols);
+        const int r0 = cellAt(qy0 - float(g.y0), g.rows), r1 = cellAt(qy1 - float(g.y0), g.rows);
+        const uint32_t* start = lensCellStart.data() + size_t(b) * g.cells;
+        for (int r = r0; r <= r1; ++r) {
+          const size_t row = size_t(r) * size_t(g.cols);
+          stats.lensScanned += start[row + size_t(c1) + 1] - start[row + size_t(c0)];
+        }
+        if (vectorKernels) {
+          const kernels::LensCells cells{lensSortedT.data(), lensSortedX.data(), lensSortedY.data(), lensSortedU.data(), lensSortedV.data(),
+                                         lensSortedIndex.data(), start};
+          n = kernels::gatherLensCells(isa, cells, size_t(g.cols), c0, r0, c1, r1, box, cand, n);
+        } else {
+          for (int r = r0; r <= r1; ++r) {
+            const size_t row = size_t(r) * size_t(g.cols);
+            for (uint32_t i = start[row + size_t(c0)], e = start[row + size_t(c1) + 1]; i < e; ++i) {
+              cand.index[n] = lensSortedIndex[i];
+              cand.t[n] = lensSortedT[i], cand.x[n] = lensSortedX[i], cand.y[n] = lensSortedY[i], cand.u[n] = lensSortedU[i], cand.v[n] = lensSortedV[i];
+              n += box.admits(lensSortedT[i], lensSortedX[i], lensSortedY[i], lensSortedU[i], lensSortedV[i]);
+            }
+          }
+        }
+      }
+    }
+    const TilePart& part = *lc.part;
+    const uint32_t* c = &part.corners[size_t(d.m) * 4];
+    const bool tri = c[3] == kNoCorner;
+    const uint8_t flags = part.flags[d.m];
+    bool edgesReady = false;
+    for (size_t i = 0; i < n; ++i) {
+      const uint32_t idx = cand.index[i];
+      if (!(zbuf[idx] > d.zCull)) continue;  // the early depth test
+      if (lc.cover.check && !Source::covers(double(cand.t[i]), lc.cover.lo, lc.cover.hi, lc.cover.openEnd)) continue;
+      ++stats.sampleTests;
+      const LensSample ls{idx, cand.t[i], cand.x[i], cand.y[i], cand.u[i], cand.v[i]};
+      if (lc.moving) {
+        testLens(lc, hc, d.m, c, tri, flags, ls);
+        continue;
+      }
+      if (!edgesReady) lensEdges(part, c, tri), edgesReady = true;
+      testStillLens(hc, d.m, c, tri, flags, ls);
+    }
+  }
+  lensDraws.clear(), lensChunks.clear(), lensBlockF.clear();
+}
+
+// A still micropolygon's edges as functions of the lens point. With corners P_j sheared to
+// S_j = P_j + L q_j (L = (Lx, Ly, 0), q_j = z_j / d - 1), an edge's cross product is
+// S_a × S_b = P_a × P_b + L × D with D = q_a P_b - q_b P_a, which is affine in L:
+// E(L) = E0 + Lx (0, -Dz, Dy) + Ly (Dz, 0, -Dx), and so is its raster form. A shared edge seen
+// from the other side has every term exactly negated, so the test stays watertight.
+void BucketRasterizer::Impl::lensEdges(const TilePart& part, const uint32_t* c, bool tri) {
+  glm::dvec3 P[4];
+  double q[4];
+  const int nc = tri ? 3 : 4;
+  const double invD = 1.0 / view.focalDistance;
+  for (int j = 0; j < nc; ++j) P[j] = glm::dvec3(part.position(0, c[j])), q[j] = P[j].z * invD - 1.0;
+  if (tri) P[3] = P[2], q[3] = q[2];
+  for (int k = 0; k < 5; ++k) {
+    if (tri && (k == 2 || k == 3)) {
+      stillLens.e0[k] = stillLens.ex[k] = stillLens.ey[k] = glm::dvec3(0.0);
+      continue;
+    }
+    const int a = kEdgeVerts[k][0], b = kEdgeVerts[k][1];
+    const glm::dvec3 D = q[a] * P[b] - q[b] * P[a];
+    stillLens.e0[k] = toRaster(cross(P[a], P[b]), rasterScale);
+    stillLens.ex[k] = toRaster(glm::dvec3(0.0, -D.z, D.y), rasterScale);
+    stillLens.ey[k] = toRaster(glm::dvec3(D.z, 0.0, -D.x), rasterScale);
+  }
+  for (int j = 0; j < 4; ++j) stillLens.z[j] = float(P[j].z);
+}
+
+// Exact coverage of a still micropolygon (lensEdges() made for it) for one sample: its edges at
+// the sample's lens point, through the static path's edge test.
+void BucketRasterizer::Impl::testStillLens(const HitContext& hc, uint32_t m, const uint32_t* c, bool tri, uint8_t flags, const LensSample& ls) {
+  const double Lx = view.lensRadius * double(ls.u), Ly = view.lensRadius * double(ls.v);
+  glm::dvec3 E[5];
+  for (int k = 0; k < 5; ++k) E[k] = (stillLens.e0[k] + Lx * stillLens.ex[k]) + Ly * stillLens.ey[k];
+  float b[3];
+  int t;
+  if (!coversFixed(E, tri, opt.backfaceCull && !(flags & store::kTwoSided), ls.x, ls.y, t, b)) return;
+  const float* zv = stillLens.z;
+  const float z = t == 0 ? b[0] * zv[0] + b[1] * zv[1] + b[2] * zv[2] : b[0] * zv[0] + b[1] * zv[2] + b[2] * zv[3];
+  if (!(z >= view.nearClip && z <= view.farClip)) return;
+  const uint32_t tv[3] = {c[0], c[t == 0 ? 1 : 2], c[t == 0 ? 2 : 3]};
+  recordHit(hc, ls.slot, m, tv, b, z);
+}
+
+// Exact coverage of a moving micropolygon m for one sample: its corners at the sample's time,
+// sheared for its lens point, through the static path's edge test.
+void BucketRasterizer::Impl::testLens(const LensChunk& lc, const HitContext& hc, uint32_t m, const uint32_t* c, bool tri, uint8_t flags, const LensSample& ls) {
+  const TilePart& part = *lc.part;
   glm::dvec3 P[4];
   const int nc = tri ? 3 : 4;
   if (lc.moving) {
     uint32_t k;
     float f;
-    segmentAt(lc.knots, double(st[idx]) + lc.toLocal, k, f);
+    segmentAt(*lc.knots, double(ls.t) + lc.toLocal, k, f);
     for (int j = 0; j < nc; ++j) {
       const glm::dvec3 a(part.position(k, c[j])), b(part.position(k + 1, c[j]));
       P[j] = a + double(f) * (b - a);
@@ -236,7 +452,7 @@ void BucketRasterizer::Impl::testLens(const LensChunk& lc, uint32_t m, const uin
     for (int j = 0; j < nc; ++j) P[j] = glm::dvec3(part.position(0, c[j]));
   }
   if (tri) P[3] = P[2];
-  const double Lx = view.lensRadius * double(lx[idx]), Ly = view.lensRadius * double(ly[idx]), invD = 1.0 / view.focalDistance;
+  const double Lx = view.lensRadius * double(ls.u), Ly = view.lensRadius * double(ls.v), invD = 1.0 / view.focalDistance;
   glm::dvec3 S[4];
   for (int j = 0; j < 4; ++j) {
     const double q = P[j].z * invD - 1.0;
@@ -247,12 +463,12 @@ void BucketRasterizer::Impl::testLens(const LensChunk& lc, uint32_t m, const uin
     E[k] = tri && (k == 2 || k == 3) ? glm::dvec3(0.0) : toRaster(cross(S[kEdgeVerts[k][0]], S[kEdgeVerts[k][1]]), rasterScale);
   float b[3];
   int t;
-  if (!coversFixed(E, tri, opt.backfaceCull && !(flags & store::kTwoSided), sx[idx], sy[idx], t, b)) return;
+  if (!coversFixed(E, tri, opt.backfaceCull && !(flags & store::kTwoSided), ls.x, ls.y, t, b)) return;
   const float zv[4] = {float(P[0].z), float(P[1].z), float(P[2].z), float(P[3].z)};
   const float z = t == 0 ? b[0] * zv[0] + b[1] * zv[1] + b[2] * zv[2] : b[0] * zv[0] + b[1] * zv[2] + b[2] * zv[3];
   if (!(z >= view.nearClip && z <= view.farClip)) return;
   const uint32_t tv[3] = {c[0], c[t == 0 ? 1 : 2], c[t == 0 ? 2 : 3]};
-  recordHit(lc.hc, idx, m, tv, b, z);
+  recordHit(hc, ls.slot, m, tv, b, z);
 }
 
 }  // namespace reshutter::resample

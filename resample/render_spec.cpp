@@ -34,7 +34,8 @@ std::string RenderStats::report() const {
     << " bounded from their interval ends, " << raster.chunkGatheredMicropolygons << " of those gathered by chunk, " << raster.chunkCulledMicropolygons
     << " skipped with their chunk), " << raster.parts << " parts (" << raster.transparentParts << " transparent)\n";
   if (raster.lensMicropolygons)
-    s << "  lens               " << raster.lensMicropolygons << " micropolygons through the lens (depth of field), " << raster.lensScanned
+    s << "  lens               " << raster.lensMicropolygons << " micropolygons through the lens (depth of field), " << raster.lensLayers
+      << " bucket samplings sorted by depth layer, " << raster.lensScanned
       << " samples in their search boxes (" << std::setprecision(1) << double(raster.lensScanned) / double(raster.lensMicropolygons) << std::setprecision(3)
       << " each)\n";
   s << "  fragments          " << raster.fragments << " transparent\n";

@@ -511,21 +511,22 @@ bool avx2::projectLerped(const float* a, const float* b, float f, size_t n, cons
   return bad != 0;
 }
 
-size_t avx2::gatherLens(const SampleRows& rows, const float* lensX, const float* lensY, const LensBox& box, const Candidates& out, size_t n) {
-  // LensBox::admits() eight samples at a time (min / max as its conditionals: b < a ? b : a).
+namespace {
+
+size_t gatherLensCellsAvx2(const LensCells& cells, size_t stride, int c0, int r0, int c1, int r1, const LensBox& box, const LensCandidates& out, size_t n) {
+  // LensBox::admits() eight sorted samples at a time (min / max as its conditionals: b < a ? b : a).
   const __m256 x0 = _mm256_set1_ps(box.x0), x1 = _mm256_set1_ps(box.x1), y0 = _mm256_set1_ps(box.y0), y1 = _mm256_set1_ps(box.y1);
   const __m256 cx0 = _mm256_set1_ps(box.cx0), cx1 = _mm256_set1_ps(box.cx1), cy0 = _mm256_set1_ps(box.cy0), cy1 = _mm256_set1_ps(box.cy1);
-  const __m256 zCull = _mm256_set1_ps(rows.zCull);
   const __m256 thetaA = _mm256_set1_ps(box.thetaA), invLen = _mm256_set1_ps(box.invLen), one = _mm256_set1_ps(1.f), zero = _mm256_setzero_ps();
   const __m256 mx0 = _mm256_set1_ps(box.mx0), mx1 = _mm256_set1_ps(box.mx1), my0 = _mm256_set1_ps(box.my0), my1 = _mm256_set1_ps(box.my1);
-  const __m256i iota = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-  for (int row = 0; row < rows.rows; ++row) {
-    const size_t base = rows.first + size_t(row) * rows.stride;
-    for (int c = 0; c < rows.cols; c += 8) {
-      const size_t at = base + size_t(c);
-      const unsigned live = rows.cols - c >= 8 ? 0xFFu : (1u << (rows.cols - c)) - 1;
-      const __m256 u = _mm256_loadu_ps(lensX + at), v = _mm256_loadu_ps(lensY + at);
-      const __m256 t = _mm256_loadu_ps(rows.st + at), x = _mm256_loadu_ps(rows.sx + at), y = _mm256_loadu_ps(rows.sy + at);
+  for (int r = r0; r <= r1; ++r) {
+    const size_t row = size_t(r) * stride;
+    const uint32_t last = cells.start[row + size_t(c1) + 1];
+    for (uint32_t at = cells.start[row + size_t(c0)]; at < last; at += 8) {
+      // Lanes past the run read the next cells' samples (or the arrays' room) and are masked off.
+      const unsigned live = last - at >= 8 ? 0xFFu : (1u << (last - at)) - 1;
+      const __m256 u = _mm256_loadu_ps(cells.u + at), v = _mm256_loadu_ps(cells.v + at);
+      const __m256 t = _mm256_loadu_ps(cells.t + at), x = _mm256_loadu_ps(cells.x + at), y = _mm256_loadu_ps(cells.y + at);
       // f = a < 1 ? (a > 0 ? a : 0) : 1: min(max(a, 0), 1) in _mm256 operand order (min/max
       // return the second operand unless the comparison holds).
       const __m256 f = _mm256_min_ps(_mm256_max_ps(_mm256_mul_ps(_mm256_sub_ps(t, thetaA), invLen), zero), one);
@@ -537,15 +538,21 @@ size_t avx2::gatherLens(const SampleRows& rows, const float* lensX, const float*
       const __m256 yHi = _mm256_add_ps(_mm256_add_ps(y1, _mm256_mul_ps(f, my1)), _mm256_max_ps(dy1, dy0));
       __m256 in = _mm256_and_ps(_mm256_cmp_ps(x, xLo, _CMP_GE_OQ), _mm256_cmp_ps(x, xHi, _CMP_LE_OQ));
       in = _mm256_and_ps(in, _mm256_and_ps(_mm256_cmp_ps(y, yLo, _CMP_GE_OQ), _mm256_cmp_ps(y, yHi, _CMP_LE_OQ)));
-      in = _mm256_and_ps(in, _mm256_cmp_ps(_mm256_loadu_ps(rows.depth + at), zCull, _CMP_GT_OQ));
       const unsigned mask = unsigned(_mm256_movemask_ps(in)) & live;
-      n = appendMasked(mask, _mm256_add_epi32(_mm256_set1_epi32(int(uint32_t(at))), iota), t, x, y, out, n);
+      if (!mask) continue;
+      const __m256i perm = _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompress.perm[mask]));
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(out.index + n),
+                          _mm256_permutevar8x32_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(cells.index + at)), perm));
+      _mm256_storeu_ps(out.t + n, _mm256_permutevar8x32_ps(t, perm));
+      _mm256_storeu_ps(out.x + n, _mm256_permutevar8x32_ps(x, perm));
+      _mm256_storeu_ps(out.y + n, _mm256_permutevar8x32_ps(y, perm));
+      _mm256_storeu_ps(out.u + n, _mm256_permutevar8x32_ps(u, perm));
+      _mm256_storeu_ps(out.v + n, _mm256_permutevar8x32_ps(v, perm));
+      n += size_t(__builtin_popcount(mask));
     }
   }
   return n;
 }
-
-namespace {
 
 // sortByCell()'s cell of every candidate: MovingBox's u (insideAtOwnTime()'s operations), then
 // the compensated position's cell, clamped to the grid (a NaN clamps to the last cell: max and
@@ -569,6 +576,6 @@ void cellsOfAvx2(const CellGrid& g, const float* t, const float* x, const float*
 }  // namespace
 
 const IsaKernels kAvx2Kernels = {gatherInBoxAvx2, gatherStrataAvx2,           filterCandidatesAvx2,     cellsOfAvx2, avx2::projectLerped, linearEdgesAvx2,
-                                 fixedEdgesAvx2,  testLinearEdgesAvx2<false>, testLinearEdgesAvx2<true>, avx2::gatherLens};
+                                 fixedEdgesAvx2,  testLinearEdgesAvx2<false>, testLinearEdgesAvx2<true>, gatherLensCellsAvx2};
 
 }  // namespace reshutter::resample::kernels

@@ -1,6 +1,6 @@
 // The vector kernels for AVX-512 (F, VL, BW, DQ, with BMI2): sample gathering (sixteen lanes, as
-// four row segments of up to four samples), the exact coverage test (eight candidates) and the
-// edge set-up, the AVX2 kernels' operations lane for lane. The vertex projection is the AVX2 one
+// four row segments of up to four samples; the lens gather as row segments of sixteen), the exact
+// coverage test (eight candidates) and the edge set-up, the AVX2 kernels' operations lane for lane. The vertex projection is the AVX2 one
 // (an AVX-512 twin measured within the noise, bench/RESULTS.md). This file alone is compiled with the
 // AVX-512 flags; simd_dispatch.cpp calls it only on CPUs that run it. See simd_isa.h for what it
 // may include.
@@ -406,6 +406,48 @@ void cellsOfAvx512(const CellGrid& g, const float* t, const float* x, const floa
   }
 }
 
+// LensBox::admits() sixteen sorted samples at a time, one masked load per run segment (no read
+// past a run's end), the AVX2 kernel's operations lane for lane, and a compress of the admitted
+// slots stored whole (a compress straight to memory is slow on AMD's cores).
+size_t gatherLensCellsAvx512(const LensCells& cells, size_t stride, int c0, int r0, int c1, int r1, const LensBox& box, const LensCandidates& out, size_t n) {
+  const __m512 x0 = _mm512_set1_ps(box.x0), x1 = _mm512_set1_ps(box.x1), y0 = _mm512_set1_ps(box.y0), y1 = _mm512_set1_ps(box.y1);
+  const __m512 cx0 = _mm512_set1_ps(box.cx0), cx1 = _mm512_set1_ps(box.cx1), cy0 = _mm512_set1_ps(box.cy0), cy1 = _mm512_set1_ps(box.cy1);
+  const __m512 thetaA = _mm512_set1_ps(box.thetaA), invLen = _mm512_set1_ps(box.invLen), one = _mm512_set1_ps(1.f), zero = _mm512_setzero_ps();
+  const __m512 mx0 = _mm512_set1_ps(box.mx0), mx1 = _mm512_set1_ps(box.mx1), my0 = _mm512_set1_ps(box.my0), my1 = _mm512_set1_ps(box.my1);
+  // A box that does not lerp (invLen 0) has f = +0 for every sample, as the AVX2 kernel computes
+  // it.
+  const bool timed = box.invLen != 0.f;
+  for (int r = r0; r <= r1; ++r) {
+    const size_t row = size_t(r) * stride;
+    const uint32_t last = cells.start[row + size_t(c1) + 1];
+    for (uint32_t at = cells.start[row + size_t(c0)]; at < last; at += 16) {
+      const __mmask16 live = last - at >= 16 ? __mmask16(0xFFFF) : __mmask16((1u << (last - at)) - 1);
+      const __m512 x = _mm512_maskz_loadu_ps(live, cells.x + at), y = _mm512_maskz_loadu_ps(live, cells.y + at);
+      const __m512 u = _mm512_maskz_loadu_ps(live, cells.u + at), v = _mm512_maskz_loadu_ps(live, cells.v + at);
+      const __m512 t = _mm512_maskz_loadu_ps(live, cells.t + at);
+      __m512 f = zero;
+      if (timed) f = _mm512_min_ps(_mm512_max_ps(_mm512_mul_ps(_mm512_sub_ps(t, thetaA), invLen), zero), one);
+      const __m512 dx0 = _mm512_mul_ps(u, cx0), dx1 = _mm512_mul_ps(u, cx1), dy0 = _mm512_mul_ps(v, cy0), dy1 = _mm512_mul_ps(v, cy1);
+      const __m512 xLo = _mm512_add_ps(_mm512_add_ps(x0, _mm512_mul_ps(f, mx0)), _mm512_min_ps(dx1, dx0));
+      const __m512 xHi = _mm512_add_ps(_mm512_add_ps(x1, _mm512_mul_ps(f, mx1)), _mm512_max_ps(dx1, dx0));
+      const __m512 yLo = _mm512_add_ps(_mm512_add_ps(y0, _mm512_mul_ps(f, my0)), _mm512_min_ps(dy1, dy0));
+      const __m512 yHi = _mm512_add_ps(_mm512_add_ps(y1, _mm512_mul_ps(f, my1)), _mm512_max_ps(dy1, dy0));
+      __mmask16 in = _mm512_mask_cmp_ps_mask(live, x, xLo, _CMP_GE_OQ);
+      in = _mm512_mask_cmp_ps_mask(in, x, xHi, _CMP_LE_OQ);
+      in = _mm512_mask_cmp_ps_mask(in, y, yLo, _CMP_GE_OQ);
+      in = _mm512_mask_cmp_ps_mask(in, y, yHi, _CMP_LE_OQ);
+      _mm512_storeu_si512(out.index + n, _mm512_maskz_compress_epi32(in, _mm512_maskz_loadu_epi32(in, cells.index + at)));
+      _mm512_storeu_ps(out.t + n, _mm512_maskz_compress_ps(in, t));
+      _mm512_storeu_ps(out.x + n, _mm512_maskz_compress_ps(in, x));
+      _mm512_storeu_ps(out.y + n, _mm512_maskz_compress_ps(in, y));
+      _mm512_storeu_ps(out.u + n, _mm512_maskz_compress_ps(in, u));
+      _mm512_storeu_ps(out.v + n, _mm512_maskz_compress_ps(in, v));
+      n += size_t(__builtin_popcount(unsigned(in)));
+    }
+  }
+  return n;
+}
+
 void fixedEdgesAvx512(const float* const at[4], const RasterScale& m, LinearEdges& out) { edgesAvx512<true>(at, at, m, out); }
 
 }  // namespace
@@ -413,6 +455,6 @@ void fixedEdgesAvx512(const float* const at[4], const RasterScale& m, LinearEdge
 const IsaKernels kAvx512Kernels = {gatherInBoxAvx512, gatherStrataAvx512,           filterCandidatesAvx512,
                                    cellsOfAvx512,     avx2::projectLerped,          edgesAvx512<false>,
                                    fixedEdgesAvx512,  testLinearEdgesAvx512<false>, testLinearEdgesAvx512<true>,
-                                   avx2::gatherLens};
+                                   gatherLensCellsAvx512};
 
 }  // namespace reshutter::resample::kernels

@@ -43,8 +43,8 @@ size_t gatherInBox(Isa isa, const SampleRows& rows, const MovingBox& box, const 
   return kernelsFor(isa).gatherInBox(rows, box, out, n);
 }
 
-size_t gatherLens(Isa isa, const SampleRows& rows, const float* lensX, const float* lensY, const LensBox& box, const Candidates& out, size_t n) {
-  return kernelsFor(isa).gatherLens(rows, lensX, lensY, box, out, n);
+size_t gatherLensCells(Isa isa, const LensCells& cells, size_t stride, int c0, int r0, int c1, int r1, const LensBox& box, const LensCandidates& out, size_t n) {
+  return kernelsFor(isa).gatherLensCells(cells, stride, c0, r0, c1, r1, box, out, n);
 }
 
 size_t gatherStrata(Isa isa, const SampleRows& region, const StrataSpans& spans, const MovingBox& box, const Candidates& out) {

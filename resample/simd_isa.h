@@ -29,7 +29,7 @@ struct IsaKernels {
   void (*fixedEdges)(const float* const at[4], const RasterScale& scale, LinearEdges& out);
   size_t (*testMovingEdges)(const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits);  // setup.fixed false
   size_t (*testFixedEdges)(const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits);   // setup.fixed true
-  size_t (*gatherLens)(const SampleRows& rows, const float* lensX, const float* lensY, const LensBox& box, const Candidates& out, size_t n);
+  size_t (*gatherLensCells)(const LensCells& cells, size_t stride, int c0, int r0, int c1, int r1, const LensBox& box, const LensCandidates& out, size_t n);
 };
 
 #if defined(__x86_64__) || defined(__i386__)
@@ -39,7 +39,6 @@ extern const IsaKernels kAvx512Kernels;
 // The AVX2 kernels that the AVX-512 table shares.
 namespace avx2 {
 bool projectLerped(const float* a, const float* b, float f, size_t n, const ProjectionScale& scale, float* x, float* y, float* z, float box[4]);
-size_t gatherLens(const SampleRows& rows, const float* lensX, const float* lensY, const LensBox& box, const Candidates& out, size_t n);
 }  // namespace avx2
 #endif
 

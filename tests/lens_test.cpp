@@ -325,32 +325,75 @@ TEST(LensReference, FieldsAndRollingShutterAgreeWithTheRayCaster) {
   expectRayCasterAgrees(s, rolling, rr, 36, 24, "rolling");
 }
 
+// The lens path draws its micropolygons by depth layer, each searching the samples sorted into
+// cells of their positions sheared by the layer's depth (raster_lens.cpp). Occlusion culling -
+// layers nearest first, samples already hidden left out of a layer's cells - must change no bit of
+// any output, flat or deep, still or moving, through a narrow or a wide aperture; and the samples
+// a micropolygon examines must stay about what the pinhole needs, not grow with the circle of
+// confusion (an aperture 16 times wider, up to ~25 px: a search bounded per lens stratum would
+// examine tens of times more).
+TEST(LensLayers, CullingIsExactAndTheSearchDoesNotGrowWithTheCircle) {
+  ScratchDir dir;
+  for (const char* motion : {"0 --knots 1", "12 --knots 3"}) {
+    const std::string path = dir.path(std::string("gen") + motion[0] + ".mps");
+    const CommandResult gen = runReshutter(std::string("generate -n 40000 --width 128 --height 96 --transparent 0.3 --motion ") + motion + " -o " + path);
+    ASSERT_EQ(gen.exitCode, 0) << gen.err;
+    auto reader = std::make_shared<const store::StoreReader>(path);
+    std::vector<double> examined;
+    for (double fstop : {4.0, 0.25}) {  // depths 5 to 50 focused at 20: circles up to ~1.5 and ~25 px
+      RenderSpec spec = specFor(reader, 0.1, 0.9, 4, 4, 7);
+      spec.lens.fstop = fstop, spec.lens.focalLength = 1, spec.lens.focalDistance = 20;
+      spec.aovs = {AovRequest::parse("z", "test"), AovRequest::parse("id", "test")};
+      spec.deep = true;
+      spec.raster.occlusionCulling = true;
+      const RenderResult culled = render(spec);
+      spec.raster.occlusionCulling = false;
+      const RenderResult all = render(spec);
+      const std::string what = std::string("motion ") + motion + " f/" + std::to_string(fstop);
+      expectSameOutputs(culled, all, what);
+      ASSERT_GT(all.stats.raster.lensMicropolygons, 0u) << what;
+      EXPECT_GT(all.stats.raster.lensLayers, 0u) << what;
+      // Hidden samples were left out of the cells, and hidden surfaces skipped.
+      EXPECT_LT(double(culled.stats.raster.lensScanned), 0.8 * double(all.stats.raster.lensScanned)) << what;
+      EXPECT_LT(culled.stats.raster.hits, all.stats.raster.hits) << what;
+      examined.push_back(double(all.stats.raster.lensScanned) / double(all.stats.raster.lensMicropolygons));
+    }
+    EXPECT_LT(examined[1], 2.0 * examined[0]) << "motion " << motion << ": " << examined[0] << " then " << examined[1] << " samples per micropolygon";
+  }
+}
+
 TEST(LensDeterminism, BitIdenticalForAnyThreadCountBucketSizeAndInstructionSet) {
   ScratchDir dir;
-  const CommandResult gen = runReshutter("generate -n 40000 --width 128 --height 96 --transparent 0.3 --motion 12 --knots 3 -o " + dir.path("gen.mps"));
-  ASSERT_EQ(gen.exitCode, 0) << gen.err;
-  auto reader = std::make_shared<const store::StoreReader>(dir.path("gen.mps"));
-  struct Variant {
-    int threads, bucket;
-    bool vector;
-  };
-  std::vector<std::vector<float>> images;
-  for (const Variant v : {Variant{1, 32, true}, Variant{2, 16, true}, Variant{2, 57, true}, Variant{1, 24, false}}) {
-    tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(v.threads));
-    RenderSpec spec = specFor(reader, 0.1, 0.9, 4, 4, 42);
-    spec.filter = FilterSpec::parse("gaussian:2x2", "test");
-    spec.bucketSize = v.bucket;
-    spec.raster.vectorKernels = v.vector;
-    spec.lens.fstop = 1, spec.lens.focalLength = 1, spec.lens.focalDistance = 20;  // depths 5 to 50: up to ~6 px
-    EXPECT_EQ(lensTimeBlocks(spec), 4);  // a moving store: planes pair time blocks with lens quadrants
-    const RenderResult r = render(spec);
-    EXPECT_GT(r.stats.raster.lensMicropolygons, 0u);
-    std::vector<float> all;
-    for (const auto& c : r.image.channels) all.insert(all.end(), c.f.begin(), c.f.end());
-    images.push_back(all);
-  }
-  for (size_t i = 1; i < images.size(); ++i) {
-    ASSERT_EQ(images[i].size(), images[0].size());
-    EXPECT_EQ(std::memcmp(images[i].data(), images[0].data(), images[0].size() * sizeof(float)), 0) << "variant " << i;
+  for (const bool moving : {true, false}) {
+    const std::string path = dir.path(moving ? "moving.mps" : "still.mps");
+    const CommandResult gen = runReshutter(std::string("generate -n 40000 --width 128 --height 96 --transparent 0.3 --motion ") + (moving ? "12 --knots 3" : "0 --knots 1") +
+                                           " -o " + path);
+    ASSERT_EQ(gen.exitCode, 0) << gen.err;
+    auto reader = std::make_shared<const store::StoreReader>(path);
+    struct Variant {
+      int threads, bucket;
+      bool vector;
+    };
+    std::vector<std::vector<float>> images;
+    for (const Variant v : {Variant{1, 32, true}, Variant{2, 16, true}, Variant{2, 57, true}, Variant{1, 24, false}}) {
+      tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(v.threads));
+      RenderSpec spec = specFor(reader, 0.1, 0.9, 4, 4, 42);
+      spec.filter = FilterSpec::parse("gaussian:2x2", "test");
+      spec.bucketSize = v.bucket;
+      spec.raster.vectorKernels = v.vector;
+      spec.lens.fstop = 1, spec.lens.focalLength = 1, spec.lens.focalDistance = 20;  // depths 5 to 50: up to ~6 px
+      // A moving store: planes pair time blocks with lens quadrants.
+      EXPECT_EQ(lensTimeBlocks(spec), moving ? 4 : 1);
+      const RenderResult r = render(spec);
+      EXPECT_GT(r.stats.raster.lensMicropolygons, 0u);
+      EXPECT_GT(r.stats.raster.lensLayers, 0u);
+      std::vector<float> all;
+      for (const auto& c : r.image.channels) all.insert(all.end(), c.f.begin(), c.f.end());
+      images.push_back(all);
+    }
+    for (size_t i = 1; i < images.size(); ++i) {
+      ASSERT_EQ(images[i].size(), images[0].size());
+      EXPECT_EQ(std::memcmp(images[i].data(), images[0].data(), images[0].size() * sizeof(float)), 0) << (moving ? "moving" : "still") << " variant " << i;
+    }
   }
 }

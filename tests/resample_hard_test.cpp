@@ -467,23 +467,6 @@ TEST(ResampleHard, VectorAndScalarKernelsAgreeOrthographic) {
   }
 }
 
-// Every flat channel and every deep sample of two renders the same, bit for bit.
-void expectSameOutputs(const RenderResult& got, const RenderResult& want, const std::string& what) {
-  ASSERT_EQ(got.image.channels.size(), want.image.channels.size()) << what;
-  for (size_t i = 0; i < want.image.channels.size(); ++i) {
-    EXPECT_EQ(got.image.channels[i].f, want.image.channels[i].f) << what << " " << want.image.channels[i].name;
-    EXPECT_EQ(got.image.channels[i].u, want.image.channels[i].u) << what << " " << want.image.channels[i].name;
-  }
-  ASSERT_EQ(got.deep.totalSamples(), want.deep.totalSamples()) << what;
-  DeepPixel a, b;
-  for (int y = want.deep.y0; y < want.deep.y0 + want.deep.height; ++y)
-    for (int x = want.deep.x0; x < want.deep.x0 + want.deep.width; ++x) {
-      got.deep.getPixel(x, y, a), want.deep.getPixel(x, y, b);
-      ASSERT_EQ(a.f, b.f) << what << " deep pixel " << x << " " << y;
-      ASSERT_EQ(a.u, b.u) << what << " deep pixel " << x << " " << y;
-    }
-}
-
 // Chunk gathers (one gather for micropolygons that move together, sorted into cells of
 // compensated position) must find exactly the samples each micropolygon's own gather finds: the
 // same sample tests, the same hits, every channel and deep sample the same - for motion from

@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include "common/random.h"
+#include "resample/deep.h"
 
 namespace reshutter::test {
 
@@ -285,5 +286,22 @@ const ImageChannel& channel(const RenderResult& r, const std::string& name) {
   if (!c) throw std::runtime_error("no channel " + name);
   return *c;
 }
+
+void expectSameOutputs(const RenderResult& got, const RenderResult& want, const std::string& what) {
+  ASSERT_EQ(got.image.channels.size(), want.image.channels.size()) << what;
+  for (size_t i = 0; i < want.image.channels.size(); ++i) {
+    EXPECT_EQ(got.image.channels[i].f, want.image.channels[i].f) << what << " " << want.image.channels[i].name;
+    EXPECT_EQ(got.image.channels[i].u, want.image.channels[i].u) << what << " " << want.image.channels[i].name;
+  }
+  ASSERT_EQ(got.deep.totalSamples(), want.deep.totalSamples()) << what;
+  DeepPixel a, b;
+  for (int y = want.deep.y0; y < want.deep.y0 + want.deep.height; ++y)
+    for (int x = want.deep.x0; x < want.deep.x0 + want.deep.width; ++x) {
+      got.deep.getPixel(x, y, a), want.deep.getPixel(x, y, b);
+      ASSERT_EQ(a.f, b.f) << what << " deep pixel " << x << " " << y;
+      ASSERT_EQ(a.u, b.u) << what << " deep pixel " << x << " " << y;
+    }
+}
+
 
 }  // namespace reshutter::test

@@ -87,4 +87,7 @@ void expectRayCasterAgrees(const TestScene& s, const resample::RenderSpec& spec,
 
 const resample::ImageChannel& channel(const resample::RenderResult& r, const std::string& name);
 
+/// Expects every flat channel and every deep sample of two renders to be the same, bit for bit.
+void expectSameOutputs(const resample::RenderResult& got, const resample::RenderResult& want, const std::string& what);
+
 }  // namespace reshutter::test
