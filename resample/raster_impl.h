@@ -249,7 +249,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   };
   void rasterizeLens(const Source& src, const store::TileEntry& entry, const store::TilePart& part, const HitContext& hc, const Chunk& ch);
   void queueLens(const LensChunk& lc, uint32_t chunk, uint32_t m);
-  void sortLensLayer(float cxl, float cyl, float zMin);
+  void sortLensLayer(float cxl, float cyl, float zMin, bool times);
   void drawLensQueued();
   struct LensSample {  // a candidate: its slot and its copies of the sample's time, position and lens point
     uint32_t slot;

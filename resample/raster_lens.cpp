@@ -22,6 +22,7 @@
 #include <algorithm>
 #include <cmath>
 #include <numeric>
+#include <type_traits>
 
 #include "resample/raster_impl.h"
 
@@ -233,8 +234,9 @@ void BucketRasterizer::Impl::queueLens(const LensChunk& lc, uint32_t chunk, uint
 
 // Sorts the bucket's samples into pixel cells of their positions sheared by displacement
 // (cxl, cyl) per unit of lens (a layer's middle), stably (slot order within a cell), leaving out
-// those whose nearest opaque surface so far is no farther than zMin.
-void BucketRasterizer::Impl::sortLensLayer(float cxl, float cyl, float zMin) {
+// those whose nearest opaque surface so far is no farther than zMin; their times only if `times`
+// (else the sorted times are stale: the gathers read them, but nothing uses what they give).
+void BucketRasterizer::Impl::sortLensLayer(float cxl, float cyl, float zMin, bool times) {
   // A layer's shear moves samples by up to |cxl| (|lens point| <= 1); beyond a region's size
   // they pile into the edge cells instead of growing the grid.
   const float maxPad = float(std::max(w, h));
@@ -281,16 +283,21 @@ void BucketRasterizer::Impl::sortLensLayer(float cxl, float cyl, float zMin) {
   std::partial_sum(start, start + blocks * cells + 1, start);
   // Scatter: each cell's samples in slot order, with the copies the gather reads.
   std::copy(start, start + blocks * cells, cursor);
-  for (size_t s = 0; s < planes; ++s) {
-    const size_t base = s * planeStride;
-    for (size_t p = 0; p < count; ++p) {
-      const size_t j = base + p;
-      if (cellOf[j] == kHidden) continue;
-      const uint32_t at = cursor[cellOf[j]]++;
-      outIndex[at] = uint32_t(j);
-      outT[at] = ts[j], outX[at] = xs[j], outY[at] = ys[j], outU[at] = us[j], outV[at] = vs[j];
+  auto scatter = [&](auto withTimes) {
+    for (size_t s = 0; s < planes; ++s) {
+      const size_t base = s * planeStride;
+      for (size_t p = 0; p < count; ++p) {
+        const size_t j = base + p;
+        if (cellOf[j] == kHidden) continue;
+        const uint32_t at = cursor[cellOf[j]]++;
+        outIndex[at] = uint32_t(j);
+        if constexpr (decltype(withTimes)::value) outT[at] = ts[j];
+        outX[at] = xs[j], outY[at] = ys[j], outU[at] = us[j], outV[at] = vs[j];
+      }
     }
-  }
+  };
+  if (times) scatter(std::true_type{});
+  else scatter(std::false_type{});
 }
 
 // Draws the queued micropolygons layer by layer (nearest first; queue order - chunks nearest
@@ -327,9 +334,16 @@ void BucketRasterizer::Impl::drawLensQueued() {
         // The layer's nearest culling depth: a sample whose nearest opaque surface so far is no
         // farther cannot change (every micropolygon of the layer would fail its early depth
         // test), so it is left out of the layer's cells. Exact, as the early depth test is.
-        float zMin = d.zCull;
-        for (size_t oj = oi + 1; oj < lensOrder.size() && lensDraws[lensOrder[oj]].layer == d.layer; ++oj) zMin = std::min(zMin, lensDraws[lensOrder[oj]].zCull);
-        sortLensLayer(lc.lensAx * d.kl, lc.lensAy * d.kl, zMin);
+        // Sample times are copied only where some micropolygon of the layer reads them (it moves,
+        // or its store covers part of the render's times).
+        float zMin = INFINITY;
+        bool times = false;
+        for (size_t oj = oi; oj < lensOrder.size() && lensDraws[lensOrder[oj]].layer == d.layer; ++oj) {
+          const LensDraw& e = lensDraws[lensOrder[oj]];
+          zMin = std::min(zMin, e.zCull);
+          times = times || lensChunks[e.chunk].moving || lensChunks[e.chunk].cover.check;
+        }
+        sortLensLayer(lc.lensAx * d.kl, lc.lensAy * d.kl, zMin, times);
         sortedLayer = d.layer;
         ++stats.lensLayers;
       }
@@ -422,11 +436,22 @@ void BucketRasterizer::Impl::lensEdges(const TilePart& part, const uint32_t* c, 
 // the sample's lens point, through the static path's edge test.
 void BucketRasterizer::Impl::testStillLens(const HitContext& hc, uint32_t m, const uint32_t* c, bool tri, uint8_t flags, const LensSample& ls) {
   const double Lx = view.lensRadius * double(ls.u), Ly = view.lensRadius * double(ls.v);
+  auto edge = [&](int k) { return (stillLens.e0[k] + Lx * stillLens.ex[k]) + Ly * stillLens.ey[k]; };
+  // Triangle A's edges (01, 12, 02) first; B's two others only if A misses (coversFixed()'s test
+  // and order, its edges made as they are needed).
   glm::dvec3 E[5];
-  for (int k = 0; k < 5; ++k) E[k] = (stillLens.e0[k] + Lx * stillLens.ex[k]) + Ly * stillLens.ey[k];
+  E[0] = edge(0), E[1] = edge(1), E[4] = edge(4);
+  const bool cullBack = opt.backfaceCull && !(flags & store::kTwoSided);
+  const double x = ls.x, y = ls.y;
   float b[3];
-  int t;
-  if (!coversFixed(E, tri, opt.backfaceCull && !(flags & store::kTwoSided), ls.x, ls.y, t, b)) return;
+  int t = 0;
+  if (!triangleCovers(
+          edgeAt(x, y, E[1]), -edgeAt(x, y, E[4]), edgeAt(x, y, E[0]), [&](int i) { return i == 0 ? E[1] : i == 1 ? -E[4] : E[0]; }, cullBack, b)) {
+    if (tri) return;
+    E[2] = edge(2), E[3] = edge(3);
+    t = 1;
+    if (!triangleCovers(edgeAt(x, y, E[2]), edgeAt(x, y, E[3]), edgeAt(x, y, E[4]), [&](int i) { return E[2 + i]; }, cullBack, b)) return;
+  }
   const float* zv = stillLens.z;
   const float z = t == 0 ? b[0] * zv[0] + b[1] * zv[1] + b[2] * zv[2] : b[0] * zv[0] + b[1] * zv[2] + b[2] * zv[3];
   if (!(z >= view.nearClip && z <= view.farClip)) return;
