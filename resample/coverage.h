@@ -195,6 +195,12 @@ struct EdgeTestSetup {
   bool cullBackFaces;            // back-face knock-out applies to this micropolygon
   bool fixed = false;            // a static micropolygon: the edges are c[e][0..2] at any time (f = 0)
   float za[4] = {}, zb[4] = {};  // corner depths at the segment's two ends (equal when fixed)
+  // A still micropolygon through a lens (fixed, su set): the edges are (c[0..2] + Lx c[3..5]) +
+  // Ly c[6..8] at the candidate's lens point (Lx, Ly) = lensRadius (su, sv), as the lens path's
+  // scalar test makes them.
+  const float* su = nullptr;
+  const float* sv = nullptr;
+  double lensRadius = 0;
 };
 
 /// One decided candidate: which triangle it hit (0: p0 p1 p2, 1: p0 p2 p3), its barycentrics

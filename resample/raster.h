@@ -8,7 +8,8 @@
 //     - linear (raster_linear.cpp): a moving chunk whose interval lies in one knot segment - each
 //       micropolygon's box lerped between the interval's ends; runs that move together gather once;
 //     - moving (raster_moving.cpp): other moving chunks, bounded per time stratum;
-//     - lens (raster_lens.cpp): with depth of field, every chunk, bounded per lens stratum.
+//     - lens (raster_lens.cpp): with depth of field, every chunk, queued and then drawn by depth
+//       layer against the samples sorted by their lens-sheared positions.
 //  4. Gather (gather.h): the samples inside a micropolygon's box at their own time, not yet hidden
 //     by a nearer opaque surface (the early depth test: exact, it changes no bit).
 //  5. Coverage (coverage.h): the exact edge-function test of each candidate at its time - the
@@ -174,7 +175,8 @@ class BucketRasterizer {
   void add(const Source& source, const store::TileEntry& entry, const store::TilePart& part);
   /// Rasterizes the queued parts in runs of micropolygons, nearest first, so that occlusion
   /// culling skips most hidden surfaces. Depth ties keep the surface drawn first (store order
-  /// among runs of equal nearest depth, given parts queued in store order).
+  /// among runs of equal nearest depth, given parts queued in store order; through a lens, the
+  /// nearer depth layer first, then that order).
   void rasterizeQueued();
   /// Composites each sample's surfaces front to back and returns the region's samples
   /// (rasterizing what is still queued first).

@@ -388,19 +388,54 @@ void BucketRasterizer::Impl::drawLensQueued() {
     const uint32_t* c = &part.corners[size_t(d.m) * 4];
     const bool tri = c[3] == kNoCorner;
     const uint8_t flags = part.flags[d.m];
-    bool edgesReady = false;
+    if (lc.moving || !vectorKernels) {
+      bool edgesReady = false;
+      for (size_t i = 0; i < n; ++i) {
+        const uint32_t idx = cand.index[i];
+        if (!(zbuf[idx] > d.zCull)) continue;  // the early depth test
+        if (lc.cover.check && !Source::covers(double(cand.t[i]), lc.cover.lo, lc.cover.hi, lc.cover.openEnd)) continue;
+        ++stats.sampleTests;
+        const LensSample ls{idx, cand.t[i], cand.x[i], cand.y[i], cand.u[i], cand.v[i]};
+        if (lc.moving) {
+          testLens(lc, hc, d.m, c, tri, flags, ls);
+          continue;
+        }
+        if (!edgesReady) lensEdges(part, c, tri), edgesReady = true;
+        testStillLens(hc, d.m, c, tri, flags, ls);
+      }
+      continue;
+    }
+    // A still micropolygon with the vector kernels: the candidates that pass the early depth
+    // test (and the coverage) moved to the front, then the edge test eight at a time, exact ties
+    // (undecided) in the scalar test - the same hits, in the same order, as the loop above.
+    size_t kept = 0;
     for (size_t i = 0; i < n; ++i) {
       const uint32_t idx = cand.index[i];
-      if (!(zbuf[idx] > d.zCull)) continue;  // the early depth test
+      if (!(zbuf[idx] > d.zCull)) continue;
       if (lc.cover.check && !Source::covers(double(cand.t[i]), lc.cover.lo, lc.cover.hi, lc.cover.openEnd)) continue;
-      ++stats.sampleTests;
-      const LensSample ls{idx, cand.t[i], cand.x[i], cand.y[i], cand.u[i], cand.v[i]};
-      if (lc.moving) {
-        testLens(lc, hc, d.m, c, tri, flags, ls);
+      cand.index[kept] = idx, cand.t[kept] = cand.t[i], cand.x[kept] = cand.x[i], cand.y[kept] = cand.y[i], cand.u[kept] = cand.u[i], cand.v[kept] = cand.v[i];
+      ++kept;
+    }
+    if (!kept) continue;
+    stats.sampleTests += kept;
+    lensEdges(part, c, tri);
+    kernels::LinearEdges edges;
+    for (int e = 0; e < 5; ++e)
+      for (int k = 0; k < 3; ++k) edges.c[k][e] = stillLens.e0[e][k], edges.c[3 + k][e] = stillLens.ex[e][k], edges.c[6 + k][e] = stillLens.ey[e][k];
+    kernels::EdgeTestSetup setup{cand.t, cand.x, cand.y, 0.f, 0.f, tri, opt.backfaceCull && !(flags & store::kTwoSided), true};
+    for (int j = 0; j < 4; ++j) setup.za[j] = setup.zb[j] = stillLens.z[j];
+    setup.su = cand.u, setup.sv = cand.v, setup.lensRadius = view.lensRadius;
+    const size_t hits = kernels::testLinearEdges(isa, setup, edges, kept, edgeHits.data());
+    for (size_t hi = 0; hi < hits; ++hi) {
+      const kernels::EdgeHit& eh = edgeHits[hi];
+      const size_t i = eh.candidate;
+      if (eh.undecided) {
+        testStillLens(hc, d.m, c, tri, flags, LensSample{cand.index[i], cand.t[i], cand.x[i], cand.y[i], cand.u[i], cand.v[i]});
         continue;
       }
-      if (!edgesReady) lensEdges(part, c, tri), edgesReady = true;
-      testStillLens(hc, d.m, c, tri, flags, ls);
+      if (!(eh.z >= view.nearClip && eh.z <= view.farClip)) continue;
+      const uint32_t tv[3] = {c[0], c[1 + eh.triangle], c[2 + eh.triangle]};
+      recordHit(hc, cand.index[i], d.m, tv, eh.b, eh.z);
     }
   }
   lensDraws.clear(), lensChunks.clear(), lensBlockF.clear();

@@ -318,12 +318,20 @@ size_t filterCandidatesAvx2(const Candidates& in, size_t begin, size_t end, cons
 }
 
 // One edge's value at four samples: E(f) = c0 + f (c3 + f c6) per component, then
-// (x Ex + y Ey) + Ez at raster position (x, y), as edgeAt() and EdgeQuad::at() compute it.
-template <bool kFixed>
-inline __m256d edgeValue(const LinearEdges& E, int e, __m256d f, __m256d rx, __m256d ry) {
+// (x Ex + y Ey) + Ez at raster position (x, y), as edgeAt() and EdgeQuad::at() compute it; for a
+// still micropolygon through a lens (kLensEdges), E = (c[0..2] + Lx c[3..5]) + Ly c[6..8] with
+// the sample's lens point in f (Lx) and g (Ly), as the lens path's scalar test makes it.
+template <int kMode>
+inline __m256d edgeValue(const LinearEdges& E, int e, __m256d f, __m256d g, __m256d rx, __m256d ry) {
   __m256d c[9];
-  for (int k = 0; k < (kFixed ? 3 : 9); ++k) c[k] = _mm256_set1_pd(E.c[k][e]);
-  if constexpr (kFixed) return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(rx, c[0]), _mm256_mul_pd(ry, c[1])), c[2]);
+  for (int k = 0; k < (kMode == kFixedEdges ? 3 : 9); ++k) c[k] = _mm256_set1_pd(E.c[k][e]);
+  if constexpr (kMode == kFixedEdges) return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(rx, c[0]), _mm256_mul_pd(ry, c[1])), c[2]);
+  if constexpr (kMode == kLensEdges) {
+    const __m256d ex = _mm256_add_pd(_mm256_add_pd(c[0], _mm256_mul_pd(f, c[3])), _mm256_mul_pd(g, c[6]));
+    const __m256d ey = _mm256_add_pd(_mm256_add_pd(c[1], _mm256_mul_pd(f, c[4])), _mm256_mul_pd(g, c[7]));
+    const __m256d ez = _mm256_add_pd(_mm256_add_pd(c[2], _mm256_mul_pd(f, c[5])), _mm256_mul_pd(g, c[8]));
+    return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(rx, ex), _mm256_mul_pd(ry, ey)), ez);
+  }
   const __m256d ex = _mm256_add_pd(c[0], _mm256_mul_pd(f, _mm256_add_pd(c[3], _mm256_mul_pd(f, c[6]))));
   const __m256d ey = _mm256_add_pd(c[1], _mm256_mul_pd(f, _mm256_add_pd(c[4], _mm256_mul_pd(f, c[7]))));
   const __m256d ez = _mm256_add_pd(c[2], _mm256_mul_pd(f, _mm256_add_pd(c[5], _mm256_mul_pd(f, c[8]))));
@@ -420,19 +428,21 @@ inline TriangleMasks triangleMasks(__m256d a0, __m256d a1, __m256d a2, bool cull
   return m;
 }
 
-template <bool kFixed>
+template <int kMode>
 size_t testLinearEdgesAvx2(const EdgeTestSetup& s, const LinearEdges& E, size_t n, EdgeHit* hits) {
   const __m128 fOffset = _mm_set1_ps(s.fOffset), fScale = _mm_set1_ps(s.fScale), zero = _mm_setzero_ps(), one = _mm_set1_ps(1.f);
-  const __m256d sign = _mm256_set1_pd(-0.0);
+  const __m256d sign = _mm256_set1_pd(-0.0), lensRadius = _mm256_set1_pd(s.lensRadius);
   size_t h = 0;
   for (size_t i = 0; i < n; i += 4) {
     const size_t live = n - i < 4 ? n - i : 4;  // lanes past n read padding and are masked off
-    // f = clamp((t + fOffset) fScale, 0, 1), operand order as std::clamp; fixed edges need no time.
+    // f = clamp((t + fOffset) fScale, 0, 1), operand order as std::clamp; still edges need no time.
     __m128 f = zero;
-    if constexpr (!kFixed) f = _mm_min_ps(one, _mm_max_ps(zero, _mm_mul_ps(_mm_add_ps(_mm_loadu_ps(s.st + i), fOffset), fScale)));
-    const __m256d fd = _mm256_cvtps_pd(f);
+    if constexpr (kMode == kMovingEdges) f = _mm_min_ps(one, _mm_max_ps(zero, _mm_mul_ps(_mm_add_ps(_mm_loadu_ps(s.st + i), fOffset), fScale)));
+    // Through a lens, the edges' parameters are the lens point (Lx, Ly) = lensRadius (u, v).
+    const __m256d fd = kMode == kLensEdges ? _mm256_mul_pd(lensRadius, _mm256_cvtps_pd(_mm_loadu_ps(s.su + i))) : _mm256_cvtps_pd(f);
+    const __m256d gd = kMode == kLensEdges ? _mm256_mul_pd(lensRadius, _mm256_cvtps_pd(_mm_loadu_ps(s.sv + i))) : fd;
     const __m256d rx = _mm256_cvtps_pd(_mm_loadu_ps(s.sx + i)), ry = _mm256_cvtps_pd(_mm_loadu_ps(s.sy + i));
-    const __m256d e0 = edgeValue<kFixed>(E, 0, fd, rx, ry), e1 = edgeValue<kFixed>(E, 1, fd, rx, ry), e4 = edgeValue<kFixed>(E, 4, fd, rx, ry);
+    const __m256d e0 = edgeValue<kMode>(E, 0, fd, gd, rx, ry), e1 = edgeValue<kMode>(E, 1, fd, gd, rx, ry), e4 = edgeValue<kMode>(E, 4, fd, gd, rx, ry);
     const int liveMask = (1 << live) - 1;
     // Triangle A = (p0 p1 p2) with edges 12, 20 (= -02), 01.
     const TriangleMasks A = triangleMasks(e1, _mm256_xor_pd(e4, sign), e0, s.cullBackFaces);
@@ -441,7 +451,7 @@ size_t testLinearEdgesAvx2(const EdgeTestSetup& s, const LinearEdges& E, size_t 
     const int needB = liveMask & ~hitA & ~undecided;
     if (!s.triangle && needB) {
       // Triangle B = (p0 p2 p3) with edges 23, 30, 02.
-      B = triangleMasks(edgeValue<kFixed>(E, 2, fd, rx, ry), edgeValue<kFixed>(E, 3, fd, rx, ry), e4, s.cullBackFaces);
+      B = triangleMasks(edgeValue<kMode>(E, 2, fd, gd, rx, ry), edgeValue<kMode>(E, 3, fd, gd, rx, ry), e4, s.cullBackFaces);
       hitB = B.hit & needB;
       undecided |= B.tie & needB;
       hitB &= ~undecided;
@@ -576,6 +586,7 @@ void cellsOfAvx2(const CellGrid& g, const float* t, const float* x, const float*
 }  // namespace
 
 const IsaKernels kAvx2Kernels = {gatherInBoxAvx2, gatherStrataAvx2,           filterCandidatesAvx2,     cellsOfAvx2, avx2::projectLerped, linearEdgesAvx2,
-                                 fixedEdgesAvx2,  testLinearEdgesAvx2<false>, testLinearEdgesAvx2<true>, gatherLensCellsAvx2};
+                                 fixedEdgesAvx2,  testLinearEdgesAvx2<kMovingEdges>, testLinearEdgesAvx2<kFixedEdges>, testLinearEdgesAvx2<kLensEdges>,
+                                 gatherLensCellsAvx2};
 
 }  // namespace reshutter::resample::kernels

@@ -314,11 +314,17 @@ void edgesAvx512(const float* const at[4], const float* const to[4], const Raste
 
 // The edge test with eight candidates per iteration: testLinearEdgesAvx2()'s operations, lane
 // for lane, in AVX-512 (doubles in zmm, the floats of eight lanes in ymm).
-template <bool kFixed>
-inline __m512d edgeValue512(const LinearEdges& E, int e, __m512d f, __m512d rx, __m512d ry) {
+template <int kMode>
+inline __m512d edgeValue512(const LinearEdges& E, int e, __m512d f, __m512d g, __m512d rx, __m512d ry) {
   __m512d c[9];
-  for (int k = 0; k < (kFixed ? 3 : 9); ++k) c[k] = _mm512_set1_pd(E.c[k][e]);
-  if constexpr (kFixed) return _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(rx, c[0]), _mm512_mul_pd(ry, c[1])), c[2]);
+  for (int k = 0; k < (kMode == kFixedEdges ? 3 : 9); ++k) c[k] = _mm512_set1_pd(E.c[k][e]);
+  if constexpr (kMode == kFixedEdges) return _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(rx, c[0]), _mm512_mul_pd(ry, c[1])), c[2]);
+  if constexpr (kMode == kLensEdges) {
+    const __m512d ex = _mm512_add_pd(_mm512_add_pd(c[0], _mm512_mul_pd(f, c[3])), _mm512_mul_pd(g, c[6]));
+    const __m512d ey = _mm512_add_pd(_mm512_add_pd(c[1], _mm512_mul_pd(f, c[4])), _mm512_mul_pd(g, c[7]));
+    const __m512d ez = _mm512_add_pd(_mm512_add_pd(c[2], _mm512_mul_pd(f, c[5])), _mm512_mul_pd(g, c[8]));
+    return _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(rx, ex), _mm512_mul_pd(ry, ey)), ez);
+  }
   const __m512d ex = _mm512_add_pd(c[0], _mm512_mul_pd(f, _mm512_add_pd(c[3], _mm512_mul_pd(f, c[6]))));
   const __m512d ey = _mm512_add_pd(c[1], _mm512_mul_pd(f, _mm512_add_pd(c[4], _mm512_mul_pd(f, c[7]))));
   const __m512d ez = _mm512_add_pd(c[2], _mm512_mul_pd(f, _mm512_add_pd(c[5], _mm512_mul_pd(f, c[8]))));
@@ -349,20 +355,22 @@ inline TriangleMasks512 triangleMasks512(__m512d a0, __m512d a1, __m512d a2, boo
   return m;
 }
 
-template <bool kFixed>
+template <int kMode>
 size_t testLinearEdgesAvx512(const EdgeTestSetup& s, const LinearEdges& E, size_t n, EdgeHit* hits) {
   const __m256 fOffset = _mm256_set1_ps(s.fOffset), fScale = _mm256_set1_ps(s.fScale), zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.f);
   const __m512i sign = _mm512_set1_epi64(int64_t(0x8000000000000000ull));
+  const __m512d lensRadius = _mm512_set1_pd(s.lensRadius);
   __m256 zDelta[4], zStart[4];
   for (int j = 0; j < 4; ++j) zStart[j] = _mm256_set1_ps(s.za[j]), zDelta[j] = _mm256_set1_ps(s.zb[j] - s.za[j]);
   size_t h = 0;
   for (size_t i = 0; i < n; i += 8) {
     const size_t live = n - i < 8 ? n - i : 8;  // lanes past n read padding and are masked off
     __m256 f = zero;
-    if constexpr (!kFixed) f = _mm256_min_ps(one, _mm256_max_ps(zero, _mm256_mul_ps(_mm256_add_ps(_mm256_loadu_ps(s.st + i), fOffset), fScale)));
-    const __m512d fd = _mm512_cvtps_pd(f);
+    if constexpr (kMode == kMovingEdges) f = _mm256_min_ps(one, _mm256_max_ps(zero, _mm256_mul_ps(_mm256_add_ps(_mm256_loadu_ps(s.st + i), fOffset), fScale)));
+    const __m512d fd = kMode == kLensEdges ? _mm512_mul_pd(lensRadius, _mm512_cvtps_pd(_mm256_loadu_ps(s.su + i))) : _mm512_cvtps_pd(f);
+    const __m512d gd = kMode == kLensEdges ? _mm512_mul_pd(lensRadius, _mm512_cvtps_pd(_mm256_loadu_ps(s.sv + i))) : fd;
     const __m512d rx = _mm512_cvtps_pd(_mm256_loadu_ps(s.sx + i)), ry = _mm512_cvtps_pd(_mm256_loadu_ps(s.sy + i));
-    const __m512d e0 = edgeValue512<kFixed>(E, 0, fd, rx, ry), e1 = edgeValue512<kFixed>(E, 1, fd, rx, ry), e4 = edgeValue512<kFixed>(E, 4, fd, rx, ry);
+    const __m512d e0 = edgeValue512<kMode>(E, 0, fd, gd, rx, ry), e1 = edgeValue512<kMode>(E, 1, fd, gd, rx, ry), e4 = edgeValue512<kMode>(E, 4, fd, gd, rx, ry);
     const unsigned liveMask = (1u << live) - 1;
     // Triangle A = (p0 p1 p2) with edges 12, 20 (= -02), 01.
     const TriangleMasks512 A = triangleMasks512(e1, _mm512_castsi512_pd(_mm512_xor_si512(_mm512_castpd_si512(e4), sign)), e0, s.cullBackFaces);
@@ -371,7 +379,7 @@ size_t testLinearEdgesAvx512(const EdgeTestSetup& s, const LinearEdges& E, size_
     const unsigned needB = liveMask & ~hitA & ~undecided;
     if (!s.triangle && needB) {
       // Triangle B = (p0 p2 p3) with edges 23, 30, 02.
-      B = triangleMasks512(edgeValue512<kFixed>(E, 2, fd, rx, ry), edgeValue512<kFixed>(E, 3, fd, rx, ry), e4, s.cullBackFaces);
+      B = triangleMasks512(edgeValue512<kMode>(E, 2, fd, gd, rx, ry), edgeValue512<kMode>(E, 3, fd, gd, rx, ry), e4, s.cullBackFaces);
       hitB = B.hit & needB;
       undecided |= B.tie & needB;
       hitB &= ~undecided;
@@ -454,7 +462,7 @@ void fixedEdgesAvx512(const float* const at[4], const RasterScale& m, LinearEdge
 
 const IsaKernels kAvx512Kernels = {gatherInBoxAvx512, gatherStrataAvx512,           filterCandidatesAvx512,
                                    cellsOfAvx512,     avx2::projectLerped,          edgesAvx512<false>,
-                                   fixedEdgesAvx512,  testLinearEdgesAvx512<false>, testLinearEdgesAvx512<true>,
-                                   gatherLensCellsAvx512};
+                                   fixedEdgesAvx512,  testLinearEdgesAvx512<kMovingEdges>, testLinearEdgesAvx512<kFixedEdges>,
+                                   testLinearEdgesAvx512<kLensEdges>, gatherLensCellsAvx512};
 
 }  // namespace reshutter::resample::kernels

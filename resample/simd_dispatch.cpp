@@ -84,7 +84,7 @@ void fixedEdges(Isa isa, const float* const at[4], const RasterScale& scale, Lin
 
 size_t testLinearEdges(Isa isa, const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits) {
   const IsaKernels& k = kernelsFor(isa);
-  return setup.fixed ? k.testFixedEdges(setup, edges, n, hits) : k.testMovingEdges(setup, edges, n, hits);
+  return setup.su ? k.testLensEdges(setup, edges, n, hits) : setup.fixed ? k.testFixedEdges(setup, edges, n, hits) : k.testMovingEdges(setup, edges, n, hits);
 }
 
 }  // namespace reshutter::resample::kernels

@@ -17,6 +17,11 @@
 
 namespace reshutter::resample::kernels {
 
+// The edge test's kinds of edges (the kernels' template argument): quadratic in a moving
+// micropolygon's segment parameter, fixed, or affine in the lens point (a still micropolygon seen
+// through a lens).
+inline constexpr int kMovingEdges = 0, kFixedEdges = 1, kLensEdges = 2;
+
 struct IsaKernels {
   size_t (*gatherInBox)(const SampleRows& rows, const MovingBox& box, const Candidates& out, size_t n);
   size_t (*gatherStrata)(const SampleRows& region, const StrataSpans& spans, const MovingBox& box, const Candidates& out);
@@ -29,6 +34,7 @@ struct IsaKernels {
   void (*fixedEdges)(const float* const at[4], const RasterScale& scale, LinearEdges& out);
   size_t (*testMovingEdges)(const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits);  // setup.fixed false
   size_t (*testFixedEdges)(const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits);   // setup.fixed true
+  size_t (*testLensEdges)(const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits);    // setup.su set
   size_t (*gatherLensCells)(const LensCells& cells, size_t stride, int c0, int r0, int c1, int r1, const LensBox& box, const LensCandidates& out, size_t n);
 };
 
