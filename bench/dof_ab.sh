@@ -1,0 +1,39 @@
+#!/usr/bin/env bash
+# Depth of field, two builds against each other: the 1080p bench store through bench/dof_frame.sh's
+# apertures (circles of confusion of RADII px at the far depth; 0 = the pinhole), each build and
+# radius run ROUNDS times interleaved in the same minutes, and the fastest of each reported (wall
+# and CPU seconds, rasterize thread-seconds) with its ratio to that build's pinhole frame. On a
+# noisy host only ratios within one run mean anything. Not a test: run by hand.
+# Usage: bench/dof_ab.sh OLD_BINARY NEW_BINARY STORE ROUNDS [RADII...]
+set -euo pipefail
+old=${1:?usage: bench/dof_ab.sh OLD_BINARY NEW_BINARY STORE ROUNDS [RADII...]}
+new=${2:?usage}
+store=${3:?usage}
+rounds=${4:?usage}
+shift 4
+radii=("$@")
+((${#radii[@]})) || radii=(0 5 20 50)
+work=$(mktemp -d /tmp/reshutter-dofab.XXXXXX)
+trap 'rm -rf "$work"' EXIT
+source "$(dirname "$0")/host.sh"
+host_line
+# As bench/dof_frame.sh: fov 40 over 1080 rows, focus at the nearest depth (5), f-stop chosen so
+# that the farthest depth (50) has a circle of radius r.
+a=$(awk 'BEGIN { print 540 / (sin(20 * atan2(0, -1) / 180) / cos(20 * atan2(0, -1) / 180)) }')
+for ((round = 0; round < rounds; ++round)); do
+  for r in "${radii[@]}"; do
+    for which in old new; do
+      bin=$old
+      [[ $which == new ]] && bin=$new
+      lens=(--pinhole)
+      [[ $r != 0 ]] && lens=(--fstop "$(awk -v r="$r" -v a="$a" 'BEGIN { printf "%.6f", 1 / (2 * r / (a * 0.18)) }')" --focal-length 1 --focus-distance 5)
+      /usr/bin/time -o "$work/time" -f "%e %U %S" "$bin" -q resample "$store" --spp 16 --filter gaussian:2x2 --stats -o "$work/out.exr" "${lens[@]}" > "$work/log" 2>&1
+      raster=$(awk '/time \(thread-sum\)/ { for (i = 1; i <= NF; ++i) if ($i == "rasterize") print $(i + 1) }' "$work/log")
+      echo "$which $r $(cat "$work/time") $raster"
+    done
+  done
+done | awk '{ k = $1 " " $2; cpu = $4 + $5
+              if (!(k in w) || $3 < w[k]) w[k] = $3
+              if (!(k in c) || cpu < c[k]) c[k] = cpu
+              if (!(k in ras) || $6 < ras[k]) ras[k] = $6 }
+            END { for (k in w) { split(k, p, " "); printf "%s %4s px   wall %7.2f s (%4.2fx)   CPU %7.2f s   rasterize %8.3f thread-s\n", p[1], p[2], w[k], w[k] / w[p[1] " 0"], c[k], ras[k] } }' | sort -k1,1r -k2n
