@@ -45,6 +45,16 @@ inline __mmask16 insideAtOwnTime512(__mmask16 live, const BoxLanes512& b, __m512
   return _mm512_mask_cmp_ps_mask(in, y, _mm512_add_ps(b.y1, _mm512_mul_ps(u, b.dy1)), _CMP_LE_OQ);
 }
 
+// Appends the lanes of k (index, time, position) to `out` from n, every lane stored whole (a
+// compress straight to memory is slow on AMD's cores); returns the new count.
+inline size_t appendCompressed512(const Candidates& out, size_t n, __mmask16 k, __m512i idx, __m512 t, __m512 x, __m512 y) {
+  _mm512_storeu_si512(out.index + n, _mm512_maskz_compress_epi32(k, idx));
+  _mm512_storeu_ps(out.t + n, _mm512_maskz_compress_ps(k, t));
+  _mm512_storeu_ps(out.x + n, _mm512_maskz_compress_ps(k, x));
+  _mm512_storeu_ps(out.y + n, _mm512_maskz_compress_ps(k, y));
+  return n + size_t(__builtin_popcount(unsigned(k)));
+}
+
 // Row segments waiting for a vector: segment k covers samples start[k] .. start[k] + 3, of which
 // the set bits of bits[k] (at most four) are in the range.
 struct Segments {
@@ -75,11 +85,7 @@ inline size_t appendSegmentVector(const BoxLanes512& b, const SampleRows& r, __m
   const __m512i spread = _mm512_setr_epi32(0, 0, 0, 0, 1, 1, 1, 1, 2, 2, 2, 2, 3, 3, 3, 3);
   const __m512i quad = _mm512_setr_epi32(0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3, 0, 1, 2, 3);
   const __m512i idx = _mm512_add_epi32(_mm512_permutexvar_epi32(spread, _mm512_zextsi128_si512(_mm_load_si128(reinterpret_cast<const __m128i*>(at)))), quad);
-  _mm512_storeu_si512(out.index + n, _mm512_maskz_compress_epi32(k, idx));
-  _mm512_storeu_ps(out.t + n, _mm512_maskz_compress_ps(k, t));
-  _mm512_storeu_ps(out.x + n, _mm512_maskz_compress_ps(k, x));
-  _mm512_storeu_ps(out.y + n, _mm512_maskz_compress_ps(k, y));
-  return n + size_t(__builtin_popcount(unsigned(k)));
+  return appendCompressed512(out, n, k, idx, t, x, y);
 }
 
 // Tests every whole vector of waiting segments; keeps the (at most three) left over, or with
@@ -121,11 +127,7 @@ inline size_t appendPlaneQuad(const BoxLanes512& b, const SampleRows& r, __m512 
   const __m512i idx = _mm512_add_epi32(_mm512_set1_epi32(int(uint32_t(first))),
                                        _mm512_setr_epi32(0, 1, s2, s2 + 1, p1, p1 + 1, p1 + s2, p1 + s2 + 1, 2 * p1, 2 * p1 + 1, 2 * p1 + s2, 2 * p1 + s2 + 1,
                                                          3 * p1, 3 * p1 + 1, 3 * p1 + s2, 3 * p1 + s2 + 1));
-  _mm512_storeu_si512(out.index + n, _mm512_maskz_compress_epi32(k, idx));
-  _mm512_storeu_ps(out.t + n, _mm512_maskz_compress_ps(k, t));
-  _mm512_storeu_ps(out.x + n, _mm512_maskz_compress_ps(k, x));
-  _mm512_storeu_ps(out.y + n, _mm512_maskz_compress_ps(k, y));
-  return n + size_t(__builtin_popcount(unsigned(k)));
+  return appendCompressed512(out, n, k, idx, t, x, y);
 }
 
 // gatherInBox() with sixteen lanes: the rows of every plane as segments of up to four samples,
@@ -184,11 +186,7 @@ size_t filterCandidatesAvx512(const Candidates& in, size_t begin, size_t end, co
     const __m512 t = _mm512_loadu_ps(in.t + k), x = _mm512_loadu_ps(in.x + k), y = _mm512_loadu_ps(in.y + k);
     const __mmask16 visible = _mm512_mask_cmp_ps_mask(live, _mm512_mask_i32gather_ps(zc, live, idx, depth, 4), zc, _CMP_GT_OQ);
     const __mmask16 keep = insideAtOwnTime512(visible, b, t, x, y);
-    _mm512_storeu_si512(out.index + n, _mm512_maskz_compress_epi32(keep, idx));
-    _mm512_storeu_ps(out.t + n, _mm512_maskz_compress_ps(keep, t));
-    _mm512_storeu_ps(out.x + n, _mm512_maskz_compress_ps(keep, x));
-    _mm512_storeu_ps(out.y + n, _mm512_maskz_compress_ps(keep, y));
-    n += size_t(__builtin_popcount(unsigned(keep)));
+    n = appendCompressed512(out, n, keep, idx, t, x, y);
   }
   return n;
 }
@@ -415,8 +413,8 @@ void cellsOfAvx512(const CellGrid& g, const float* t, const float* x, const floa
 }
 
 // LensBox::admits() sixteen sorted samples at a time, one masked load per run segment (no read
-// past a run's end), the AVX2 kernel's operations lane for lane, and a compress of the admitted
-// slots stored whole (a compress straight to memory is slow on AMD's cores).
+// past a run's end), the AVX2 kernel's operations lane for lane, and the admitted ones appended
+// by compresses.
 size_t gatherLensCellsAvx512(const LensCells& cells, size_t stride, int c0, int r0, int c1, int r1, const LensBox& box, const LensCandidates& out, size_t n) {
   const __m512 x0 = _mm512_set1_ps(box.x0), x1 = _mm512_set1_ps(box.x1), y0 = _mm512_set1_ps(box.y0), y1 = _mm512_set1_ps(box.y1);
   const __m512 cx0 = _mm512_set1_ps(box.cx0), cx1 = _mm512_set1_ps(box.cx1), cy0 = _mm512_set1_ps(box.cy0), cy1 = _mm512_set1_ps(box.cy1);
@@ -444,13 +442,9 @@ size_t gatherLensCellsAvx512(const LensCells& cells, size_t stride, int c0, int 
       in = _mm512_mask_cmp_ps_mask(in, x, xHi, _CMP_LE_OQ);
       in = _mm512_mask_cmp_ps_mask(in, y, yLo, _CMP_GE_OQ);
       in = _mm512_mask_cmp_ps_mask(in, y, yHi, _CMP_LE_OQ);
-      _mm512_storeu_si512(out.index + n, _mm512_maskz_compress_epi32(in, _mm512_maskz_loadu_epi32(in, cells.index + at)));
-      _mm512_storeu_ps(out.t + n, _mm512_maskz_compress_ps(in, t));
-      _mm512_storeu_ps(out.x + n, _mm512_maskz_compress_ps(in, x));
-      _mm512_storeu_ps(out.y + n, _mm512_maskz_compress_ps(in, y));
       _mm512_storeu_ps(out.u + n, _mm512_maskz_compress_ps(in, u));
       _mm512_storeu_ps(out.v + n, _mm512_maskz_compress_ps(in, v));
-      n += size_t(__builtin_popcount(unsigned(in)));
+      n = appendCompressed512({out.index, out.t, out.x, out.y}, n, in, _mm512_maskz_loadu_epi32(in, cells.index + at), t, x, y);
     }
   }
   return n;

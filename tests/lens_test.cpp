@@ -345,10 +345,7 @@ TEST(LensLayers, CullingIsExactAndTheSearchDoesNotGrowWithTheCircle) {
       spec.lens.fstop = fstop, spec.lens.focalLength = 1, spec.lens.focalDistance = 20;
       spec.aovs = {AovRequest::parse("z", "test"), AovRequest::parse("id", "test")};
       spec.deep = true;
-      spec.raster.occlusionCulling = true;
-      const RenderResult culled = render(spec);
-      spec.raster.occlusionCulling = false;
-      const RenderResult all = render(spec);
+      const auto [culled, all] = renderCulledAndNot(spec);
       const std::string what = std::string("motion ") + motion + " f/" + std::to_string(fstop);
       expectSameOutputs(culled, all, what);
       ASSERT_GT(all.stats.raster.lensMicropolygons, 0u) << what;

@@ -513,10 +513,7 @@ TEST(ResampleHard, OcclusionCullingIsExact) {
       RenderSpec spec = comparisonSpec(reader, shutter);
       spec.aovs = {AovRequest::parse("z", "test"), AovRequest::parse("id", "test")};
       spec.deep = true;
-      spec.raster.occlusionCulling = true;
-      const RenderResult culled = render(spec);
-      spec.raster.occlusionCulling = false;
-      const RenderResult all = render(spec);
+      const auto [culled, all] = renderCulledAndNot(spec);
       const std::string what = std::string(c.name) + " shutter " + std::to_string(shutter);
       expectSameOutputs(culled, all, what);
       // Hidden surfaces were skipped, not drawn and then lost.

@@ -287,6 +287,13 @@ const ImageChannel& channel(const RenderResult& r, const std::string& name) {
   return *c;
 }
 
+std::pair<RenderResult, RenderResult> renderCulledAndNot(RenderSpec spec) {
+  spec.raster.occlusionCulling = true;
+  RenderResult culled = render(spec);
+  spec.raster.occlusionCulling = false;
+  return {std::move(culled), render(spec)};
+}
+
 void expectSameOutputs(const RenderResult& got, const RenderResult& want, const std::string& what) {
   ASSERT_EQ(got.image.channels.size(), want.image.channels.size()) << what;
   for (size_t i = 0; i < want.image.channels.size(); ++i) {

@@ -7,6 +7,7 @@
 #include <array>
 #include <memory>
 #include <string>
+#include <utility>
 #include <vector>
 
 #include "resample/resampler.h"
@@ -86,6 +87,9 @@ void expectRayCasterAgrees(const TestScene& s, const resample::RenderSpec& spec,
                            const std::string& what);
 
 const resample::ImageChannel& channel(const resample::RenderResult& r, const std::string& name);
+
+/// Renders `spec` with occlusion culling (first) and without (second).
+std::pair<resample::RenderResult, resample::RenderResult> renderCulledAndNot(resample::RenderSpec spec);
 
 /// Expects every flat channel and every deep sample of two renders to be the same, bit for bit.
 void expectSameOutputs(const resample::RenderResult& got, const resample::RenderResult& want, const std::string& what);
