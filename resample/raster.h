@@ -111,8 +111,8 @@ struct RasterOptions {
   /// image either way; off only to measure what it saves.
   bool chunkGathers = true;
   /// With a lens: the bucket's sample planes pair this many time blocks with N / this many lens
-  /// strata (SamplePattern::lensPlanes; 1 = lens strata alone). render() chooses it
-  /// (lensTimeBlocks() in resampler.h).
+  /// strata (SamplePattern::lensPlanes; 1 = lens strata alone), and the lens path sorts each time
+  /// block's samples apart. render() chooses it (lensTimeBlocks() in resampler.h).
   int lensTimeBlocks = 1;
 };
 

@@ -249,7 +249,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   };
   void rasterizeLens(const Source& src, const store::TileEntry& entry, const store::TilePart& part, const HitContext& hc, const Chunk& ch);
   void queueLens(const LensChunk& lc, uint32_t chunk, uint32_t m);
-  void sortLensLayer(float cxl, float cyl, float zMin, bool times);
+  void sortLensLayer(size_t first, size_t last, float cxl, float cyl);
   void drawLensQueued();
   struct LensSample {  // a candidate: its slot and its copies of the sample's time, position and lens point
     uint32_t slot;
@@ -270,6 +270,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   LensGrid lensGrid;
   std::vector<uint32_t> lensCellStart, lensCursor;  // [cell]: the cell's first sorted sample; the scatter's cursors
   std::vector<uint32_t> lensCellOf;                 // [sample slot]: its cell in the layer being sorted
+  std::vector<uint8_t> lensTileUsed;                // [tile of 8 × 8 cells]: some search of the layer reaches it
   SkewedArray<uint32_t> lensSortedIndex{4};         // the sorted samples' slots, times, positions and lens points
   SkewedArray<float> lensSortedT{12}, lensSortedX{20}, lensSortedY{28}, lensSortedU{36}, lensSortedV{44};
   SkewedArray<float> candU{60}, candV{2};  // the lens path's candidates' lens points (candidates, candT, candX, candY hold the rest)

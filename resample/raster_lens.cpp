@@ -233,10 +233,14 @@ void BucketRasterizer::Impl::queueLens(const LensChunk& lc, uint32_t chunk, uint
 }
 
 // Sorts the bucket's samples into pixel cells of their positions sheared by displacement
-// (cxl, cyl) per unit of lens (a layer's middle), stably (slot order within a cell), leaving out
-// those whose nearest opaque surface so far is no farther than zMin; their times only if `times`
-// (else the sorted times are stale: the gathers read them, but nothing uses what they give).
-void BucketRasterizer::Impl::sortLensLayer(float cxl, float cyl, float zMin, bool times) {
+// (cxl, cyl) per unit of lens (the middle of the layer of lensDraws[lensOrder[first..last)]),
+// stably (slot order within a cell). Left out, exactly: samples whose nearest opaque surface so
+// far is no farther than the layer's nearest micropolygon can come (every one of them would fail
+// its early depth test), and samples sheared into a tile of cells no micropolygon of the layer
+// searches (a sparse layer sorts little). Sample times are copied only where some micropolygon of
+// the layer reads them (it moves, or its store covers part of the render's times); elsewhere the
+// sorted times are stale - the gathers read them, but nothing uses what they give.
+void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl, float cyl) {
   // A layer's shear moves samples by up to |cxl| (|lens point| <= 1); beyond a region's size
   // they pile into the edge cells instead of growing the grid.
   const float maxPad = float(std::max(w, h));
@@ -245,6 +249,23 @@ void BucketRasterizer::Impl::sortLensLayer(float cxl, float cyl, float zMin, boo
   g.x0 = x0 - padX, g.y0 = y0 - padY, g.cols = w + 2 * padX, g.rows = h + 2 * padY;
   const size_t cells = size_t(g.cols) * size_t(g.rows), blocks = size_t(lensTimeBlocks), perBlock = size_t(N) / blocks;
   g.cells = cells;
+  float zMin = INFINITY;
+  bool times = false;
+  // Tiles of 8 × 8 cells that some micropolygon's search box (over its whole motion) touches.
+  const int tileCols = (g.cols + 7) / 8, tileRows = (g.rows + 7) / 8;
+  lensTileUsed.assign(size_t(tileCols) * size_t(tileRows), 0);
+  auto tileAt = [](float v, int count) { return v >= 0.f ? (v < float(count) ? int(v) / 8 : (count - 1) / 8) : 0; };
+  for (size_t i = first; i < last; ++i) {
+    const LensDraw& e = lensDraws[lensOrder[i]];
+    const LensChunk& ec = lensChunks[e.chunk];
+    zMin = std::min(zMin, e.zCull);
+    times = times || ec.moving || ec.cover.check;
+    const kernels::LensBox& b = e.box;
+    const int tx0 = tileAt(b.x0 + std::min(0.f, b.mx0) - e.ex - e.qm - float(g.x0), g.cols), tx1 = tileAt(b.x1 + std::max(0.f, b.mx1) + e.ex + e.qm - float(g.x0), g.cols);
+    const int ty0 = tileAt(b.y0 + std::min(0.f, b.my0) - e.ey - e.qm - float(g.y0), g.rows), ty1 = tileAt(b.y1 + std::max(0.f, b.my1) + e.ey + e.qm - float(g.y0), g.rows);
+    for (int ty = ty0; ty <= ty1; ++ty) std::fill_n(&lensTileUsed[size_t(ty) * size_t(tileCols) + size_t(tx0)], tx1 - tx0 + 1, uint8_t(1));
+  }
+  const uint8_t* __restrict used = lensTileUsed.data();
   // Keyed by time block, then cell: block b's cells are [b cells, (b + 1) cells).
   lensCellStart.assign(blocks * cells + 1, 0);
   lensCursor.resize(blocks * cells);
@@ -274,8 +295,9 @@ void BucketRasterizer::Impl::sortLensLayer(float cxl, float cyl, float zMin, boo
     const size_t base = s * planeStride;
     for (size_t p = 0; p < count; ++p) {
       const size_t j = base + p;
-      const float col = clampTo(xs[j] - cxl * us[j] - gx0, maxCol), row = clampTo(ys[j] - cyl * vs[j] - gy0, maxRow);
-      cellOf[j] = depth[j] > zMin ? uint32_t(s / perBlock * cells) + uint32_t(int(row)) * cols + uint32_t(int(col)) : kHidden;
+      const int col = int(clampTo(xs[j] - cxl * us[j] - gx0, maxCol)), row = int(clampTo(ys[j] - cyl * vs[j] - gy0, maxRow));
+      const bool wanted = depth[j] > zMin && used[size_t(row >> 3) * size_t(tileCols) + size_t(col >> 3)];
+      cellOf[j] = wanted ? uint32_t(s / perBlock * cells) + uint32_t(row) * cols + uint32_t(col) : kHidden;
     }
     for (size_t p = 0; p < count; ++p) ++start[cellOf[base + p] + 1];  // kHidden + 1 wraps to 0: the slot nobody reads
   }
@@ -331,19 +353,9 @@ void BucketRasterizer::Impl::drawLensQueued() {
       stats.lensScanned += n;
     } else {
       if (d.layer != sortedLayer) {
-        // The layer's nearest culling depth: a sample whose nearest opaque surface so far is no
-        // farther cannot change (every micropolygon of the layer would fail its early depth
-        // test), so it is left out of the layer's cells. Exact, as the early depth test is.
-        // Sample times are copied only where some micropolygon of the layer reads them (it moves,
-        // or its store covers part of the render's times).
-        float zMin = INFINITY;
-        bool times = false;
-        for (size_t oj = oi; oj < lensOrder.size() && lensDraws[lensOrder[oj]].layer == d.layer; ++oj) {
-          const LensDraw& e = lensDraws[lensOrder[oj]];
-          zMin = std::min(zMin, e.zCull);
-          times = times || lensChunks[e.chunk].moving || lensChunks[e.chunk].cover.check;
-        }
-        sortLensLayer(lc.lensAx * d.kl, lc.lensAy * d.kl, zMin, times);
+        size_t last = oi + 1;
+        while (last < lensOrder.size() && lensDraws[lensOrder[last]].layer == d.layer) ++last;
+        sortLensLayer(oi, last, lc.lensAx * d.kl, lc.lensAy * d.kl);
         sortedLayer = d.layer;
         ++stats.lensLayers;
       }

@@ -45,9 +45,10 @@ class SamplePattern {
   /// Lens points of the pixel's samples and the bucket plane each belongs to (BucketSamples),
   /// given their time strata. timeBlocks = 1: lens() - planes are lens strata. timeBlocks = A > 1
   /// (nx and ny even, A = N / 4): plane a·4 + b pairs time block a (N/A consecutive time strata)
-  /// with lens block b (a quadrant of the lens strata grid, A strata), so that a plane bounds a
-  /// moving micropolygon to a quarter of its path and a quarter of the aperture; each pixel still
-  /// takes every time stratum and every lens stratum once, the pairings permuted per pixel.
+  /// with lens block b (a quadrant of the lens strata grid, A strata): the lens path sorts each
+  /// time block's samples apart, so a moving micropolygon searches one block's part of its path at
+  /// a time, and each block still spans the whole aperture; each pixel still takes every time
+  /// stratum and every lens stratum once, the pairings permuted per pixel.
   void lensPlanes(int px, int py, const uint16_t* timeStratumOf, int timeBlocks, uint16_t* planeOf, glm::vec2* disk) const;
 
  private:
