@@ -336,7 +336,7 @@ TEST(LensLayers, CullingIsExactAndTheSearchDoesNotGrowWithTheCircle) {
   ScratchDir dir;
   for (const char* motion : {"0 --knots 1", "12 --knots 3"}) {
     const std::string path = dir.path(std::string("gen") + motion[0] + ".mps");
-    const CommandResult gen = runReshutter(std::string("generate -n 40000 --width 128 --height 96 --transparent 0.3 --motion ") + motion + " -o " + path);
+    const CommandResult gen = runReshutter(std::string("generate -n 20000 --width 96 --height 72 --transparent 0.3 --motion ") + motion + " -o " + path);
     ASSERT_EQ(gen.exitCode, 0) << gen.err;
     auto reader = std::make_shared<const store::StoreReader>(path);
     std::vector<double> examined;
