@@ -240,6 +240,12 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
     float zCull, kl;
     kernels::LensBox box;
     float ex, ey, qm;
+    /// The box (x0, x1, y0, y1) the sheared positions of its samples with lerp parameter in
+    /// [f0, f1] lie in: the lerped box over that span, widened by ex, ey and qm.
+    void searchBox(float f0, float f1, float q[4]) const {
+      q[0] = box.x0 + std::min(f0 * box.mx0, f1 * box.mx0) - ex - qm, q[1] = box.x1 + std::max(f0 * box.mx1, f1 * box.mx1) + ex + qm;
+      q[2] = box.y0 + std::min(f0 * box.my0, f1 * box.my0) - ey - qm, q[3] = box.y1 + std::max(f0 * box.my1, f1 * box.my1) + ey + qm;
+    }
   };
   // The cells a layer's samples are sorted into: pixels of the region widened by the shear, once
   // per time block (BucketSamples::lensTimeBlocks), block-major.
@@ -255,11 +261,11 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
     uint32_t slot;
     float t, x, y, u, v;
   };
-  void testLens(const LensChunk& lc, const HitContext& hc, uint32_t m, const uint32_t* c, bool tri, uint8_t flags, const LensSample& ls);
+  void testLens(const LensChunk& lc, const HitContext& hc, uint32_t m, const uint32_t* c, bool tri, uint8_t flags, const LensSample& ls);  // moving
   void lensEdges(const store::TilePart& part, const uint32_t* c, bool tri);
   void testStillLens(const HitContext& hc, uint32_t m, const uint32_t* c, bool tri, uint8_t flags, const LensSample& ls);
-  struct StillLensEdges {  // a still micropolygon's raster edges e0 + Lx ex + Ly ey, and corner depths
-    glm::dvec3 e0[5], ex[5], ey[5];
+  struct StillLensEdges {  // a still micropolygon's raster edges (c[0..2] + Lx c[3..5]) + Ly c[6..8] per edge, and corner depths
+    kernels::LinearEdges edges;
     float z[4];
   } stillLens;
   std::vector<double> lensTimes;  // a chunk's bound times (local)

@@ -223,12 +223,12 @@ void BucketRasterizer::Impl::queueLens(const LensChunk& lc, uint32_t chunk, uint
   // widened by what the displacement strays from the layer's, |c - cxl| |u| with |u| <= 1.
   const float kl = (float(d.layer) + 0.5f) / layerScale, cxl = lc.lensAx * kl, cyl = lc.lensAy * kl;
   const float ex = std::max(std::abs(cx0 - cxl), std::abs(cx1 - cxl)), ey = std::max(std::abs(cy0 - cyl), std::abs(cy1 - cyl));
-  // Over the whole motion here; drawLensQueued() narrows it to each time block's part of it.
-  const float qx0 = box.x0 + std::min(0.f, box.mx0) - ex, qx1 = box.x1 + std::max(0.f, box.mx1) + ex;
-  const float qy0 = box.y0 + std::min(0.f, box.my0) - ey, qy1 = box.y1 + std::max(0.f, box.my1) + ey;
-  // The rounding of the sheared positions and of the per-sample box.
-  d.qm = 2e-3f + 1e-5f * std::max({std::abs(qx0), std::abs(qx1), std::abs(qy0), std::abs(qy1), std::abs(cxl), std::abs(cyl), mag + lc.kMag});
-  d.ex = ex, d.ey = ey, d.kl = kl;
+  // The rounding of the sheared positions and of the per-sample box, scaled by the search box
+  // over the whole motion (searchBox() narrows that to a time block's part of it).
+  d.ex = ex, d.ey = ey, d.qm = 0.f, d.kl = kl;
+  float q[4];
+  d.searchBox(0.f, 1.f, q);
+  d.qm = 2e-3f + 1e-5f * std::max({std::abs(q[0]), std::abs(q[1]), std::abs(q[2]), std::abs(q[3]), std::abs(cxl), std::abs(cyl), mag + lc.kMag});
   lensDraws.push_back(d);
 }
 
@@ -260,9 +260,10 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
     const LensChunk& ec = lensChunks[e.chunk];
     zMin = std::min(zMin, e.zCull);
     times = times || ec.moving || ec.cover.check;
-    const kernels::LensBox& b = e.box;
-    const int tx0 = tileAt(b.x0 + std::min(0.f, b.mx0) - e.ex - e.qm - float(g.x0), g.cols), tx1 = tileAt(b.x1 + std::max(0.f, b.mx1) + e.ex + e.qm - float(g.x0), g.cols);
-    const int ty0 = tileAt(b.y0 + std::min(0.f, b.my0) - e.ey - e.qm - float(g.y0), g.rows), ty1 = tileAt(b.y1 + std::max(0.f, b.my1) + e.ey + e.qm - float(g.y0), g.rows);
+    float q[4];
+    e.searchBox(0.f, 1.f, q);
+    const int tx0 = tileAt(q[0] - float(g.x0), g.cols), tx1 = tileAt(q[1] - float(g.x0), g.cols);
+    const int ty0 = tileAt(q[2] - float(g.y0), g.rows), ty1 = tileAt(q[3] - float(g.y0), g.rows);
     for (int ty = ty0; ty <= ty1; ++ty) std::fill_n(&lensTileUsed[size_t(ty) * size_t(tileCols) + size_t(tx0)], tx1 - tx0 + 1, uint8_t(1));
   }
   const uint8_t* __restrict used = lensTileUsed.data();
@@ -371,10 +372,10 @@ void BucketRasterizer::Impl::drawLensQueued() {
           f0 = lensBlockF[lc.blockF + 2 * size_t(b)], f1 = lensBlockF[lc.blockF + 2 * size_t(b) + 1];
           if (f0 > f1) continue;  // no sample of this block in the region's groups
         }
-        const float qx0 = box.x0 + std::min(f0 * box.mx0, f1 * box.mx0) - d.ex - d.qm, qx1 = box.x1 + std::max(f0 * box.mx1, f1 * box.mx1) + d.ex + d.qm;
-        const float qy0 = box.y0 + std::min(f0 * box.my0, f1 * box.my0) - d.ey - d.qm, qy1 = box.y1 + std::max(f0 * box.my1, f1 * box.my1) + d.ey + d.qm;
-        const int c0 = cellAt(qx0 - float(g.x0), g.cols), c1 = cellAt(qx1 - float(g.x0), g.cols);
-        const int r0 = cellAt(qy0 - float(g.y0), g.rows), r1 = cellAt(qy1 - float(g.y0), g.rows);
+        float q[4];
+        d.searchBox(f0, f1, q);
+        const int c0 = cellAt(q[0] - float(g.x0), g.cols), c1 = cellAt(q[1] - float(g.x0), g.cols);
+        const int r0 = cellAt(q[2] - float(g.y0), g.rows), r1 = cellAt(q[3] - float(g.y0), g.rows);
         const uint32_t* start = lensCellStart.data() + size_t(b) * g.cells;
         for (int r = r0; r <= r1; ++r) {
           const size_t row = size_t(r) * size_t(g.cols);
@@ -431,24 +432,11 @@ void BucketRasterizer::Impl::drawLensQueued() {
     if (!kept) continue;
     stats.sampleTests += kept;
     lensEdges(part, c, tri);
-    kernels::LinearEdges edges;
-    for (int e = 0; e < 5; ++e)
-      for (int k = 0; k < 3; ++k) edges.c[k][e] = stillLens.e0[e][k], edges.c[3 + k][e] = stillLens.ex[e][k], edges.c[6 + k][e] = stillLens.ey[e][k];
     kernels::EdgeTestSetup setup{cand.t, cand.x, cand.y, 0.f, 0.f, tri, opt.backfaceCull && !(flags & store::kTwoSided), true};
     for (int j = 0; j < 4; ++j) setup.za[j] = setup.zb[j] = stillLens.z[j];
     setup.su = cand.u, setup.sv = cand.v, setup.lensRadius = view.lensRadius;
-    const size_t hits = kernels::testLinearEdges(isa, setup, edges, kept, edgeHits.data());
-    for (size_t hi = 0; hi < hits; ++hi) {
-      const kernels::EdgeHit& eh = edgeHits[hi];
-      const size_t i = eh.candidate;
-      if (eh.undecided) {
-        testStillLens(hc, d.m, c, tri, flags, LensSample{cand.index[i], cand.t[i], cand.x[i], cand.y[i], cand.u[i], cand.v[i]});
-        continue;
-      }
-      if (!(eh.z >= view.nearClip && eh.z <= view.farClip)) continue;
-      const uint32_t tv[3] = {c[0], c[1 + eh.triangle], c[2 + eh.triangle]};
-      recordHit(hc, cand.index[i], d.m, tv, eh.b, eh.z);
-    }
+    recordKernelHits(hc, d.m, c, setup, stillLens.edges, kept,
+                     [&](uint32_t idx) { testStillLens(hc, d.m, c, tri, flags, LensSample{idx, st[idx], sx[idx], sy[idx], lx[idx], ly[idx]}); });
   }
   lensDraws.clear(), lensChunks.clear(), lensBlockF.clear();
 }
@@ -466,15 +454,16 @@ void BucketRasterizer::Impl::lensEdges(const TilePart& part, const uint32_t* c, 
   for (int j = 0; j < nc; ++j) P[j] = glm::dvec3(part.position(0, c[j])), q[j] = P[j].z * invD - 1.0;
   if (tri) P[3] = P[2], q[3] = q[2];
   for (int k = 0; k < 5; ++k) {
-    if (tri && (k == 2 || k == 3)) {
-      stillLens.e0[k] = stillLens.ex[k] = stillLens.ey[k] = glm::dvec3(0.0);
-      continue;
+    glm::dvec3 E[3]{glm::dvec3(0.0), glm::dvec3(0.0), glm::dvec3(0.0)};  // E0, its Lx and its Ly coefficients
+    if (!tri || (k != 2 && k != 3)) {
+      const int a = kEdgeVerts[k][0], b = kEdgeVerts[k][1];
+      const glm::dvec3 D = q[a] * P[b] - q[b] * P[a];
+      E[0] = toRaster(cross(P[a], P[b]), rasterScale);
+      E[1] = toRaster(glm::dvec3(0.0, -D.z, D.y), rasterScale);
+      E[2] = toRaster(glm::dvec3(D.z, 0.0, -D.x), rasterScale);
     }
-    const int a = kEdgeVerts[k][0], b = kEdgeVerts[k][1];
-    const glm::dvec3 D = q[a] * P[b] - q[b] * P[a];
-    stillLens.e0[k] = toRaster(cross(P[a], P[b]), rasterScale);
-    stillLens.ex[k] = toRaster(glm::dvec3(0.0, -D.z, D.y), rasterScale);
-    stillLens.ey[k] = toRaster(glm::dvec3(D.z, 0.0, -D.x), rasterScale);
+    for (int i = 0; i < 3; ++i)
+      for (int axis = 0; axis < 3; ++axis) stillLens.edges.c[3 * i + axis][k] = E[i][axis];
   }
   for (int j = 0; j < 4; ++j) stillLens.z[j] = float(P[j].z);
 }
@@ -483,7 +472,10 @@ void BucketRasterizer::Impl::lensEdges(const TilePart& part, const uint32_t* c, 
 // the sample's lens point, through the static path's edge test.
 void BucketRasterizer::Impl::testStillLens(const HitContext& hc, uint32_t m, const uint32_t* c, bool tri, uint8_t flags, const LensSample& ls) {
   const double Lx = view.lensRadius * double(ls.u), Ly = view.lensRadius * double(ls.v);
-  auto edge = [&](int k) { return (stillLens.e0[k] + Lx * stillLens.ex[k]) + Ly * stillLens.ey[k]; };
+  const auto& e = stillLens.edges.c;
+  auto edge = [&](int k) {
+    return (glm::dvec3(e[0][k], e[1][k], e[2][k]) + Lx * glm::dvec3(e[3][k], e[4][k], e[5][k])) + Ly * glm::dvec3(e[6][k], e[7][k], e[8][k]);
+  };
   // Triangle A's edges (01, 12, 02) first; B's two others only if A misses (coversFixed()'s test
   // and order, its edges made as they are needed).
   glm::dvec3 E[5];
@@ -512,16 +504,12 @@ void BucketRasterizer::Impl::testLens(const LensChunk& lc, const HitContext& hc,
   const TilePart& part = *lc.part;
   glm::dvec3 P[4];
   const int nc = tri ? 3 : 4;
-  if (lc.moving) {
-    uint32_t k;
-    float f;
-    segmentAt(*lc.knots, double(ls.t) + lc.toLocal, k, f);
-    for (int j = 0; j < nc; ++j) {
-      const glm::dvec3 a(part.position(k, c[j])), b(part.position(k + 1, c[j]));
-      P[j] = a + double(f) * (b - a);
-    }
-  } else {
-    for (int j = 0; j < nc; ++j) P[j] = glm::dvec3(part.position(0, c[j]));
+  uint32_t k;
+  float f;
+  segmentAt(*lc.knots, double(ls.t) + lc.toLocal, k, f);
+  for (int j = 0; j < nc; ++j) {
+    const glm::dvec3 a(part.position(k, c[j])), b(part.position(k + 1, c[j]));
+    P[j] = a + double(f) * (b - a);
   }
   if (tri) P[3] = P[2];
   const double Lx = view.lensRadius * double(ls.u), Ly = view.lensRadius * double(ls.v), invD = 1.0 / view.focalDistance;

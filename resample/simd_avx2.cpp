@@ -550,15 +550,11 @@ size_t gatherLensCellsAvx2(const LensCells& cells, size_t stride, int c0, int r0
       in = _mm256_and_ps(in, _mm256_and_ps(_mm256_cmp_ps(y, yLo, _CMP_GE_OQ), _mm256_cmp_ps(y, yHi, _CMP_LE_OQ)));
       const unsigned mask = unsigned(_mm256_movemask_ps(in)) & live;
       if (!mask) continue;
+      // The lens points beside what appendMasked() stores.
       const __m256i perm = _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompress.perm[mask]));
-      _mm256_storeu_si256(reinterpret_cast<__m256i*>(out.index + n),
-                          _mm256_permutevar8x32_epi32(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(cells.index + at)), perm));
-      _mm256_storeu_ps(out.t + n, _mm256_permutevar8x32_ps(t, perm));
-      _mm256_storeu_ps(out.x + n, _mm256_permutevar8x32_ps(x, perm));
-      _mm256_storeu_ps(out.y + n, _mm256_permutevar8x32_ps(y, perm));
       _mm256_storeu_ps(out.u + n, _mm256_permutevar8x32_ps(u, perm));
       _mm256_storeu_ps(out.v + n, _mm256_permutevar8x32_ps(v, perm));
-      n += size_t(__builtin_popcount(mask));
+      n = appendMasked(mask, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(cells.index + at)), t, x, y, {out.index, out.t, out.x, out.y}, n);
     }
   }
   return n;
