@@ -477,7 +477,7 @@ TEST(ResampleHard, ChunkGathersFindEveryMicropolygonsSamples) {
   ScratchDir dir;
   for (double motion : {0.5, 8.0, 40.0}) {
     const SyntheticCase c{"chunks", 2, motion, 0.2};
-    auto reader = syntheticStore(dir, c, 50000, 9);
+    auto reader = syntheticStore(dir, c, 25000, 9);
     for (int shutter = 0; shutter < 4; ++shutter)
       for (const KernelSet& k : kernelSets()) {
         if (!k.vector) continue;
