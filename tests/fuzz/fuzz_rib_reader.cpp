@@ -39,7 +39,11 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         const auto knots = shade::clipKnots(p, f.options.shutterOpen, f.options.shutterClose);
         std::vector<shade::Leaf> leaves;
         shade::DiceStats stats;
-        shade::splitPrimitive(p, knots, cam, o, leaves, stats);
+        // The scene's named cameras too (at most two, made as small as the main one): a piece
+        // any of them sees is kept.
+        std::vector<store::Camera> others(f.options.namedCameras.begin(), f.options.namedCameras.begin() + std::min<size_t>(2, f.options.namedCameras.size()));
+        for (store::Camera& c : others) c.width = std::clamp(c.width, 1, 48), c.height = std::clamp(c.height, 1, 36);
+        shade::splitPrimitive(p, knots, cam, others, o, leaves, stats);
         shade::DicedGrid grid;
         for (size_t i = 0; i < leaves.size() && i < 4; ++i) shade::diceLeaf(p, leaves[i], knots, knots[0], cam.nearClip, perspective, grid);
       }
