@@ -25,8 +25,12 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
   (void)quiet;
   try {
     shade::Scene scene([](shade::FrameScene& f) {
-      store::Camera cam = f.options.camera;
-      cam.width = std::clamp(cam.width, 1, 48), cam.height = std::clamp(cam.height, 1, 36);
+      // Cameras made small: the fuzzer's resolutions would otherwise dice for minutes.
+      auto small = [](store::Camera c) {
+        c.width = std::clamp(c.width, 1, 48), c.height = std::clamp(c.height, 1, 36);
+        return c;
+      };
+      const store::Camera cam = small(f.options.camera);
       const bool perspective = cam.projection == store::Projection::Perspective;
       size_t prims = 0;
       for (const shade::Primitive& p : f.prims) {
@@ -39,10 +43,9 @@ extern "C" int LLVMFuzzerTestOneInput(const uint8_t* data, size_t size) {
         const auto knots = shade::clipKnots(p, f.options.shutterOpen, f.options.shutterClose);
         std::vector<shade::Leaf> leaves;
         shade::DiceStats stats;
-        // The scene's named cameras too (at most two, made as small as the main one): a piece
-        // any of them sees is kept.
-        std::vector<store::Camera> others(f.options.namedCameras.begin(), f.options.namedCameras.begin() + std::min<size_t>(2, f.options.namedCameras.size()));
-        for (store::Camera& c : others) c.width = std::clamp(c.width, 1, 48), c.height = std::clamp(c.height, 1, 36);
+        // The scene's named cameras too (at most two): a piece any of them sees is kept.
+        std::vector<store::Camera> others;
+        for (size_t i = 0; i < f.options.namedCameras.size() && i < 2; ++i) others.push_back(small(f.options.namedCameras[i]));
         shade::splitPrimitive(p, knots, cam, others, o, leaves, stats);
         shade::DicedGrid grid;
         for (size_t i = 0; i < leaves.size() && i < 4; ++i) shade::diceLeaf(p, leaves[i], knots, knots[0], cam.nearClip, perspective, grid);
