@@ -24,6 +24,7 @@ void RasterStats::add(const RasterStats& o) {
   linearMicropolygons += o.linearMicropolygons;
   chunkCulledMicropolygons += o.chunkCulledMicropolygons;
   chunkGatheredMicropolygons += o.chunkGatheredMicropolygons;
+  groupsTogetherMicropolygons += o.groupsTogetherMicropolygons;
   lensMicropolygons += o.lensMicropolygons;
   lensScanned += o.lensScanned;
   lensLayers += o.lensLayers;
@@ -121,6 +122,18 @@ void BucketRasterizer::Impl::rasterizeChunk(const Source& src, const TileEntry& 
     return;
   }
   const int G = int(shutter.groups().size());
+  // Interlaced fields in one pass: a micropolygon is bounded, its samples gathered and tested
+  // once for both fields, over the interval that spans them, where that interval lies inside
+  // one knot segment (the linear path). Each sample still sees the chunks in the same order, so
+  // the image is the one the group-by-group loop below makes.
+  if (G > 1 && opt.groupsTogether && std::all_of(groupPresent.begin(), groupPresent.end(), [](uint8_t p) { return p != 0; })) {
+    bool instant = false;
+    for (int g = 0; g < G; ++g) instant |= shutter.instantaneous(g);
+    if (!instant) {
+      const MovingTimes& together = timesFor(src, entry.schedule, knots, -1);
+      if (together.linearPath && rasterizeMoving(together, part, knots, hc, ch)) return;
+    }
+  }
   for (int g = 0; g < G; ++g) {
     if (!groupPresent[size_t(g)]) continue;
     if (shutter.instantaneous(g)) {

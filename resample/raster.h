@@ -110,6 +110,10 @@ struct RasterOptions {
   /// (one gather, sorted into cells) instead of one gather each. The same candidates, hits and
   /// image either way; off only to measure what it saves.
   bool chunkGathers = true;
+  /// Interlaced fields: moving micropolygons inside one knot segment are bounded, gathered and
+  /// tested once for both fields instead of once per field. The same hits and image either way;
+  /// off only to measure what it saves.
+  bool groupsTogether = true;
   /// With a lens: the bucket's sample planes pair this many time blocks with N / this many lens
   /// strata (SamplePattern::lensPlanes; 1 = lens strata alone), and the lens path sorts each time
   /// block's samples apart. render() chooses it (lensTimeBlocks() in resampler.h).
@@ -123,6 +127,7 @@ struct RasterStats {
   uint64_t linearMicropolygons = 0;         // moving ones bounded from their interval ends (one knot segment)
   uint64_t chunkCulledMicropolygons = 0;    // moving ones skipped with their whole chunk (its path misses the region)
   uint64_t chunkGatheredMicropolygons = 0;  // linear-path ones whose candidates came from their chunk's one gather
+  uint64_t groupsTogetherMicropolygons = 0;  // moving ones drawn for every shutter group (both fields) in one pass
   uint64_t generalHits = 0;                 // hits through the general attribute lookup (output variables, other attribute layouts)
   uint64_t lensMicropolygons = 0;           // drawn on the lens path (depth of field)
   uint64_t lensScanned = 0;                 // samples the lens path's gathers examined (in the cells of their search boxes)

@@ -103,7 +103,8 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   // any) in pixels [px0, px1] × [py0, py1] that lie in `box` at their own time and inside the
   // source's coverage; returns the new count.
   size_t gatherCandidates(int s0, int s1, int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover, float zCull, size_t n);
-  kernels::Candidates candidateList() { return {candidates.data(), candT.data(), candX.data(), candY.data()}; }
+  // The candidate arrays from entry n on.
+  kernels::Candidates candidateList(size_t n = 0) { return {candidates.data() + n, candT.data() + n, candX.data() + n, candY.data() + n}; }
 
   // Runs the vector edge test of micropolygon m over the first n candidates and records its hits,
   // exact ties to `scalarTest`. The kernel interpolates the depth from setup.za / setup.zb with
@@ -171,7 +172,18 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
     Coverage cover{};
     bool linearPath = false;
     LinearInterval li{};
-    std::vector<float> stratumU0, stratumU1;  // linear path: stratum s's span [u0, u1] in the group interval, 0..1, padded to whole vectors
+    // Linear path: stratum s's span [u0, u1] in the interval, 0..1, padded to whole vectors; one
+    // block of spanStride per group served (group k's at k * spanStride).
+    std::vector<float> stratumU0, stratumU1;
+    // Shutter groups served: one (g >= 0), or every group at once (g = -1: the fields of an
+    // interlaced frame drawn in one pass over the interval that spans them; linear path only).
+    int groups = 1;
+    size_t spanStride = 0;
+    float widestSpan = 0.f;  // the widest stratum span, in u
+    const float* spanU0(int k) const { return stratumU0.data() + size_t(k) * spanStride; }
+    const float* spanU1(int k) const { return stratumU1.data() + size_t(k) * spanStride; }
+    // The shutter group block k serves.
+    int groupOf(int k) const { return g >= 0 ? g : k; }
   };
   const MovingTimes& timesFor(const Source& src, uint32_t schedule, const store::Schedule& knots, int g);
   std::vector<std::unique_ptr<MovingTimes>> movingTimes;  // this bucket's
@@ -187,7 +199,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
     float rx0, ry0, rx1, ry1;  // the region, widened by the projection margin
   };
 
-  void rasterizeMoving(const MovingTimes& mt, const store::TilePart& part, const store::Schedule& knots, const HitContext& hc, const Chunk& ch);
+  bool rasterizeMoving(const MovingTimes& mt, const store::TilePart& part, const store::Schedule& knots, const HitContext& hc, const Chunk& ch);
   void drawMoving(const MovingPart& mp, uint32_t mi);
   void projectVertexPath(const MovingTimes& mt, const store::TilePart& part, uint32_t vBase, uint32_t vi);
   void testCandidates(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, uint8_t flags, size_t n);
@@ -303,7 +315,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
     bool gathered;        // its micropolygons filter the sorted cells (else each gathers alone)
   };
 
-  void drawLinearChunk(const MovingPart& mp, const Chunk& ch);
+  bool drawLinearChunk(const MovingPart& mp, const Chunk& ch);
   void prepareLinearVertices(uint32_t nV);
   LinearState linearBox(const MovingPart& mp, const uint32_t* c, int nc, LinearBox& out) const;
   void drawLinear(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, const LinearBox& lb);

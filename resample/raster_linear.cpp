@@ -19,14 +19,20 @@ using store::kNoCorner;
 // fold into the chunk loop (drawLinearChunk) as they did when they were one class body.
 
 // A chunk's micropolygons on the linear path, those it cannot bound (a corner before the near
-// plane at an interval end) on the general path (drawMoving()).
-void BucketRasterizer::Impl::drawLinearChunk(const MovingPart& mp, const Chunk& ch) {
+// plane at an interval end) on the general path (drawMoving()). With every shutter group's times
+// at once the general path is not at hand: such a chunk draws nothing and returns false.
+bool BucketRasterizer::Impl::drawLinearChunk(const MovingPart& mp, const Chunk& ch) {
   prepareLinearVertices(mp.nV);
   prepareLinearChunk(mp, ch);
+  if (mp.times.groups > 1)
+    for (const ChunkMicropolygon& cm : chunkMps)
+      if (cm.state == LinearState::Unbounded) return false;
   for (uint32_t mi = ch.m0; mi < ch.m1; ++mi) {
     const uint32_t* c = &mp.part.corners[size_t(mi) * 4];
     if (!rasterizeLinearInChunk(mp, mi, ch, c, c[3] == kNoCorner)) drawMoving(mp, mi);
   }
+  stats.groupsTogetherMicropolygons += mp.times.groups > 1 ? ch.m1 - ch.m0 : 0;
+  return true;
 }
 
 // The per-vertex terms of linearBox() for the chunk's nV vertices (cull rows 0 and 1).
@@ -123,34 +129,43 @@ inline void BucketRasterizer::Impl::drawLinear(const MovingPart& mp, uint32_t mi
   // micropolygon's size (at least half a pixel): short intervals and slow motion then pay the
   // per-bound set-up once for several strata instead of once each (the samples' own-time box
   // test below keeps the candidates as tight either way).
-  const float motion = lb.motion, size = lb.size;
+  // (With every group at once, a stratum spans widestSpan of the interval, not 1/N of it.)
+  const MovingTimes& mt = mp.times;
+  const float motion = mt.groups > 1 ? lb.motion * mt.widestSpan * float(N) : lb.motion, size = lb.size;
   const int span = motion > 0.f ? std::clamp(int(0.5f * size * float(N) / motion), 1, N) : N;
   size_t n = 0;
-  if (span < N && vectorKernels && !mp.times.cover.check && N <= 64) {
+  if (span < N && vectorKernels && !mt.cover.check && N <= 64) {
     // Every stratum's pixel range and samples in one vector pass: cheaper than the shared
     // ranges below whenever the micropolygon moves at all (the ranges are computed eight at a
     // time; cachegrind: -3 % on a quarter shutter), though not when one range serves all strata.
-    const kernels::SampleRows region{st.data(),     sx.data(), sy.data(), 0,           size_t(w), w, h, multiGroup ? rowGroup.data() : nullptr,
-                                     uint8_t(mp.g), N,         PS,        zbuf.data(), zCull};
-    const kernels::StrataSpans spans{mp.times.stratumU0.data(), mp.times.stratumU1.data(), N, x0, y0, w, h, lb.rangeMargin};
-    n = kernels::gatherStrata(isa, region, spans, box, candidateList());
+    for (int k = 0; k < mt.groups; ++k) {
+      const kernels::SampleRows region{st.data(), sx.data(), sy.data(), 0,  size_t(w),   w,    h, multiGroup ? rowGroup.data() : nullptr,
+                                       uint8_t(mt.groupOf(k)), N, PS, zbuf.data(), zCull};
+      const kernels::StrataSpans spans{mt.spanU0(k), mt.spanU1(k), N, x0, y0, w, h, lb.rangeMargin};
+      n += kernels::gatherStrata(isa, region, spans, box, candidateList(n));
+    }
     if (n) testCandidates(mp, mi, c, tri, flags, n);
     return;
   }
-  for (int s0 = 0; s0 < N; s0 += span) {
-    const int s1 = std::min(N, s0 + span);  // strata [s0, s1)
-    const float u0 = mp.times.stratumU0[size_t(s0)], u1 = mp.times.stratumU1[size_t(s1 - 1)];
-    const float sx0 = std::min(box.x0 + u0 * box.dx0, box.x0 + u1 * box.dx0), sx1 = std::max(box.x1 + u0 * box.dx1, box.x1 + u1 * box.dx1);
-    const float sy0 = std::min(box.y0 + u0 * box.dy0, box.y0 + u1 * box.dy0), sy1 = std::max(box.y1 + u0 * box.dy1, box.y1 + u1 * box.dy1);
-    if (sx1 < mp.rx0 || sx0 >= mp.rx1 || sy1 < mp.ry0 || sy0 >= mp.ry1) continue;
-    int px0, py0, px1, py1;
-    if (!pixelRange(sx0, sy0, sx1, sy1, px0, py0, px1, py1)) continue;
-    if (multiGroup) {  // fields: trim to this group's rows (a one-row range is often the other field's)
-      while (py0 <= py1 && rowGroup[size_t(py0 - y0)] != mp.g) ++py0;
-      while (py1 >= py0 && rowGroup[size_t(py1 - y0)] != mp.g) --py1;
-      if (py0 > py1) continue;
+  for (int k = 0; k < mt.groups; ++k) {
+    const int g = mt.groupOf(k);
+    const float* U0 = mt.spanU0(k);
+    const float* U1 = mt.spanU1(k);
+    for (int s0 = 0; s0 < N; s0 += span) {
+      const int s1 = std::min(N, s0 + span);  // strata [s0, s1)
+      const float u0 = U0[size_t(s0)], u1 = U1[size_t(s1 - 1)];
+      const float sx0 = std::min(box.x0 + u0 * box.dx0, box.x0 + u1 * box.dx0), sx1 = std::max(box.x1 + u0 * box.dx1, box.x1 + u1 * box.dx1);
+      const float sy0 = std::min(box.y0 + u0 * box.dy0, box.y0 + u1 * box.dy0), sy1 = std::max(box.y1 + u0 * box.dy1, box.y1 + u1 * box.dy1);
+      if (sx1 < mp.rx0 || sx0 >= mp.rx1 || sy1 < mp.ry0 || sy0 >= mp.ry1) continue;
+      int px0, py0, px1, py1;
+      if (!pixelRange(sx0, sy0, sx1, sy1, px0, py0, px1, py1)) continue;
+      if (multiGroup) {  // fields: trim to this group's rows (a one-row range is often the other field's)
+        while (py0 <= py1 && rowGroup[size_t(py0 - y0)] != g) ++py0;
+        while (py1 >= py0 && rowGroup[size_t(py1 - y0)] != g) --py1;
+        if (py0 > py1) continue;
+      }
+      n = gatherCandidates(s0, s1, g, px0, py0, px1, py1, box, mt.cover, zCull, n);
     }
-    n = gatherCandidates(s0, s1, mp.g, px0, py0, px1, py1, box, mp.times.cover, zCull, n);
   }
   // Every stratum's candidates tested together: the vector test fills its lanes.
   if (n) testCandidates(mp, mi, c, tri, flags, n);
@@ -211,7 +226,9 @@ inline void BucketRasterizer::Impl::gatherRun(const MovingPart& mp, uint32_t r) 
   const MovingBox box{x0a - e, x0b - x0a, x1a + e, x1b - x1a, y0a - e, y0b - y0a, y1a + e, y1b - y1a, mp.times.li.thetaA, mp.times.li.invLen};
   // Worth it when the run's box is small next to its micropolygons' boxes together (it is
   // about their union when they move together); else each gathers on its own.
-  const float motion = std::max({std::abs(box.dx0), std::abs(box.dx1), std::abs(box.dy0), std::abs(box.dy1)}) / float(N);
+  const MovingTimes& mt = mp.times;
+  const float reach = std::max({std::abs(box.dx0), std::abs(box.dx1), std::abs(box.dy0), std::abs(box.dy1)});
+  const float motion = mt.groups > 1 ? reach * mt.widestSpan : reach / float(N);  // over one stratum
   const float runArea = (box.x1 - box.x0 + motion + 1.f) * (box.y1 - box.y0 + motion + 1.f);
   const float alone = spread + float(drawn) * (motion * motion + 2.f * motion);
   if (!(runArea < 0.5f * alone)) return;
@@ -245,11 +262,14 @@ inline void BucketRasterizer::Impl::gatherRun(const MovingPart& mp, uint32_t r) 
     cm.cx0 = cell(b.x0 + std::min(0.f, b.dx0 - dx) - ec, gx0, cellGrid.cols), cm.cx1 = cell(b.x1 + std::max(0.f, b.dx1 - dx) + ec, gx0, cellGrid.cols);
     cm.cy0 = cell(b.y0 + std::min(0.f, b.dy0 - dy) - ec, gy0, cellGrid.rows), cm.cy1 = cell(b.y1 + std::max(0.f, b.dy1 - dy) + ec, gy0, cellGrid.rows);
   }
-  const kernels::SampleRows region{st.data(),     sx.data(), sy.data(), 0,           size_t(w), w, h, multiGroup ? rowGroup.data() : nullptr,
-                                   uint8_t(mp.g), N,         PS,        zbuf.data(), zCull};
-  const kernels::StrataSpans spans{mp.times.stratumU0.data(), mp.times.stratumU1.data(), N, x0, y0, w, h, margin + e};
   const kernels::Candidates gathered{chunkIndex.data(), chunkT.data(), chunkX.data(), chunkY.data()};
-  const size_t n = kernels::gatherStrata(isa, region, spans, box, gathered);
+  size_t n = 0;
+  for (int k = 0; k < mt.groups; ++k) {
+    const kernels::SampleRows region{st.data(), sx.data(), sy.data(), 0,  size_t(w),   w,    h, multiGroup ? rowGroup.data() : nullptr,
+                                     uint8_t(mt.groupOf(k)), N, PS, zbuf.data(), zCull};
+    const kernels::StrataSpans spans{mt.spanU0(k), mt.spanU1(k), N, x0, y0, w, h, margin + e};
+    n += kernels::gatherStrata(isa, region, spans, box, {gathered.index + n, gathered.t + n, gathered.x + n, gathered.y + n});
+  }
   cellStart.resize(size_t(cellGrid.cols) * size_t(cellGrid.rows) + 1);
   kernels::sortByCell(isa, cellGrid, gathered, n, {sortedIndex.data(), sortedT.data(), sortedX.data(), sortedY.data()}, cellStart.data(), cellScratch.data());
   run.gathered = true;

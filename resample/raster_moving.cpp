@@ -16,33 +16,40 @@ namespace reshutter::resample {
 using store::kNoCorner;
 using store::TilePart;
 
+// g = -1: every shutter group at once, over the interval from the first group's opening to the
+// last one's closing (used only when that interval lies inside one knot segment: linearPath).
 const BucketRasterizer::Impl::MovingTimes& BucketRasterizer::Impl::timesFor(const Source& src, uint32_t schedule, const store::Schedule& knots, int g) {
   for (const auto& t : movingTimes)
     if (t->src == &src && t->schedule == schedule && t->g == g) return *t;
   movingTimes.push_back(std::make_unique<MovingTimes>());
   MovingTimes& mt = *movingTimes.back();
   mt.src = &src, mt.schedule = schedule, mt.g = g;
+  mt.groups = g >= 0 ? 1 : int(shutter.groups().size());
   const uint32_t K = uint32_t(knots.size());
   const double F = double(src.frame);
   const double toLocal = tBase - F;  // local time = st + toLocal
   const double covLo = src.coverStart(), covHi = src.coverEnd();
   mt.cover = {!Source::covers(tMin, covLo, covHi, src.endShared) || !Source::covers(tMax, covLo, covHi, src.endShared), covLo - tBase, covHi - tBase,
               src.endShared};
-  const double* lo = &stratumLo[size_t(g) * N];
-  const double* hi = &stratumHi[size_t(g) * N];
+  // Group block k's strata bounds, absolute frames.
+  auto lo = [&](int k) { return &stratumLo[size_t(mt.groupOf(k)) * N]; };
+  auto hi = [&](int k) { return &stratumHi[size_t(mt.groupOf(k)) * N]; };
+  double first = INFINITY, last = -INFINITY;
+  for (int k = 0; k < mt.groups; ++k) first = std::min(first, lo(k)[0] - F), last = std::max(last, hi(k)[N - 1] - F);
 
   // Distinct local times to project vertices at: strata boundaries and the knots between them.
   auto& thetaTimes = mt.thetaTimes;
-  for (int s = 0; s < N; ++s) thetaTimes.push_back(lo[s] - F), thetaTimes.push_back(hi[s] - F);
+  for (int k = 0; k < mt.groups; ++k)
+    for (int s = 0; s < N; ++s) thetaTimes.push_back(lo(k)[s] - F), thetaTimes.push_back(hi(k)[s] - F);
   for (uint32_t k = 0; k < K; ++k)
-    if (knots[k] > lo[0] - F && knots[k] < hi[N - 1] - F) thetaTimes.push_back(knots[k]);
+    if (knots[k] > first && knots[k] < last) thetaTimes.push_back(knots[k]);
   std::sort(thetaTimes.begin(), thetaTimes.end());
   thetaTimes.erase(std::unique(thetaTimes.begin(), thetaTimes.end()), thetaTimes.end());
   const size_t T = thetaTimes.size();
   mt.stratumFirst.resize(size_t(N)), mt.stratumLast.resize(size_t(N));
   for (int s = 0; s < N; ++s) {
-    mt.stratumFirst[size_t(s)] = int(std::lower_bound(thetaTimes.begin(), thetaTimes.end(), lo[s] - F) - thetaTimes.begin());
-    mt.stratumLast[size_t(s)] = int(std::upper_bound(thetaTimes.begin(), thetaTimes.end(), hi[s] - F) - thetaTimes.begin()) - 1;
+    mt.stratumFirst[size_t(s)] = int(std::lower_bound(thetaTimes.begin(), thetaTimes.end(), lo(0)[s] - F) - thetaTimes.begin());
+    mt.stratumLast[size_t(s)] = int(std::upper_bound(thetaTimes.begin(), thetaTimes.end(), hi(0)[s] - F) - thetaTimes.begin()) - 1;
     if (!opt.perStratumBounds) mt.stratumFirst[size_t(s)] = 0, mt.stratumLast[size_t(s)] = int(T) - 1;  // one bound for the interval
   }
   mt.thetaSeg.resize(T), mt.thetaF.resize(T);
@@ -74,18 +81,24 @@ const BucketRasterizer::Impl::MovingTimes& BucketRasterizer::Impl::timesFor(cons
     // A sample's time and segment parameter are floats: their rounding, as a fraction of the
     // interval, widens the box by that fraction of the micropolygon's motion.
     li.uErr = float(5e-7 * (std::max({1.0, std::abs(th0 - toLocal), std::abs(th1 - toLocal)}) + knotSpan) / len);
-    mt.stratumU0.assign(size_t(N + 7) / 8 * 8, 0.f), mt.stratumU1.assign(size_t(N + 7) / 8 * 8, 0.f);
-    for (int s = 0; s < N; ++s) {
-      mt.stratumU0[size_t(s)] = std::clamp(float((lo[s] - F - th0) / len) - 1e-6f, 0.f, 1.f);
-      mt.stratumU1[size_t(s)] = std::clamp(float((hi[s] - F - th0) / len) + 1e-6f, 0.f, 1.f);
-    }
+    mt.spanStride = size_t(N + 7) / 8 * 8;
+    mt.stratumU0.assign(mt.spanStride * size_t(mt.groups), 0.f), mt.stratumU1.assign(mt.spanStride * size_t(mt.groups), 0.f);
+    for (int k = 0; k < mt.groups; ++k)
+      for (int s = 0; s < N; ++s) {
+        const size_t i = size_t(k) * mt.spanStride + size_t(s);
+        mt.stratumU0[i] = std::clamp(float((lo(k)[s] - F - th0) / len) - 1e-6f, 0.f, 1.f);
+        mt.stratumU1[i] = std::clamp(float((hi(k)[s] - F - th0) / len) + 1e-6f, 0.f, 1.f);
+        mt.widestSpan = std::max(mt.widestSpan, mt.stratumU1[i] - mt.stratumU0[i]);
+      }
   }
   return mt;
 }
 
-// Micropolygons [ch.m0, ch.m1) of a moving part in shutter group mt.g. Per-vertex work covers
-// the chunk's vertices [ch.vLo, ch.vHi] only.
-void BucketRasterizer::Impl::rasterizeMoving(const MovingTimes& mt, const TilePart& part, const store::Schedule& knots, const HitContext& hc, const Chunk& ch) {
+// Micropolygons [ch.m0, ch.m1) of a moving part in shutter group mt.g (every group, g = -1).
+// Per-vertex work covers the chunk's vertices [ch.vLo, ch.vHi] only. False, with nothing drawn,
+// when the times serve every group and a micropolygon needs the general path, which bounds one
+// group at a time: the caller then draws the chunk group by group.
+bool BucketRasterizer::Impl::rasterizeMoving(const MovingTimes& mt, const TilePart& part, const store::Schedule& knots, const HitContext& hc, const Chunk& ch) {
   const uint32_t K = part.numKnots, vBase = ch.vLo, nV = ch.vHi - ch.vLo + 1;
   const size_t T = mt.thetaTimes.size(), C = mt.cullTheta.size();
   cullX.resize(C * nV), cullY.resize(C * nV), cullZ.resize(C * nV);
@@ -119,7 +132,7 @@ void BucketRasterizer::Impl::rasterizeMoving(const MovingTimes& mt, const TilePa
   }
   if (missesRegion) {
     stats.chunkCulledMicropolygons += ch.m1 - ch.m0;
-    return;
+    return true;
   }
   projX.resize(T * nV), projY.resize(T * nV), projRho.resize(T * nV), depthScratch.resize(T);
   thetaBox.resize(4 * T);
@@ -132,11 +145,9 @@ void BucketRasterizer::Impl::rasterizeMoving(const MovingTimes& mt, const TilePa
   const float rx0 = float(x0) - m, ry0 = float(y0) - m, rx1 = float(x0 + w) + m, ry1 = float(y0 + h) + m;
   const MovingPart mp{part, knots, hc, mt, mt.g, nV, vBase, rx0, ry0, rx1, ry1};
 
-  if (mt.linearPath) {
-    drawLinearChunk(mp, ch);
-    return;
-  }
+  if (mt.linearPath) return drawLinearChunk(mp, ch);
   for (uint32_t mi = ch.m0; mi < ch.m1; ++mi) drawMoving(mp, mi);
+  return true;
 }
 
 // Micropolygon mi of a moving chunk on the general path: bounded per time stratum from its corners'

@@ -33,6 +33,7 @@ std::string RenderStats::report() const {
   s << "  micropolygons      " << raster.micropolygons << " processed (" << raster.staticMicropolygons << " on the static path, " << raster.linearMicropolygons
     << " bounded from their interval ends, " << raster.chunkGatheredMicropolygons << " of those gathered by chunk, " << raster.chunkCulledMicropolygons
     << " skipped with their chunk), " << raster.parts << " parts (" << raster.transparentParts << " transparent)\n";
+  if (raster.groupsTogetherMicropolygons) s << "  fields             " << raster.groupsTogetherMicropolygons << " moving micropolygons drawn for both fields in one pass\n";
   if (raster.lensMicropolygons)
     s << "  lens               " << raster.lensMicropolygons << " micropolygons through the lens (depth of field), " << raster.lensLayers
       << " bucket samplings sorted by depth layer, " << raster.lensScanned

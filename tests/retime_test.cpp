@@ -119,6 +119,8 @@ TEST(RetimeFields, SinglePassEqualsTwoPassBitForBitWithOneRowFilters) {
       RenderSpec one = baseSpec({Source{s1, 3}}, ShutterModel::fields(f1, f2, parity), 4);
       one.filter = FilterSpec::parse(filter, "t");
       RenderResult single = render(one);
+      // The moving square was drawn for both fields at once (raster.cpp's groups together).
+      EXPECT_GT(single.stats.raster.groupsTogetherMicropolygons, 0u) << filter;
       RenderResult pass[2];
       for (int k = 0; k < 2; ++k) {
         const ShutterGroup& g = k == 0 ? f1 : f2;
