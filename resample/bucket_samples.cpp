@@ -29,6 +29,9 @@ void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
     groupPresent[rowGroup[size_t(r)]] = 1;
   }
   multiGroup = G > 1;
+  rowParity = G == 2 && h > 0 ? rowGroup[0] : -1;
+  for (int r = 0; r < h && rowParity >= 0; ++r)
+    if (rowGroup[size_t(r)] != ((rowParity + r) & 1)) rowParity = -1;
   std::vector<uint16_t> stratumOf(static_cast<size_t>(N)), lensOf(static_cast<size_t>(N));
   std::vector<float> u(static_cast<size_t>(N));
   std::vector<glm::vec2> disk(static_cast<size_t>(N));

@@ -82,6 +82,7 @@ struct BucketSamples {
   std::vector<uint8_t> rowGroup;            // per region row
   std::vector<uint8_t> groupPresent;
   bool multiGroup = false;                   // more than one shutter group (fields): rows differ
+  int rowParity = -1;                        // two groups alternating by row: rowGroup[r] = (rowParity + r) & 1; else -1
   std::vector<double> stratumLo, stratumHi;  // [g * N + s], absolute frames
   double tMin = 0, tMax = 0;
   // The base of the stored times (st): the whole frame before the earliest time, not the earliest

@@ -40,6 +40,10 @@ struct SampleRows {
   // cannot change the others. zCull = -INFINITY keeps every sample.
   const float* depth = nullptr;
   float zCull = -INFINITY;
+  // gatherStrata(): when rowGroup is set and the groups alternate by row (interlaced fields),
+  // the group of row 0 of the region; lets small strata mask the other group's rows instead of
+  // walking row by row. -1: not known to alternate.
+  int rowParity = -1;
 };
 
 /// A list of candidate samples: each one's index and a copy of its time and position, so that

@@ -140,7 +140,7 @@ inline void BucketRasterizer::Impl::drawLinear(const MovingPart& mp, uint32_t mi
     // time; cachegrind: -3 % on a quarter shutter), though not when one range serves all strata.
     for (int k = 0; k < mt.groups; ++k) {
       const kernels::SampleRows region{st.data(), sx.data(), sy.data(), 0,  size_t(w),   w,    h, multiGroup ? rowGroup.data() : nullptr,
-                                       uint8_t(mt.groupOf(k)), N, PS, zbuf.data(), zCull};
+                                       uint8_t(mt.groupOf(k)), N, PS, zbuf.data(), zCull, rowParity};
       const kernels::StrataSpans spans{mt.spanU0(k), mt.spanU1(k), N, x0, y0, w, h, lb.rangeMargin};
       n += kernels::gatherStrata(isa, region, spans, box, candidateList(n));
     }
@@ -266,7 +266,7 @@ inline void BucketRasterizer::Impl::gatherRun(const MovingPart& mp, uint32_t r) 
   size_t n = 0;
   for (int k = 0; k < mt.groups; ++k) {
     const kernels::SampleRows region{st.data(), sx.data(), sy.data(), 0,  size_t(w),   w,    h, multiGroup ? rowGroup.data() : nullptr,
-                                     uint8_t(mt.groupOf(k)), N, PS, zbuf.data(), zCull};
+                                     uint8_t(mt.groupOf(k)), N, PS, zbuf.data(), zCull, rowParity};
     const kernels::StrataSpans spans{mt.spanU0(k), mt.spanU1(k), N, x0, y0, w, h, margin + e};
     n += kernels::gatherStrata(isa, region, spans, box, {gathered.index + n, gathered.t + n, gathered.x + n, gathered.y + n});
   }

@@ -208,6 +208,8 @@ size_t gatherStrataAvx2(const SampleRows& region, const StrataSpans& sp, const M
   const __m256i base = _mm256_set1_epi32(int(region.first));
   const BoxLanes lanes = boxLanes(b);
   const __m256 x0 = lanes.x0, dx0 = lanes.dx0, x1 = lanes.x1, dx1 = lanes.dx1, y0 = lanes.y0, dy0 = lanes.dy0, y1 = lanes.y1, dy1 = lanes.dy1;
+  const bool alternate = region.rowGroup && region.rowParity >= 0;
+  const __m256i parity = _mm256_set1_epi32(region.rowParity), group = _mm256_set1_epi32(region.group);
   for (int s = 0; s < N; s += 8) {
     const __m256 u0 = _mm256_loadu_ps(sp.u0 + s), u1 = _mm256_loadu_ps(sp.u1 + s);
     const __m256 ax0 = _mm256_min_ps(_mm256_add_ps(x0, _mm256_mul_ps(u0, dx0)), _mm256_add_ps(x0, _mm256_mul_ps(u1, dx0)));
@@ -249,12 +251,19 @@ size_t gatherStrataAvx2(const SampleRows& region, const StrataSpans& sp, const M
     _mm256_store_si256(reinterpret_cast<__m256i*>(third + s), row2);
     _mm256_store_si256(reinterpret_cast<__m256i*>(fourth + s), _mm256_add_epi32(row2, _mm256_and_si256(fourRows, stride)));
     const __m256i colBits = _mm256_sub_epi32(_mm256_sllv_epi32(ione, _mm256_min_epi32(c, _mm256_set1_epi32(4))), ione);
-    _mm256_store_si256(reinterpret_cast<__m256i*>(laneMask + s), _mm256_or_si256(colBits, _mm256_and_si256(twoRows, _mm256_slli_epi32(colBits, 4))));
-    _mm256_store_si256(reinterpret_cast<__m256i*>(laneMask2 + s),
-                       _mm256_or_si256(_mm256_and_si256(threeRows, colBits), _mm256_and_si256(fourRows, _mm256_slli_epi32(colBits, 4))));
+    // Alternating groups: rows 0 and 2 are the group's when the first row is, rows 1 and 3 when
+    // it is not; the other group's rows get no lanes.
+    __m256i evenRows = _mm256_set1_epi32(-1), oddRows = evenRows;
+    if (alternate) {
+      evenRows = _mm256_cmpeq_epi32(_mm256_and_si256(_mm256_add_epi32(dy, parity), ione), group);
+      oddRows = _mm256_xor_si256(evenRows, _mm256_set1_epi32(-1));
+    }
+    const __m256i evenBits = _mm256_and_si256(evenRows, colBits), oddBits = _mm256_and_si256(oddRows, _mm256_slli_epi32(colBits, 4));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(laneMask + s), _mm256_or_si256(evenBits, _mm256_and_si256(twoRows, oddBits)));
+    _mm256_store_si256(reinterpret_cast<__m256i*>(laneMask2 + s), _mm256_or_si256(_mm256_and_si256(threeRows, evenBits), _mm256_and_si256(fourRows, oddBits)));
   }
   if (N < 64) nonEmpty &= (uint64_t(1) << N) - 1, halfVector &= (uint64_t(1) << N) - 1;  // the padding lanes past the last stratum
-  if (region.rowGroup) oneVector = 0, halfVector = 0;                                    // fields: gatherRows() skips the other group's rows
+  if (region.rowGroup && !alternate) oneVector = 0, halfVector = 0;                      // gatherRows() skips the other group's rows
   // Locals, so that the candidate stores (which may alias anything) do not force reloads.
   const Candidates list = out;
   SampleRows rr = region;

@@ -209,6 +209,9 @@ size_t gatherStrataAvx512(const SampleRows& region, const StrataSpans& sp, const
   const __m512i planeStride = _mm512_set1_epi32(int(region.planeStride)), stride = _mm512_set1_epi32(int(region.stride));
   const __m512i base = _mm512_set1_epi32(int(region.first));
   const BoxLanes512 lanes = boxLanes512(b);
+  // Alternating groups (fields): a small stratum's rows of the other group get no segment.
+  const bool alternate = region.rowGroup && region.rowParity >= 0;
+  const __m512i parity = _mm512_set1_epi32(region.rowParity), group = _mm512_set1_epi32(region.group);
   Segments seg;
   for (int s = 0; s < N; s += 16) {
     const __mmask16 valid = N - s >= 16 ? __mmask16(0xFFFF) : __mmask16((1u << (N - s)) - 1);
@@ -231,8 +234,11 @@ size_t gatherStrataAvx512(const SampleRows& region, const StrataSpans& sp, const
     __m512i at = _mm512_add_epi32(_mm512_add_epi32(base, _mm512_mullo_epi32(plane, planeStride)),
                                   _mm512_add_epi32(_mm512_mullo_epi32(dy, stride), _mm512_sub_epi32(px0, regionX)));
     const __mmask16 live = _mm512_mask_cmpgt_epi32_mask(_mm512_cmpgt_epi32_mask(c, izero) & valid, r, izero);
-    // Fields: the loop below skips the other group's rows, so every stratum takes it.
-    const __mmask16 fits = region.rowGroup ? __mmask16(0) : _mm512_mask_cmple_epi32_mask(_mm512_mask_cmple_epi32_mask(live, c, four), r, four);
+    // Groups that do not alternate: the loop below skips the other group's rows, so every
+    // stratum takes it.
+    const __mmask16 fits = region.rowGroup && !alternate ? __mmask16(0) : _mm512_mask_cmple_epi32_mask(_mm512_mask_cmple_epi32_mask(live, c, four), r, four);
+    const __mmask16 evenRows = alternate ? _mm512_cmpeq_epi32_mask(_mm512_and_si512(_mm512_add_epi32(dy, parity), ione), group) : __mmask16(0xFFFF);
+    const __mmask16 oddRows = alternate ? __mmask16(~evenRows) : __mmask16(0xFFFF);
     wide |= uint64_t(live & ~fits) << s;
     if (live & ~fits) {
       _mm512_store_si512(first + s, at);
@@ -243,7 +249,7 @@ size_t gatherStrataAvx512(const SampleRows& region, const StrataSpans& sp, const
     // Row k of every small stratum that has one: its start and its columns' lane bits.
     const __m512i colBits = _mm512_sub_epi32(_mm512_sllv_epi32(ione, _mm512_min_epi32(c, four)), ione);
     for (int k = 0; k < 4; ++k) {
-      const __mmask16 has = _mm512_mask_cmpgt_epi32_mask(fits, r, _mm512_set1_epi32(k));
+      const __mmask16 has = _mm512_mask_cmpgt_epi32_mask(fits & (k % 2 ? oddRows : evenRows), r, _mm512_set1_epi32(k));
       _mm512_storeu_si512(seg.start + seg.count, _mm512_maskz_compress_epi32(has, at));
       _mm_storeu_si128(reinterpret_cast<__m128i*>(seg.bits + seg.count), _mm512_cvtepi32_epi8(_mm512_maskz_compress_epi32(has, colBits)));
       seg.count += size_t(__builtin_popcount(unsigned(has)));
