@@ -7,6 +7,7 @@
 //     - static (raster_static.cpp): parts that do not move, still chunks, exact instants;
 //     - linear (raster_linear.cpp): a moving chunk whose interval lies in one knot segment - each
 //       micropolygon's box lerped between the interval's ends; runs that move together gather once;
+//       interlaced fields inside one segment are drawn together, each field's strata gathered from its rows;
 //     - moving (raster_moving.cpp): other moving chunks, bounded per time stratum;
 //     - lens (raster_lens.cpp): with depth of field, every chunk, queued and then drawn by depth
 //       layer against the samples sorted by their lens-sheared positions.
