@@ -188,7 +188,8 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   const MovingTimes& timesFor(const Source& src, uint32_t schedule, const store::Schedule& knots, int g);
   std::vector<std::unique_ptr<MovingTimes>> movingTimes;  // this bucket's
 
-  // What every micropolygon of one chunk shares on the moving path for shutter group g.
+  // What every micropolygon of one chunk shares on the moving path for shutter group g (-1: every
+  // group at once, on the linear path only).
   struct MovingPart {
     const store::TilePart& part;
     const store::Schedule& knots;
