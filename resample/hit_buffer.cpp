@@ -22,6 +22,10 @@ void attrAt(const store::TilePart& part, const store::Schema& schema, int ai, ui
   for (int c = 0; c < nc; ++c) outv[c] = b[0] * arr.f[size_t(v[0]) * nc + c] + b[1] * arr.f[size_t(v[1]) * nc + c] + b[2] * arr.f[size_t(v[2]) * nc + c];
 }
 
+// Sample k's lens point on the unit disk (0 without a lens): where its volume ray leaves the lens.
+double lensU(const BucketSamples& samples, size_t k) { return samples.lensPlanes ? double(samples.lx[k]) : 0.0; }
+double lensV(const BucketSamples& samples, size_t k) { return samples.lensPlanes ? double(samples.ly[k]) : 0.0; }
+
 }  // namespace
 
 HitBuffer::HitBuffer(const std::vector<AovChannel>& a, const RasterOptions& options, float far, RasterStats& stats)
@@ -301,8 +305,8 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
       VolumeSegment v;
       // Deep output will want this segment's slices: kept, ended by a marker holding the whole
       // segment, so visitFragments() need not march the ray again.
-      volumes->integrate(double(samples.sx[k]), double(samples.sy[k]), samples.tBase + double(samples.st[k]), double(zPrev), double(z), v,
-                         keepSlices ? &keptSlices : nullptr, volumeSliceRatio);
+      volumes->integrate(double(samples.sx[k]), double(samples.sy[k]), lensU(samples, k), lensV(samples, k), samples.tBase + double(samples.st[k]),
+                         double(zPrev), double(z), v, keepSlices ? &keptSlices : nullptr, volumeSliceRatio);
       if (keepSlices) {
         VolumeSlice end;
         end.slice = kSegmentEnd, end.segment = v;
@@ -416,8 +420,8 @@ void HitBuffer::visitFragments(const BucketSamples& samples, const std::function
         for (; keptSlices[cursor].slice != kSegmentEnd; ++cursor) slices.push_back(keptSlices[cursor]);
         v = keptSlices[cursor++].segment;
       } else {
-        volumes->integrate(double(samples.sx[k]), double(samples.sy[k]), samples.tBase + double(samples.st[k]), double(zPrev), double(z), v, &slices,
-                           volumeSliceRatio);
+        volumes->integrate(double(samples.sx[k]), double(samples.sy[k]), lensU(samples, k), lensV(samples, k), samples.tBase + double(samples.st[k]),
+                           double(zPrev), double(z), v, &slices, volumeSliceRatio);
       }
       zPrev = z;
       for (const VolumeSlice& vs : slices) {

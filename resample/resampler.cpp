@@ -263,6 +263,7 @@ struct Plan {
     if (volumes) {
       volumeCamera.ax = view.ax, volumeCamera.bx = view.bx, volumeCamera.ay = view.ay, volumeCamera.by = view.by;
       volumeCamera.perspective = view.perspective;
+      if (view.lens()) volumeCamera.lensRadius = view.lensRadius, volumeCamera.focalDistance = view.focalDistance;
       volumeCamera.worldToCamera = cam.worldToCamera;
       volumeCamera.framesPerSecond = double(meta0.fps.num) / double(meta0.fps.den);
       volumeCamera.referenceFrame = double(spec.sources[0].frame);

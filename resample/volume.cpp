@@ -125,8 +125,9 @@ VolumeTracer::~VolumeTracer() = default;
 bool VolumeTracer::touches(double x0, double y0, double x1, double y1) const { return engine_->touches(x0, y0, x1, y1); }
 void VolumeTracer::beginRegion(int x0, int y0, int w, int h) { engine_->beginRegion(x0, y0, w, h); }
 bool VolumeTracer::sharesRays() const { return engine_->sharesRays(); }
-void VolumeTracer::integrate(double x, double y, double t, double z0, double z1, VolumeSegment& out, std::vector<VolumeSlice>* slices, double ratio) {
-  engine_->integrate(x, y, t, z0, z1, out, slices, ratio, stats_);
+void VolumeTracer::integrate(double x, double y, double u, double v, double t, double z0, double z1, VolumeSegment& out, std::vector<VolumeSlice>* slices,
+                             double ratio) {
+  engine_->integrate(x, y, u, v, t, z0, z1, out, slices, ratio, stats_);
 }
 
 void writeSmokePuff(const std::string& path, const SmokePuff& puff) { volumeEngine().writeSmokePuff(path, puff); }

@@ -128,6 +128,11 @@ struct VolumeCamera {
   /// The lights the store recorded (camera space), for single scattering.
   std::vector<store::StoredLight> lights;
   bool perspective = true;
+  /// A thin lens (depth of field, perspective only): radius in camera units and focal distance.
+  /// A sample with lens point L = lensRadius·(u, v) (u, v on the unit disk) sees along the ray
+  /// L + (p − L/d)·z, p the pinhole direction through its raster position: the ray the
+  /// rasterizer's lens path tests surfaces against. 0: a pinhole.
+  double lensRadius = 0, focalDistance = 1;
   glm::dmat4 worldToCamera{1.0};
   double framesPerSecond = 24;
   double referenceFrame = 0;  // absolute frames
@@ -181,12 +186,16 @@ class VolumeTracer {
   void beginRegion(int x0, int y0, int w, int h);
   /// Whether segments come from shared rays (VolumeOptions::raySpacing) rather than marches.
   bool sharesRays() const;
-  /// Integrates the ray through raster (x, y) at absolute time t over camera depths [z0, z1]
-  /// (z1 may be infinite: the volumes' far side).
-  void integrate(double x, double y, double t, double z0, double z1, VolumeSegment& out) { integrate(x, y, t, z0, z1, out, nullptr, 0.0); }
+  /// Integrates the ray through raster (x, y) and lens point (u, v) on the unit disk (0, 0
+  /// without a lens) at absolute time t over camera depths [z0, z1] (z1 may be infinite: the
+  /// volumes' far side).
+  void integrate(double x, double y, double u, double v, double t, double z0, double z1, VolumeSegment& out) {
+    integrate(x, y, u, v, t, z0, z1, out, nullptr, 0.0);
+  }
   /// The same, also appending the segment's depth slices (ratio > 1) to `slices` (deep output);
   /// `out` is bit for bit what the call without slices gives.
-  void integrate(double x, double y, double t, double z0, double z1, VolumeSegment& out, std::vector<VolumeSlice>* slices, double ratio);
+  void integrate(double x, double y, double u, double v, double t, double z0, double z1, VolumeSegment& out, std::vector<VolumeSlice>* slices,
+                 double ratio);
   const VolumeStats& stats() const { return stats_; }
 
  private:

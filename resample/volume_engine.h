@@ -37,8 +37,8 @@ struct VolumeTracerEngine {
   virtual bool touches(double x0, double y0, double x1, double y1) const = 0;
   virtual void beginRegion(int x0, int y0, int w, int h) = 0;
   virtual bool sharesRays() const = 0;
-  virtual void integrate(double x, double y, double t, double z0, double z1, VolumeSegment& out, std::vector<VolumeSlice>* slices, double ratio,
-                         VolumeStats& stats) = 0;
+  virtual void integrate(double x, double y, double u, double v, double t, double z0, double z1, VolumeSegment& out, std::vector<VolumeSlice>* slices,
+                         double ratio, VolumeStats& stats) = 0;
 };
 
 /// The plugin's entry point: makes the engines above.
@@ -56,7 +56,7 @@ struct VolumeEngine {
 };
 
 /// The symbol the plugin exports: `const VolumeEngine* NAME()`.
-inline constexpr const char* kVolumeEngineEntry = "reshutter_volume_engine_v1";
+inline constexpr const char* kVolumeEngineEntry = "reshutter_volume_engine_v2";
 
 /// The plugin's engine, loaded on first call (thread-safe) by common/module.h's loadModule():
 /// $RESHUTTER_VOLUME_MODULE names another copy. Throws Error saying where it looked when none loads.

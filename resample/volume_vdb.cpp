@@ -192,8 +192,8 @@ struct VdbTracer final : VolumeTracerEngine {
   bool touches(double x0, double y0, double x1, double y1) const override;
   void beginRegion(int x0, int y0, int w, int h) override;
   bool sharesRays() const override { return shareRays; }
-  void integrate(double x, double y, double t, double z0, double z1, VolumeSegment& out, std::vector<VolumeSlice>* slices, double ratio,
-                 VolumeStats& stats) override;
+  void integrate(double x, double y, double u, double v, double t, double z0, double z1, VolumeSegment& out, std::vector<VolumeSlice>* slices,
+                 double ratio, VolumeStats& stats) override;
   void integrateShared(double x, double y, double z0, double z1, VolumeSegment& out, std::vector<VolumeSlice>* slices, double ratio, VolumeStats& stats);
 
   struct PerVolume {
@@ -298,12 +298,19 @@ struct VdbTracer final : VolumeTracerEngine {
   std::vector<PerVolume> volumes;
   std::vector<std::pair<double, double>> spans;  // scratch: a ray's intervals in camera depth
 
-  // Camera-space ray through raster (x, y): point(z) = origin + dir · z.
-  void rayThrough(double x, double y, glm::dvec3& origin, glm::dvec3& dir) const {
+  // Camera-space ray through raster (x, y) and lens point (u, v) on the unit disk: point(z) =
+  // origin + dir · z. Through a lens the ray leaves the lens point L and meets the pinhole ray
+  // at the focal distance d: L + (p − L/d) z.
+  void rayThrough(double x, double y, double u, double v, glm::dvec3& origin, glm::dvec3& dir) const {
     origin = glm::dvec3(0.0), dir = glm::dvec3(0.0, 0.0, 1.0);
     if (camera.perspective) dir = {(x - camera.bx) / camera.ax, (y - camera.by) / camera.ay, 1.0};
     else origin = {(x - camera.bx) / camera.ax, (y - camera.by) / camera.ay, 0.0};
+    if (lens()) {
+      origin = {camera.lensRadius * u, camera.lensRadius * v, 0.0};
+      dir -= origin / camera.focalDistance;
+    }
   }
+  bool lens() const { return camera.perspective && camera.lensRadius > 0; }
   // Each volume's intervals of camera depth in [z0, zFar] that may hold density, merged and
   // sorted into `spans`; returns the march's step in camera depth (INFINITY: nothing to march).
   double collectSpans(const glm::dvec3& origin, const glm::dvec3& dir, double z0, double zFar, VolumeStats& stats) {
@@ -395,7 +402,7 @@ struct VdbTracer final : VolumeTracerEngine {
     ray.entries.clear();
     ++stats.sharedRays;
     glm::dvec3 origin, dir;
-    rayThrough((double(i) + 0.5) * spacing, (double(j) + 0.5) * spacing, origin, dir);
+    rayThrough((double(i) + 0.5) * spacing, (double(j) + 0.5) * spacing, 0.0, 0.0, origin, dir);
     const double worldPerZ = glm::length(glm::dvec3(cameraToWorld * glm::dvec4(dir, 0.0)));
     const double seconds = (rayTime - camera.referenceFrame) / camera.framesPerSecond;
     const double stepZ = collectSpans(origin, dir, 0.0, 1e30, stats);
@@ -543,8 +550,10 @@ VdbTracer::VdbTracer(const VdbScene& s, const VolumeCamera& c, double earliest, 
   }
   if (lighting) m.cacheLighting(*lighting);  // needs the volumes' placement
   // Shared rays serve volumes that stay put over the render: their rays do not depend on time.
+  // Nor through a lens: there each sample's ray leaves its own lens point, and the pinhole rays
+  // of a lattice are not it.
   m.spacing = scene.options().raySpacing;
-  m.shareRays = m.spacing > 0 && std::none_of(m.volumes.begin(), m.volumes.end(), [](const PerVolume& pv) { return pv.moving || pv.velocity; });
+  m.shareRays = m.spacing > 0 && !m.lens() && std::none_of(m.volumes.begin(), m.volumes.end(), [](const PerVolume& pv) { return pv.moving || pv.velocity; });
   m.rayTime = earliest;
 }
 
@@ -557,7 +566,7 @@ bool VdbTracer::touches(double x0, double y0, double x1, double y1) const {
     // (the transforms are blended linearly), and so do their projections: the knots bound them.
     std::vector<glm::dmat4> placements{glm::inverse(pv.cameraToFile)};
     if (pv.moving) placements = pv.v->spec.fileToCamera;
-    double lx = INFINITY, ly = INFINITY, hx = -INFINITY, hy = -INFINITY;
+    double lx = INFINITY, ly = INFINITY, hx = -INFINITY, hy = -INFINITY, zLo = INFINITY, zHi = -INFINITY;
     bool unbounded = false;
     for (size_t k8 = 0; k8 < 8 * placements.size(); ++k8) {
       const int k = int(k8 % 8);
@@ -571,18 +580,26 @@ bool VdbTracer::touches(double x0, double y0, double x1, double y1) const {
       const double iz = c.perspective ? 1.0 / p.z : 1.0;
       const double rx = c.ax * p.x * iz + c.bx, ry = c.ay * p.y * iz + c.by;
       lx = std::min(lx, rx), hx = std::max(hx, rx), ly = std::min(ly, ry), hy = std::max(hy, ry);
+      zLo = std::min(zLo, p.z), zHi = std::max(zHi, p.z);
     }
     if (unbounded) return true;
     // Screen y may run either way (ay < 0): the box is min/max either way.
     // A sample blending shared rays sees medium up to one lattice spacing beyond the bounds.
     const double reach = 1 + (m.shareRays ? m.spacing : 0.0);
-    if (hx >= x0 - reach && lx <= x1 + reach && hy >= y0 - reach && ly <= y1 + reach) return true;
+    // Through a lens a sample at raster x sees the point the pinhole sees at x + a R u (1/z − 1/d)
+    // (|u| <= 1): the bounds widen by the largest circle of confusion over the box's depths.
+    double cocX = 0, cocY = 0;
+    if (m.lens()) {
+      const double k = std::max(std::abs(1 / zLo - 1 / c.focalDistance), std::abs(1 / zHi - 1 / c.focalDistance)) * c.lensRadius;
+      cocX = std::abs(c.ax) * k, cocY = std::abs(c.ay) * k;
+    }
+    if (hx >= x0 - reach - cocX && lx <= x1 + reach + cocX && hy >= y0 - reach - cocY && ly <= y1 + reach + cocY) return true;
   }
   return false;
 }
 
-void VdbTracer::integrate(double x, double y, double t, double z0, double z1, VolumeSegment& out, std::vector<VolumeSlice>* slices, double ratio,
-                          VolumeStats& stats) {
+void VdbTracer::integrate(double x, double y, double u, double v, double t, double z0, double z1, VolumeSegment& out, std::vector<VolumeSlice>* slices,
+                          double ratio, VolumeStats& stats) {
   VdbTracer& m = *this;
   out = VolumeSegment{};
   if (!(z1 > z0)) return;
@@ -593,7 +610,7 @@ void VdbTracer::integrate(double x, double y, double t, double z0, double z1, Vo
   const VolumeCamera& c = m.camera;
   m.placeAt(t);
   glm::dvec3 origin, dir;
-  m.rayThrough(x, y, origin, dir);
+  m.rayThrough(x, y, u, v, origin, dir);
   const double worldPerZ = glm::length(glm::dvec3(m.cameraToWorld * glm::dvec4(dir, 0.0)));
   const double seconds = (t - c.referenceFrame) / c.framesPerSecond;
   const double zFar = std::isfinite(z1) ? z1 : 1e30;
@@ -818,7 +835,7 @@ struct VdbEngine final : VolumeEngine {
 }  // namespace
 }  // namespace reshutter::resample
 
-extern "C" __attribute__((visibility("default"))) const reshutter::resample::VolumeEngine* reshutter_volume_engine_v1() {
+extern "C" __attribute__((visibility("default"))) const reshutter::resample::VolumeEngine* reshutter_volume_engine_v2() {
   static const reshutter::resample::VdbEngine engine;
   return &engine;
 }

@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <functional>
+#include <optional>
 #include <sstream>
 #include <string>
 
@@ -220,6 +221,97 @@ TEST(Volume, SphereTransmittanceFollowsTheChordPixelByPixel) {
   // Voxelisation moves the surface by up to half a voxel: large only where the chord is short.
   EXPECT_LT(worst, 0.03);
   EXPECT_LT(sum / (kW * kH), 2e-3);
+}
+
+// Fraction of the unit disk with x <= a: the x marginal of a uniform lens point.
+double diskBelow(double a) {
+  if (a <= -1) return 0;
+  if (a >= 1) return 1;
+  return 1 - (std::acos(a) - a * std::sqrt(1 - a * a)) / M_PI;
+}
+
+// Through a lens a volume blurs as a surface does (issue #26): each sample's ray leaves its own
+// lens point. A thin dense slab at depth 10 covering raster x >= the frame's centre column, in front of
+// a white wall, focused at depth 5: a sample at x sees the slab where its lens displacement r·u
+// (u the lens point's x on the unit disk, r the circle of confusion at the slab's front) is at
+// most x - edge, so a column's red is 1 minus that disk fraction averaged over the pixel. Buckets
+// of 4 pixels, narrower than the blur: a bucket beside the slab must still march it. Focused on
+// the slab, the image is the pinhole's. Shared rays (the default) give way to each sample's march.
+TEST(Volume, ThroughALensAVolumeBlursByItsCircleOfConfusion) {
+  constexpr int W = 64, H = 24;
+  ScratchDir dir;
+  test::TestScene scene = test::makeScene(W, H, {0.0});
+  test::TestMp wallMp;
+  wallMp.knots = {scene.rect(-200, -200, W + 200, H + 200, 40)};
+  wallMp.ci = {1, 1, 1};
+  scene.mps.push_back(wallMp);
+  auto store = test::writeScene(scene, dir.path("wall.mps"));
+  // Two voxels thick (0.1 world units): thin enough that a lens ray's slope across it moves it a
+  // small fraction of a pixel, dense enough (optical depth 25) to be opaque.
+  const glm::dvec3 a = scene.cam(-30, -30, 10), b = scene.cam(W + 30, H + 30, 10);
+  Box slab = boxOf(0.0, std::max(a.x, b.x), std::min(a.y, b.y), std::max(a.y, b.y), 0, 0);
+  slab.i0.z() = 199, slab.i1.z() = 200;
+  const double zFront = slab.lo().z, zMiddle = 0.5 * (slab.lo().z + slab.hi().z);
+  const std::string vdb = writeVdb(dir, "slab.vdb", {filledGrid(slab, 1.f, "density")});
+  const auto volumes = volumeOf(vdb + ",density-scale=250", 0.5f, true, true, 1.f);  // raySpacing 1: shared unless a lens forbids it
+  const store::Projector projector(scene.meta.cameras[0]);
+  const double ax = std::abs(projector.ax);
+  // The slab's face x = slab.lo().x seen at its front depth, in raster columns (the face lies on
+  // the optical axis's side plane, so every depth puts it within a voxel of the centre).
+  const glm::dvec3 faceCam(slab.lo().x, 0.0, zFront);
+  const double edge = projector.ax * faceCam.x / zFront + projector.bx;
+  // One aperture: a circle of confusion of r pixels at the slab's front when focused at depth 5.
+  const double r = 6.5, lensRadius = r / (ax * std::abs(1 / 5.0 - 1 / zFront));
+  // The pinhole reference marches every sample's ray too: shared rays blend optical depth across
+  // a lattice spacing, which moves a hard edge by up to that.
+  const auto marched = volumeOf(vdb + ",density-scale=250", 0.5f, true, true, 0.f);
+  auto renderWith = [&](std::optional<double> focus) {
+    RenderSpec spec = test::specFor(store, 0, 0, 8, 8, 3);
+    spec.bucketSize = 4;
+    spec.volumes = focus ? volumes : marched;
+    if (focus) spec.lens.focalLength = 1, spec.lens.fstop = 1 / (2 * lensRadius), spec.lens.focalDistance = *focus;
+    return render(spec);
+  };
+  auto redColumns = [&](const RenderResult& res) {
+    const auto& R = test::channel(res, "R").f;
+    std::vector<double> col(size_t(W), 0.0);
+    for (int py = 0; py < H; ++py)
+      for (int px = 0; px < W; ++px) col[size_t(px)] += R[size_t(py) * W + px] / H;
+    return col;
+  };
+  const RenderResult pinhole = renderWith(std::nullopt);
+  {
+    RenderSpec shared = test::specFor(store, 0, 0, 2, 2, 3);
+    shared.volumes = volumes;
+    EXPECT_GT(render(shared).stats.volumes.sharedSegments, 0u);  // without a lens the same volumes share rays
+  }
+  const std::vector<double> sharp = redColumns(pinhole);
+  EXPECT_GT(sharp[size_t(edge) - 2], 0.999);
+  EXPECT_LT(sharp[size_t(edge) + 2], 1e-3);
+
+  const RenderResult blurred = renderWith(5.0);
+  EXPECT_EQ(blurred.stats.volumes.sharedSegments, 0u);
+  EXPECT_GT(blurred.stats.volumes.rays, 0u);
+  EXPECT_GT(blurred.stats.raster.lensMicropolygons, 0u);  // the wall went through the lens path too
+  const std::vector<double> col = redColumns(blurred);
+  double sumErr = 0;
+  for (int px = 0; px < W; ++px) {
+    double covered = 0;
+    const int steps = 400;
+    for (int k = 0; k < steps; ++k) covered += diskBelow((px + (k + 0.5) / steps - edge) / r) / steps;
+    const double err = std::abs(col[size_t(px)] - (1 - covered));
+    sumErr += err;
+    EXPECT_LT(err, 0.04) << "column " << px << ": " << col[size_t(px)] << " against " << 1 - covered;
+  }
+  EXPECT_LT(sumErr / W, 0.01);
+  // The blur is as wide as the circle, on both sides of the edge.
+  EXPECT_LT(col[size_t(edge - r + 1)], 0.999);
+  EXPECT_GT(col[size_t(edge + r - 2)], 1e-3);
+
+  // Focused on the slab: within a few per cent of the pinhole image column by column (its
+  // thickness still blurs by a few hundredths of a pixel).
+  const std::vector<double> focused = redColumns(renderWith(zMiddle));
+  for (int px = 0; px < W; ++px) EXPECT_NEAR(focused[size_t(px)], sharp[size_t(px)], 0.05) << "column " << px;
 }
 
 TEST(Volume, SingleScatteringFromTheStoresLightWithSelfShadowing) {
