@@ -53,6 +53,8 @@ struct Candidates {
   float* t;
   float* x;
   float* y;
+  /// The same arrays from entry n on (a list appended to after its first n).
+  Candidates from(size_t n) const { return {index + n, t + n, x + n, y + n}; }
 };
 
 /// Appends to `out` from position n the samples in `rows` (plane by plane; a fixed box of at most

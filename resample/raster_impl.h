@@ -104,7 +104,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   // source's coverage; returns the new count.
   size_t gatherCandidates(int s0, int s1, int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover, float zCull, size_t n);
   // The candidate arrays from entry n on.
-  kernels::Candidates candidateList(size_t n = 0) { return {candidates.data() + n, candT.data() + n, candX.data() + n, candY.data() + n}; }
+  kernels::Candidates candidateList(size_t n = 0) { return kernels::Candidates{candidates.data(), candT.data(), candX.data(), candY.data()}.from(n); }
 
   // Runs the vector edge test of micropolygon m over the first n candidates and records its hits,
   // exact ties to `scalarTest`. The kernel interpolates the depth from setup.za / setup.zb with

@@ -268,7 +268,7 @@ inline void BucketRasterizer::Impl::gatherRun(const MovingPart& mp, uint32_t r) 
     const kernels::SampleRows region{st.data(), sx.data(), sy.data(), 0,  size_t(w),   w,    h, multiGroup ? rowGroup.data() : nullptr,
                                      uint8_t(mt.groupOf(k)), N, PS, zbuf.data(), zCull, rowParity};
     const kernels::StrataSpans spans{mt.spanU0(k), mt.spanU1(k), N, x0, y0, w, h, margin + e};
-    n += kernels::gatherStrata(isa, region, spans, box, {gathered.index + n, gathered.t + n, gathered.x + n, gathered.y + n});
+    n += kernels::gatherStrata(isa, region, spans, box, gathered.from(n));
   }
   cellStart.resize(size_t(cellGrid.cols) * size_t(cellGrid.rows) + 1);
   kernels::sortByCell(isa, cellGrid, gathered, n, {sortedIndex.data(), sortedT.data(), sortedX.data(), sortedY.data()}, cellStart.data(), cellScratch.data());

@@ -23,22 +23,6 @@ using namespace reshutter::test;
 
 namespace {
 
-// Fraction of the unit disk with x <= a: the x marginal of a uniform lens point.
-double diskBelow(double a) {
-  if (a <= -1) return 0;
-  if (a >= 1) return 1;
-  return 1 - (std::acos(a) - a * std::sqrt(1 - a * a)) / M_PI;
-}
-
-// A lens whose circle of confusion for depth z has raster radius r, focused at d (spec overrides).
-RenderSpec::LensOverride lensFor(const TestScene& s, double r, double z, double d) {
-  const double ax = store::Projector(s.meta.cameras[0]).ax;
-  const double radius = r / (ax * std::abs(1 / d - 1 / z));
-  RenderSpec::LensOverride o;
-  o.focalLength = 1, o.fstop = 1 / (2 * radius), o.focalDistance = d;
-  return o;
-}
-
 // A static opaque surface at depth z covering raster x >= edge (and far beyond the frame).
 TestScene edgeScene(double edge, double z, int W = 64, int H = 24) {
   TestScene s = makeScene(W, H, {0.0});

@@ -311,4 +311,18 @@ void expectSameOutputs(const RenderResult& got, const RenderResult& want, const 
 }
 
 
+double diskBelow(double a) {
+  if (a <= -1) return 0;
+  if (a >= 1) return 1;
+  return 1 - (std::acos(a) - a * std::sqrt(1 - a * a)) / M_PI;
+}
+
+resample::RenderSpec::LensOverride lensFor(const TestScene& s, double r, double z, double d) {
+  const double ax = store::Projector(s.meta.cameras[0]).ax;
+  const double radius = r / (ax * std::abs(1 / d - 1 / z));
+  resample::RenderSpec::LensOverride o;
+  o.focalLength = 1, o.fstop = 1 / (2 * radius), o.focalDistance = d;
+  return o;
+}
+
 }  // namespace reshutter::test

@@ -52,6 +52,13 @@ std::shared_ptr<const store::StoreReader> writeScene(const TestScene& scene, con
 /// A render spec for one store over [open, close] (frame-relative), box filter 1×1.
 resample::RenderSpec specFor(std::shared_ptr<const store::StoreReader> reader, double open, double close, int nx, int ny, uint64_t seed = 0);
 
+/// Fraction of the unit disk with x <= a: the x marginal of a uniform lens point, so the share of
+/// a pixel's lens samples that see past a straight edge a·r away (r the circle of confusion).
+double diskBelow(double a);
+/// A lens whose circle of confusion for depth z has raster radius r on the scene's camera,
+/// focused at d (the spec's overrides).
+resample::RenderSpec::LensOverride lensFor(const TestScene& s, double r, double z, double d);
+
 /// The reference alpha per pixel (box filter over the pixel's own samples) of an opaque or
 /// transparent scene: per sample, the front-to-back composite of every surface the ray hits at
 /// the sample's time, using the same sample positions and times as `spec` - and, with a lens

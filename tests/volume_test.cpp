@@ -223,13 +223,6 @@ TEST(Volume, SphereTransmittanceFollowsTheChordPixelByPixel) {
   EXPECT_LT(sum / (kW * kH), 2e-3);
 }
 
-// Fraction of the unit disk with x <= a: the x marginal of a uniform lens point.
-double diskBelow(double a) {
-  if (a <= -1) return 0;
-  if (a >= 1) return 1;
-  return 1 - (std::acos(a) - a * std::sqrt(1 - a * a)) / M_PI;
-}
-
 // Through a lens a volume blurs as a surface does (issue #26): each sample's ray leaves its own
 // lens point. A thin dense slab at depth 10 covering raster x >= the frame's centre column, in front of
 // a white wall, focused at depth 5: a sample at x sees the slab where its lens displacement r·u
@@ -255,13 +248,12 @@ TEST(Volume, ThroughALensAVolumeBlursByItsCircleOfConfusion) {
   const std::string vdb = writeVdb(dir, "slab.vdb", {filledGrid(slab, 1.f, "density")});
   const auto volumes = volumeOf(vdb + ",density-scale=250", 0.5f, true, true, 1.f);  // raySpacing 1: shared unless a lens forbids it
   const store::Projector projector(scene.meta.cameras[0]);
-  const double ax = std::abs(projector.ax);
   // The slab's face x = slab.lo().x seen at its front depth, in raster columns (the face lies on
   // the optical axis's side plane, so every depth puts it within a voxel of the centre).
-  const glm::dvec3 faceCam(slab.lo().x, 0.0, zFront);
-  const double edge = projector.ax * faceCam.x / zFront + projector.bx;
+  const double edge = projector.ax * slab.lo().x / zFront + projector.bx;
   // One aperture: a circle of confusion of r pixels at the slab's front when focused at depth 5.
-  const double r = 6.5, lensRadius = r / (ax * std::abs(1 / 5.0 - 1 / zFront));
+  const double r = 6.5;
+  const RenderSpec::LensOverride lens = test::lensFor(scene, r, zFront, 5.0);
   // The pinhole reference marches every sample's ray too: shared rays blend optical depth across
   // a lattice spacing, which moves a hard edge by up to that.
   const auto marched = volumeOf(vdb + ",density-scale=250", 0.5f, true, true, 0.f);
@@ -269,7 +261,7 @@ TEST(Volume, ThroughALensAVolumeBlursByItsCircleOfConfusion) {
     RenderSpec spec = test::specFor(store, 0, 0, 8, 8, 3);
     spec.bucketSize = 4;
     spec.volumes = focus ? volumes : marched;
-    if (focus) spec.lens.focalLength = 1, spec.lens.fstop = 1 / (2 * lensRadius), spec.lens.focalDistance = *focus;
+    if (focus) spec.lens = lens, spec.lens.focalDistance = *focus;
     return render(spec);
   };
   auto redColumns = [&](const RenderResult& res) {
@@ -298,7 +290,7 @@ TEST(Volume, ThroughALensAVolumeBlursByItsCircleOfConfusion) {
   for (int px = 0; px < W; ++px) {
     double covered = 0;
     const int steps = 400;
-    for (int k = 0; k < steps; ++k) covered += diskBelow((px + (k + 0.5) / steps - edge) / r) / steps;
+    for (int k = 0; k < steps; ++k) covered += test::diskBelow((px + (k + 0.5) / steps - edge) / r) / steps;
     const double err = std::abs(col[size_t(px)] - (1 - covered));
     sumErr += err;
     EXPECT_LT(err, 0.04) << "column " << px << ": " << col[size_t(px)] << " against " << 1 - covered;
