@@ -28,6 +28,7 @@ void RasterStats::add(const RasterStats& o) {
   lensMicropolygons += o.lensMicropolygons;
   lensScanned += o.lensScanned;
   lensLayers += o.lensLayers;
+  lensSegmentDraws += o.lensSegmentDraws;
   transparentParts += o.transparentParts;
 }
 

@@ -133,6 +133,7 @@ struct RasterStats {
   uint64_t lensMicropolygons = 0;           // drawn on the lens path (depth of field)
   uint64_t lensScanned = 0;                 // samples the lens path's gathers examined (in the cells of their search boxes)
   uint64_t lensLayers = 0;                  // times the lens path sorted a bucket's samples for a layer of depths
+  uint64_t lensSegmentDraws = 0;            // lens draws of moving micropolygons cut at their knots (one per knot segment of a bucket's times)
   void add(const RasterStats& o);
 };
 

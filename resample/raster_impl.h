@@ -234,7 +234,9 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
     const store::TileEntry* entry;
     bool moving;
     uint32_t vBase, nV;
-    size_t C;                // bound times: cullX/Y/Z hold [time * nV + v - vBase]
+    size_t C;                // its bound times: cullX/Y/Z hold [(cullBase + time) * nV + v - vBase]
+    uint32_t cullBase;       // its first bound time (a knot segment's draw: C = 2 of the chunk's cullTimes)
+    uint32_t cullTimes;      // the chunk's bound times
     float lensAx, lensAy;    // raster displacement per unit of lens and of k = 1/d - 1/z
     float invD;              // 1 / focal distance
     float kMag;              // the rounding scale of the displacements
@@ -243,6 +245,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
     float thetaA, invLen;    // invLen > 0: one knot segment, the boxes lerp by (st - thetaA) invLen between the two bound times
     float uErr;              // the rounding of that parameter
     uint32_t blockF;         // invLen > 0: lensBlockF[blockF + 2 b], [.. + 1] is time block b's span of the lerp parameter
+    float segLo = -INFINITY, segHi = INFINITY;  // the sample times (st) the draw tests: its knot segment's
   };
   // One queued micropolygon: its per-sample box and its layer (INT32_MIN: unbounded, every
   // sample). Its samples' positions sheared by the layer's middle k (kl) lie in the box (over its
@@ -281,7 +284,8 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
     kernels::LinearEdges edges;
     float z[4];
   } stillLens;
-  std::vector<double> lensTimes;  // a chunk's bound times (local)
+  std::vector<double> lensTimes;  // a chunk's bound times (local), in order
+  std::vector<uint8_t> segmentBounded;  // [bound time]: every corner projects
   std::vector<LensChunk> lensChunks;
   std::vector<LensDraw> lensDraws;
   std::vector<uint32_t> lensOrder;  // lensDraws by layer

@@ -56,94 +56,101 @@ void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileE
   const bool moving = (entry.effects & store::kEffectMoving) && part.numKnots > 1 && !ch.still;
   const uint32_t vBase = ch.vLo, nV = ch.vHi - ch.vLo + 1;
   const double F = double(src.frame);
-  // Local times to bound at: the region's first and last sample times and the knots between
-  // (a corner's screen path is straight between them); a still chunk has one position.
+  // Local times to bound at, in order: the region's first sample time, the knots inside the
+  // region's times and its last sample time (a corner's screen path is straight between them); a
+  // still chunk has one position.
   lensTimes.clear();
   if (moving && tMax > tMin) {
-    lensTimes.push_back(tMin - F), lensTimes.push_back(tMax - F);
+    lensTimes.push_back(tMin - F);
     for (double k : knots)
       if (k > tMin - F && k < tMax - F) lensTimes.push_back(k);
+    lensTimes.push_back(tMax - F);
   } else {
     lensTimes.push_back(moving ? tMin - F : 0.0);  // an instant, or no motion
   }
   const size_t C = lensTimes.size();
   cullX.resize(C * nV), cullY.resize(C * nV), cullZ.resize(C * nV);
-  float zLo = INFINITY, zHi = -INFINITY;
-  bool unbounded = false;
+  segmentBounded.assign(C, 1);
   for (size_t ci = 0; ci < C; ++ci)
     for (uint32_t i = 0; i < nV; ++i) {
       const glm::vec3 p = moving ? positionAt(part, knots, vBase + i, lensTimes[ci]) : part.position(0, vBase + i);
       float x = 0, y = 0;
-      if (!project(p, x, y)) x = NAN, unbounded = true;
+      if (!project(p, x, y)) x = NAN, segmentBounded[ci] = 0;
       cullX[ci * nV + i] = x, cullY[ci * nV + i] = y, cullZ[ci * nV + i] = p.z;
-      zLo = std::min(zLo, p.z), zHi = std::max(zHi, p.z);
     }
   const float lensAx = float(view.ax * view.lensRadius), lensAy = float(view.ay * view.lensRadius);
   const float invD = float(1.0 / view.focalDistance);
-  // The chunk's box over every time, widened by the largest displacement the whole aperture
-  // gives its depths: a chunk that misses the region with it is dropped whole.
-  if (!unbounded) {
-    float kLo, kHi, sxLo, sxHi, syLo, syHi;
-    kLo = invD - 1.f / zLo, kHi = invD - 1.f / zHi;
+  // The box over bound times [b0, b1] (their corners' paths lie in it: a straight path projects
+  // to a straight one), widened by the largest displacement the whole aperture gives its depths;
+  // false if it misses the region.
+  auto touchesRegion = [&](size_t b0, size_t b1) {
+    for (size_t ci = b0; ci <= b1; ++ci)
+      if (!segmentBounded[ci]) return true;
+    const float* xs = cullX.data() + b0 * nV;
+    const float* ys = cullY.data() + b0 * nV;
+    const float* zs = cullZ.data() + b0 * nV;
+    const size_t n = (b1 - b0 + 1) * nV;
+    const float zLo = *std::min_element(zs, zs + n), zHi = *std::max_element(zs, zs + n);
+    float sxLo, sxHi, syLo, syHi;
+    const float kLo = invD - 1.f / zLo, kHi = invD - 1.f / zHi;
     productRange(-lensAx, lensAx, kLo, kHi, sxLo, sxHi);
     productRange(-lensAy, lensAy, kLo, kHi, syLo, syHi);
-    const float* xs = cullX.data();
-    const float* ys = cullY.data();
-    const float bx0 = *std::min_element(xs, xs + C * nV), bx1 = *std::max_element(xs, xs + C * nV);
-    const float by0 = *std::min_element(ys, ys + C * nV), by1 = *std::max_element(ys, ys + C * nV);
-    if (boxMissesRegion(bx0 + sxLo, by0 + syLo, bx1 + sxHi, by1 + syHi, 2.f)) {
-      stats.chunkCulledMicropolygons += ch.m1 - ch.m0;
-      return;
-    }
+    const float bx0 = *std::min_element(xs, xs + n), bx1 = *std::max_element(xs, xs + n);
+    const float by0 = *std::min_element(ys, ys + n), by1 = *std::max_element(ys, ys + n);
+    return !boxMissesRegion(bx0 + sxLo, by0 + syLo, bx1 + sxHi, by1 + syHi, 2.f);
+  };
+  if (!touchesRegion(0, C - 1)) {
+    stats.chunkCulledMicropolygons += ch.m1 - ch.m0;
+    return;
   }
-  // One knot segment over the render's times: each corner moves along a straight screen line, so
-  // a sample is held to the lerp of the end boxes at its own time (MovingBox's idea), widened by
-  // the perspective lag and the rounding of its time.
-  float thetaA = 0, invLen = 0, uErr = 0;
-  const int blocks = lensTimeBlocks, perBlock = N / blocks;
-  const uint32_t blockF = uint32_t(lensBlockF.size());
-  if (moving && C == 2) {
-    const double len = lensTimes[1] - lensTimes[0], toLocal = tBase - F;
-    thetaA = float(lensTimes[0] - toLocal), invLen = float(1.0 / len);
-    uErr = float(5e-7 * std::max({1.0, std::abs(lensTimes[0]), std::abs(lensTimes[1]), std::abs(toLocal)}) / len);
-    // Each time block's span of the lerp parameter (its planes' times over the region's groups),
-    // widened for the rounding of a sample's parameter: its samples search that part of the path.
-    for (int b = 0; b < blocks; ++b) {
-      float f0 = 1.f, f1 = 0.f;
-      for (size_t g = 0; g < groupPresent.size(); ++g) {
-        if (!groupPresent[g]) continue;
-        const size_t gs = g * size_t(N) + size_t(b * perBlock);
-        const double lo = (stratumLo[gs] - F - lensTimes[0]) / len, hi = (stratumHi[gs] - F - lensTimes[0]) / len;
-        f0 = std::min(f0, std::clamp(float(lo) - 1e-6f, 0.f, 1.f)), f1 = std::max(f1, std::clamp(float(hi) + 1e-6f, 0.f, 1.f));
-      }
-      lensBlockF.push_back(f0), lensBlockF.push_back(f1);
-    }
-  }
+  stats.lensMicropolygons += ch.m1 - ch.m0;
   const double covLo = src.coverStart(), covHi = src.coverEnd();
+  const Coverage cover{!Source::covers(tMin, covLo, covHi, src.endShared) || !Source::covers(tMax, covLo, covHi, src.endShared), covLo - tBase, covHi - tBase,
+                       src.endShared};
   // The displacement coefficients' own rounding: k = 1/d - 1/z cancels near the focal plane.
-  const float kMag = std::max(std::abs(lensAx), std::abs(lensAy)) * (invD + (zLo > 0 ? 1.f / zLo : 0.f));
-  const LensChunk lc{&part,
-                     &knots,
-                     hc,
-                     &src,
-                     &entry,
-                     moving,
-                     vBase,
-                     nV,
-                     C,
-                     lensAx,
-                     lensAy,
-                     invD,
-                     std::isfinite(kMag) ? kMag : 0.f,
-                     {!Source::covers(tMin, covLo, covHi, src.endShared) || !Source::covers(tMax, covLo, covHi, src.endShared), covLo - tBase, covHi - tBase,
-                      src.endShared},
-                     tBase - F,
-                     thetaA,
-                     invLen,
-                     uErr,
-                     invLen > 0 ? blockF : ~0u};
-  lensChunks.push_back(lc);
-  for (uint32_t m = ch.m0; m < ch.m1; ++m) queueLens(lc, uint32_t(lensChunks.size() - 1), m);
+  const float zNear = *std::min_element(cullZ.begin(), cullZ.begin() + ptrdiff_t(C * nV));
+  const float kMag = std::max(std::abs(lensAx), std::abs(lensAy)) * (invD + (zNear > 0 ? 1.f / zNear : 0.f));
+  const double toLocal = tBase - F;
+  // A moving chunk is drawn once per knot segment of the region's times: over one segment each
+  // corner moves along a straight screen line, so a sample is held to the lerp of the segment's
+  // end boxes at its own time (MovingBox's idea), widened by the perspective lag and the rounding
+  // of its time; a micropolygon's box over its whole path would hold every sample near any part
+  // of a curved path. Each sample belongs to one segment (segLo <= its time < segHi, in st
+  // units, the knots' times rounded once), so it tests the micropolygon once.
+  const int blocks = lensTimeBlocks, perBlock = N / blocks;
+  const size_t segments = C > 1 ? C - 1 : 1;
+  for (size_t seg = 0; seg < segments; ++seg) {
+    if (segments > 1 && !touchesRegion(seg, seg + 1)) continue;
+    float thetaA = 0, invLen = 0, uErr = 0;
+    const uint32_t blockF = uint32_t(lensBlockF.size());
+    if (C > 1) {
+      const double len = lensTimes[seg + 1] - lensTimes[seg];
+      thetaA = float(lensTimes[seg] - toLocal), invLen = float(1.0 / len);
+      uErr = float(5e-7 * std::max({1.0, std::abs(lensTimes[seg]), std::abs(lensTimes[seg + 1]), std::abs(toLocal)}) / len);
+      // Each time block's span of the lerp parameter (its planes' times over the region's
+      // groups), widened for the rounding of a sample's parameter: its samples search that part
+      // of the path; a block wholly outside the segment is not searched (f0 > f1).
+      for (int b = 0; b < blocks; ++b) {
+        float f0 = 1.f, f1 = 0.f;
+        for (size_t g = 0; g < groupPresent.size(); ++g) {
+          if (!groupPresent[g]) continue;
+          const size_t gs = g * size_t(N) + size_t(b * perBlock);
+          const double lo = (stratumLo[gs] - F - lensTimes[seg]) / len, hi = (stratumHi[gs] - F - lensTimes[seg]) / len;
+          const double slack = 1e-6 + double(uErr);
+          if (hi < -slack || lo > 1.0 + slack) continue;
+          f0 = std::min(f0, std::clamp(float(lo) - 1e-6f, 0.f, 1.f)), f1 = std::max(f1, std::clamp(float(hi) + 1e-6f, 0.f, 1.f));
+        }
+        lensBlockF.push_back(f0), lensBlockF.push_back(f1);
+      }
+    }
+    LensChunk lc{&part, &knots, hc, &src, &entry, moving, vBase, nV, size_t(C > 1 ? 2 : 1), uint32_t(seg), uint32_t(C), lensAx, lensAy, invD,
+                 std::isfinite(kMag) ? kMag : 0.f, cover, toLocal, thetaA, invLen, uErr, invLen > 0 ? blockF : ~0u};
+    lc.segLo = seg > 0 ? float(lensTimes[seg] - toLocal) : -INFINITY;
+    lc.segHi = seg + 1 < segments ? float(lensTimes[seg + 1] - toLocal) : INFINITY;
+    lensChunks.push_back(lc);
+    if (segments > 1) stats.lensSegmentDraws += ch.m1 - ch.m0;
+    for (uint32_t m = ch.m0; m < ch.m1; ++m) queueLens(lensChunks.back(), uint32_t(lensChunks.size() - 1), m);
+  }
 }
 
 // A micropolygon's box for the per-sample test and its layer, from the chunk's bound positions
@@ -154,7 +161,7 @@ void BucketRasterizer::Impl::queueLens(const LensChunk& lc, uint32_t chunk, uint
   const int nc = c[3] == kNoCorner ? 3 : 4;
   float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY, zLo = INFINITY, zHi = -INFINITY;
   bool bounded = true;
-  for (size_t ci = 0; ci < lc.C; ++ci)
+  for (size_t ci = lc.cullBase; ci < lc.cullBase + lc.C; ++ci)
     for (int j = 0; j < nc; ++j) {
       const size_t k = ci * lc.nV + (c[j] - lc.vBase);
       const float x = cullX[k], y = cullY[k];
@@ -162,7 +169,6 @@ void BucketRasterizer::Impl::queueLens(const LensChunk& lc, uint32_t chunk, uint
       bx0 = std::min(bx0, x), by0 = std::min(by0, y), bx1 = std::max(bx1, x), by1 = std::max(by1, y);
       zLo = std::min(zLo, cullZ[k]), zHi = std::max(zHi, cullZ[k]);
     }
-  ++stats.lensMicropolygons;
   LensDraw d;
   d.chunk = chunk, d.m = m, d.zCull = cullDepth(zLo);
   if (!bounded) {
@@ -186,11 +192,14 @@ void BucketRasterizer::Impl::queueLens(const LensChunk& lc, uint32_t chunk, uint
       float* e = end ? e1 : e0;
       e[0] = e[1] = INFINITY, e[2] = e[3] = -INFINITY;
       for (int j = 0; j < nc; ++j) {
-        const size_t k = size_t(end) * lc.nV + (c[j] - lc.vBase);
+        const size_t k = (lc.cullBase + size_t(end)) * lc.nV + (c[j] - lc.vBase);
         e[0] = std::min(e[0], cullX[k]), e[1] = std::min(e[1], cullY[k]), e[2] = std::max(e[2], cullX[k]), e[3] = std::max(e[3], cullY[k]);
       }
     }
-    for (int j = 0; j < nc; ++j) lag = std::max(lag, perspectiveLag(cullZ[c[j] - lc.vBase], cullZ[lc.nV + (c[j] - lc.vBase)]));
+    for (int j = 0; j < nc; ++j) {
+      const size_t k = lc.cullBase * lc.nV + (c[j] - lc.vBase);
+      lag = std::max(lag, perspectiveLag(cullZ[k], cullZ[k + lc.nV]));
+    }
   }
   // What the lerped boxes are widened by (perspective lag, the rounding of the sample's time),
   // and the rounding margin of the projections and of any displacement the lens gives (|lens
@@ -207,13 +216,20 @@ void BucketRasterizer::Impl::queueLens(const LensChunk& lc, uint32_t chunk, uint
   }
   // The layer: from the micropolygon's depths at its knots, which every bucket sees alike (the
   // bound times above are the region's), so that the draw order - and with it which of two
-  // surfaces at exactly one depth a sample keeps - does not depend on the bucketing.
+  // surfaces at exactly one depth a sample keeps - does not depend on the bucketing; every knot
+  // segment's draw of it takes the same layer.
   float zkLo = zLo, zkHi = zHi;
   if (lc.moving) {
     float lo = INFINITY, hi = -INFINITY;
     for (uint32_t k = 0; k < part.numKnots; ++k)
       for (int j = 0; j < nc; ++j) lo = std::min(lo, part.position(k, c[j]).z), hi = std::max(hi, part.position(k, c[j]).z);
-    if (lo >= view.nearClip) zkLo = lo, zkHi = hi;  // else (a knot before the near plane) the region's depths
+    if (lo >= view.nearClip) {
+      zkLo = lo, zkHi = hi;
+    } else {  // a knot before the near plane: the depths at the region's bound times
+      zkLo = INFINITY, zkHi = -INFINITY;
+      for (size_t ci = 0; ci < lc.cullTimes; ++ci)
+        for (int j = 0; j < nc; ++j) zkLo = std::min(zkLo, cullZ[ci * lc.nV + (c[j] - lc.vBase)]), zkHi = std::max(zkHi, cullZ[ci * lc.nV + (c[j] - lc.vBase)]);
+    }
   }
   const float kMid = 0.5f * ((lc.invD - 1.f / zkLo) + (lc.invD - 1.f / zkHi));
   const float layerScale = std::max(std::abs(lc.lensAx), std::abs(lc.lensAy)) / kLayerWidth;
@@ -407,6 +423,7 @@ void BucketRasterizer::Impl::drawLensQueued() {
         const uint32_t idx = cand.index[i];
         if (!(zbuf[idx] > d.zCull)) continue;  // the early depth test
         if (lc.cover.check && !Source::covers(double(cand.t[i]), lc.cover.lo, lc.cover.hi, lc.cover.openEnd)) continue;
+        if (!(cand.t[i] >= lc.segLo && cand.t[i] < lc.segHi)) continue;  // another knot segment's sample
         ++stats.sampleTests;
         const LensSample ls{idx, cand.t[i], cand.x[i], cand.y[i], cand.u[i], cand.v[i]};
         if (lc.moving) {

@@ -88,7 +88,7 @@ struct RenderSpec {
 store::Lens renderLens(const store::Camera& camera, const RenderSpec::LensOverride& o);
 
 /// How a render with a lens pairs its sample planes (RasterOptions::lensTimeBlocks): N / 4 time
-/// blocks with the lens's quadrants when at least a quarter of the stores' micropolygons move
+/// blocks with the lens's quadrants when at least a twelfth of the stores' micropolygons move
 /// over a shutter that is not an instant (and the samples are an even grid of at most 256), else
 /// 1 (planes are lens strata: tightest for what stands still).
 int lensTimeBlocks(const RenderSpec& spec);

@@ -138,7 +138,51 @@ TEST(LensReference, AgreesWithARayCasterWhoseRaysLeaveTheLens) {
     EXPECT_EQ(lensTimeBlocks(spec), a == b ? 1 : 4) << "interval " << a << ":" << b;  // an instant needs no time blocks
     RenderResult r = render(spec);
     EXPECT_GT(r.stats.raster.lensMicropolygons, 0u);
+    // The quads' knot at 0.4 lies inside both intervals: their paths are drawn segment by segment.
+    EXPECT_EQ(r.stats.raster.lensSegmentDraws > 0, a < 0.4 && b > 0.4) << "interval " << a << ":" << b;
     expectRayCasterAgrees(s, spec, r, 40, 28, cat("interval ", a, ":", b));
+  }
+}
+
+TEST(LensSegments, ACurvedPathThroughTheLensTestsAboutWhatThePinholeTests) {
+  // Small quads sweeping arcs of a circle over five knots: a box over a whole arc holds tens of
+  // times the samples a quad can cover. Drawn one knot segment at a time, each sample is held to
+  // its own segment's lerped box, so through a negligible lens (a tenth of a pixel) the exact
+  // tests are about the pinhole path's (which bounds each time stratum), and each sample tests a
+  // quad once: the ray caster agrees sample by sample, through that lens and through a wide one.
+  ScratchDir dir;
+  const int W = 48, H = 40;
+  TestScene s = makeScene(W, H, {0.0, 0.25, 0.5, 0.75, 1.0});
+  Rng rng(5);
+  for (int i = 0; i < 16; ++i) {
+    TestMp mp;
+    const double cx = rng.uniform(8, W - 8), cy = rng.uniform(8, H - 8), radius = rng.uniform(6, 14), size = rng.uniform(1, 3), z = rng.uniform(5, 20);
+    const double phase = rng.uniform(0, 2 * M_PI), sweep = rng.uniform(1.5, 3) * (i % 2 ? 1 : -1);
+    for (int k = 0; k < 5; ++k) {
+      const double angle = phase + sweep * k / 4.0, x = cx + radius * std::cos(angle), y = cy + radius * std::sin(angle);
+      mp.knots.push_back(s.rect(x, y, x + size, y + size, z));
+    }
+    // Half of them transparent: a sample that tested a quad twice would composite it twice.
+    const float opacity = i % 4 < 2 ? 1.f : 0.5f;
+    mp.ci = glm::vec3(float(rng.uniform()), float(rng.uniform()), float(rng.uniform())) * opacity, mp.oi = glm::vec3(opacity);
+    s.mps.push_back(mp);
+  }
+  auto reader = writeScene(s, dir.path("arcs.mps"));
+  RenderSpec pinhole = specFor(reader, 0.05, 0.95, 4, 4, 3);
+  const RenderResult p = render(pinhole);
+  ASSERT_GT(p.stats.raster.hits, 0u);
+  for (double r : {0.1, 4.0}) {
+    RenderSpec spec = pinhole;
+    spec.lens = lensFor(s, r, 20, 10);
+    const RenderResult l = render(spec);
+    const std::string what = cat("circle of confusion ", r, " px at depth 20");
+    ASSERT_EQ(l.stats.raster.lensMicropolygons, uint64_t(s.mps.size())) << what;
+    EXPECT_GE(l.stats.raster.lensSegmentDraws, 3 * s.mps.size()) << what;  // the region's times hold three knots or more
+    if (r < 1) {
+      EXPECT_LT(double(l.stats.raster.sampleTests), 1.25 * double(p.stats.raster.sampleTests))
+          << what << ": " << l.stats.raster.sampleTests << " exact tests, the pinhole's " << p.stats.raster.sampleTests;
+    }
+    expectRayCasterAgrees(s, spec, l, W, H, what);
   }
 }
 
