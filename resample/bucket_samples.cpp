@@ -8,8 +8,14 @@
 
 namespace reshutter::resample {
 
-BucketSamples::BucketSamples(const SamplePattern& p, const ShutterModel& s, int lensTimeBlocks)
-    : pattern(p), shutter(s), N(p.spp()), lensPlanes(lensTimeBlocks >= 1), lensTimeBlocks(std::max(lensTimeBlocks, 1)), tBase(std::floor(s.earliest())) {}
+BucketSamples::BucketSamples(const SamplePattern& p, const ShutterModel& s, int lensTimeBlocks, bool drawTimes)
+    : pattern(p),
+      shutter(s),
+      N(p.spp()),
+      lensPlanes(lensTimeBlocks >= 1),
+      lensTimeBlocks(std::max(lensTimeBlocks, 1)),
+      drawTimes(drawTimes || lensTimeBlocks > 1),  // time blocks pair lens points with the time strata
+      tBase(std::floor(s.earliest())) {}
 
 void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
   x0 = rx0, y0 = ry0, w = rw, h = rh, P = w * h;
@@ -57,9 +63,16 @@ void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
     for (int px = 0; px < w; ++px) {
       const int p = py * w + px, gx = x0 + px, gy = y0 + py;
       const int pat = pattern.patternOf(gx, gy);
-      pattern.times(gx, gy, stratumOf.data(), u.data());
-      if (lensPlanes) pattern.lensPlanes(gx, gy, stratumOf.data(), lensTimeBlocks, lensOf.data(), disk.data());
       const int g = rowGroup[size_t(py)];
+      // Untimed: one time per pixel, the middle of its interval; planes in sample order.
+      float mid = 0.f;
+      if (drawTimes) {
+        pattern.times(gx, gy, stratumOf.data(), u.data());
+      } else {
+        mid = float(shutter.time(g, float(gy) + 0.5f, 0.5f) - tBase);
+        for (int i = 0; i < N; ++i) stratumOf[size_t(i)] = uint16_t(i);
+      }
+      if (lensPlanes) pattern.lensPlanes(gx, gy, stratumOf.data(), lensTimeBlocks, lensOf.data(), disk.data());
       // A global box shutter (the usual case): time() is open + u * length for every sample,
       // the same sum, without its per-sample test.
       const ShutterGroup& group = shutter.groups()[size_t(g)];
@@ -75,11 +88,22 @@ void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
         glm::vec2 o = pattern.offset(pat, i);
         const float x = float(gx) + o.x, y = float(gy) + o.y;
         sx[idx] = x, sy[idx] = y;
-        const double t = globalBox ? open + double(u[size_t(i)]) * length : shutter.time(g, y, u[size_t(i)]);
-        st[idx] = float(t - tBase);
+        if (drawTimes) {
+          const double t = globalBox ? open + double(u[size_t(i)]) * length : shutter.time(g, y, u[size_t(i)]);
+          st[idx] = float(t - tBase);
+        } else {
+          st[idx] = mid;
+        }
         idxOf[size_t(p) * N + i] = uint32_t(idx);
       }
     }
+  if (!drawTimes) {
+    // Nothing reads the times: the region's range is its strata's, unwidened.
+    for (int g = 0; g < G; ++g)
+      if (groupPresent[size_t(g)])
+        for (int s = 0; s < N; ++s) tMin = std::min(tMin, stratumLo[size_t(g) * N + s]), tMax = std::max(tMax, stratumHi[size_t(g) * N + s]);
+    return;
+  }
   // The widening, per stratum plane and row: tBase + double(st) rises with st (rounding is
   // monotonic), so the extreme stored times are those of the extreme st, found row by row.
   for (int s = 0; s < N; ++s)

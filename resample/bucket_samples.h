@@ -53,7 +53,9 @@ inline constexpr size_t kPad = 16;
 struct BucketSamples {
   /// With a lens (lensTimeBlocks >= 1), each sample also has a lens position, and the planes pair
   /// lens and time strata (SamplePattern::lensPlanes) rather than being time strata.
-  BucketSamples(const SamplePattern& pattern, const ShutterModel& shutter, int lensTimeBlocks = 0);
+  /// drawTimes false: nothing reads a sample's time (RasterOptions::sampleTimes): samples take
+  /// their row's time at the middle of the interval and lie in planes by their order.
+  BucketSamples(const SamplePattern& pattern, const ShutterModel& shutter, int lensTimeBlocks = 0, bool drawTimes = true);
 
   /// Lays out the samples of region [x0, x0+w) × [y0, y0+h) (raster pixels).
   void prepare(int x0, int y0, int w, int h);
@@ -68,6 +70,7 @@ struct BucketSamples {
   /// the planes (it sorts the samples by depth layer). Without a lens, planes are time strata.
   const bool lensPlanes;
   const int lensTimeBlocks;
+  const bool drawTimes;
 
   // Region.
   int x0 = 0, y0 = 0, w = 0, h = 0, P = 0;

@@ -29,11 +29,12 @@ void RasterStats::add(const RasterStats& o) {
   lensScanned += o.lensScanned;
   lensLayers += o.lensLayers;
   lensSegmentDraws += o.lensSegmentDraws;
+  untimedSamples += o.untimedSamples;
   transparentParts += o.transparentParts;
 }
 
 BucketRasterizer::Impl::Impl(const SamplePattern& p, const ShutterModel& s, const View& v, const std::vector<AovChannel>& a, const RasterOptions& o)
-    : BucketSamples(p, s, v.lens() ? o.lensTimeBlocks : 0),
+    : BucketSamples(p, s, v.lens() ? o.lensTimeBlocks : 0, o.sampleTimes),
       HitBuffer(a, o, v.farClip, stats),
       view(v),
       opt(o),
@@ -60,6 +61,7 @@ void BucketRasterizer::Impl::begin(int rx0, int ry0, int rw, int rh) {
   }
   reset(slots);
   stats = RasterStats{};
+  if (!drawTimes) stats.untimedSamples = uint64_t(P) * uint64_t(N);
   volumesHere = volumes && volumes->touches(double(x0), double(y0), double(x0 + w), double(y0 + h));
   if (volumesHere) volumes->beginRegion(x0, y0, w, h);
   queued.clear(), chunks.clear(), movingTimes.clear();

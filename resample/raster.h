@@ -119,6 +119,14 @@ struct RasterOptions {
   /// strata (SamplePattern::lensPlanes; 1 = lens strata alone), and the lens path sorts each time
   /// block's samples apart. render() chooses it (lensTimeBlocks() in resampler.h).
   int lensTimeBlocks = 1;
+  /// Skip drawing the samples' times when nothing in the render reads them (a motion-free
+  /// render): each sample then takes its row's time at the middle of the interval and planes
+  /// follow the sample order. A still surface's hits do not depend on a sample's time or plane,
+  /// so the image is the same; off only to measure what it saves.
+  bool skipUnreadTimes = true;
+  /// Whether the samples draw their times: set by render() from skipUnreadTimes and what the
+  /// render reads.
+  bool sampleTimes = true;
 };
 
 /// Counters for --stats; summed over buckets.
@@ -134,6 +142,7 @@ struct RasterStats {
   uint64_t lensScanned = 0;                 // samples the lens path's gathers examined (in the cells of their search boxes)
   uint64_t lensLayers = 0;                  // times the lens path sorted a bucket's samples for a layer of depths
   uint64_t lensSegmentDraws = 0;            // lens draws of moving micropolygons cut at their knots (one per knot segment of a bucket's times)
+  uint64_t untimedSamples = 0;              // samples laid out without drawing a time (nothing read it: RasterOptions::sampleTimes)
   void add(const RasterStats& o);
 };
 

@@ -212,6 +212,23 @@ std::vector<Source> withSharedEnds(std::vector<Source> sources) {
 
 /// Everything the buckets read and none writes: the validated window and shutter, the camera's
 /// view, the sample pattern, the output variables and their filters, the buckets.
+/// Whether anything the render draws reads a sample's time: a moving part or view, colours shaded
+/// in time, a store covering only part of the shutter (retime's stores), volumes (marched at the
+/// sample's time). Without any, the samples skip their time draws (RasterOptions::sampleTimes).
+bool readsSampleTimes(const std::vector<Source>& sources, const ShutterModel& shutter, const std::vector<std::unique_ptr<const CarriedStore>>& carried,
+                      bool volumes) {
+  if (volumes) return true;
+  const double t0 = shutter.earliest(), t1 = shutter.latest();
+  for (size_t i = 0; i < sources.size(); ++i) {
+    const Source& src = sources[i];
+    if (carried[i] && carried[i]->moving()) return true;
+    if (!Source::covers(t0, src.coverStart(), src.coverEnd(), src.endShared) || !Source::covers(t1, src.coverStart(), src.coverEnd(), src.endShared)) return true;
+    for (const store::TileEntry& e : src.store->entries())
+      if (e.effects & (store::kEffectMoving | store::kEffectShadedInTime)) return true;
+  }
+  return false;
+}
+
 struct Plan {
   Plan(const RenderSpec& spec, const Window& window, const ShutterModel& shutter)
       : spec(spec),
@@ -260,6 +277,7 @@ struct Plan {
       for (size_t w = spec.volumes ? spec.volumes->warnings().size() : 0; w < scene->warnings().size(); ++w) warnOnce("store-volume", scene->warnings()[w]);
       volumes = std::move(scene);
     }
+    rasterOptions.sampleTimes = !rasterOptions.skipUnreadTimes || readsSampleTimes(sources, shutter, carried, volumes != nullptr);
     if (volumes) {
       volumeCamera.ax = view.ax, volumeCamera.bx = view.bx, volumeCamera.ay = view.ay, volumeCamera.by = view.by;
       volumeCamera.perspective = view.perspective;

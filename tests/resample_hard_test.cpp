@@ -501,6 +501,46 @@ TEST(ResampleHard, ChunkGathersFindEveryMicropolygonsSamples) {
   }
 }
 
+// A render where nothing reads a sample's time - motion-free stores, no volume - skips drawing
+// the times: every output (colour, depth, ids, deep samples) must be what drawn times give, for
+// progressive, sub-interval, fields and instant shutters, a rolling read-out and a lens, with
+// both instruction sets and the scalar loops. A moving store, or a store covering only part of
+// the shutter, draws them.
+TEST(ResampleHard, UntimedSamplesGiveTheImageOfDrawnTimes) {
+  ScratchDir dir;
+  const SyntheticCase still{"untimed", 1, 0, 0.4};
+  auto reader = syntheticStore(dir, still, 8000, 4);
+  for (int shutter = 0; shutter < 6; ++shutter)
+    for (const KernelSet& k : kernelSets()) {
+      // Shutters 0-3 as comparisonSpec(); 4: a rolling read-out over the sub-interval; 5: through
+      // a lens.
+      RenderSpec spec = comparisonSpec(reader, shutter == 4 ? 1 : shutter == 5 ? 0 : shutter);
+      if (shutter == 4) spec.shutter.setRolling(RollingShutter{0.3, false, 120});
+      if (shutter == 5) spec.lens.fstop = 1, spec.lens.focalLength = 1, spec.lens.focalDistance = 20;
+      spec.raster.vectorKernels = k.vector, spec.raster.avx512Kernels = k.avx512;
+      spec.aovs = {AovRequest::parse("id", "test"), AovRequest::parse("z", "test")};
+      spec.deep = true;
+      const RenderResult untimed = render(spec);
+      spec.raster.skipUnreadTimes = false;
+      const RenderResult timed = render(spec);
+      const std::string what = std::string(k.name) + " shutter " + std::to_string(shutter);
+      EXPECT_GE(untimed.stats.raster.untimedSamples, untimed.stats.samples) << what;  // every sample, margins included
+      EXPECT_EQ(timed.stats.raster.untimedSamples, 0u) << what;
+      ASSERT_GT(timed.stats.raster.hits, 0u) << what;
+      if (shutter == 5) {
+        EXPECT_GT(untimed.stats.raster.lensMicropolygons, 0u) << what;
+      }
+      expectSameOutputs(untimed, timed, what);
+    }
+  // Times are read: by a moving store, and where a store covers only part of the shutter.
+  auto moving = syntheticStore(dir, SyntheticCase{"moving", 2, 8, 0.0}, 2000, 5);
+  EXPECT_EQ(render(comparisonSpec(moving, 0)).stats.raster.untimedSamples, 0u);
+  RenderSpec beyond = comparisonSpec(reader, 0);
+  beyond.shutter = ShutterModel::progressive(1.5, 2.5);
+  beyond.sources.push_back(Source{reader, 2});
+  EXPECT_EQ(render(beyond).stats.raster.untimedSamples, 0u);
+}
+
 // Interlaced fields drawn in one pass - each moving micropolygon bounded, gathered and tested once
 // for both fields, over the interval that spans them - against field by field: every output the
 // same (colour, depth, ids, deep samples), with both instruction sets and the scalar loops, and
