@@ -119,10 +119,11 @@ struct RasterOptions {
   /// strata (SamplePattern::lensPlanes; 1 = lens strata alone), and the lens path sorts each time
   /// block's samples apart. render() chooses it (lensTimeBlocks() in resampler.h).
   int lensTimeBlocks = 1;
-  /// Skip drawing the samples' times when nothing in the render reads them (a motion-free
-  /// render): each sample then takes its row's time at the middle of the interval and planes
-  /// follow the sample order. A still surface's hits do not depend on a sample's time or plane,
-  /// so the image is the same; off only to measure what it saves.
+  /// Skip drawing the samples' times where they are one per group (an instant) or nothing in the
+  /// render reads them (a motion-free render): each sample then takes its row's time at the middle
+  /// of the interval and planes follow the sample order. A sample's hits do not depend on its
+  /// plane, nor a still surface's on its time, so the image is the same; off only to measure what
+  /// it saves.
   bool skipUnreadTimes = true;
   /// Whether the samples draw their times: set by render() from skipUnreadTimes and what the
   /// render reads.

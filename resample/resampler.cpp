@@ -212,11 +212,14 @@ std::vector<Source> withSharedEnds(std::vector<Source> sources) {
 
 /// Everything the buckets read and none writes: the validated window and shutter, the camera's
 /// view, the sample pattern, the output variables and their filters, the buckets.
-/// Whether anything the render draws reads a sample's time: a moving part or view, colours shaded
-/// in time, a store covering only part of the shutter (retime's stores), volumes (marched at the
-/// sample's time). Without any, the samples skip their time draws (RasterOptions::sampleTimes).
-bool readsSampleTimes(const std::vector<Source>& sources, const ShutterModel& shutter, const std::vector<std::unique_ptr<const CarriedStore>>& carried,
+/// Whether the samples must draw their times (RasterOptions::sampleTimes): not at an instant
+/// without a rolling read-out (every sample's time is then its group's, drawn or not), nor when
+/// nothing the render draws reads them - no moving part or view, no colours shaded in time, every
+/// store covering the whole shutter (retime's do not), no volume (marched at the sample's time).
+bool drawsSampleTimes(const std::vector<Source>& sources, const ShutterModel& shutter, const std::vector<std::unique_ptr<const CarriedStore>>& carried,
                       bool volumes) {
+  const auto& groups = shutter.groups();
+  if (shutter.rolling().duration == 0.0 && std::all_of(groups.begin(), groups.end(), [](const ShutterGroup& g) { return g.length() == 0.0; })) return false;
   if (volumes) return true;
   const double t0 = shutter.earliest(), t1 = shutter.latest();
   for (size_t i = 0; i < sources.size(); ++i) {
@@ -277,7 +280,7 @@ struct Plan {
       for (size_t w = spec.volumes ? spec.volumes->warnings().size() : 0; w < scene->warnings().size(); ++w) warnOnce("store-volume", scene->warnings()[w]);
       volumes = std::move(scene);
     }
-    rasterOptions.sampleTimes = !rasterOptions.skipUnreadTimes || readsSampleTimes(sources, shutter, carried, volumes != nullptr);
+    rasterOptions.sampleTimes = !rasterOptions.skipUnreadTimes || drawsSampleTimes(sources, shutter, carried, volumes != nullptr);
     if (volumes) {
       volumeCamera.ax = view.ax, volumeCamera.bx = view.bx, volumeCamera.ay = view.ay, volumeCamera.by = view.by;
       volumeCamera.perspective = view.perspective;

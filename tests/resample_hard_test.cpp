@@ -501,8 +501,8 @@ TEST(ResampleHard, ChunkGathersFindEveryMicropolygonsSamples) {
   }
 }
 
-// A render where nothing reads a sample's time - motion-free stores, no volume - skips drawing
-// the times: every output (colour, depth, ids, deep samples) must be what drawn times give, for
+// A render where nothing reads a sample's time - motion-free stores, no volume - or where every
+// sample's time is the same (an instant) skips drawing the times: every output (colour, depth, ids, deep samples) must be what drawn times give, for
 // progressive, sub-interval, fields and instant shutters, a rolling read-out and a lens, with
 // both instruction sets and the scalar loops. A moving store, or a store covering only part of
 // the shutter, draws them.
@@ -532,9 +532,22 @@ TEST(ResampleHard, UntimedSamplesGiveTheImageOfDrawnTimes) {
       }
       expectSameOutputs(untimed, timed, what);
     }
-  // Times are read: by a moving store, and where a store covers only part of the shutter.
-  auto moving = syntheticStore(dir, SyntheticCase{"moving", 2, 8, 0.0}, 2000, 5);
+  // Times are read: by a moving store, and where a store covers only part of the shutter; but
+  // at an instant every sample's time is the same, drawn or not, and the moving image is too.
+  auto moving = syntheticStore(dir, SyntheticCase{"moving", 3, 8, 0.2}, 4000, 5);
   EXPECT_EQ(render(comparisonSpec(moving, 0)).stats.raster.untimedSamples, 0u);
+  for (const KernelSet& k : kernelSets()) {
+    RenderSpec instant = comparisonSpec(moving, 3);
+    instant.raster.vectorKernels = k.vector, instant.raster.avx512Kernels = k.avx512;
+    instant.deep = true;
+    const RenderResult untimed = render(instant);
+    instant.raster.skipUnreadTimes = false;
+    const RenderResult timed = render(instant);
+    EXPECT_GT(untimed.stats.raster.untimedSamples, 0u) << k.name;
+    EXPECT_EQ(timed.stats.raster.untimedSamples, 0u) << k.name;
+    EXPECT_LT(untimed.stats.raster.staticMicropolygons, untimed.stats.raster.micropolygons) << k.name;  // some took a moving path
+    expectSameOutputs(untimed, timed, std::string("moving at an instant, ") + k.name);
+  }
   RenderSpec beyond = comparisonSpec(reader, 0);
   beyond.shutter = ShutterModel::progressive(1.5, 2.5);
   beyond.sources.push_back(Source{reader, 2});
