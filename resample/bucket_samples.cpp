@@ -59,19 +59,16 @@ void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
       stratumLo[size_t(g) * N + s] = lo;
       stratumHi[size_t(g) * N + s] = hi;
     }
-  for (int py = 0; py < h; ++py)
+  // Without drawn times: planes in sample order, and one time per row, the middle of its interval.
+  if (!drawTimes)
+    for (int i = 0; i < N; ++i) stratumOf[size_t(i)] = uint16_t(i);
+  for (int py = 0; py < h; ++py) {
+    const int g = rowGroup[size_t(py)];
+    const float mid = drawTimes ? 0.f : float(shutter.time(g, double(y0 + py) + 0.5, 0.5) - tBase);
     for (int px = 0; px < w; ++px) {
       const int p = py * w + px, gx = x0 + px, gy = y0 + py;
       const int pat = pattern.patternOf(gx, gy);
-      const int g = rowGroup[size_t(py)];
-      // Untimed: one time per pixel, the middle of its interval; planes in sample order.
-      float mid = 0.f;
-      if (drawTimes) {
-        pattern.times(gx, gy, stratumOf.data(), u.data());
-      } else {
-        mid = float(shutter.time(g, float(gy) + 0.5f, 0.5f) - tBase);
-        for (int i = 0; i < N; ++i) stratumOf[size_t(i)] = uint16_t(i);
-      }
+      if (drawTimes) pattern.times(gx, gy, stratumOf.data(), u.data());
       if (lensPlanes) pattern.lensPlanes(gx, gy, stratumOf.data(), lensTimeBlocks, lensOf.data(), disk.data());
       // A global box shutter (the usual case): time() is open + u * length for every sample,
       // the same sum, without its per-sample test.
@@ -97,6 +94,7 @@ void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
         idxOf[size_t(p) * N + i] = uint32_t(idx);
       }
     }
+  }
   if (!drawTimes) {
     // Nothing reads the times: the region's range is its strata's, unwidened.
     for (int g = 0; g < G; ++g)

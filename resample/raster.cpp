@@ -29,7 +29,7 @@ void RasterStats::add(const RasterStats& o) {
   lensScanned += o.lensScanned;
   lensLayers += o.lensLayers;
   lensSegmentDraws += o.lensSegmentDraws;
-  untimedSamples += o.untimedSamples;
+  midIntervalSamples += o.midIntervalSamples;
   transparentParts += o.transparentParts;
 }
 
@@ -61,7 +61,7 @@ void BucketRasterizer::Impl::begin(int rx0, int ry0, int rw, int rh) {
   }
   reset(slots);
   stats = RasterStats{};
-  if (!drawTimes) stats.untimedSamples = uint64_t(P) * uint64_t(N);
+  if (!drawTimes) stats.midIntervalSamples = uint64_t(P) * uint64_t(N);
   volumesHere = volumes && volumes->touches(double(x0), double(y0), double(x0 + w), double(y0 + h));
   if (volumesHere) volumes->beginRegion(x0, y0, w, h);
   queued.clear(), chunks.clear(), movingTimes.clear();

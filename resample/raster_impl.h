@@ -286,6 +286,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   } stillLens;
   std::vector<double> lensTimes;  // a chunk's bound times (local), in order
   std::vector<uint8_t> segmentBounded;  // [bound time]: every corner projects
+  std::vector<uint8_t> segmentTouches;  // [knot segment of a chunk's bound times]: its box reaches the region
   std::vector<LensChunk> lensChunks;
   std::vector<LensDraw> lensDraws;
   std::vector<uint32_t> lensOrder;  // lensDraws by layer

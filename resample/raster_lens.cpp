@@ -99,7 +99,13 @@ void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileE
     const float by0 = *std::min_element(ys, ys + n), by1 = *std::max_element(ys, ys + n);
     return !boxMissesRegion(bx0 + sxLo, by0 + syLo, bx1 + sxHi, by1 + syHi, 2.f);
   };
-  if (!touchesRegion(0, C - 1)) {
+  // Which knot segments' boxes reach the region (a still chunk or an instant: its one
+  // position); a chunk none of whose segments does is dropped whole.
+  const size_t segments = C > 1 ? C - 1 : 1;
+  segmentTouches.resize(segments);
+  bool touches = false;
+  for (size_t seg = 0; seg < segments; ++seg) touches |= (segmentTouches[seg] = touchesRegion(seg, std::min(seg + 1, C - 1)));
+  if (!touches) {
     stats.chunkCulledMicropolygons += ch.m1 - ch.m0;
     return;
   }
@@ -118,9 +124,8 @@ void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileE
   // of a curved path. Each sample belongs to one segment (segLo <= its time < segHi, in st
   // units, the knots' times rounded once), so it tests the micropolygon once.
   const int blocks = lensTimeBlocks, perBlock = N / blocks;
-  const size_t segments = C > 1 ? C - 1 : 1;
   for (size_t seg = 0; seg < segments; ++seg) {
-    if (segments > 1 && !touchesRegion(seg, seg + 1)) continue;
+    if (!segmentTouches[seg]) continue;
     float thetaA = 0, invLen = 0, uErr = 0;
     const uint32_t blockF = uint32_t(lensBlockF.size());
     if (C > 1) {

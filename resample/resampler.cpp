@@ -210,8 +210,6 @@ std::vector<Source> withSharedEnds(std::vector<Source> sources) {
   return sources;
 }
 
-/// Everything the buckets read and none writes: the validated window and shutter, the camera's
-/// view, the sample pattern, the output variables and their filters, the buckets.
 /// Whether the samples must draw their times (RasterOptions::sampleTimes): not at an instant
 /// without a rolling read-out (every sample's time is then its group's, drawn or not), nor when
 /// nothing the render draws reads them - no moving part or view, no colours shaded in time, every
@@ -232,6 +230,8 @@ bool drawsSampleTimes(const std::vector<Source>& sources, const ShutterModel& sh
   return false;
 }
 
+/// Everything the buckets read and none writes: the validated window and shutter, the camera's
+/// view, the sample pattern, the output variables and their filters, the buckets.
 struct Plan {
   Plan(const RenderSpec& spec, const Window& window, const ShutterModel& shutter)
       : spec(spec),

@@ -508,7 +508,7 @@ TEST(ResampleHard, ChunkGathersFindEveryMicropolygonsSamples) {
 // the shutter, draws them.
 TEST(ResampleHard, UntimedSamplesGiveTheImageOfDrawnTimes) {
   ScratchDir dir;
-  const SyntheticCase still{"untimed", 1, 0, 0.4};
+  const SyntheticCase still{"still", 1, 0, 0.4};
   auto reader = syntheticStore(dir, still, 8000, 4);
   for (int shutter = 0; shutter < 6; ++shutter)
     for (const KernelSet& k : kernelSets()) {
@@ -520,38 +520,39 @@ TEST(ResampleHard, UntimedSamplesGiveTheImageOfDrawnTimes) {
       spec.raster.vectorKernels = k.vector, spec.raster.avx512Kernels = k.avx512;
       spec.aovs = {AovRequest::parse("id", "test"), AovRequest::parse("z", "test")};
       spec.deep = true;
-      const RenderResult untimed = render(spec);
+      const RenderResult skipped = render(spec);
       spec.raster.skipUnreadTimes = false;
-      const RenderResult timed = render(spec);
+      const RenderResult drawn = render(spec);
       const std::string what = std::string(k.name) + " shutter " + std::to_string(shutter);
-      EXPECT_GE(untimed.stats.raster.untimedSamples, untimed.stats.samples) << what;  // every sample, margins included
-      EXPECT_EQ(timed.stats.raster.untimedSamples, 0u) << what;
-      ASSERT_GT(timed.stats.raster.hits, 0u) << what;
+      EXPECT_GE(skipped.stats.raster.midIntervalSamples, skipped.stats.samples) << what;  // every sample, margins included
+      EXPECT_EQ(drawn.stats.raster.midIntervalSamples, 0u) << what;
+      ASSERT_GT(drawn.stats.raster.hits, 0u) << what;
       if (shutter == 5) {
-        EXPECT_GT(untimed.stats.raster.lensMicropolygons, 0u) << what;
+        EXPECT_GT(skipped.stats.raster.lensMicropolygons, 0u) << what;
       }
-      expectSameOutputs(untimed, timed, what);
+      expectSameOutputs(skipped, drawn, what);
     }
-  // Times are read: by a moving store, and where a store covers only part of the shutter; but
-  // at an instant every sample's time is the same, drawn or not, and the moving image is too.
+  // A moving store reads the times; but at an instant every sample's time is the same, drawn or
+  // not, and so is the moving image.
   auto moving = syntheticStore(dir, SyntheticCase{"moving", 3, 8, 0.2}, 4000, 5);
-  EXPECT_EQ(render(comparisonSpec(moving, 0)).stats.raster.untimedSamples, 0u);
+  EXPECT_EQ(render(comparisonSpec(moving, 0)).stats.raster.midIntervalSamples, 0u);
   for (const KernelSet& k : kernelSets()) {
     RenderSpec instant = comparisonSpec(moving, 3);
     instant.raster.vectorKernels = k.vector, instant.raster.avx512Kernels = k.avx512;
     instant.deep = true;
-    const RenderResult untimed = render(instant);
+    const RenderResult skipped = render(instant);
     instant.raster.skipUnreadTimes = false;
-    const RenderResult timed = render(instant);
-    EXPECT_GT(untimed.stats.raster.untimedSamples, 0u) << k.name;
-    EXPECT_EQ(timed.stats.raster.untimedSamples, 0u) << k.name;
-    EXPECT_LT(untimed.stats.raster.staticMicropolygons, untimed.stats.raster.micropolygons) << k.name;  // some took a moving path
-    expectSameOutputs(untimed, timed, std::string("moving at an instant, ") + k.name);
+    const RenderResult drawn = render(instant);
+    EXPECT_GT(skipped.stats.raster.midIntervalSamples, 0u) << k.name;
+    EXPECT_EQ(drawn.stats.raster.midIntervalSamples, 0u) << k.name;
+    EXPECT_LT(skipped.stats.raster.staticMicropolygons, skipped.stats.raster.micropolygons) << k.name;  // some took a moving path
+    expectSameOutputs(skipped, drawn, std::string("moving at an instant, ") + k.name);
   }
+  // So does a render where a store covers only part of the shutter.
   RenderSpec beyond = comparisonSpec(reader, 0);
   beyond.shutter = ShutterModel::progressive(1.5, 2.5);
   beyond.sources.push_back(Source{reader, 2});
-  EXPECT_EQ(render(beyond).stats.raster.untimedSamples, 0u);
+  EXPECT_EQ(render(beyond).stats.raster.midIntervalSamples, 0u);
 }
 
 // Interlaced fields drawn in one pass - each moving micropolygon bounded, gathered and tested once
