@@ -126,7 +126,10 @@ struct ShadeCommand {
                  cat(std::round(r.shade.shadowBuildSeconds * 100) / 100), " s)",
                  r.shade.shadingTimes.size() > 1 ? cat("; in time: ", r.shade.blendedTimes, " grid times blended between shaded ones, ", r.shade.reusedVertices,
                                                        " vertex shadings kept from the first time (only shadows could change, and did not), ",
-                                                       r.shade.stillOnlyRays, " rays against still micropolygons only (no moving caster could block them)")
+                                                       r.shade.stillOnlyRays, " rays against still micropolygons only (no moving caster could block them), ",
+                                                       r.shade.carriedTimes, " grid times of rigidly moving grids carried from the first (not diced again), ",
+                                                       r.shade.rigidMicropolygons, " moving micropolygons in ", r.shade.rigidCasters,
+                                                       " rigidly moving shadow casters (a still BVH each, instanced)")
                                                  : std::string()));
     });
     shade::readRibScene(scene, sceneBuilder, opt.dice.cullMargin);

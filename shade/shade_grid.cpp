@@ -162,21 +162,10 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
   // Per stored light, its share reaching the vertex: 1 for the grid's lights until a shadow ray
   // says less, 0 for the others (kept only for the view-dependent terms' inputs).
   std::vector<float> visibility(keepView ? c.lit.size() : 0, 0.f);
-  if (reuse && reuse->recording) reuse->visibility.assign(nV * lights.size(), 1.f), reuse->stillBlocked.clear();
-  size_t ray = 0;  // reuse: the next ray of the first time's order
+  if (reuse && reuse->recording) reuse->visibility.assign(nV * lights.size(), 1.f), reuse->traced.assign(nV * lights.size(), {}), reuse->open.clear();
+  const bool reusing = reuse && !reuse->recording;
   std::vector<ShadowRay> rays;
-  // Whether a ray is blocked at this time: by still micropolygons (reusing: the first time's
-  // answer), then by the moving ones - unless no moving caster can reach the grid.
-  auto blocked = [&](const ShadowRay& r) {
-    bool still;
-    if (reuse && !reuse->recording) {
-      still = reuse->stillBlocked[ray++];
-    } else {
-      still = c.shadows->occludedByStill(r.origin, r.dir, r.tfar);
-      if (reuse) reuse->stillBlocked.push_back(still);
-    }
-    return still || (!stillCastersOnly && c.shadows->occludedByMoving(r.origin, r.dir, r.tfar, time));
-  };
+  auto byMoving = [&](const ShadowRay& r) { return !stillCastersOnly && c.shadows->occludedByMoving(r.origin, r.dir, r.tfar, time); };
   for (size_t i = 0; i < nV; ++i) {
     if (keepView)
       for (const LitLight& l : lights)
@@ -188,21 +177,40 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
     if (traces) {
       // Each shadowed light's Cl scaled by the share of it that reaches this point; lights
       // behind the point's shading hemisphere add nothing and trace nothing.
-      const glm::dvec3 Nf = facingNormal(in);
-      const glm::dvec3 Ng = glm::dot(in.Ng, in.Ng) > 0 ? glm::normalize(in.Ng) : Nf;
-      const double floorBias = 1e-6 * std::max({std::abs(in.P.x), std::abs(in.P.y), std::abs(in.P.z), 1.0});
-      bool asFirst = reuse && !reuse->recording;
+      glm::dvec3 Nf(0), Ng(0);
+      double floorBias = 0;
+      if (!reusing) {
+        Nf = facingNormal(in);
+        Ng = glm::dot(in.Ng, in.Ng) > 0 ? glm::normalize(in.Ng) : Nf;
+        floorBias = 1e-6 * std::max({std::abs(in.P.x), std::abs(in.P.y), std::abs(in.P.z), 1.0});
+      }
+      bool asFirst = reusing;
       for (size_t li = 0; li < lights.size(); ++li) {
         shadowed[li].Cl0 = lights[li].Cl0;  // the previous vertex scaled it
-        glm::dvec3 L, Cl;
-        if (!lights[li].shadows || !illuminate(lights[li], in.P, L, Cl) || !(glm::dot(L, Nf) > 0)) continue;
-        uint64_t seed = hashCombine(hashCombine(leafIndex, i), li);
-        if (k > 0 && !reuse) seed = hashCombine(seed, k);
-        const size_t n = shade::shadowRays(lights[li], in.P, Ng, std::max(double(bias[i]), floorBias), c.shadowSamples, seed, rays);
-        if (n == 0) continue;
-        size_t visible = 0;
-        for (const ShadowRay& r : rays) visible += !blocked(r);
-        shadowRays += rays.size();
+        size_t n = 0, visible = 0;
+        if (reusing) {
+          // The first time's rays that no still micropolygon blocked, against the moving ones.
+          const ShadowReuse::Traced& t = reuse->traced[i * lights.size() + li];
+          if (t.n == 0) continue;
+          n = t.n;
+          for (size_t r = t.first; r < size_t(t.first) + t.open; ++r) visible += !byMoving(reuse->open[r]);
+          shadowRays += t.open;
+        } else {
+          glm::dvec3 L, Cl;
+          if (!lights[li].shadows || !illuminate(lights[li], in.P, L, Cl) || !(glm::dot(L, Nf) > 0)) continue;
+          uint64_t seed = hashCombine(hashCombine(leafIndex, i), li);
+          if (k > 0 && !reuse) seed = hashCombine(seed, k);
+          n = shade::shadowRays(lights[li], in.P, Ng, std::max(double(bias[i]), floorBias), c.shadowSamples, seed, rays);
+          if (n == 0) continue;
+          ShadowReuse::Traced* t = reuse ? &reuse->traced[i * lights.size() + li] : nullptr;
+          if (t) t->n = uint32_t(n), t->first = uint32_t(reuse->open.size());
+          for (const ShadowRay& r : rays) {
+            if (c.shadows->occludedByStill(r.origin, r.dir, r.tfar)) continue;
+            if (t) reuse->open.push_back(r), ++t->open;
+            visible += !byMoving(r);
+          }
+          shadowRays += rays.size();
+        }
         const double share = double(visible) / double(n);
         shadowed[li].Cl0 *= share;
         if (lights[li].stored < visibility.size()) visibility[lights[li].stored] = float(share);

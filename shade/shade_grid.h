@@ -75,11 +75,16 @@ struct ShadeContext {
 /// Shading in time for a grid whose shading can change only through moving casters' shadows (it
 /// stands still, its lights stand still, nothing of it is animated): its shadow rays are the same
 /// at every time, so the first time records which of them still micropolygons block, later times
-/// trace only the rest and only against the moving ones, and a vertex whose every light comes
+/// trace only the rest and only against the moving ones (the same rays: kept, not made again), and a vertex whose every light comes
 /// out as visible as at the first time keeps that time's outputs (nothing else can differ).
 struct ShadowReuse {
-  bool recording = true;                                   // the first time: record; later: reuse
-  std::vector<uint8_t> stillBlocked;                       // per ray, in the order traced
+  bool recording = true;  // the first time: record; later: reuse
+  struct Traced {         // one light at one vertex
+    uint32_t n = 0;       // the share's denominator (0: not traced - the light is behind, or casts no shadows)
+    uint32_t first = 0, open = 0;  // its rays that no still micropolygon blocks, in `open`
+  };
+  std::vector<Traced> traced;                              // [vertex * lights + light]
+  std::vector<ShadowRay> open;                             // the rays later times trace (against the moving micropolygons only)
   std::vector<float> visibility;                           // [vertex * lights + light] at the first time (1: not traced)
   const std::vector<std::vector<float>>* first = nullptr;  // the first time's outputs (reusing)
   uint64_t reusedVertices = 0;
@@ -94,6 +99,9 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
                    double time, size_t k, uint64_t leafIndex, std::vector<std::vector<float>>& attrs, uint64_t& shadowRays, ShadowReuse* reuse = nullptr,
                    bool stillCastersOnly = false);
 
+/// Whether the affine part of `m` can be inverted without losing most of its digits: its
+/// determinant against the product of its columns' lengths (1 for a rotation at any scale).
+bool wellInvertible(const glm::dmat4& m);
 /// Whether a primitive's colour, opacity or shader is given at several times (a motion block).
 bool animated(const Attributes& a);
 /// Whether a light is somewhere else (in camera space) at the interval's close than at its open.
@@ -106,6 +114,6 @@ bool mayShadeDifferently(const ShadeContext& c, uint32_t pi, std::span<const glm
 bool onlyShadowsChange(const ShadeContext& c, uint32_t pi, bool moves, std::span<const uint32_t> lights);
 /// Shades a candidate at the other times; whether it kept them (shade_in_time.cpp).
 bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const DicedGrid& g, bool moves, std::span<const uint32_t> lightIdx, uint64_t leafIndex,
-                 GridOut& out, uint64_t& shadowRays, ShadowReuse* reuse, uint64_t& blendedTimes);
+                 GridOut& out, uint64_t& shadowRays, ShadowReuse* reuse, uint64_t& blendedTimes, uint64_t& carriedTimes);
 
 }  // namespace reshutter::shade::pass

@@ -3,6 +3,9 @@
 #include <algorithm>
 #include <cmath>
 
+#include <glm/gtc/matrix_inverse.hpp>
+#include <glm/matrix.hpp>
+
 #include "shade/shade_grid.h"
 
 namespace reshutter::shade::pass {
@@ -24,7 +27,42 @@ bool translatesRigidly(std::span<const glm::vec3> P, size_t nV, size_t K) {
   return true;
 }
 
+/// Grid `g`, diced at the shading time `shadeAt`, as diceLeaf() would dice it at time `t` when
+/// its primitive moves rigidly: its shading geometry carried by M(t) · M(shadeAt)^-1, the same up
+/// to rounding without evaluating the surface again. False when the primitive's shape changes
+/// over time (deformation keys, a camera-facing kind), a transform is nearly singular, or the
+/// motion turns it inside out (the dicing's winding changes, so the grid is diced again and
+/// found to differ).
+bool carryRigidly(const Primitive& p, const DicedGrid& g, double shadeAt, double t, DicedGrid& out) {
+  if (p.times.size() > 1 || p.kind == PrimKind::Curve || p.kind == PrimKind::Point) return false;
+  const glm::dmat4 from = p.xform->at(shadeAt), to = p.xform->at(t);
+  if (!wellInvertible(from) || !wellInvertible(to) || (glm::determinant(from) < 0) != (glm::determinant(to) < 0)) return false;
+  const glm::dmat4 R = to * glm::inverse(from);
+  const glm::dmat3 normals = glm::inverseTranspose(glm::dmat3(R));
+  const size_t nV = g.numVertices;
+  out.nu = g.nu, out.nv = g.nv, out.numVertices = g.numVertices;
+  out.positions.clear(), out.corners.clear();
+  out.P.resize(nV), out.N.resize(nV), out.Ng.resize(nV);
+  auto carryNormal = [&](const glm::dvec3& n) {
+    const glm::dvec3 m = normals * n;
+    const double len = glm::length(m);
+    return len > 0 ? m / len : n;
+  };
+  for (size_t i = 0; i < nV; ++i) {
+    out.P[i] = glm::dvec3(R * glm::dvec4(g.P[i], 1.0));
+    out.N[i] = carryNormal(g.N[i]), out.Ng[i] = carryNormal(g.Ng[i]);
+  }
+  out.u = g.u, out.v = g.v, out.s = g.s, out.t = g.t;
+  return true;
+}
+
 }  // namespace
+
+bool wellInvertible(const glm::dmat4& m) {
+  const double det = glm::determinant(glm::dmat3(m));
+  const double bound = glm::length(glm::dvec3(m[0])) * glm::length(glm::dvec3(m[1])) * glm::length(glm::dvec3(m[2]));
+  return std::isfinite(det) && std::isfinite(bound) && std::abs(det) > 1e-9 * bound;
+}
 
 bool animated(const Attributes& a) { return a.color.values.size() > 1 || a.opacity.values.size() > 1 || a.surface.values.size() > 1; }
 
@@ -78,7 +116,7 @@ bool onlyShadowsChange(const ShadeContext& c, uint32_t pi, bool moves, std::span
 /// ends, the span's other times are blended too rather than shaded (linear between the shaded
 /// times, as the re-sampler blends them). Tolerance 0 shades every time.
 bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const DicedGrid& g, bool moves, std::span<const uint32_t> lightIdx, uint64_t leafIndex,
-                 GridOut& out, uint64_t& shadowRays, ShadowReuse* reuse, uint64_t& blendedTimes) {
+                 GridOut& out, uint64_t& shadowRays, ShadowReuse* reuse, uint64_t& blendedTimes, uint64_t& carriedTimes) {
   const Primitive& p = c.scene.prims[pi];
   const size_t T = c.times.size();
   std::vector<std::vector<std::vector<float>>> at(T);
@@ -94,8 +132,12 @@ bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const Dic
     // shadows and shader can differ): no second dicing.
     const DicedGrid* geometry = &g;
     if (moves) {
-      diceLeaf(p, leaf, c.split.knots[pi], c.times[k], c.nearClip, c.perspective, gk);
-      if (gk.numVertices != g.numVertices || gk.corners != out.corners) return false;
+      if (carryRigidly(p, g, c.shadeAt, c.times[k], gk)) {
+        ++carriedTimes;
+      } else {
+        diceLeaf(p, leaf, c.split.knots[pi], c.times[k], c.nearClip, c.perspective, gk);
+        if (gk.numVertices != g.numVertices || gk.corners != out.corners) return false;
+      }
       geometry = &gk;
     }
     lights.clear();

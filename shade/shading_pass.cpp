@@ -8,9 +8,11 @@
 #include <chrono>
 #include <cmath>
 #include <filesystem>
+#include <map>
 #include <memory>
 #include <span>
 
+#include <glm/matrix.hpp>
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_pipeline.h>
 #include <tbb/task_arena.h>
@@ -58,7 +60,7 @@ struct Batch {
   size_t first = 0, count = 0;  // into the flattened leaf list
   std::vector<GridOut> grids;
   uint64_t dropped = 0, trimmed = 0, shadowRays = 0;
-  uint64_t timeCandidates = 0, timed = 0, timedMicropolygons = 0, reusedVertices = 0, blendedTimes = 0, stillOnlyRays = 0;
+  uint64_t timeCandidates = 0, timed = 0, timedMicropolygons = 0, reusedVertices = 0, blendedTimes = 0, carriedTimes = 0, stillOnlyRays = 0;
 };
 
 using BatchPtr = std::shared_ptr<Batch>;
@@ -234,7 +236,7 @@ void shadeBatch(const ShadeContext& c, Batch& b) {
     if (stillCastersOnly) b.stillOnlyRays += shadowRays - raysBefore;
     if (candidate) {
       ++b.timeCandidates;
-      if (shadeInTime(c, pi, *leaf, g, moves, lightIdx, b.first + n, out, shadowRays, reusing, b.blendedTimes))
+      if (shadeInTime(c, pi, *leaf, g, moves, lightIdx, b.first + n, out, shadowRays, reusing, b.blendedTimes, b.carriedTimes))
         ++b.timed, b.timedMicropolygons += out.corners.size() / 4;
       b.reusedVertices += reuse.reusedVertices;
     }
@@ -259,6 +261,7 @@ class GridSender {
     stats_.timedGrids += b.timed;
     stats_.reusedVertices += b.reusedVertices;
     stats_.blendedTimes += b.blendedTimes;
+    stats_.carriedTimes += b.carriedTimes;
     stats_.stillOnlyRays += b.stillOnlyRays;
     stats_.timedMicropolygons += b.timedMicropolygons;
     for (GridOut& go : b.grids)
@@ -347,11 +350,58 @@ bool wantsShadows(const FrameScene& scene, std::span<const LitLight> lit, double
   return false;
 }
 
+/// The rigid motions of the primitives that move rigidly over the shading times, shared by the
+/// primitives under one transform (the same knots): (for each primitive, its motion's index or
+/// -1; the motions relative to the first knot, ShadowScene::RigidMotion). A primitive whose
+/// shape deforms, whose transform stands still, or whose first transform cannot be inverted has none.
+std::vector<int> rigidMotions(const ShadeContext& c, const SplitScene& split, std::vector<ShadowScene::RigidMotion>& motions) {
+  std::vector<int> of(c.scene.prims.size(), -1);
+  if (c.times.size() <= 1) return of;
+  std::map<std::pair<const MotionXform*, std::vector<double>>, int> seen;
+  for (size_t pi = 0; pi < of.size(); ++pi) {
+    const Primitive& p = c.scene.prims[pi];
+    const std::vector<double>& knots = split.knots[pi];
+    if (knots.size() <= 1 || p.times.size() > 1 || !p.xform->moving() || !p.attrs->transmission) continue;
+    if (p.kind == PrimKind::Curve || p.kind == PrimKind::Point) continue;  // they turn to face the eye
+    const auto [at, fresh] = seen.try_emplace({p.xform.get(), knots}, int(motions.size()));
+    if (fresh) {
+      const glm::dmat4 first = p.xform->at(knots[0]);
+      if (!wellInvertible(first)) {
+        at->second = -1;
+      } else {
+        ShadowScene::RigidMotion m{knots, {}};
+        const glm::dmat4 back = glm::inverse(first);
+        for (double t : knots) m.mats.push_back(p.xform->at(t) * back);
+        motions.push_back(std::move(m));
+      }
+    }
+    of[pi] = at->second;
+  }
+  return of;
+}
+
+/// Whether the knot positions of a piece (knot-major, nV vertices each) are mats[k] · its first
+/// knot's, within float rounding - the promise a rigid motion makes to ShadowScene.
+bool movesBy(const std::vector<glm::vec3>& positions, size_t nV, const ShadowScene::RigidMotion& m) {
+  float scale = 0;
+  for (const glm::vec3& q : positions) scale = std::max({scale, std::abs(q.x), std::abs(q.y), std::abs(q.z)});
+  const double eps = 1e-6 * double(scale);
+  for (size_t k = 1; k < m.mats.size(); ++k)
+    for (size_t v = 0; v < nV; ++v) {
+      const glm::dvec3 d = glm::dvec3(m.mats[k] * glm::dvec4(glm::dvec3(positions[v]), 1.0)) - glm::dvec3(positions[k * nV + v]);
+      if (!(std::abs(d.x) <= eps && std::abs(d.y) <= eps && std::abs(d.z) <= eps)) return false;
+    }
+  return true;
+}
+
 /// The frame's micropolygons at the shading time, every leaf of a primitive that casts shadows
 /// diced again (the shading pass's grids stream out; keeping them all would hold the frame) -
 /// from `split`, the frame's own leaves, or leaves split at a coarser shadow rate.
 std::unique_ptr<ShadowScene> buildShadowScene(const ShadeContext& c, const SplitScene& split, MovingCasters* movingCasters = nullptr) {
   std::vector<ShadowScene::Piece> pieces(split.flat.size());
+  std::vector<ShadowScene::RigidMotion> motions;
+  const std::vector<int> rigidOf = rigidMotions(c, split, motions);
+  std::vector<ShadowBox> moved(pieces.size());  // a moving piece's box over the interval
   tbb::parallel_for(tbb::blocked_range<size_t>(0, pieces.size(), 8), [&](const tbb::blocked_range<size_t>& r) {
     DicedGrid g;
     for (size_t i = r.begin(); i != r.end(); ++i) {
@@ -359,10 +409,20 @@ std::unique_ptr<ShadowScene> buildShadowScene(const ShadeContext& c, const Split
       const Primitive& p = c.scene.prims[pi];
       if (!p.attrs->transmission) continue;
       diceLeaf(p, *leaf, split.knots[pi], c.shadeAt, c.nearClip, c.perspective, g);
-      if (c.times.size() > 1 && split.knots[pi].size() > 1) {
+      const size_t K = split.knots[pi].size();
+      if (c.times.size() > 1 && K > 1) {
         // Shading in time: the micropolygons move over the interval (their positions at the knots).
-        pieces[i].P = std::move(g.positions);
-        pieces[i].knots = split.knots[pi];
+        const bool moves = !store::verticesStandStill(g.positions, g.numVertices, 0, g.numVertices);
+        if (moves)
+          for (const glm::vec3& q : g.positions) moved[i].add(q);
+        const int rigid = rigidOf[pi];
+        if (moves && rigid >= 0 && movesBy(g.positions, g.numVertices, motions[size_t(rigid)])) {
+          pieces[i].P.assign(g.positions.begin(), g.positions.begin() + g.numVertices);
+          pieces[i].rigid = rigid;
+        } else {
+          pieces[i].P = std::move(g.positions);
+          pieces[i].knots = split.knots[pi];
+        }
       } else {
         pieces[i].P.assign(g.P.begin(), g.P.end());
       }
@@ -375,15 +435,13 @@ std::unique_ptr<ShadowScene> buildShadowScene(const ShadeContext& c, const Split
     std::vector<ShadowBox> boxes;
     uint32_t last = UINT32_MAX;
     for (size_t i = 0; i < pieces.size(); ++i) {
-      if (pieces[i].knots.size() <= 1) continue;
-      const size_t nV = pieces[i].P.size() / pieces[i].knots.size();
-      if (store::verticesStandStill(pieces[i].P, nV, 0, nV)) continue;
+      if (!(moved[i].lo.x <= moved[i].hi.x)) continue;
       if (split.flat[i].first != last) boxes.emplace_back(), last = split.flat[i].first;
-      for (const glm::vec3& q : pieces[i].P) boxes.back().add(q);
+      boxes.back().lo = glm::min(boxes.back().lo, moved[i].lo), boxes.back().hi = glm::max(boxes.back().hi, moved[i].hi);
     }
     if (!boxes.empty()) *movingCasters = MovingCasters(c.lit, std::move(boxes));
   }
-  return c.times.size() > 1 ? std::make_unique<ShadowScene>(pieces, c.times.front(), c.times.back()) : std::make_unique<ShadowScene>(pieces);
+  return c.times.size() > 1 ? std::make_unique<ShadowScene>(pieces, c.times.front(), c.times.back(), motions) : std::make_unique<ShadowScene>(pieces);
 }
 
 // The texture search path with relative entries taken from the RIB file's directory, which is
@@ -473,6 +531,7 @@ ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::Gri
       shadows = buildShadowScene(context, splitScene(scene, iv, cam, coarse, ignored), &context.movingCasters);
     }
     stats.shadowMicropolygons = shadows->micropolygons();
+    stats.rigidCasters = shadows->rigidInstances(), stats.rigidMicropolygons = shadows->rigidMicropolygons();
     stats.shadowBuildSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }
   context.shadows = shadows.get();

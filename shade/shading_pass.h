@@ -66,11 +66,13 @@ struct ShadeStats {
   uint64_t textureLookups = 0;                      // filtered texture lookups (shade/texture.h), one per textured vertex
   uint64_t missingTextures = 0;                     // textures that could not be read (shown magenta)
   uint64_t shadowMicropolygons = 0;                 // in the shadow scene (0: no light asked for shadows)
+  uint64_t rigidCasters = 0, rigidMicropolygons = 0;  // shading in time: the rigid motions instanced in it, and the micropolygons moved so
   uint64_t shadowRays = 0;                          // traced towards lights
   double shadowBuildSeconds = 0;                    // dicing the frame for the shadow scene and building its BVH
   uint64_t timeCandidateGrids = 0;                  // shading in time: grids whose shading could change, shaded at every time
   uint64_t timedGrids = 0, timedMicropolygons = 0;  // of them, those that changed enough to keep every time
   uint64_t blendedTimes = 0;                        // candidates' later times blended between shaded ones (their middle lay within the tolerance of the blend)
+  uint64_t carriedTimes = 0;         // moving candidates' later times carried by their rigid motion from the first, not diced again
   uint64_t reusedVertices = 0;       // vertex shadings at later times that kept the first time's outputs (only shadows could change, and did not)
   uint64_t stillOnlyRays = 0;        // rays of grids no moving caster can shadow, traced against the still micropolygons only
   std::vector<double> shadingTimes;  // empty: shaded once

@@ -19,10 +19,12 @@ namespace reshutter::shade {
 struct ShadowScene::Impl {
   RTCDevice device = nullptr;
   RTCScene still = nullptr, moving = nullptr;  // moving: only when some piece moves
+  std::vector<RTCScene> instanced;             // the rigidly moving pieces' own BVHs, instanced in `moving`
   double open = 0, close = 0;                  // the moving pieces' interval (Embree's ray time 0 to 1)
   ~Impl() {
     if (still) rtcReleaseScene(still);
     if (moving) rtcReleaseScene(moving);
+    for (RTCScene s : instanced) rtcReleaseScene(s);
     if (device) rtcReleaseDevice(device);
   }
 };
@@ -57,22 +59,29 @@ void stepPositions(const ShadowScene::Piece& p, size_t nV, unsigned step, unsign
   }
 }
 
-// Embree time steps for a piece: 1 when it stands still, its knots when they are evenly spread
-// over [open, close], else twice as many even steps.
+// Embree time steps for positions at `knots` over [open, close]: the knots when they are evenly
+// spread over it, else twice as many even steps.
+unsigned stepsForKnots(const std::vector<double>& knots, double open, double close) {
+  const size_t K = knots.size();
+  if (K <= 1 || !(close > open)) return 1;
+  const double span = close - open;
+  bool even = std::abs(knots.front() - open) <= 1e-9 * span && std::abs(knots.back() - close) <= 1e-9 * span;
+  for (size_t k = 0; even && k < K; ++k) even = std::abs(knots[k] - (open + span * double(k) / double(K - 1))) <= 1e-9 * span;
+  return unsigned(even ? K : std::min<size_t>(2 * K, 129));
+}
+
+// Embree time steps for a piece: 1 when it stands still, else as stepsForKnots.
 unsigned stepsFor(const ShadowScene::Piece& p, double open, double close) {
   const size_t K = p.knots.size();
   if (K <= 1 || !(close > open)) return 1;
   const size_t nV = p.P.size() / K;
   if (store::verticesStandStill(p.P, nV, 0, nV)) return 1;
-  const double span = close - open;
-  bool even = std::abs(p.knots.front() - open) <= 1e-9 * span && std::abs(p.knots.back() - close) <= 1e-9 * span;
-  for (size_t k = 0; even && k < K; ++k) even = std::abs(p.knots[k] - (open + span * double(k) / double(K - 1))) <= 1e-9 * span;
-  return unsigned(even ? K : std::min<size_t>(2 * K, 129));
+  return stepsForKnots(p.knots, open, close);
 }
 
 }  // namespace
 
-ShadowScene::ShadowScene(std::span<const Piece> pieces, double open, double close) : impl_(std::make_unique<Impl>()) {
+ShadowScene::ShadowScene(std::span<const Piece> pieces, double open, double close, std::span<const RigidMotion> rigid) : impl_(std::make_unique<Impl>()) {
   impl_->open = open, impl_->close = close;
   impl_->device = rtcNewDevice(nullptr);
   if (!impl_->device) fail("shadows", "Embree could not start (rtcNewDevice)");
@@ -82,15 +91,14 @@ ShadowScene::ShadowScene(std::span<const Piece> pieces, double open, double clos
     rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_MEDIUM);
     return scene;
   };
+  auto movingScene = [&] {
+    if (!impl_->moving) impl_->moving = newScene();
+    return impl_->moving;
+  };
   impl_->still = newScene();
-  // One Embree geometry per count of time steps (a geometry's vertex buffers are its steps).
-  std::map<unsigned, std::vector<size_t>> groups;
-  for (size_t i = 0; i < pieces.size(); ++i)
-    if (!pieces[i].corners.empty()) groups[stepsFor(pieces[i], open, close)].push_back(i);
-  for (const auto& group : groups) {
-    // Named copies, not structured bindings: clang 14 (the fuzz build) cannot capture those.
-    const unsigned steps = group.first;
-    const std::vector<size_t>& members = group.second;
+  // One quad geometry of `members`' micropolygons in `steps` time steps (a geometry's vertex
+  // buffers are its steps), into `scene`.
+  auto attachQuads = [&](RTCScene scene, const std::vector<size_t>& members, unsigned steps) {
     // Where each member's vertices and micropolygons go in the geometry.
     std::vector<uint64_t> vertexBase(members.size() + 1, 0), quadBase(members.size() + 1, 0);
     for (size_t j = 0; j < members.size(); ++j) {
@@ -122,9 +130,48 @@ ShadowScene::ShadowScene(std::span<const Piece> pieces, double open, double clos
       }
     });
     rtcCommitGeometry(geom);
-    if (steps > 1 && !impl_->moving) impl_->moving = newScene();
-    rtcAttachGeometry(steps > 1 ? impl_->moving : impl_->still, geom);
+    rtcAttachGeometry(scene, geom);
     rtcReleaseGeometry(geom);
+    return quadBase.back();
+  };
+  std::map<unsigned, std::vector<size_t>> groups;
+  std::vector<std::vector<size_t>> rigidMembers(rigid.size());
+  const bool interval = close > open;
+  for (size_t i = 0; i < pieces.size(); ++i) {
+    if (pieces[i].corners.empty()) continue;
+    const int r = pieces[i].rigid;
+    if (r >= 0 && size_t(r) < rigid.size() && interval && rigid[size_t(r)].knots.size() > 1) rigidMembers[size_t(r)].push_back(i);
+    else if (r >= 0) fail("shadows", "a piece names rigid motion ", r, " of ", rigid.size(), " outside an interval that moves it");
+    else groups[stepsFor(pieces[i], open, close)].push_back(i);
+  }
+  for (const auto& [steps, members] : groups) attachQuads(steps > 1 ? movingScene() : impl_->still, members, steps);
+  for (size_t r = 0; r < rigid.size(); ++r) {
+    if (rigidMembers[r].empty()) continue;
+    const RigidMotion& motion = rigid[r];
+    if (motion.mats.size() != motion.knots.size()) fail("shadows", "rigid motion ", r, " has ", motion.mats.size(), " transforms for ", motion.knots.size(), " knots");
+    RTCScene local = newScene();
+    impl_->instanced.push_back(local);
+    rigidMicropolygons_ += attachQuads(local, rigidMembers[r], 1);
+    rtcCommitScene(local);
+    ++rigidInstances_;
+    RTCGeometry instance = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_INSTANCE);
+    rtcSetGeometryInstancedScene(instance, local);
+    const unsigned steps = stepsForKnots(motion.knots, open, close);
+    rtcSetGeometryTimeStepCount(instance, steps);
+    for (unsigned s = 0; s < steps; ++s) {
+      // The blend of the knots' matrices at the step's time, as stepPositions() blends positions.
+      size_t k;
+      double w;
+      locate(motion.knots, open + (close - open) * double(s) / double(steps - 1), k, w);
+      const glm::dmat4 m = w == 0 ? motion.mats[k] : motion.mats[k] * (1 - w) + motion.mats[k + 1] * w;
+      float columns[12];
+      for (int c = 0; c < 4; ++c)
+        for (int row = 0; row < 3; ++row) columns[3 * c + row] = float(m[c][row]);
+      rtcSetGeometryTransform(instance, s, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, columns);
+    }
+    rtcCommitGeometry(instance);
+    rtcAttachGeometry(movingScene(), instance);
+    rtcReleaseGeometry(instance);
   }
   rtcCommitScene(impl_->still);
   if (impl_->moving) rtcCommitScene(impl_->moving);

@@ -18,6 +18,7 @@
 #include <vector>
 
 #include <glm/common.hpp>
+#include <glm/mat4x4.hpp>
 #include <glm/vec3.hpp>
 
 #include "shade/shaders.h"
@@ -32,6 +33,16 @@ class ShadowScene {
     std::vector<glm::vec3> P;
     std::vector<uint32_t> corners;
     std::vector<double> knots;  // the positions' times (empty or one: fixed)
+    int rigid = -1;             // >= 0: P is one set of vertices moved by that RigidMotion (knots then empty)
+  };
+  /// How pieces move when they move rigidly (one primitive's, or several under one transform):
+  /// their vertices at knot k are mats[k] · P. Such pieces go into one still BVH of their own,
+  /// instanced with Embree's motion-blurred transforms - a BVH without time steps builds several
+  /// times faster than one over the moving vertices, and the linear blend of the matrices between
+  /// knots moves each vertex exactly as the blend of its positions does.
+  struct RigidMotion {
+    std::vector<double> knots;
+    std::vector<glm::dmat4> mats;
   };
   /// Builds the BVH over every piece's micropolygons (watertight traversal: a ray cannot slip
   /// between two micropolygons that share an edge). With `open` < `close`, moving pieces move
@@ -39,7 +50,7 @@ class ShadowScene {
   /// are resampled onto 2 × knots even steps) and occludedByMoving() takes a time. Still and
   /// moving micropolygons go to two BVHs: rays at a still point need only the moving one at
   /// later times, and the still one carries no time steps.
-  explicit ShadowScene(std::span<const Piece> pieces, double open = 0, double close = 0);
+  explicit ShadowScene(std::span<const Piece> pieces, double open = 0, double close = 0, std::span<const RigidMotion> rigid = {});
   ~ShadowScene();
   ShadowScene(const ShadowScene&) = delete;
   ShadowScene& operator=(const ShadowScene&) = delete;
@@ -50,11 +61,14 @@ class ShadowScene {
   bool occludedByStill(const glm::dvec3& origin, const glm::dvec3& dir, double tfar) const;
   bool occludedByMoving(const glm::dvec3& origin, const glm::dvec3& dir, double tfar, double time) const;
   uint64_t micropolygons() const { return micropolygons_; }
+  /// The rigid motions instanced, and the micropolygons moving that way.
+  uint64_t rigidInstances() const { return rigidInstances_; }
+  uint64_t rigidMicropolygons() const { return rigidMicropolygons_; }
 
  private:
   struct Impl;
   std::unique_ptr<Impl> impl_;
-  uint64_t micropolygons_ = 0;
+  uint64_t micropolygons_ = 0, rigidInstances_ = 0, rigidMicropolygons_ = 0;
 };
 
 /// A camera-space box (the bounds of moving casters and receivers over an interval).

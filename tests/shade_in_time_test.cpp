@@ -93,6 +93,8 @@ TEST(ShadeInTime, ARotatingSquareMatchesItsShadingAtEachInstant) {
   // The path: the square's grids were candidates and kept every time.
   EXPECT_GT(numberBefore(three.report, " of "), 0u) << three.report;
   EXPECT_EQ(numberBefore(three.report, " of "), numberBefore(three.report, " grids that may change")) << three.report;
+  // It rotates rigidly: its later times were carried by its motion, not diced again.
+  EXPECT_GT(numberBefore(three.report, " grid times of rigidly moving grids carried"), 0u) << three.report;
   const auto info = runReshutter("info " + three.store);
   EXPECT_NE(info.out.find("in time at 3 times [0 0.5 1]"), std::string::npos) << info.out;
   double blendErr3 = 0, blendErr9 = 0;
@@ -274,6 +276,9 @@ TEST(ShadeInTime, ShadowsFollowTheCasterThroughTheShutter) {
   // The still floor's later times traced only against the moving sphere, and the vertices its
   // shadow never reached kept their first colour without being shaded again.
   EXPECT_GT(numberBefore(timed.report, " vertex shadings kept from the first time"), 0u) << timed.report;
+  // The sphere translates rigidly: its micropolygons are one still BVH, instanced with its motion.
+  EXPECT_EQ(numberBefore(timed.report, " rigidly moving shadow casters"), 1u) << timed.report;
+  EXPECT_GT(numberBefore(timed.report, " moving micropolygons in "), 0u) << timed.report;
   // Which is exact: at every shading time the floor matches the sphere frozen there, shaded once.
   for (double t : {0.5, 1.0}) {
     const double x = -1 + 2 * t;
@@ -287,6 +292,45 @@ TEST(ShadeInTime, ShadowsFollowTheCasterThroughTheShutter) {
       for (int x2 = 0; x2 < 64; ++x2) differ += std::abs(red(a, x2, y) - red(b, x2, y)) > 0.02f;
     // Pixels whose samples straddle the shadow's edge may differ by a sample or two of rounding.
     EXPECT_LT(differ, 12) << "t=" << t;  // the open's shadow kept would differ over ~100 pixels
+  }
+}
+
+// Casters that rotate (rigidly, over three knots) and that deform (a sphere growing: its shape
+// changes, so it cannot be instanced) over the floor, under the light from straight above: shaded
+// in time, at each shading time the floor matches the casters frozen there and shaded once - the
+// frozen ones are plain still micropolygons, so the instanced motion and the per-vertex motion
+// are checked against geometry that does not move. A rotating caster's later times are carried by
+// its motion (not diced again); the growing sphere's are diced again.
+TEST(ShadeInTime, RotatingAndDeformingCastersShadowAsTheyStandAtEachTime) {
+  ScratchDir dir;
+  // Both fully transparent, so that the camera above sees their shadows under them; the bar's
+  // edges off the floor's vertex grid (a vertex exactly under an edge is a tie either way).
+  const std::string bar = "AttributeBegin\nOpacity [0 0 0]\nTranslate -1.47 2 1.03\nMotionBegin [0 0.5 1]\nRotate 0 0 1 0\nRotate 40 0 1 0\nRotate 90 0 1 0\nMotionEnd\n"
+                          "Polygon \"P\" [-1.5 0 -0.3  -1.5 0 0.3  1.5 0 0.3  1.5 0 -0.3]\nAttributeEnd\n";
+  const std::string growing = "AttributeBegin\nOpacity [0 0 0]\nTranslate 1.5 2 -1.5\nMotionBegin [0 1]\nSphere 0.4 -0.4 0.4 360\nSphere 0.9 -0.9 0.9 360\nMotionEnd\nAttributeEnd\n";
+  const std::string base = edited(kMovingSphereOverFloor, "AttributeBegin\nMotionBegin [0 1]\nTranslate -1 2 0\nTranslate 1 2 0\nMotionEnd\nSphere 0.5 -0.5 0.5 360\nAttributeEnd\n", "");
+  const std::string scene = edited(base, "WorldEnd", bar + growing + "WorldEnd");
+  const Shaded timed = shade(dir, "timed", scene, "--shade-in-time 0 --shade-times 3");
+  EXPECT_EQ(numberBefore(timed.report, " rigidly moving shadow casters"), 1u) << "the bar alone: " << timed.report;
+  EXPECT_GT(numberBefore(timed.report, " grid times of rigidly moving grids carried"), 0u) << timed.report;
+  for (int k : {1, 2}) {
+    const double t = 0.5 * k;
+    std::string frozen = edited(scene, "MotionBegin [0 0.5 1]\nRotate 0 0 1 0\nRotate 40 0 1 0\nRotate 90 0 1 0\nMotionEnd", k == 1 ? "Rotate 40 0 1 0" : "Rotate 90 0 1 0");
+    const double r = 0.4 + 0.5 * t;
+    const std::string rs = std::to_string(r);
+    frozen = edited(frozen, "MotionBegin [0 1]\nSphere 0.4 -0.4 0.4 360\nSphere 0.9 -0.9 0.9 360\nMotionEnd", "Sphere " + rs + " -" + rs + " " + rs + " 360");
+    const Shaded still = shade(dir, "frozen" + std::to_string(k), frozen, "");
+    const auto a = instant(dir, timed.store, t, "timed" + std::to_string(k)), b = instant(dir, still.store, t, "frozen-at" + std::to_string(k));
+    int differ = 0, shadowed = 0;
+    for (int y = 0; y < 64; ++y)
+      for (int x = 0; x < 64; ++x) {
+        differ += std::abs(red(a, x, y) - red(b, x, y)) > 0.02f;
+        shadowed += red(b, x, y) < 0.5f;
+      }
+    EXPECT_GT(shadowed, 150) << "t=" << t << ": the frozen casters shadow the floor";
+    // A pixel whose samples straddle a shadow's edge may differ by rounding; the open's shadows
+    // kept would differ over hundreds.
+    EXPECT_LT(differ, 4) << "t=" << t;
   }
 }
 
