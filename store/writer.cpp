@@ -93,20 +93,31 @@ class RecordLog {
 
 // Record layouts. Vertex: K×3 position words, then every vertex-rate attribute of the schema
 // (zeros where a grid lacks it). Micropolygon: 4 corners, object id, grid id, flags, then every
-// micropolygon-rate attribute.
+// micropolygon-rate attribute. A part of grids shaded once has no words for the attributes
+// carried at later shading times ("Ci@k", ...): its parts never hold them, and most grids of a
+// frame shaded in time are shaded once.
 struct RecordLayout {
-  std::vector<uint32_t> attrOffset;  // per schema attribute, within the vertex or mp record tail
+  struct Field {  // one attribute of the record tail
+    uint32_t attr, offset;
+    int components;
+    bool isUInt, isOpacity;
+  };
+  std::vector<Field> fields[2];  // by AttrRate: the attributes the record holds, in schema order
   uint32_t vertexAttrWords = 0, mpAttrWords = 0;
   static constexpr uint32_t kMpFixedWords = 7;
-  explicit RecordLayout(const Schema& schema) {
-    for (const auto& a : schema.attrs) {
+  RecordLayout(const Schema& schema, bool withTimed) {
+    for (uint32_t ai = 0; ai < schema.attrs.size(); ++ai) {
+      const auto& a = schema.attrs[ai];
+      if (!withTimed && StoreMeta::timedIndex(a.name)) continue;
       uint32_t& words = a.rate == AttrRate::Vertex ? vertexAttrWords : mpAttrWords;
-      attrOffset.push_back(words);
-      words += uint32_t(componentCount(a.type));
+      const int nc = componentCount(a.type);
+      fields[size_t(a.rate)].push_back(Field{ai, words, nc, a.type == AttrType::UInt, StoreMeta::timedBase(a.name) == "Oi"});
+      words += uint32_t(nc);
     }
   }
   uint32_t vertexWords(uint32_t knots) const { return 3 * knots + vertexAttrWords; }
   uint32_t mpWords() const { return kMpFixedWords + mpAttrWords; }
+  const std::vector<Field>& of(AttrRate rate) const { return fields[size_t(rate)]; }
 };
 
 struct Builder {
@@ -150,30 +161,30 @@ void unpack(const Builder& b, const Schema& schema, const RecordLayout& layout, 
     if (a.type == AttrType::UInt) arr.u.resize(n), arr.f.clear();
     else arr.f.resize(n), arr.u.clear();
   }
+  // The fields this part holds (the builder set a presence bit for each attribute it stored).
+  auto present = [&](AttrRate rate) {
+    std::vector<RecordLayout::Field> out;
+    for (const RecordLayout::Field& f : layout.of(rate))
+      if (b.presence >> f.attr & 1) out.push_back(f);
+    return out;
+  };
+  auto copyFields = [&](const std::vector<RecordLayout::Field>& fields, const uint32_t* tail, size_t element) {
+    for (const RecordLayout::Field& f : fields) {
+      if (f.isUInt) part.attrs[f.attr].u[element] = tail[f.offset];
+      else std::memcpy(&part.attrs[f.attr].f[element * size_t(f.components)], tail + f.offset, size_t(f.components) * 4);
+    }
+  };
+  const std::vector<RecordLayout::Field> vertexFields = present(AttrRate::Vertex), mpFields = present(AttrRate::Micropolygon);
   for (uint32_t v = 0; v < nV; ++v) {
     const uint32_t* r = b.vertices.record(v);
     for (uint32_t k = 0; k < K; ++k) std::memcpy(&part.positions[size_t(k) * nV + v], r + 3 * k, 12);
-    const uint32_t* tail = r + 3 * K;
-    for (size_t ai = 0; ai < schema.attrs.size(); ++ai) {
-      const auto& a = schema.attrs[ai];
-      if (a.rate != AttrRate::Vertex || !(b.presence >> ai & 1)) continue;
-      const int nc = componentCount(a.type);
-      if (a.type == AttrType::UInt) part.attrs[ai].u[v] = tail[layout.attrOffset[ai]];
-      else std::memcpy(&part.attrs[ai].f[size_t(v) * nc], tail + layout.attrOffset[ai], size_t(nc) * 4);
-    }
+    copyFields(vertexFields, r + 3 * K, v);
   }
   for (uint32_t m = 0; m < nMp; ++m) {
     const uint32_t* r = b.mps.record(m);
     std::memcpy(&part.corners[size_t(m) * 4], r, 16);
     part.objectId[m] = r[4], part.gridId[m] = r[5], part.flags[m] = uint8_t(r[6]);
-    const uint32_t* tail = r + RecordLayout::kMpFixedWords;
-    for (size_t ai = 0; ai < schema.attrs.size(); ++ai) {
-      const auto& a = schema.attrs[ai];
-      if (a.rate != AttrRate::Micropolygon || !(b.presence >> ai & 1)) continue;
-      const int nc = componentCount(a.type);
-      if (a.type == AttrType::UInt) part.attrs[ai].u[m] = tail[layout.attrOffset[ai]];
-      else std::memcpy(&part.attrs[ai].f[size_t(m) * nc], tail + layout.attrOffset[ai], size_t(nc) * 4);
-    }
+    copyFields(mpFields, r + RecordLayout::kMpFixedWords, m);
   }
 }
 
@@ -196,7 +207,7 @@ struct StoreWriter::Impl {
   std::vector<std::unique_ptr<Builder>> full;
   std::vector<std::unique_ptr<Builder>> spareBuilders;
   ChunkPool chunks;
-  RecordLayout layout;
+  RecordLayout layouts[2];  // [shaded in time]: a part's records hold the later times' attributes only when its grids carry them
   std::vector<TileEntry> entries;
   bool failed = false, closed = false;
   WriteStats stats;
@@ -206,7 +217,6 @@ struct StoreWriter::Impl {
   std::span<const glm::vec3> gridPositions;
   bool gridShadedInTime = false;
   // Per schema attribute: an opacity ("Oi" or "Oi@k"), whose values set the transparency effects.
-  std::vector<uint8_t> isOpacity;
   int firstTimedColour = -1;  // "Ci@1": present in a grid that is shaded in time
   // Per-grid scratch, reused.
   std::vector<glm::dvec2> raster;  // knot-major
@@ -231,8 +241,7 @@ struct StoreWriter::Impl {
     return it->second;
   }
 
-  Impl(const std::string& path, StoreMeta m, WriterOptions o) : meta(std::move(m)), options(o), file(path), projector(meta.cameras.at(0)), layout(meta.schema) {
-    for (const auto& a : meta.schema.attrs) isOpacity.push_back(StoreMeta::timedBase(a.name) == "Oi");
+  Impl(const std::string& path, StoreMeta m, WriterOptions o) : meta(std::move(m)), options(o), file(path), projector(meta.cameras.at(0)), layouts{RecordLayout(meta.schema, false), RecordLayout(meta.schema, true)} {
     if (meta.shadingTimes.size() > 1) firstTimedColour = meta.schema.find(StoreMeta::timedName("Ci", 1));
     char header[kHeaderSize] = {};
     std::copy(std::begin(kHeaderMagic), std::end(kHeaderMagic), header);
@@ -264,7 +273,7 @@ struct StoreWriter::Impl {
     } else {
       b = std::make_unique<Builder>();
     }
-    b->reset(key, uint32_t(meta.schedules[key.schedule].size()), layout);
+    b->reset(key, uint32_t(meta.schedules[key.schedule].size()), layouts[key.shadedInTime]);
     b->stamp = nextStamp();
     return *builders.emplace(key, std::move(b)).first->second;
   }
@@ -436,24 +445,20 @@ struct StoreWriter::Impl {
   // Copies element `element`'s attributes of one rate (per micropolygon or per vertex) into a
   // record's attribute words; an attribute the grid lacks is zero.
   void packAttributes(Builder& b, const GridInput& g, AttrRate rate, size_t element, uint32_t* tail) {
-    const auto& schema = meta.schema;
-    for (size_t ai = 0; ai < schema.attrs.size(); ++ai) {
-      const auto& a = schema.attrs[ai];
-      if (a.rate != rate) continue;
-      const int nc = componentCount(a.type);
-      uint32_t* dst = tail + layout.attrOffset[ai];
-      if (ai >= g.attrs.size() || !g.attrs[ai].present()) {
-        std::fill(dst, dst + nc, 0u);
+    for (const RecordLayout::Field& f : layouts[b.key.shadedInTime].of(rate)) {
+      uint32_t* dst = tail + f.offset;
+      if (f.attr >= g.attrs.size() || !g.attrs[f.attr].present()) {
+        std::fill(dst, dst + f.components, 0u);
         continue;
       }
-      if (a.type == AttrType::UInt) {
-        dst[0] = g.attrs[ai].u[element];
+      if (f.isUInt) {
+        dst[0] = g.attrs[f.attr].u[element];
       } else {
-        const float* src = &g.attrs[ai].f[element * size_t(nc)];
-        std::memcpy(dst, src, size_t(nc) * 4);
-        if (isOpacity[ai]) noteOpacity(b, src);
+        const float* src = &g.attrs[f.attr].f[element * size_t(f.components)];
+        std::memcpy(dst, src, size_t(f.components) * 4);
+        if (f.isOpacity) noteOpacity(b, src);
       }
-      b.presence |= uint64_t(1) << ai;
+      b.presence |= uint64_t(1) << f.attr;
     }
   }
 
@@ -541,7 +546,7 @@ struct StoreWriter::Impl {
       auto& p = parts[i];
       thread_local std::vector<uint8_t> raw;
       thread_local TilePart part;
-      unpack(*p.builder, schema, layout, part);
+      unpack(*p.builder, schema, layouts[p.builder->key.shadedInTime], part);
       encodeRaw(schema, part, p.entry.attrPresence, raw);
       compress(raw, level, p.compressed);
       p.entry.rawSize = uint32_t(raw.size());
