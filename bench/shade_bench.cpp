@@ -4,7 +4,7 @@
 // compression and I/O, what `reshutter shade` costs).
 // Usage: shade_bench [--quick] [--dir DIR]      (one line of results per configuration)
 //        shade_bench --shadows                    (the demo with shadows off and on)
-//        shade_bench --shade-in-time [--quick] [--only once|t0.03|t0.01|t0] [--threads N]
+//        shade_bench --shade-in-time [--quick] [--only once|t0.03|t0.01|t0] [--threads N] [--res W H] [--repeat N]
 //                                                  (the demo shaded once and in time, into stores;
 //                                                   --quick: 640x360 only)
 //        shade_bench --motion-factors DIR          (demo stores for motion factor 0, 0.5, 1, 2, 4 in DIR,
@@ -91,6 +91,7 @@ int main(int argc, char** argv) {
   int threadCount = 0;  // --threads N: that many instead of every core
   std::string only;     // --only LABEL: that configuration alone (with --shade-in-time: once, t0.03, t0.01, t0)
   int resW = 0, resH = 0;  // --res W H: that frame size alone (with --shade-in-time)
+  int repeat = 1;          // --repeat N: each configuration N times in this process (warm: the later runs)
   std::string dir = std::filesystem::temp_directory_path().string(), mfDir;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--quick")) quick = true;
@@ -100,9 +101,10 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--dir") && i + 1 < argc) dir = argv[++i];
     else if (!std::strcmp(argv[i], "--threads") && i + 1 < argc) threadCount = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--only") && i + 1 < argc) only = argv[++i];
+    else if (!std::strcmp(argv[i], "--repeat") && i + 1 < argc) repeat = std::max(1, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--res") && i + 2 < argc) resW = std::atoi(argv[i + 1]), resH = std::atoi(argv[i + 2]), i += 2;
     else {
-      std::fprintf(stderr, "usage: shade_bench [--quick] [--dir DIR] [--threads N] [--shadows | --shade-in-time [--only LABEL] [--res W H]]\n");
+      std::fprintf(stderr, "usage: shade_bench [--quick] [--dir DIR] [--threads N] [--shadows | --shade-in-time [--only LABEL] [--res W H] [--repeat N]]\n");
       return 2;
     }
   }
@@ -142,11 +144,13 @@ int main(int argc, char** argv) {
     for (auto [w, h] : sizes) {
       if (quick && w > 640) break;
       const int n = threadCount > 0 ? threadCount : cores;
-      if (only.empty() || only == "once") run("once", w, h, 1, n, store);
-      for (double tol : {0.03, 0.01, 0.0}) {
-        char label[16];
-        std::snprintf(label, sizeof label, "t%g", tol);
-        if (only.empty() || only == label) run(label, w, h, 1, n, store, 0, true, 1, tol, 5);
+      for (int r = 0; r < repeat; ++r) {
+        if (only.empty() || only == "once") run("once", w, h, 1, n, store);
+        for (double tol : {0.03, 0.01, 0.0}) {
+          char label[16];
+          std::snprintf(label, sizeof label, "t%g", tol);
+          if (only.empty() || only == label) run(label, w, h, 1, n, store, 0, true, 1, tol, 5);
+        }
       }
     }
     std::filesystem::remove(store);
