@@ -100,7 +100,8 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
                    bool stillCastersOnly = false);
 
 /// Whether the affine part of `m` can be inverted without losing most of its digits: its
-/// determinant against the product of its columns' lengths (1 for a rotation at any scale).
+/// determinant against the cube of its longest column (1 for a rotation at any scale; a column
+/// collapsed against the others, as a half turn blended at its middle, is not).
 bool wellInvertible(const glm::dmat4& m);
 /// Whether a primitive's colour, opacity or shader is given at several times (a motion block).
 bool animated(const Attributes& a);

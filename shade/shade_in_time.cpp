@@ -60,8 +60,8 @@ bool carryRigidly(const Primitive& p, const DicedGrid& g, double shadeAt, double
 
 bool wellInvertible(const glm::dmat4& m) {
   const double det = glm::determinant(glm::dmat3(m));
-  const double bound = glm::length(glm::dvec3(m[0])) * glm::length(glm::dvec3(m[1])) * glm::length(glm::dvec3(m[2]));
-  return std::isfinite(det) && std::isfinite(bound) && std::abs(det) > 1e-9 * bound;
+  const double longest = std::max({glm::length(glm::dvec3(m[0])), glm::length(glm::dvec3(m[1])), glm::length(glm::dvec3(m[2]))});
+  return std::isfinite(det) && std::isfinite(longest) && std::abs(det) > 1e-9 * longest * longest * longest;
 }
 
 bool animated(const Attributes& a) { return a.color.values.size() > 1 || a.opacity.values.size() > 1 || a.surface.values.size() > 1; }

@@ -353,7 +353,8 @@ bool wantsShadows(const FrameScene& scene, std::span<const LitLight> lit, double
 /// The rigid motions of the primitives that move rigidly over the shading times, shared by the
 /// primitives under one transform (the same knots): (for each primitive, its motion's index or
 /// -1; the motions relative to the first knot, ShadowScene::RigidMotion). A primitive whose
-/// shape deforms, whose transform stands still, or whose first transform cannot be inverted has none.
+/// shape deforms, whose transform stands still, or whose transform cannot be inverted well at a
+/// knot or a shading time has none.
 std::vector<int> rigidMotions(const ShadeContext& c, const SplitScene& split, std::vector<ShadowScene::RigidMotion>& motions) {
   std::vector<int> of(c.scene.prims.size(), -1);
   if (c.times.size() <= 1) return of;
@@ -366,7 +367,12 @@ std::vector<int> rigidMotions(const ShadeContext& c, const SplitScene& split, st
     const auto [at, fresh] = seen.try_emplace({p.xform.get(), knots}, int(motions.size()));
     if (fresh) {
       const glm::dmat4 first = p.xform->at(knots[0]);
-      if (!wellInvertible(first)) {
+      // Rays enter the BVH through the motion's inverse at their time: it must exist at every
+      // shading time and knot (a half turn between two knots blends through a flat matrix).
+      bool invertible = wellInvertible(first);
+      for (double t : c.times) invertible = invertible && wellInvertible(p.xform->at(t));
+      for (double t : knots) invertible = invertible && wellInvertible(p.xform->at(t));
+      if (!invertible) {
         at->second = -1;
       } else {
         ShadowScene::RigidMotion m{knots, {}};

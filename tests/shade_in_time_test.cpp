@@ -334,6 +334,39 @@ TEST(ShadeInTime, RotatingAndDeformingCastersShadowAsTheyStandAtEachTime) {
   }
 }
 
+// A half turn between two knots blends through a flat matrix: at the middle the bar is a line,
+// and its motion has no inverse there, so it cannot enter a BVH of its own through one. It moves
+// vertex by vertex instead; at the middle it casts no shadow, at the close the turned bar's.
+TEST(ShadeInTime, AHalfTurnBetweenKnotsIsNotTakenForARigidCaster) {
+  ScratchDir dir;
+  const std::string motion = "MotionBegin [0 1]\nRotate 0 0 1 0\nRotate 180 0 1 0\nMotionEnd\n";
+  const std::string bar = "AttributeBegin\nOpacity [0 0 0]\nTranslate -1.47 2 1.03\n" + motion +
+                          "Polygon \"P\" [-1.5 0 -0.3  -1.5 0 0.3  1.5 0 0.3  1.5 0 -0.3]\nAttributeEnd\n";
+  const std::string base = edited(kMovingSphereOverFloor, "AttributeBegin\nMotionBegin [0 1]\nTranslate -1 2 0\nTranslate 1 2 0\nMotionEnd\nSphere 0.5 -0.5 0.5 360\nAttributeEnd\n", "");
+  const std::string scene = edited(base, "WorldEnd", bar + "WorldEnd");
+  const Shaded timed = shade(dir, "timed", scene, "--shade-in-time 0 --shade-times 3");
+  EXPECT_EQ(numberBefore(timed.report, " rigidly moving shadow casters"), 0u) << timed.report;
+  EXPECT_GT(numberBefore(timed.report, " of "), 0u) << "the floor under the bar is a candidate: " << timed.report;
+  auto shadowedPixels = [&](const resample::FlatImage& img) {
+    int n = 0;
+    for (int y = 0; y < 64; ++y)
+      for (int x = 0; x < 64; ++x) {
+        EXPECT_TRUE(std::isfinite(red(img, x, y))) << x << ", " << y;
+        n += red(img, x, y) < 0.5f;
+      }
+    return n;
+  };
+  EXPECT_GT(shadowedPixels(instant(dir, timed.store, 0.0, "open")), 80) << "the bar's shadow at the open";
+  EXPECT_EQ(shadowedPixels(instant(dir, timed.store, 0.5, "middle")), 0) << "a bar flattened into a line casts none";
+  const Shaded turned = shade(dir, "turned", edited(scene, motion, "Rotate 180 0 1 0\n"), "");
+  const auto a = instant(dir, timed.store, 1.0, "close"), b = instant(dir, turned.store, 1.0, "turned");
+  int differ = 0;
+  for (int y = 0; y < 64; ++y)
+    for (int x = 0; x < 64; ++x) differ += std::abs(red(a, x, y) - red(b, x, y)) > 0.02f;
+  EXPECT_LT(differ, 4);
+  EXPECT_GT(shadowedPixels(b), 80);
+}
+
 // A still sphere far from the moving one shadows the floor too (fully transparent, so that the
 // camera above sees its shadow). The floor there and the still sphere are no candidates (no
 // moving caster reaches them), so their rays skip the moving micropolygons: exactly, as the first
