@@ -74,9 +74,10 @@ struct ShadeContext {
 
 /// Shading in time for a grid whose shading can change only through moving casters' shadows (it
 /// stands still, its lights stand still, nothing of it is animated): its shadow rays are the same
-/// at every time, so the first time records which of them still micropolygons block, later times
-/// trace only the rest and only against the moving ones (the same rays: kept, not made again), and a vertex whose every light comes
-/// out as visible as at the first time keeps that time's outputs (nothing else can differ).
+/// at every time, so the first time keeps the ones no still micropolygon blocks, later times
+/// trace those (not made again) against the moving micropolygons only, and a vertex whose every
+/// light comes out as visible as at the first time keeps that time's outputs (nothing else can
+/// differ).
 struct ShadowReuse {
   bool recording = true;  // the first time: record; later: reuse
   struct Traced {         // one light at one vertex

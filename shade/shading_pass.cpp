@@ -375,10 +375,10 @@ std::vector<int> rigidMotions(const ShadeContext& c, const SplitScene& split, st
       if (!invertible) {
         at->second = -1;
       } else {
-        ShadowScene::RigidMotion m{knots, {}};
+        std::vector<glm::dmat4> mats;
         const glm::dmat4 back = glm::inverse(first);
-        for (double t : knots) m.mats.push_back(p.xform->at(t) * back);
-        motions.push_back(std::move(m));
+        for (double t : knots) mats.push_back(p.xform->at(t) * back);
+        motions.emplace_back(knots, std::move(mats));
       }
     }
     of[pi] = at->second;
@@ -422,12 +422,13 @@ std::unique_ptr<ShadowScene> buildShadowScene(const ShadeContext& c, const Split
         if (moves)
           for (const glm::vec3& q : g.positions) moved[i].add(q);
         const int rigid = rigidOf[pi];
-        if (moves && rigid >= 0 && movesBy(g.positions, g.numVertices, motions[size_t(rigid)])) {
-          pieces[i].P.assign(g.positions.begin(), g.positions.begin() + g.numVertices);
-          pieces[i].rigid = rigid;
-        } else {
+        if (moves && (rigid < 0 || !movesBy(g.positions, g.numVertices, motions[size_t(rigid)]))) {
           pieces[i].P = std::move(g.positions);
           pieces[i].knots = split.knots[pi];
+        } else {
+          // Standing still, or moving rigidly: one set of vertices, its first knot's.
+          pieces[i].P.assign(g.positions.begin(), g.positions.begin() + g.numVertices);
+          if (moves) pieces[i].rigid = rigid;
         }
       } else {
         pieces[i].P.assign(g.P.begin(), g.P.end());

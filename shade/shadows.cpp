@@ -140,7 +140,7 @@ ShadowScene::ShadowScene(std::span<const Piece> pieces, double open, double clos
   for (size_t i = 0; i < pieces.size(); ++i) {
     if (pieces[i].corners.empty()) continue;
     const int r = pieces[i].rigid;
-    if (r >= 0 && size_t(r) < rigid.size() && interval && rigid[size_t(r)].knots.size() > 1) rigidMembers[size_t(r)].push_back(i);
+    if (r >= 0 && size_t(r) < rigid.size() && interval && rigid[size_t(r)].moving()) rigidMembers[size_t(r)].push_back(i);
     else if (r >= 0) fail("shadows", "a piece names rigid motion ", r, " of ", rigid.size(), " outside an interval that moves it");
     else groups[stepsFor(pieces[i], open, close)].push_back(i);
   }
@@ -148,7 +148,7 @@ ShadowScene::ShadowScene(std::span<const Piece> pieces, double open, double clos
   for (size_t r = 0; r < rigid.size(); ++r) {
     if (rigidMembers[r].empty()) continue;
     const RigidMotion& motion = rigid[r];
-    if (motion.mats.size() != motion.knots.size()) fail("shadows", "rigid motion ", r, " has ", motion.mats.size(), " transforms for ", motion.knots.size(), " knots");
+    if (motion.mats.size() != motion.times.size()) fail("shadows", "rigid motion ", r, " has ", motion.mats.size(), " transforms for ", motion.times.size(), " knots");
     RTCScene local = newScene();
     impl_->instanced.push_back(local);
     rigidMicropolygons_ += attachQuads(local, rigidMembers[r], 1);
@@ -156,14 +156,11 @@ ShadowScene::ShadowScene(std::span<const Piece> pieces, double open, double clos
     ++rigidInstances_;
     RTCGeometry instance = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_INSTANCE);
     rtcSetGeometryInstancedScene(instance, local);
-    const unsigned steps = stepsForKnots(motion.knots, open, close);
+    const unsigned steps = stepsForKnots(motion.times, open, close);
     rtcSetGeometryTimeStepCount(instance, steps);
     for (unsigned s = 0; s < steps; ++s) {
       // The blend of the knots' matrices at the step's time, as stepPositions() blends positions.
-      size_t k;
-      double w;
-      locate(motion.knots, open + (close - open) * double(s) / double(steps - 1), k, w);
-      const glm::dmat4 m = w == 0 ? motion.mats[k] : motion.mats[k] * (1 - w) + motion.mats[k + 1] * w;
+      const glm::dmat4 m = motion.at(open + (close - open) * double(s) / double(steps - 1));
       float columns[12];
       for (int c = 0; c < 4; ++c)
         for (int row = 0; row < 3; ++row) columns[3 * c + row] = float(m[c][row]);

@@ -18,7 +18,6 @@
 #include <vector>
 
 #include <glm/common.hpp>
-#include <glm/mat4x4.hpp>
 #include <glm/vec3.hpp>
 
 #include "shade/shaders.h"
@@ -36,14 +35,11 @@ class ShadowScene {
     int rigid = -1;             // >= 0: P is one set of vertices moved by that RigidMotion (knots then empty)
   };
   /// How pieces move when they move rigidly (one primitive's, or several under one transform):
-  /// their vertices at knot k are mats[k] · P. Such pieces go into one still BVH of their own,
-  /// instanced with Embree's motion-blurred transforms - a BVH without time steps builds several
-  /// times faster than one over the moving vertices, and the linear blend of the matrices between
-  /// knots moves each vertex exactly as the blend of its positions does.
-  struct RigidMotion {
-    std::vector<double> knots;
-    std::vector<glm::dmat4> mats;
-  };
+  /// their vertices at knot time k are mats[k] · P. Such pieces go into one still BVH of their
+  /// own, instanced with Embree's motion-blurred transforms - a BVH without time steps builds
+  /// several times faster than one over the moving vertices, and the linear blend of the matrices
+  /// between knots (MotionXform::at) moves each vertex exactly as the blend of its positions does.
+  using RigidMotion = MotionXform;
   /// Builds the BVH over every piece's micropolygons (watertight traversal: a ray cannot slip
   /// between two micropolygons that share an edge). With `open` < `close`, moving pieces move
   /// over that interval (their knots inside it; Embree's time steps are even, so uneven knots

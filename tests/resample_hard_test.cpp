@@ -502,10 +502,10 @@ TEST(ResampleHard, ChunkGathersFindEveryMicropolygonsSamples) {
 }
 
 // A render where nothing reads a sample's time - motion-free stores, no volume - or where every
-// sample's time is the same (an instant) skips drawing the times: every output (colour, depth, ids, deep samples) must be what drawn times give, for
-// progressive, sub-interval, fields and instant shutters, a rolling read-out and a lens, with
-// both instruction sets and the scalar loops. A moving store, or a store covering only part of
-// the shutter, draws them.
+// sample's time is the same (an instant) skips drawing the times: every output (colour, depth,
+// ids, deep samples) must be what drawn times give, for progressive, sub-interval, fields and
+// instant shutters, a rolling read-out and a lens, with both instruction sets and the scalar
+// loops. A moving store, or a store covering only part of the shutter, draws them.
 TEST(ResampleHard, UntimedSamplesGiveTheImageOfDrawnTimes) {
   ScratchDir dir;
   const SyntheticCase still{"still", 1, 0, 0.4};

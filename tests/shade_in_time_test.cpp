@@ -260,25 +260,25 @@ const std::string kMovingSphereOverFloor =
 TEST(ShadeInTime, ShadowsFollowTheCasterThroughTheShutter) {
   ScratchDir dir;
   const Shaded once = shade(dir, "once", kMovingSphereOverFloor, "");
-  const Shaded timed = shade(dir, "timed", kMovingSphereOverFloor, "--shade-in-time 0.05");
+  const Shaded inTime = shade(dir, "inTime", kMovingSphereOverFloor, "--shade-in-time 0.05");
   // The floor is a candidate (a moving caster shadows it) and keeps its times.
-  EXPECT_GT(numberBefore(timed.report, " of "), 0u) << timed.report;
+  EXPECT_GT(numberBefore(inTime.report, " of "), 0u) << inTime.report;
   // The open's shadow, the floor at (-1, 0, 0): pixel (24, 32). At the close the sphere (and so
   // its shadow, under it) is at x = +1, so the floor there is in the open: white matte, 0.1
   // ambient + 1 from the light = 1.1; in shadow, 0.1.
   const auto onceEnd = instant(dir, once.store, 1.0, "once-end");
-  const auto timedEnd = instant(dir, timed.store, 1.0, "timed-end");
-  const auto timedOpen = instant(dir, timed.store, 0.0, "timed-open");
+  const auto timedEnd = instant(dir, inTime.store, 1.0, "inTime-end");
+  const auto timedOpen = instant(dir, inTime.store, 0.0, "inTime-open");
   const float openSpotOnce = red(onceEnd, 24, 32), openSpotTimed = red(timedEnd, 24, 32);
   EXPECT_NEAR(openSpotOnce, 0.1f, 0.02f) << "shaded once, the floor keeps the open's shadow";
   EXPECT_NEAR(openSpotTimed, 1.1f, 0.02f) << "shaded in time, the open's shadow has moved away by the close";
   EXPECT_NEAR(red(timedOpen, 40, 32), 1.1f, 0.02f) << "at the open, the close's shadow spot is lit";
   // The still floor's later times traced only against the moving sphere, and the vertices its
   // shadow never reached kept their first colour without being shaded again.
-  EXPECT_GT(numberBefore(timed.report, " vertex shadings kept from the first time"), 0u) << timed.report;
+  EXPECT_GT(numberBefore(inTime.report, " vertex shadings kept from the first time"), 0u) << inTime.report;
   // The sphere translates rigidly: its micropolygons are one still BVH, instanced with its motion.
-  EXPECT_EQ(numberBefore(timed.report, " rigidly moving shadow casters"), 1u) << timed.report;
-  EXPECT_GT(numberBefore(timed.report, " moving micropolygons in "), 0u) << timed.report;
+  EXPECT_EQ(numberBefore(inTime.report, " rigidly moving shadow casters"), 1u) << inTime.report;
+  EXPECT_GT(numberBefore(inTime.report, " moving micropolygons in "), 0u) << inTime.report;
   // Which is exact: at every shading time the floor matches the sphere frozen there, shaded once.
   for (double t : {0.5, 1.0}) {
     const double x = -1 + 2 * t;
@@ -286,7 +286,7 @@ TEST(ShadeInTime, ShadowsFollowTheCasterThroughTheShutter) {
         edited(kMovingSphereOverFloor, "MotionBegin [0 1]\nTranslate -1 2 0\nTranslate 1 2 0\nMotionEnd", "Translate " + std::to_string(x) + " 2 0");
     const std::string tag = std::to_string(int(t * 10));
     const Shaded still = shade(dir, "frozen" + tag, frozen, "");
-    const auto a = instant(dir, timed.store, t, "timed-at" + tag), b = instant(dir, still.store, t, "frozen-at" + tag);
+    const auto a = instant(dir, inTime.store, t, "inTime-at" + tag), b = instant(dir, still.store, t, "frozen-at" + tag);
     int differ = 0;
     for (int y = 0; y < 64; ++y)
       for (int x2 = 0; x2 < 64; ++x2) differ += std::abs(red(a, x2, y) - red(b, x2, y)) > 0.02f;
@@ -310,9 +310,9 @@ TEST(ShadeInTime, RotatingAndDeformingCastersShadowAsTheyStandAtEachTime) {
   const std::string growing = "AttributeBegin\nOpacity [0 0 0]\nTranslate 1.5 2 -1.5\nMotionBegin [0 1]\nSphere 0.4 -0.4 0.4 360\nSphere 0.9 -0.9 0.9 360\nMotionEnd\nAttributeEnd\n";
   const std::string base = edited(kMovingSphereOverFloor, "AttributeBegin\nMotionBegin [0 1]\nTranslate -1 2 0\nTranslate 1 2 0\nMotionEnd\nSphere 0.5 -0.5 0.5 360\nAttributeEnd\n", "");
   const std::string scene = edited(base, "WorldEnd", bar + growing + "WorldEnd");
-  const Shaded timed = shade(dir, "timed", scene, "--shade-in-time 0 --shade-times 3");
-  EXPECT_EQ(numberBefore(timed.report, " rigidly moving shadow casters"), 1u) << "the bar alone: " << timed.report;
-  EXPECT_GT(numberBefore(timed.report, " grid times of rigidly moving grids carried"), 0u) << timed.report;
+  const Shaded inTime = shade(dir, "inTime", scene, "--shade-in-time 0 --shade-times 3");
+  EXPECT_EQ(numberBefore(inTime.report, " rigidly moving shadow casters"), 1u) << "the bar alone: " << inTime.report;
+  EXPECT_GT(numberBefore(inTime.report, " grid times of rigidly moving grids carried"), 0u) << inTime.report;
   for (int k : {1, 2}) {
     const double t = 0.5 * k;
     std::string frozen = edited(scene, "MotionBegin [0 0.5 1]\nRotate 0 0 1 0\nRotate 40 0 1 0\nRotate 90 0 1 0\nMotionEnd", k == 1 ? "Rotate 40 0 1 0" : "Rotate 90 0 1 0");
@@ -320,7 +320,7 @@ TEST(ShadeInTime, RotatingAndDeformingCastersShadowAsTheyStandAtEachTime) {
     const std::string rs = std::to_string(r);
     frozen = edited(frozen, "MotionBegin [0 1]\nSphere 0.4 -0.4 0.4 360\nSphere 0.9 -0.9 0.9 360\nMotionEnd", "Sphere " + rs + " -" + rs + " " + rs + " 360");
     const Shaded still = shade(dir, "frozen" + std::to_string(k), frozen, "");
-    const auto a = instant(dir, timed.store, t, "timed" + std::to_string(k)), b = instant(dir, still.store, t, "frozen-at" + std::to_string(k));
+    const auto a = instant(dir, inTime.store, t, "inTime" + std::to_string(k)), b = instant(dir, still.store, t, "frozen-at" + std::to_string(k));
     int differ = 0, shadowed = 0;
     for (int y = 0; y < 64; ++y)
       for (int x = 0; x < 64; ++x) {
@@ -344,9 +344,9 @@ TEST(ShadeInTime, AHalfTurnBetweenKnotsIsNotTakenForARigidCaster) {
                           "Polygon \"P\" [-1.5 0 -0.3  -1.5 0 0.3  1.5 0 0.3  1.5 0 -0.3]\nAttributeEnd\n";
   const std::string base = edited(kMovingSphereOverFloor, "AttributeBegin\nMotionBegin [0 1]\nTranslate -1 2 0\nTranslate 1 2 0\nMotionEnd\nSphere 0.5 -0.5 0.5 360\nAttributeEnd\n", "");
   const std::string scene = edited(base, "WorldEnd", bar + "WorldEnd");
-  const Shaded timed = shade(dir, "timed", scene, "--shade-in-time 0 --shade-times 3");
-  EXPECT_EQ(numberBefore(timed.report, " rigidly moving shadow casters"), 0u) << timed.report;
-  EXPECT_GT(numberBefore(timed.report, " of "), 0u) << "the floor under the bar is a candidate: " << timed.report;
+  const Shaded inTime = shade(dir, "inTime", scene, "--shade-in-time 0 --shade-times 3");
+  EXPECT_EQ(numberBefore(inTime.report, " rigidly moving shadow casters"), 0u) << inTime.report;
+  EXPECT_GT(numberBefore(inTime.report, " of "), 0u) << "the floor under the bar is a candidate: " << inTime.report;
   auto shadowedPixels = [&](const resample::FlatImage& img) {
     int n = 0;
     for (int y = 0; y < 64; ++y)
@@ -356,10 +356,10 @@ TEST(ShadeInTime, AHalfTurnBetweenKnotsIsNotTakenForARigidCaster) {
       }
     return n;
   };
-  EXPECT_GT(shadowedPixels(instant(dir, timed.store, 0.0, "open")), 80) << "the bar's shadow at the open";
-  EXPECT_EQ(shadowedPixels(instant(dir, timed.store, 0.5, "middle")), 0) << "a bar flattened into a line casts none";
+  EXPECT_GT(shadowedPixels(instant(dir, inTime.store, 0.0, "open")), 80) << "the bar's shadow at the open";
+  EXPECT_EQ(shadowedPixels(instant(dir, inTime.store, 0.5, "middle")), 0) << "a bar flattened into a line casts none";
   const Shaded turned = shade(dir, "turned", edited(scene, motion, "Rotate 180 0 1 0\n"), "");
-  const auto a = instant(dir, timed.store, 1.0, "close"), b = instant(dir, turned.store, 1.0, "turned");
+  const auto a = instant(dir, inTime.store, 1.0, "close"), b = instant(dir, turned.store, 1.0, "turned");
   int differ = 0;
   for (int y = 0; y < 64; ++y)
     for (int x = 0; x < 64; ++x) differ += std::abs(red(a, x, y) - red(b, x, y)) > 0.02f;
