@@ -28,6 +28,7 @@ done
 [[ ${#builds[@]} -gt 0 ]] || { echo "bench/shade_in_time.sh: name at least one build directory" >&2; exit 2; }
 bench() { "$1/bench/shade_bench" --shade-in-time --threads "$2" --only "$3" --res "$w" "$h"; }
 if [[ $cachegrind == 1 ]]; then
+  command -v valgrind >/dev/null || { echo "bench/shade_in_time.sh: --cachegrind needs valgrind (apt-get install valgrind)" >&2; exit 1; }
   for b in "${builds[@]}"; do
     shim="$b/bench/libvalgrind_timer_shim.so"
     [[ -f "$shim" ]] || { echo "$shim missing: build the bench targets" >&2; exit 1; }
