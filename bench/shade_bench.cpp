@@ -4,7 +4,7 @@
 // compression and I/O, what `reshutter shade` costs).
 // Usage: shade_bench [--quick] [--dir DIR]      (one line of results per configuration)
 //        shade_bench --shadows                    (the demo with shadows off and on)
-//        shade_bench --shade-in-time [--quick] [--only once|t0.03|t0.01|t0] [--threads N] [--res W H] [--repeat N]
+//        shade_bench --shade-in-time [--quick] [--only once|t0.03|t0.01|t0[,...]] [--threads N] [--res W H] [--repeat N] [--stride N]
 //                                                  (the demo shaded once and in time, into stores;
 //                                                   --quick: 640x360 only)
 //        shade_bench --motion-factors DIR          (demo stores for motion factor 0, 0.5, 1, 2, 4 in DIR,
@@ -43,11 +43,14 @@ struct NullSink final : store::GridSink {
   void addGrid(const store::GridInput&) override {}
 };
 
+int timeStride = shade::ShadeOptions{}.timeStride;  // --stride N: ShadeOptions::timeStride
+
 void run(const char* label, int w, int h, double rateScale, int threads, const std::string& storePath, double motionFactor = 0, bool shadows = true,
          double shadowRate = 1, std::optional<double> timeTolerance = {}, int shadingTimes = 3) {
   tbb::global_control gc(tbb::global_control::max_allowed_parallelism, size_t(threads));
   shade::ShadeOptions o;
   o.timeTolerance = timeTolerance;
+  o.timeStride = timeStride;
   o.shadingTimes = shadingTimes;
   o.shadows = shadows;
   o.shadowRate = shadowRate;
@@ -76,8 +79,9 @@ void run(const char* label, int w, int h, double rateScale, int threads, const s
               storePath.empty() ? "null sink" : (std::to_string(bytes / 1000000) + " MB store").c_str(), buildSeconds, bench::peakRssBytes() / 1e6);
   if (!st.shadingTimes.empty())
     std::printf("       in time: %zu times, %" PRIu64 " of %" PRIu64 " candidate grids kept them (%" PRIu64 " micropolygons), %" PRIu64
-                " later vertex shadings kept the first, %" PRIu64 " grid times blended\n",
-                st.shadingTimes.size(), st.timedGrids, st.timeCandidateGrids, st.timedMicropolygons, st.reusedVertices, st.blendedTimes);
+                " later vertex shadings kept the first, %" PRIu64 " grid times blended, %" PRIu64 " later vertices shaded, %" PRIu64 " interpolated\n",
+                st.shadingTimes.size(), st.timedGrids, st.timeCandidateGrids, st.timedMicropolygons, st.reusedVertices, st.blendedTimes, st.laterVertices,
+                st.interpolatedVertices);
   if (st.shadowMicropolygons)
     std::printf("       shadows: %" PRIu64 " rays against %" PRIu64 " micropolygons (%" PRIu64 " moving rigidly in %" PRIu64 " instances), scene built in %.3f s\n",
                 st.shadowRays, st.shadowMicropolygons, st.rigidMicropolygons, st.rigidCasters, st.shadowBuildSeconds);
@@ -89,7 +93,7 @@ void run(const char* label, int w, int h, double rateScale, int threads, const s
 int main(int argc, char** argv) {
   bool quick = false, shadows = false, inTime = false;
   int threadCount = 0;  // --threads N: that many instead of every core
-  std::string only;     // --only LABEL: that configuration alone (with --shade-in-time: once, t0.03, t0.01, t0)
+  std::string only;     // --only LABEL[,LABEL...]: those configurations alone (with --shade-in-time: once, t0.03, t0.01, t0)
   int resW = 0, resH = 0;  // --res W H: that frame size alone (with --shade-in-time)
   int repeat = 1;          // --repeat N: each configuration N times in this process (warm: the later runs)
   std::string dir = std::filesystem::temp_directory_path().string(), mfDir;
@@ -101,10 +105,11 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--dir") && i + 1 < argc) dir = argv[++i];
     else if (!std::strcmp(argv[i], "--threads") && i + 1 < argc) threadCount = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--only") && i + 1 < argc) only = argv[++i];
+    else if (!std::strcmp(argv[i], "--stride") && i + 1 < argc) timeStride = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--repeat") && i + 1 < argc) repeat = std::max(1, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--res") && i + 2 < argc) resW = std::atoi(argv[i + 1]), resH = std::atoi(argv[i + 2]), i += 2;
     else {
-      std::fprintf(stderr, "usage: shade_bench [--quick] [--dir DIR] [--threads N] [--shadows | --shade-in-time [--only LABEL] [--res W H] [--repeat N]]\n");
+      std::fprintf(stderr, "usage: shade_bench [--quick] [--dir DIR] [--threads N] [--shadows | --shade-in-time [--only LABEL[,LABEL...]] [--res W H] [--repeat N] [--stride N]]\n");
       return 2;
     }
   }
@@ -129,6 +134,7 @@ int main(int argc, char** argv) {
     return 0;
   }
   const std::string store = dir + "/shade_bench.mps";
+  auto wanted = [&](const std::string& label) { return only.empty() || ("," + only + ",").find("," + label + ",") != std::string::npos; };
   if (inTime) {  // what shading in time costs on the demo (into a store: its size too)
     {
       // The demo's textures load OpenImageIO's module, once per process (~0.4 CPU-s on the
@@ -145,11 +151,11 @@ int main(int argc, char** argv) {
       if (quick && w > 640) break;
       const int n = threadCount > 0 ? threadCount : cores;
       for (int r = 0; r < repeat; ++r) {
-        if (only.empty() || only == "once") run("once", w, h, 1, n, store);
+        if (wanted("once")) run("once", w, h, 1, n, store);
         for (double tol : {0.03, 0.01, 0.0}) {
           char label[16];
           std::snprintf(label, sizeof label, "t%g", tol);
-          if (only.empty() || only == label) run(label, w, h, 1, n, store, 0, true, 1, tol, 5);
+          if (wanted(label)) run(label, w, h, 1, n, store, 0, true, 1, tol, 5);
         }
       }
     }

@@ -26,6 +26,7 @@ struct ShadeCommand {
   double shadowRate = 1;
   std::string shadeInTime = "off";
   int shadingTimes = shade::ShadeOptions{}.shadingTimes;
+  int timeStride = shade::ShadeOptions{}.timeStride;
   uint64_t primitiveBudget = shade::DiceOptions{}.maxMicropolygonsPerPrimitive;
   std::string stereo;                   // BASELINE[:CONVERGENCE]
   std::vector<std::string> addCameras;  // RIB files, each describing a camera to keep and record
@@ -81,6 +82,8 @@ struct ShadeCommand {
     }
     if (shadingTimes < 2 || shadingTimes > int(store::StoreMeta::kMaxShadingTimes)) fail("--shade-times", "must be 2 to ", store::StoreMeta::kMaxShadingTimes);
     opt.shadingTimes = shadingTimes;
+    if (timeStride < 1 || timeStride > 64) fail("--shade-in-time-stride", "must be 1 to 64");
+    opt.timeStride = timeStride;
     if (!store::parseRational(fps, opt.fps)) fail("--fps", "expected a frame rate such as 24, 25, 29.97 or 30000/1001, got '", fps, "'");
     std::vector<int64_t> wanted;
     if (!frames.empty()) wanted = parseFrameRange(frames, "--frame-range");
@@ -128,6 +131,8 @@ struct ShadeCommand {
                                                        " vertex shadings kept from the first time (only shadows could change, and did not), ",
                                                        r.shade.stillOnlyRays, " rays against still micropolygons only (no moving caster could block them), ",
                                                        r.shade.carriedTimes, " grid times of rigidly moving grids carried from the first (not diced again), ",
+                                                       r.shade.laterVertices, " vertex shadings at later times and ", r.shade.interpolatedVertices,
+                                                       " vertices whose change was interpolated between them (--shade-in-time-stride), ",
                                                        r.shade.rigidMicropolygons, " moving micropolygons in ", r.shade.rigidCasters,
                                                        " rigidly moving shadow casters (a still BVH each, instanced)")
                                                  : std::string()));
@@ -194,6 +199,11 @@ void addShadeCommand(CLI::App& app, Registry& registry) {
                   "then blends each sample's colour at its own time. off: shade once (error against time in docs/accuracy.md)")
       ->capture_default_str();
   sub->add_option("--shade-times", cmd->shadingTimes, "With --shade-in-time: shading times spread evenly over the interval, its open and close included")
+      ->capture_default_str();
+  sub->add_option("--shade-in-time-stride", cmd->timeStride,
+                  "With --shade-in-time: shade the later times at every Nth vertex of a grid, and in full only where the change since the open "
+                  "is not smooth (by the tolerance); the other vertices take the change interpolated. 1: every vertex (a change thinner than N "
+                  "micropolygons can be missed otherwise; error against time in docs/accuracy.md)")
       ->capture_default_str();
   registry.add(sub, [cmd] { return cmd->run(); });
 }

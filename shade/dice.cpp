@@ -390,6 +390,7 @@ void diceLeaf(const Primitive& p, const Leaf& leaf, const std::vector<double>& k
   const uint32_t nV = uint32_t(gv.uv.size());
   const size_t K = knots.size();
   g.nu = nu, g.nv = nv, g.numVertices = nV;
+  g.lattice.assign(gv.id.begin(), gv.id.end());
   g.positions.resize(K * nV);
   for (size_t k = 0; k < K; ++k) {
     const Shape s = p.shapeAt(knots[k]);

@@ -36,6 +36,10 @@ struct DicedGrid {
   uint32_t numVertices = 0;
   std::vector<glm::vec3> positions;  // knots × vertices, camera space
   std::vector<uint32_t> corners;     // 4 per micropolygon, ring order counter-clockwise around N
+  // The vertex at each of the (nu + 1) × (nv + 1) lattice points, u fastest (several points share
+  // one vertex along a collapsed or snapped side): shading in time shades later times on a
+  // coarser lattice (ShadeOptions::timeStride).
+  std::vector<uint32_t> lattice;
   uint64_t droppedMicropolygons = 0;
   uint64_t trimmedMicropolygons = 0;  // cut away by trim curves (trim.h)
   // At the shading time, per vertex (camera space):

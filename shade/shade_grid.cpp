@@ -103,7 +103,7 @@ void storeViewInputs(const ShadeContext& c, size_t i, const SurfaceOutput& so, c
 
 void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g, std::span<const uint32_t> corners, std::span<const LitLight> lights,
                    double time, size_t k, uint64_t leafIndex, std::vector<std::vector<float>>& attrs, uint64_t& shadowRays, ShadowReuse* reuse,
-                   bool stillCastersOnly) {
+                   bool stillCastersOnly, std::span<const uint32_t> only) {
   const Attributes& a = *p.attrs;
   const SurfaceShader shader = a.surface.at(time);
   // A RIS material's own colour and presence replace the primitive's.
@@ -123,6 +123,13 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
   // A shadow ray starts half a micropolygon off the surface (the diced surface cuts corners of
   // the true one by about that much).
   std::vector<float> bias;
+  // Shading some vertices only: what the others would need is not made.
+  std::vector<uint8_t> wanted;
+  if (!only.empty()) {
+    wanted.assign(nV, 0);
+    for (uint32_t i : only) wanted[i] = 1;
+  }
+  auto unwanted = [&](uint32_t v) { return !wanted.empty() && !wanted[v]; };
   if (traces) {
     bias.assign(nV, 0.f);
     for (size_t m = 0; m + 4 <= corners.size(); m += 4) {
@@ -130,7 +137,7 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
       const int n = q[3] == store::kNoCorner ? 3 : 4;
       for (int j = 0; j < n; ++j) {
         const uint32_t v = q[j], w = q[(j + 1) % n];
-        if (v >= nV || w >= nV) continue;
+        if (v >= nV || w >= nV || (unwanted(v) && unwanted(w))) continue;
         const float half = float(0.5 * glm::length(g.P[w] - g.P[v]));
         bias[v] = std::max(bias[v], half), bias[w] = std::max(bias[w], half);
       }
@@ -148,7 +155,7 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
       const int n = q[3] == store::kNoCorner ? 3 : 4;
       for (int j = 0; j < n; ++j) {
         const uint32_t v = q[j], a = q[(j + 1) % n], b = q[(j + n - 1) % n];
-        if (v >= nV || a >= nV || b >= nV || set[v]) continue;
+        if (v >= nV || a >= nV || b >= nV || set[v] || unwanted(v)) continue;
         footprint[v] = {float(g.s[a] - g.s[v]), float(g.t[a] - g.t[v]), float(g.s[b] - g.s[v]), float(g.t[b] - g.t[v])};
         set[v] = 1;
       }
@@ -166,7 +173,9 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
   const bool reusing = reuse && !reuse->recording;
   std::vector<ShadowRay> rays;
   auto byMoving = [&](const ShadowRay& r) { return !stillCastersOnly && c.shadows->occludedByMoving(r.origin, r.dir, r.tfar, time); };
-  for (size_t i = 0; i < nV; ++i) {
+  const size_t count = only.empty() ? nV : only.size();
+  for (size_t n = 0; n < count; ++n) {
+    const size_t i = only.empty() ? n : only[n];
     if (keepView)
       for (const LitLight& l : lights)
         if (l.stored < visibility.size()) visibility[l.stored] = 1.f;

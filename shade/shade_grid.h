@@ -65,6 +65,7 @@ struct ShadeContext {
   // receiver whose shadows they cannot reach keeps one colour.
   MovingCasters movingCasters{};
   double tolerance = 0;
+  int timeStride = 1;  // ShadeOptions::timeStride
   int ci = -1, oi = -1;
   // Per attribute carried in time (Ci, Oi, output variables): its schema slot at each shading
   // time ([0]: the attribute itself, [k]: "name@k").
@@ -95,10 +96,11 @@ struct ShadowReuse {
 /// shading time k of the pass (0: the first), into `attrs` (parallel to the schema); `reuse`
 /// (shading in time, a grid only shadows change): the first time records its rays, later times
 /// reuse them; `stillCastersOnly`: no moving caster can shadow the grid (not a candidate for
-/// shading in time), so its rays skip the moving micropolygons.
+/// shading in time), so its rays skip the moving micropolygons; `only`: shade just these
+/// vertices (a later time on a coarser lattice), leaving the others' outputs as they are.
 void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g, std::span<const uint32_t> corners, std::span<const LitLight> lights,
                    double time, size_t k, uint64_t leafIndex, std::vector<std::vector<float>>& attrs, uint64_t& shadowRays, ShadowReuse* reuse = nullptr,
-                   bool stillCastersOnly = false);
+                   bool stillCastersOnly = false, std::span<const uint32_t> only = {});
 
 /// Whether the affine part of `m` can be inverted without losing most of its digits: its
 /// determinant against the cube of its longest column (1 for a rotation at any scale; a column
@@ -114,8 +116,17 @@ bool sceneMayShadeInTime(const FrameScene& scene, double open, double close);
 bool mayShadeDifferently(const ShadeContext& c, uint32_t pi, std::span<const glm::vec3> positions, uint32_t nV, bool moves, std::span<const uint32_t> lights);
 /// Whether only moving casters' shadows can change a grid's shading (ShadowReuse applies).
 bool onlyShadowsChange(const ShadeContext& c, uint32_t pi, bool moves, std::span<const uint32_t> lights);
+/// What shading candidates at the other times did (ShadeStats says what each counts).
+struct InTimeCounts {
+  uint64_t blendedTimes = 0, carriedTimes = 0;
+  uint64_t laterVertices = 0, interpolatedVertices = 0;
+  void add(const InTimeCounts& o) {
+    blendedTimes += o.blendedTimes, carriedTimes += o.carriedTimes;
+    laterVertices += o.laterVertices, interpolatedVertices += o.interpolatedVertices;
+  }
+};
 /// Shades a candidate at the other times; whether it kept them (shade_in_time.cpp).
 bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const DicedGrid& g, bool moves, std::span<const uint32_t> lightIdx, uint64_t leafIndex,
-                 GridOut& out, uint64_t& shadowRays, ShadowReuse* reuse, uint64_t& blendedTimes, uint64_t& carriedTimes);
+                 GridOut& out, uint64_t& shadowRays, ShadowReuse* reuse, InTimeCounts& counts);
 
 }  // namespace reshutter::shade::pass

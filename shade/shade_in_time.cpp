@@ -56,6 +56,158 @@ bool carryRigidly(const Primitive& p, const DicedGrid& g, double shadeAt, double
   return true;
 }
 
+/// A later shading time on a coarser lattice (ShadeOptions::timeStride): which vertices stand
+/// at every stride-th lattice point, and, per lattice index, the coarse span that holds it.
+class CoarseLattice {
+ public:
+  /// False when the grid has no lattice, or one too small to thin.
+  bool set(const DicedGrid& g, int stride) {
+    if (stride < 2 || g.lattice.size() != size_t(g.nu + 1) * size_t(g.nv + 1) || (g.nu <= 1 && g.nv <= 1)) return false;
+    g_ = &g, stride_ = stride, row_ = g.nu + 1;
+    spans(g.nu, cu_, su_), spans(g.nv, cv_, sv_);
+    std::vector<uint8_t> reached(g.numVertices, 0), taken(g.numVertices, 0);
+    for (uint32_t v : g.lattice) {
+      if (v >= g.numVertices) return false;
+      reached[v] = 1;
+    }
+    coarse_.clear();
+    auto take = [&](uint32_t v) {
+      if (v < g.numVertices && !taken[v]) taken[v] = 1, coarse_.push_back(v);
+    };
+    for (int j : cv_)
+      for (int i : cu_) take(at(i, j));
+    for (uint32_t v = 0; v < g.numVertices; ++v)  // none expected: every vertex stands on the lattice
+      if (!reached[v]) take(v);
+    return true;
+  }
+
+  /// Shades time k's vertices into `values` (parallel to the schema; `first`: time 0's): the
+  /// coarse lattice, then every cell where the change since `first` is not smooth, then the
+  /// rest by the change interpolated from their cell's corners. `shade(list)` shades vertices.
+  template <class Shade>
+  void shadeTime(const ShadeContext& c, const std::vector<std::vector<float>>& first, std::vector<std::vector<float>>& values, Shade&& shade,
+                 InTimeCounts& counts) {
+    const DicedGrid& g = *g_;
+    shaded_.assign(g.numVertices, 0);
+    shade(std::span<const uint32_t>(coarse_));
+    for (uint32_t v : coarse_) shaded_[v] = 1;
+    // The change of colour and opacity since the first time at each coarse point, components
+    // 0-2 Ci, 3-5 Oi.
+    const size_t A = cu_.size(), B = cv_.size();
+    const int slots[2] = {c.ci, c.oi};
+    delta_.resize(A * B * 6);
+    for (size_t b = 0; b < B; ++b)
+      for (size_t a = 0; a < A; ++a)
+        for (int n = 0; n < 6; ++n) {
+          const size_t slot = size_t(slots[n / 3]), e = size_t(at(cu_[a], cv_[b])) * 3 + size_t(n % 3);
+          delta_[(b * A + a) * 6 + size_t(n)] = values[slot][e] - first[slot][e];
+        }
+    auto D = [&](size_t a, size_t b) { return &delta_[(b * A + a) * 6]; };
+    // How far from linear the change bends at each coarse point, along u and along v: its second
+    // difference there (as on an even lattice of the stride), per component. Along a side with
+    // two coarse points only (a lone span), the difference across it, at both ends.
+    const double H2 = double(stride_) * stride_;
+    auto curvature = [&](const float* d0, const float* d, const float* d1, double h0, double h1, float* out) {
+      const double scale = 2 * H2 / (h0 + h1);
+      for (int n = 0; n < 6; ++n) out[n] = float(std::abs(((d1[n] - d[n]) / h1 - (d[n] - d0[n]) / h0) * scale));
+    };
+    auto step = [&](const float* d0, const float* d1, float* out0, float* out1) {
+      for (int n = 0; n < 6; ++n) out0[n] = out1[n] = std::abs(d1[n] - d0[n]);
+    };
+    bendU_.assign(A * B * 6, 0.f), bendV_.assign(A * B * 6, 0.f);
+    auto U = [&](size_t a, size_t b) { return &bendU_[(b * A + a) * 6]; };
+    auto V = [&](size_t a, size_t b) { return &bendV_[(b * A + a) * 6]; };
+    for (size_t b = 0; b < B; ++b) {
+      if (A == 2) step(D(0, b), D(1, b), U(0, b), U(1, b));
+      for (size_t a = 1; a + 1 < A; ++a) curvature(D(a - 1, b), D(a, b), D(a + 1, b), cu_[a] - cu_[a - 1], cu_[a + 1] - cu_[a], U(a, b));
+    }
+    for (size_t a = 0; a < A; ++a) {
+      if (B == 2) step(D(a, 0), D(a, 1), V(a, 0), V(a, 1));
+      for (size_t b = 1; b + 1 < B; ++b) curvature(D(a, b - 1), D(a, b), D(a, b + 1), cv_[b] - cv_[b - 1], cv_[b + 1] - cv_[b], V(a, b));
+    }
+    // A span between two coarse points is shaded in full when the change bends by more than twice
+    // the tolerance at either of its ends (at its one interior end, at the lattice's first and
+    // last span). A step of J inside a span bends by J at both its ends and is missed by up to
+    // J / 2 in between; a smooth change is missed by about an eighth of its bend. Either end, not
+    // both: an edge found in one span is shaded in its neighbours too, where a curved edge may
+    // cross without reaching a coarse point.
+    const float threshold = float(2 * c.tolerance);
+    auto bends = [&](const float* lo, const float* hi) {
+      for (int n = 0; n < 6; ++n)
+        if (std::max(lo[n], hi[n]) > threshold) return true;
+      return false;
+    };
+    auto spanU = [&](size_t a, size_t b) {
+      const size_t lo = A == 2 ? 0 : std::max<size_t>(a, 1), hi = A == 2 ? 1 : std::min<size_t>(a + 1, A - 2);
+      return bends(U(lo, b), U(hi, b));
+    };
+    auto spanV = [&](size_t a, size_t b) {
+      const size_t lo = B == 2 ? 0 : std::max<size_t>(b, 1), hi = B == 2 ? 1 : std::min<size_t>(b + 1, B - 2);
+      return bends(V(a, lo), V(a, hi));
+    };
+    refine_.clear();
+    for (size_t b = 0; b + 1 < B; ++b)
+      for (size_t a = 0; a + 1 < A; ++a) {
+        if (!(spanU(a, b) || spanU(a, b + 1) || spanV(a, b) || spanV(a + 1, b))) continue;
+        for (int j = cv_[b]; j <= cv_[b + 1]; ++j)
+          for (int i = cu_[a]; i <= cu_[a + 1]; ++i)
+            if (const uint32_t v = at(i, j); !shaded_[v]) shaded_[v] = 1, refine_.push_back(v);
+      }
+    if (!refine_.empty()) shade(std::span<const uint32_t>(refine_));
+    counts.laterVertices += coarse_.size() + refine_.size();
+    // The rest: the change bilinear between the corners of the cell that holds it.
+    blends_.clear();
+    for (int j = 0; j <= g.nv; ++j)
+      for (int i = 0; i <= g.nu; ++i) {
+        const uint32_t v = at(i, j);
+        if (shaded_[v]) continue;
+        shaded_[v] = 1;
+        const int a = su_[size_t(i)], b = sv_[size_t(j)];
+        const int i0 = cu_[size_t(a)], i1 = cu_[size_t(a) + 1], j0 = cv_[size_t(b)], j1 = cv_[size_t(b) + 1];
+        const float wu = float(i - i0) / float(i1 - i0), wv = float(j - j0) / float(j1 - j0);
+        blends_.push_back({v, {at(i0, j0), at(i1, j0), at(i0, j1), at(i1, j1)}, {(1 - wu) * (1 - wv), wu * (1 - wv), (1 - wu) * wv, wu * wv}});
+      }
+    counts.interpolatedVertices += blends_.size();
+    for (const std::vector<int>& timed : c.timedSlots) {
+      const size_t slot = size_t(timed[0]);
+      const float* f = first[slot].data();
+      float* out = values[slot].data();
+      if (values[slot].size() != first[slot].size() || g.numVertices == 0) continue;
+      const size_t comps = first[slot].size() / g.numVertices;
+      for (const Blend& e : blends_)
+        for (size_t n = 0; n < comps; ++n) {
+          float d = 0;
+          for (int m = 0; m < 4; ++m) d += e.w[m] * (out[e.q[m] * comps + n] - f[e.q[m] * comps + n]);
+          out[e.v * comps + n] = f[e.v * comps + n] + d;
+        }
+    }
+  }
+
+ private:
+  const DicedGrid* g_ = nullptr;
+  int stride_ = 1, row_ = 0;
+  std::vector<int> cu_, cv_;  // the coarse lattice indices along u and v: 0, stride, 2 stride, ..., n
+  std::vector<int> su_, sv_;  // per lattice index: the coarse span [c[s], c[s + 1]] that holds it
+  std::vector<uint32_t> coarse_, refine_;
+  std::vector<uint8_t> shaded_;
+  struct Blend {  // an interpolated vertex: its cell's corners and their weights
+    uint32_t v, q[4];
+    float w[4];
+  };
+  std::vector<Blend> blends_;
+  std::vector<float> delta_, bendU_, bendV_;  // per coarse point (b * A + a) and component: the change of Ci and Oi, its bends
+
+  uint32_t at(int i, int j) const { return g_->lattice[size_t(j) * size_t(row_) + size_t(i)]; }
+  void spans(int n, std::vector<int>& c, std::vector<int>& s) const {
+    c.clear();
+    for (int i = 0; i < n; i += stride_) c.push_back(i);
+    c.push_back(n);
+    s.assign(size_t(n) + 1, 0);
+    for (size_t a = 0; a + 1 < c.size(); ++a)
+      for (int i = c[a]; i <= c[a + 1]; ++i) s[size_t(i)] = int(a);
+  }
+};
+
 }  // namespace
 
 bool wellInvertible(const glm::dmat4& m) {
@@ -116,7 +268,7 @@ bool onlyShadowsChange(const ShadeContext& c, uint32_t pi, bool moves, std::span
 /// ends, the span's other times are blended too rather than shaded (linear between the shaded
 /// times, as the re-sampler blends them). Tolerance 0 shades every time.
 bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const DicedGrid& g, bool moves, std::span<const uint32_t> lightIdx, uint64_t leafIndex,
-                 GridOut& out, uint64_t& shadowRays, ShadowReuse* reuse, uint64_t& blendedTimes, uint64_t& carriedTimes) {
+                 GridOut& out, uint64_t& shadowRays, ShadowReuse* reuse, InTimeCounts& counts) {
   const Primitive& p = c.scene.prims[pi];
   const size_t T = c.times.size();
   std::vector<std::vector<std::vector<float>>> at(T);
@@ -125,6 +277,8 @@ bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const Dic
   float change = 0;
   if (reuse) reuse->recording = false, reuse->first = &out.attrs;
   const int slots[2] = {c.ci, c.oi};
+  CoarseLattice lattice;
+  const bool coarse = c.tolerance > 0 && lattice.set(g, c.timeStride);
   auto values = [&](size_t k, int slot) -> std::vector<float>& { return k == 0 ? out.attrs[size_t(slot)] : at[k][size_t(slot)]; };
   // Shades time k into at[k]; false when the grid dices differently there (no blend).
   auto shadeTime = [&](size_t k) {
@@ -133,7 +287,7 @@ bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const Dic
     const DicedGrid* geometry = &g;
     if (moves) {
       if (carryRigidly(p, g, c.shadeAt, c.times[k], gk)) {
-        ++carriedTimes;
+        ++counts.carriedTimes;
       } else {
         diceLeaf(p, leaf, c.split.knots[pi], c.times[k], c.nearClip, c.perspective, gk);
         if (gk.numVertices != g.numVertices || gk.corners != out.corners) return false;
@@ -143,7 +297,15 @@ bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const Dic
     lights.clear();
     for (uint32_t li : lightIdx)  // reusing: the lights stand still, and the first time's rays need the first time's lights
       if (li < c.lit.size()) lights.push_back(reuse ? c.lit[li] : c.litAt[k][li]);
-    shadeVertices(c, p, *geometry, out.corners, lights, c.times[k], k, leafIndex, at[k], shadowRays, reuse);
+    if (coarse) {
+      auto shade = [&](std::span<const uint32_t> only) {
+        shadeVertices(c, p, *geometry, out.corners, lights, c.times[k], k, leafIndex, at[k], shadowRays, reuse, false, only);
+      };
+      lattice.shadeTime(c, out.attrs, at[k], shade, counts);
+    } else {
+      shadeVertices(c, p, *geometry, out.corners, lights, c.times[k], k, leafIndex, at[k], shadowRays, reuse);
+      counts.laterVertices += g.numVertices;
+    }
     for (int slot : slots) {
       const std::vector<float>& a = values(0, slot);
       const std::vector<float>& b = values(k, slot);
@@ -164,7 +326,7 @@ bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const Dic
         v.resize(a.size());
         for (size_t i = 0; i < a.size(); ++i) v[i] = a[i] + w * (b[i] - a[i]);
       }
-      ++blendedTimes;
+      ++counts.blendedTimes;
     }
   };
   // Refines span [lo, hi] (both shaded); false as shadeTime().

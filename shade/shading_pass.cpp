@@ -60,7 +60,8 @@ struct Batch {
   size_t first = 0, count = 0;  // into the flattened leaf list
   std::vector<GridOut> grids;
   uint64_t dropped = 0, trimmed = 0, shadowRays = 0;
-  uint64_t timeCandidates = 0, timed = 0, timedMicropolygons = 0, reusedVertices = 0, blendedTimes = 0, carriedTimes = 0, stillOnlyRays = 0;
+  uint64_t timeCandidates = 0, timed = 0, timedMicropolygons = 0, reusedVertices = 0, stillOnlyRays = 0;
+  InTimeCounts inTime;
 };
 
 using BatchPtr = std::shared_ptr<Batch>;
@@ -236,7 +237,7 @@ void shadeBatch(const ShadeContext& c, Batch& b) {
     if (stillCastersOnly) b.stillOnlyRays += shadowRays - raysBefore;
     if (candidate) {
       ++b.timeCandidates;
-      if (shadeInTime(c, pi, *leaf, g, moves, lightIdx, b.first + n, out, shadowRays, reusing, b.blendedTimes, b.carriedTimes))
+      if (shadeInTime(c, pi, *leaf, g, moves, lightIdx, b.first + n, out, shadowRays, reusing, b.inTime))
         ++b.timed, b.timedMicropolygons += out.corners.size() / 4;
       b.reusedVertices += reuse.reusedVertices;
     }
@@ -260,8 +261,10 @@ class GridSender {
     stats_.timeCandidateGrids += b.timeCandidates;
     stats_.timedGrids += b.timed;
     stats_.reusedVertices += b.reusedVertices;
-    stats_.blendedTimes += b.blendedTimes;
-    stats_.carriedTimes += b.carriedTimes;
+    stats_.blendedTimes += b.inTime.blendedTimes;
+    stats_.carriedTimes += b.inTime.carriedTimes;
+    stats_.laterVertices += b.inTime.laterVertices;
+    stats_.interpolatedVertices += b.inTime.interpolatedVertices;
     stats_.stillOnlyRays += b.stillOnlyRays;
     stats_.timedMicropolygons += b.timedMicropolygons;
     for (GridOut& go : b.grids)
@@ -495,6 +498,7 @@ ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::Gri
   if (iv.times.size() > 1) {
     context.times = iv.times;
     context.tolerance = *o.timeTolerance;
+    context.timeStride = o.timeStride;
     context.ci = meta.schema.ci(), context.oi = meta.schema.oi();
     context.litAt.resize(iv.times.size());
     for (size_t k = 1; k < iv.times.size(); ++k)

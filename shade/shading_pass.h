@@ -46,6 +46,13 @@ struct ShadeOptions {
   /// re-sampler then blends each sample's colour at its own time.
   std::optional<double> timeTolerance;
   int shadingTimes = 5;
+  /// Shading in time: later times are shaded at every timeStride-th vertex of a grid's lattice
+  /// (and its last), then in full wherever the change since the first time is not smooth there
+  /// (a coarse lattice point's second difference, or a lone span's difference, above the
+  /// tolerance); the other vertices take the change interpolated from their cell's corners. 1:
+  /// every vertex at every time. A change narrower than a cell that touches none of its corners
+  /// (a shadow thinner than timeStride micropolygons) is missed there.
+  int timeStride = 2;
   /// Keep what re-evaluating the view-dependent term for another eye needs (store::ViewTerm),
   /// on the grids whose shader has one: a render from another camera then lights speculars and
   /// headlights for its own eye. Off: other cameras see the primary camera's shading.
@@ -73,6 +80,8 @@ struct ShadeStats {
   uint64_t timedGrids = 0, timedMicropolygons = 0;  // of them, those that changed enough to keep every time
   uint64_t blendedTimes = 0;                        // candidates' later times blended between shaded ones (their middle lay within the tolerance of the blend)
   uint64_t carriedTimes = 0;         // moving candidates' later times carried by their rigid motion from the first, not diced again
+  uint64_t laterVertices = 0;        // vertex shadings at candidates' later times (blended times shade none)
+  uint64_t interpolatedVertices = 0;  // of candidates' later times, vertices whose change was interpolated on the coarse lattice (timeStride)
   uint64_t reusedVertices = 0;       // vertex shadings at later times that kept the first time's outputs (only shadows could change, and did not)
   uint64_t stillOnlyRays = 0;        // rays of grids no moving caster can shadow, traced against the still micropolygons only
   std::vector<double> shadingTimes;  // empty: shaded once

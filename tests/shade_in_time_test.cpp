@@ -295,6 +295,44 @@ TEST(ShadeInTime, ShadowsFollowTheCasterThroughTheShutter) {
   }
 }
 
+// Later times shaded on a coarser lattice (--shade-in-time-stride): the floor's moving shadow
+// is a sharp change, which the lattice must find and shade in full; a plastic sphere moving past
+// a point light changes smoothly, which the lattice interpolates. Either way each instant must
+// match shading every vertex at every time, while far fewer vertices are shaded.
+TEST(ShadeInTime, ACoarseLatticeKeepsSharpChangesAndInterpolatesSmoothOnes) {
+  ScratchDir dir;
+  const std::string lit = edited(kMovingSphereOverFloor, "Color [1 1 1]\nSurface \"matte\"\n",
+                                 "LightSource \"pointlight\" 3 \"from\" [0 3 3] \"intensity\" [6]\nColor [1 1 1]\nSurface \"matte\"\n");
+  const std::string scene = edited(lit, "WorldEnd",
+                                   "AttributeBegin\nSurface \"plastic\" \"roughness\" [0.2]\nMotionBegin [0 1]\nTranslate 2 1.2 2\nTranslate 2 1.2 -1.5\n"
+                                   "MotionEnd\nSphere 1.2 -1.2 1.2 360\nAttributeEnd\nWorldEnd");
+  const Shaded every = shade(dir, "every", scene, "--shade-in-time 0.01 --shade-in-time-stride 1");
+  EXPECT_EQ(numberBefore(every.report, " vertices whose change was interpolated"), 0u) << every.report;
+  const uint64_t everyShaded = numberBefore(every.report, " vertex shadings at later times");
+  for (int stride : {2, 3}) {
+    const std::string name = "stride" + std::to_string(stride);
+    const Shaded coarse = shade(dir, name, scene, "--shade-in-time 0.01 --shade-in-time-stride " + std::to_string(stride));
+    // The path: vertices were interpolated, and fewer shaded.
+    const uint64_t interpolated = numberBefore(coarse.report, " vertices whose change was interpolated");
+    EXPECT_GT(interpolated, 1000u) << coarse.report;
+    // Every later vertex was shaded or interpolated, once.
+    EXPECT_EQ(numberBefore(coarse.report, " vertex shadings at later times") + interpolated, everyShaded) << coarse.report;
+    for (double t : {0.5, 1.0}) {
+      const std::string tag = name + "-" + std::to_string(int(t * 10));
+      const auto a = instant(dir, coarse.store, t, tag), b = instant(dir, every.store, t, "every-" + tag);
+      int differ = 0, shadowEdge = 0;
+      for (int y = 0; y < 64; ++y)
+        for (int x = 0; x < 64; ++x) {
+          differ += std::abs(red(a, x, y) - red(b, x, y)) > 0.02f;
+          shadowEdge += std::abs(red(b, x, y) - red(b, std::min(x + 1, 63), y)) > 0.5f;
+        }
+      EXPECT_GT(shadowEdge, 10) << "t=" << t << ": the shadow's edge is in the frame";
+      // Interpolating across the shadow's edge instead of shading it would differ over dozens.
+      EXPECT_LT(differ, 4) << "stride " << stride << ", t=" << t;
+    }
+  }
+}
+
 // Casters that rotate (rigidly, over three knots) and that deform (a sphere growing: its shape
 // changes, so it cannot be instanced) over the floor, under the light from straight above: shaded
 // in time, at each shading time the floor matches the casters frozen there and shaded once - the
