@@ -587,7 +587,9 @@ TEST(ShadeInTime, BadOptionsAreOneLineErrors) {
                {"--shade-in-time -1", "--shade-in-time"},
                {"--shade-in-time 0.1 --shade-times 1", "--shade-times"},
                {"--shade-in-time 0.1 --shade-times 17", "--shade-times"},
-               {"--shade-in-time 0.1 --shade-at 0.5", "--shade-at"}};
+               {"--shade-in-time 0.1 --shade-at 0.5", "--shade-at"},
+               {"--shade-in-time 0.1 --shade-in-time-stride 0", "--shade-in-time-stride"},
+               {"--shade-in-time 0.1 --shade-in-time-stride 65", "--shade-in-time-stride"}};
   for (const auto& c : cases) {
     const auto r = runReshutter("shade " + dir.path("s.rib") + " -o " + dir.path("bad.mps") + " " + c.args);
     EXPECT_NE(r.exitCode, 0) << c.args;
