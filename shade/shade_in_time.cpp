@@ -170,16 +170,19 @@ class CoarseLattice {
     counts.interpolatedVertices += blends_.size();
     for (const std::vector<int>& timed : c.timedSlots) {
       const size_t slot = size_t(timed[0]);
-      const float* f = first[slot].data();
-      float* out = values[slot].data();
       if (values[slot].size() != first[slot].size() || g.numVertices == 0) continue;
       const size_t comps = first[slot].size() / g.numVertices;
-      for (const Blend& e : blends_)
-        for (size_t n = 0; n < comps; ++n) {
-          float d = 0;
-          for (int m = 0; m < 4; ++m) d += e.w[m] * (out[e.q[m] * comps + n] - f[e.q[m] * comps + n]);
-          out[e.v * comps + n] = f[e.v * comps + n] + d;
-        }
+      if (comps == 3)
+        interpolate<3>(first[slot].data(), values[slot].data());
+      else if (comps == 1)
+        interpolate<1>(first[slot].data(), values[slot].data());
+      else
+        for (const Blend& e : blends_)
+          for (size_t n = 0; n < comps; ++n) {
+            float d = 0;
+            for (int m = 0; m < 4; ++m) d += e.w[m] * (values[slot][e.q[m] * comps + n] - first[slot][e.q[m] * comps + n]);
+            values[slot][e.v * comps + n] = first[slot][e.v * comps + n] + d;
+          }
     }
   }
 
@@ -198,6 +201,20 @@ class CoarseLattice {
   std::vector<float> delta_, bendU_, bendV_;  // per coarse point (b * A + a) and component: the change of Ci and Oi, its bends
 
   uint32_t at(int i, int j) const { return g_->lattice[size_t(j) * size_t(row_) + size_t(i)]; }
+  /// Each blended vertex's value of an attribute of N components: its first-time value plus the
+  /// change at its cell's corners, weighted (the corners are shaded, never blended).
+  template <size_t N>
+  void interpolate(const float* first, float* out) const {
+    for (const Blend& e : blends_) {
+      float d[N] = {};
+      for (int m = 0; m < 4; ++m) {
+        const float* now = out + size_t(e.q[m]) * N;
+        const float* then = first + size_t(e.q[m]) * N;
+        for (size_t n = 0; n < N; ++n) d[n] += e.w[m] * (now[n] - then[n]);
+      }
+      for (size_t n = 0; n < N; ++n) out[size_t(e.v) * N + n] = first[size_t(e.v) * N + n] + d[n];
+    }
+  }
   void spans(int n, std::vector<int>& c, std::vector<int>& s) const {
     c.clear();
     for (int i = 0; i < n; i += stride_) c.push_back(i);
