@@ -82,6 +82,7 @@ EOF
 | ![shadow samples](accuracy/shadowsamples.png) | ![shadow rate](accuracy/shadowrate.png) |
 | ![volume step](accuracy/volumestep.png) | ![volume ray spacing](accuracy/volumespacing.png) |
 | ![depth of field](accuracy/lens.png) | ![other cameras](accuracy/views.png) |
+| ![shading in time: stride](accuracy/fieldstride.png) | |
 
 ## Tables
 
