@@ -72,7 +72,7 @@ class CoarseLattice {
     }
     coarse_.clear();
     auto take = [&](uint32_t v) {
-      if (v < g.numVertices && !taken[v]) taken[v] = 1, coarse_.push_back(v);
+      if (!taken[v]) taken[v] = 1, coarse_.push_back(v);
     };
     for (int j : cv_)
       for (int i : cu_) take(at(i, j));
@@ -170,19 +170,12 @@ class CoarseLattice {
     counts.interpolatedVertices += blends_.size();
     for (const std::vector<int>& timed : c.timedSlots) {
       const size_t slot = size_t(timed[0]);
-      if (values[slot].size() != first[slot].size() || g.numVertices == 0) continue;
-      const size_t comps = first[slot].size() / g.numVertices;
-      if (comps == 3)
+      // A view-dependent input is absent on grids whose shader has no such term.
+      if (first[slot].empty() || values[slot].size() != first[slot].size()) continue;
+      if (store::componentCount(c.schema.attrs[slot].type) == 3)
         interpolate<3>(first[slot].data(), values[slot].data());
-      else if (comps == 1)
-        interpolate<1>(first[slot].data(), values[slot].data());
       else
-        for (const Blend& e : blends_)
-          for (size_t n = 0; n < comps; ++n) {
-            float d = 0;
-            for (int m = 0; m < 4; ++m) d += e.w[m] * (values[slot][e.q[m] * comps + n] - first[slot][e.q[m] * comps + n]);
-            values[slot][e.v * comps + n] = first[slot][e.v * comps + n] + d;
-          }
+        interpolate<1>(first[slot].data(), values[slot].data());
     }
   }
 

@@ -48,10 +48,10 @@ struct ShadeOptions {
   int shadingTimes = 5;
   /// Shading in time: later times are shaded at every timeStride-th vertex of a grid's lattice
   /// (and its last), then in full wherever the change since the first time is not smooth there
-  /// (a coarse lattice point's second difference, or a lone span's difference, above the
-  /// tolerance); the other vertices take the change interpolated from their cell's corners. 1:
-  /// every vertex at every time. A change narrower than a cell that touches none of its corners
-  /// (a shadow thinner than timeStride micropolygons) is missed there.
+  /// (a coarse lattice point's second difference, or a lone span's difference, above twice the
+  /// tolerance at either end of a span); the other vertices take the change interpolated from
+  /// their cell's corners. 1: every vertex at every time. A change narrower than a cell that
+  /// touches none of its corners (a shadow thinner than timeStride micropolygons) is missed there.
   int timeStride = 2;
   /// Keep what re-evaluating the view-dependent term for another eye needs (store::ViewTerm),
   /// on the grids whose shader has one: a render from another camera then lights speculars and
