@@ -3,30 +3,32 @@
 # bench/shade_bench at 5 times, tolerance 0.01; OpenImageIO's texture module is loaded before the
 # timings (the pass alone).
 #
-#   bench/shade_in_time.sh [--rounds R] [--threads T] [--res W H] BUILD...
-#       interleaved runs of each build: CPU seconds once and in time, and the ratio per round
-#       (the host is noisy: read the median of the ratios)
-#   bench/shade_in_time.sh --cachegrind [--res W H] BUILD...
+#   bench/shade_in_time.sh [--rounds R] [--threads T] [--res W H] [--stride N] BUILD...
+#       interleaved runs of each build, each in a fresh process: CPU seconds once and in time, and
+#       the ratio per round (the host is noisy: read the median of the ratios); --stride: the
+#       later times' coarse lattice (--shade-in-time-stride; builds from the thirty-first session on)
+#   bench/shade_in_time.sh --cachegrind [--res W H] [--stride N] BUILD...
 #       instructions of the whole process, one thread (repeatable); "none" is the process with
 #       the module loaded and nothing shaded, to subtract
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source bench/host.sh
 rounds=5 threads=1 w=640 h=360 cachegrind=0
-builds=()
+builds=() stride=()
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --rounds) rounds="$2"; shift ;;
     --threads) threads="$2"; shift ;;
     --res) w="$2"; h="$3"; shift 2 ;;
     --cachegrind) cachegrind=1 ;;
-    -*) echo "usage: bench/shade_in_time.sh [--cachegrind] [--rounds R] [--threads T] [--res W H] BUILD..." >&2; exit 2 ;;
+    --stride) stride=(--stride "$2"); shift ;;
+    -*) echo "usage: bench/shade_in_time.sh [--cachegrind] [--rounds R] [--threads T] [--res W H] [--stride N] BUILD..." >&2; exit 2 ;;
     *) builds+=("$1") ;;
   esac
   shift
 done
 [[ ${#builds[@]} -gt 0 ]] || { echo "bench/shade_in_time.sh: name at least one build directory" >&2; exit 2; }
-bench() { "$1/bench/shade_bench" --shade-in-time --threads "$2" --only "$3" --res "$w" "$h"; }
+bench() { "$1/bench/shade_bench" --shade-in-time --threads "$2" --only "$3" --res "$w" "$h" "${stride[@]}"; }
 if [[ $cachegrind == 1 ]]; then
   command -v valgrind >/dev/null || { echo "bench/shade_in_time.sh: --cachegrind needs valgrind (apt-get install valgrind)" >&2; exit 1; }
   for b in "${builds[@]}"; do
@@ -34,7 +36,7 @@ if [[ $cachegrind == 1 ]]; then
     [[ -f "$shim" ]] || { echo "$shim missing: build the bench targets" >&2; exit 1; }
     for label in none once t0.01; do
       n=$(LD_PRELOAD="$shim" valgrind --tool=cachegrind --cache-sim=no --cachegrind-out-file=/dev/null \
-            "$b/bench/shade_bench" --shade-in-time --threads 1 --only "$label" --res "$w" "$h" 2>&1 | awk '/I +refs/ {gsub(",", "", $NF); print $NF}')
+            "$b/bench/shade_bench" --shade-in-time --threads 1 --only "$label" --res "$w" "$h" "${stride[@]}" 2>&1 | awk '/I +refs/ {gsub(",", "", $NF); print $NF}')
       echo "$b ${w}x$h $label $n instructions"
     done
   done
