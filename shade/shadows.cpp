@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <map>
+#include <numbers>
 
 #include <embree3/rtcore.h>
 #include <tbb/parallel_for.h>
@@ -268,6 +269,7 @@ MovingCasters::MovingCasters(std::span<const LitLight> lights, std::vector<Shado
         s.toCaster = 0.5 * (caster.lo + caster.hi) - light.position;
         s.distance = glm::length(s.toCaster);
         s.halfAngle = std::asin(std::min(1.0, s.radius / s.distance));
+        s.cosHalf = std::cos(s.halfAngle), s.sinHalf = std::sin(s.halfAngle);
       }
       f.casters.push_back(s);
     }
@@ -300,12 +302,16 @@ bool MovingCasters::mayShadow(size_t li, const ShadowBox& receiver) const {
   const glm::dvec3 toR = 0.5 * (receiver.lo + receiver.hi) - light.position;
   const double rR = 0.5 * diagonal(receiver) * (1 + 1e-6), dR = glm::length(toR);
   if (!(dR > rR)) return true;
-  const double receiverAngle = std::asin(std::min(1.0, rR / dR));
+  // The angle between a caster's centre and the receiver's, seen from the light, against the sum
+  // of their half-angles (each at most a right angle) and a little slack: compared by cosines,
+  // cos(a + b) = cos a cos b - sin a sin b, so each caster costs a dot product, not an acos.
+  const double receiverAngle = std::asin(std::min(1.0, rR / dR)) + 1e-9;
+  const double cosR = std::cos(receiverAngle), sinR = std::sin(receiverAngle);
   for (const Seen& c : f.casters) {
     if (!(c.distance > c.radius)) return true;
     if (dR + rR < c.distance - c.radius) continue;  // wholly nearer the light than the caster
     const double cosAngle = std::clamp(glm::dot(c.toCaster, toR) / (c.distance * dR), -1.0, 1.0);
-    if (std::acos(cosAngle) <= c.halfAngle + receiverAngle + 1e-9) return true;
+    if (c.halfAngle + receiverAngle >= std::numbers::pi || cosAngle >= c.cosHalf * cosR - c.sinHalf * sinR) return true;
   }
   return false;
 }

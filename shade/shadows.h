@@ -89,6 +89,7 @@ class MovingCasters {
   struct Seen {                                      // one caster from one light
     double lo[3], hi[3];                             // distant: its extent along the light's frame (e1, e2, d)
     double radius = 0, distance = 0, halfAngle = 0;  // local: its sphere grown by the emitter, seen from the light
+    double cosHalf = 1, sinHalf = 0;                 // of halfAngle
     glm::dvec3 toCaster{0};
   };
   struct FromLight {

@@ -7,6 +7,7 @@
 #include <filesystem>
 #include <fstream>
 #include <map>
+#include <random>
 #include <set>
 
 #include <gtest/gtest.h>
@@ -19,6 +20,7 @@
 #include "shade/demo_scene.h"
 #include "shade/rib_scene.h"
 #include "shade/shading_pass.h"
+#include "shade/shadows.h"
 #include "store/reader.h"
 #include "tests/test_util.h"
 
@@ -1068,3 +1070,88 @@ TEST(ShadeRib, BadInputNamesFileAndLine) {
 
 }  // namespace
 }  // namespace reshutter::shade
+
+// MovingCasters promises to be conservative: false only when no caster can shadow any point of
+// the receiver's box from the light. Brute force: random casters, receivers and lights (a point
+// light, a square area light, a sharp and a soft distant light); wherever some segment from a
+// point of the receiver to a point of the emitter (or a ray along a direction of the distant
+// light's cone) passes through a caster's box, mayShadow must say so. And it must cull: many
+// receivers far from every caster's shadow come back false.
+TEST(ShadeShadows, MovingCastersNeverMissACasterBetweenAReceiverAndItsLight) {
+  using namespace reshutter::shade;
+  std::mt19937 rng(20261127);
+  auto uniform = [&](double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng); };
+  auto randomBox = [&](double spread, double size) {
+    ShadowBox b;
+    const glm::dvec3 c(uniform(-spread, spread), uniform(-spread, spread), uniform(-spread, spread));
+    const glm::dvec3 h(uniform(0.05, size), uniform(0.05, size), uniform(0.05, size));
+    b.lo = c - h, b.hi = c + h;
+    return b;
+  };
+  // Whether the segment from `a` along `d` for s in [0, sMax] meets `box` (slabs).
+  auto meets = [](const glm::dvec3& a, const glm::dvec3& d, double sMax, const ShadowBox& box) {
+    double s0 = 0, s1 = sMax;
+    for (int k = 0; k < 3; ++k) {
+      if (std::abs(d[k]) < 1e-300) {
+        if (a[k] < box.lo[k] || a[k] > box.hi[k]) return false;
+        continue;
+      }
+      double t0 = (box.lo[k] - a[k]) / d[k], t1 = (box.hi[k] - a[k]) / d[k];
+      if (t0 > t1) std::swap(t0, t1);
+      s0 = std::max(s0, t0), s1 = std::min(s1, t1);
+      if (s0 > s1) return false;
+    }
+    return true;
+  };
+  std::vector<LitLight> lights(4);
+  lights[0].kind = LightKind::Point, lights[0].position = {0, 6, 0}, lights[0].shadows = true;
+  lights[1].kind = LightKind::Point, lights[1].shape = LightShape::Rect, lights[1].position = {3, 5, -2}, lights[1].halfU = {0.8, 0, 0},
+  lights[1].halfV = {0, 0, 0.8}, lights[1].shadows = true;
+  lights[2].kind = LightKind::Distant, lights[2].axis = glm::normalize(glm::dvec3(0.3, -1, 0.2)), lights[2].shadows = true;
+  lights[3].kind = LightKind::Distant, lights[3].axis = glm::normalize(glm::dvec3(-0.4, -1, 0.1)), lights[3].tanHalfAngle = 0.1, lights[3].shadows = true;
+  int shadowed = 0, culled = 0;
+  for (int scene = 0; scene < 24; ++scene) {
+    std::vector<ShadowBox> casters;
+    for (int i = 0; i < 3; ++i) casters.push_back(randomBox(3, 0.8));
+    const MovingCasters moving(lights, casters);
+    for (int r = 0; r < 60; ++r) {
+      const ShadowBox receiver = randomBox(4, 0.6);
+      for (size_t li = 0; li < lights.size(); ++li) {
+        const LitLight& l = lights[li];
+        const bool may = moving.mayShadow(li, receiver);
+        bool found = false;
+        for (int k = 0; k < 48 && !found; ++k) {
+          // A point of the receiver's box: its corners first, then inside.
+          const glm::dvec3 p = k < 8 ? glm::dvec3(k & 1 ? receiver.hi.x : receiver.lo.x, k & 2 ? receiver.hi.y : receiver.lo.y, k & 4 ? receiver.hi.z : receiver.lo.z)
+                                     : glm::dvec3(uniform(receiver.lo.x, receiver.hi.x), uniform(receiver.lo.y, receiver.hi.y), uniform(receiver.lo.z, receiver.hi.z));
+          for (int e = 0; e < 8 && !found; ++e) {
+            glm::dvec3 d;
+            double sMax = 1;
+            if (l.kind == LightKind::Distant) {
+              glm::dvec3 dir = -l.axis;
+              if (l.tanHalfAngle > 0) {
+                const glm::dvec3 e1 = glm::normalize(glm::cross(dir, glm::dvec3(0, 0, 1))), e2 = glm::cross(dir, e1);
+                double x, y;
+                do x = uniform(-1, 1), y = uniform(-1, 1);
+                while (x * x + y * y > 1);
+                dir = glm::normalize(dir + l.tanHalfAngle * (x * e1 + y * e2));
+              }
+              d = dir, sMax = 1e6;
+            } else {
+              d = l.position + uniform(-1, 1) * l.halfU + uniform(-1, 1) * l.halfV - p;
+            }
+            for (const ShadowBox& c : casters) found |= meets(p, d, sMax, c);
+          }
+        }
+        if (found) {
+          ++shadowed;
+          EXPECT_TRUE(may) << "scene " << scene << ", receiver " << r << ", light " << li << ": a caster lies between them";
+        }
+        culled += !may;
+      }
+    }
+  }
+  // Not vacuous: both kinds occur often.
+  EXPECT_GT(shadowed, 500);
+  EXPECT_GT(culled, 500);
+}
