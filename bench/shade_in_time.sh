@@ -10,10 +10,14 @@
 #   bench/shade_in_time.sh --cachegrind [--res W H] [--stride N] BUILD...
 #       instructions of the whole process, one thread (repeatable); "none" is the process with
 #       the module loaded and nothing shaded, to subtract
+#   bench/shade_in_time.sh --breakdown [--res W H] [--stride N] BUILD...
+#       where the extra of shading in time goes (callgrind, one thread, the pass alone): the
+#       later times, the store's writing, the rays through the moving scene (the accuracy study's
+#       size is --res 256 144)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 source bench/host.sh
-rounds=5 threads=1 w=640 h=360 cachegrind=0
+rounds=5 threads=1 w=640 h=360 cachegrind=0 breakdown=0
 builds=() stride=()
 while [[ $# -gt 0 ]]; do
   case "$1" in
@@ -21,8 +25,9 @@ while [[ $# -gt 0 ]]; do
     --threads) threads="$2"; shift ;;
     --res) w="$2"; h="$3"; shift 2 ;;
     --cachegrind) cachegrind=1 ;;
+    --breakdown) breakdown=1 ;;
     --stride) stride=(--stride "$2"); shift ;;
-    -*) echo "usage: bench/shade_in_time.sh [--cachegrind] [--rounds R] [--threads T] [--res W H] [--stride N] BUILD..." >&2; exit 2 ;;
+    -*) echo "usage: bench/shade_in_time.sh [--cachegrind | --breakdown] [--rounds R] [--threads T] [--res W H] [--stride N] BUILD..." >&2; exit 2 ;;
     *) builds+=("$1") ;;
   esac
   shift
@@ -39,6 +44,37 @@ if [[ $cachegrind == 1 ]]; then
             "$b/bench/shade_bench" --shade-in-time --threads 1 --only "$label" --res "$w" "$h" "${stride[@]}" 2>&1 | awk '/I +refs/ {gsub(",", "", $NF); print $NF}')
       echo "$b ${w}x$h $label $n instructions"
     done
+  done
+  exit 0
+fi
+if [[ $breakdown == 1 ]]; then
+  command -v valgrind >/dev/null || { echo "bench/shade_in_time.sh: --breakdown needs valgrind (apt-get install valgrind)" >&2; exit 1; }
+  tmp=$(mktemp -d)
+  trap 'rm -rf "$tmp"' EXIT
+  for b in "${builds[@]}"; do
+    shim="$b/bench/libvalgrind_timer_shim.so"
+    [[ -f "$shim" ]] || { echo "$shim missing: build the bench targets" >&2; exit 1; }
+    for label in once t0.01; do
+      LD_PRELOAD="$shim" valgrind --tool=callgrind --callgrind-out-file="$tmp/$label.out" \
+        "$b/bench/shade_bench" --shade-in-time --threads 1 --only "$label" --res "$w" "$h" "${stride[@]}" >/dev/null 2>&1 &
+    done
+    wait
+    # Inclusive instructions of the first function whose name matches, per run.
+    cost() { callgrind_annotate --inclusive=yes "$tmp/$1.out" 2>/dev/null | grep -E "^ *[0-9,]+ .*$2" | head -1 | awk '{gsub(",", "", $1); print $1 + 0}'; }
+    once=$(cost once 'shade::shadeToStore') timed=$(cost t0.01 'shade::shadeToStore')
+    later=$(cost t0.01 'pass::shadeInTime\(') moving=$(cost t0.01 'ShadowScene::occludedByMoving')
+    store=$(( $(cost t0.01 'StoreWriter::close') - $(cost once 'StoreWriter::close') ))
+    extra=$((timed - once))
+    python3 - "$b" "$w" "$h" "$once" "$timed" "$later" "$store" "$moving" <<'PY'
+import sys
+b, w, h = sys.argv[1:4]
+once, timed, later, store, moving = (int(x) for x in sys.argv[4:9])
+extra = timed - once
+print(f"{b} {w}x{h}, instructions of the pass (shadeToStore): once {once / 1e6:,.0f} M, in time {timed / 1e6:,.0f} M, ratio {timed / once:.3f}")
+for name, n in [("extra", extra), ("  the later times (shadeInTime)", later), ("  writing the store's later colours (StoreWriter::close)", store),
+                ("  the rest (first time's extra rays, candidate tests)", extra - later - store), ("rays through the moving scene, every time", moving)]:
+    print(f"  {name:58s} {n / 1e6:9,.0f} M  {n / extra:6.1%} of the extra")
+PY
   done
   exit 0
 fi
