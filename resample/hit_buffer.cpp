@@ -134,7 +134,7 @@ void HitBuffer::recordAnyHit(const HitContext& hc, uint32_t sample, uint32_t m, 
 }
 
 void HitBuffer::shadingAt(const HitContext& hc, const int* slots, uint32_t sample, uint32_t m, const uint32_t v[3], const float b[3], float out[3]) const {
-  if (!hc.timed) {
+  if (!hc.timed || slots[1] < 0) {  // slots[1] < 0: the store keeps it at the first time only (later opacities that cannot change)
     attrAt(*hc.part, *hc.schema, slots[0], m, v, b, out);
     return;
   }

@@ -109,8 +109,19 @@ store::StoreMeta storeMeta(const FrameScene& scene, const ShadeOptions& o) {
     // attribute limit holds (colour and opacity first).
     m.shadingTimes = iv.times;
     const std::vector<store::AttrDecl> first = m.schema.attrs;
+    // A surface's opacity is its Os (shade/shaders.h): it changes over the shutter only where an
+    // opacity or a shader (a RIS material's presence) is animated. Elsewhere the later times'
+    // opacities would repeat the first's, so the store leaves them out.
+    const Attributes* seen = nullptr;
+    bool opacityMayChange = false;
+    for (const Primitive& p : scene.prims) {
+      if (p.attrs.get() == seen) continue;
+      seen = p.attrs.get();
+      opacityMayChange |= p.attrs->opacity.values.size() > 1 || p.attrs->surface.values.size() > 1;
+    }
     for (const store::AttrDecl& a : first) {
       if (a.name == "s" || a.name == "t" || a.name == "u" || a.name == "v") continue;
+      if (a.name == "Oi" && !opacityMayChange) continue;
       if (varOf(a.name) >= Var::Cvi) continue;  // the view-dependent term's inputs: at the first time
       if (m.schema.attrs.size() + iv.times.size() - 1 > store::Schema::kMaxAttributes) {
         warnOnce(cat("timed-aov:", a.name), cat("output variable '", a.name, "' is stored at the first shading time only (a store holds at most ",

@@ -4,6 +4,7 @@
 #include <cmath>
 #include <cstring>
 #include <set>
+#include <string_view>
 
 #include "common/error.h"
 
@@ -272,8 +273,10 @@ void StoreMeta::validate(const std::string& where) const {
     if (!std::isfinite(shadingTimes[k])) fail(where, "shading time ", k, " is not finite");
     if (k > 0 && !(shadingTimes[k] > shadingTimes[k - 1]))
       fail(where, "shading times not strictly increasing (", shadingTimes[k - 1], " then ", shadingTimes[k], ")");
+    // The later opacities may be left out, all of them (the first time's holds throughout).
+    const bool laterOpacities = shadingTimes.size() > 1 && schema.find(timedName("Oi", 1)) >= 0;
     for (const char* base : {"Ci", "Oi"}) {
-      if (k == 0) continue;
+      if (k == 0 || (base == std::string_view("Oi") && !laterOpacities)) continue;
       const int i = schema.find(timedName(base, k));
       if (i < 0) fail(where, "shading time ", k, " has no '", timedName(base, k), "' in the schema");
       const AttrDecl& a = schema.attrs[size_t(i)];

@@ -33,6 +33,7 @@ using test::runReshutter;
 using test::ScratchDir;
 
 float red(const resample::FlatImage& img, int x, int y) { return img.find("R")->f[size_t(y - img.y0) * size_t(img.width) + size_t(x - img.x0)]; }
+float alpha(const resample::FlatImage& img, int x, int y) { return img.find("A")->f[size_t(y - img.y0) * size_t(img.width) + size_t(x - img.x0)]; }
 
 using test::numberBefore;
 
@@ -123,6 +124,34 @@ TEST(ShadeInTime, ARotatingSquareMatchesItsShadingAtEachInstant) {
   EXPECT_LT(blendErr9, blendErr3 / 4);
   // The shade-once error at the close is the whole change, 1 - cos 60° = 0.5.
   EXPECT_NEAR(red(instant(dir, once.store, 1.0, "once-end"), 16, 16) - rotatingTruth(1.0), 0.5, 1e-3);
+}
+
+// A surface's opacity changes over the shutter only where an opacity (or a shader) is animated:
+// elsewhere the store leaves the later opacities out and every instant takes the first's. The
+// rotating square at a constant half opacity: its colour still follows time, its alpha stays 0.5.
+// With its opacity animated from 1 to 0.2 the store carries the later opacities, and alpha at an
+// instant is the blend of the stored times (opacity is linear in time, so exact).
+TEST(ShadeInTime, OpacityFollowsTimeOnlyWhereItCanChange) {
+  ScratchDir dir;
+  const std::string half = edited(kRotatingSquare, "Color [1 1 1]\n", "Color [1 1 1]\nOpacity [0.5 0.5 0.5]\n");
+  const Shaded constant = shade(dir, "constant", half, "--shade-in-time 0.01 --shade-times 3");
+  EXPECT_EQ(numberBefore(constant.report, " of "), numberBefore(constant.report, " grids that may change")) << constant.report;
+  const store::StoreMeta& meta = store::StoreReader(constant.store).meta();
+  EXPECT_EQ(meta.shadingTimes.size(), 3u);
+  EXPECT_GE(meta.schema.find("Ci@2"), 0);
+  EXPECT_LT(meta.schema.find("Oi@1"), 0) << "a constant opacity needs no later times";
+  const auto open = instant(dir, constant.store, 0.0, "constant-open"), close = instant(dir, constant.store, 1.0, "constant-close");
+  EXPECT_NEAR(alpha(open, 16, 16), 0.5f, 1e-4);
+  EXPECT_NEAR(alpha(close, 16, 16), 0.5f, 1e-4);
+  // The colour at the close against the open: the shading's own change, cos 60° (scaled alike by
+  // the opacity).
+  EXPECT_NEAR(red(close, 16, 16) / red(open, 16, 16), rotatingTruth(1.0) / rotatingTruth(0.0), 1e-3);
+
+  const std::string fading = edited(kRotatingSquare, "Color [1 1 1]\n", "Color [1 1 1]\nMotionBegin [0 1]\nOpacity [1 1 1]\nOpacity [0.2 0.2 0.2]\nMotionEnd\n");
+  const Shaded animated = shade(dir, "animated", fading, "--shade-in-time 0.01 --shade-times 3");
+  EXPECT_GE(store::StoreReader(animated.store).meta().schema.find("Oi@2"), 0) << "an animated opacity is carried in time";
+  for (double t : {0.0, 0.25, 0.5, 1.0})
+    EXPECT_NEAR(alpha(instant(dir, animated.store, t, "animated-" + std::to_string(int(t * 100))), 16, 16), 1.0 - 0.8 * t, 1e-3) << "t=" << t;
 }
 
 // Times are refined by bisection: the close, then the middle; a middle within the tolerance of
@@ -483,6 +512,13 @@ TEST(ShadeInTime, StoresCheckTheirShadingTimes) {
   withN.validate("m");
   withN.schema.attrs.erase(withN.schema.attrs.begin() + withN.schema.find("N@1"));
   refused(withN, "'N' is given at shading time 2 but not at 1");
+  // The later opacities may be left out, all of them (the first time's holds throughout).
+  store::StoreMeta noLaterOpacity;
+  noLaterOpacity.schema.attrs = {{"Ci", store::AttrType::Color}, {"Oi", store::AttrType::Color}, {"Ci@1", store::AttrType::Color}, {"Ci@2", store::AttrType::Color}};
+  noLaterOpacity.shadingTimes = {0.0, 0.5, 1.0};
+  noLaterOpacity.validate("m");
+  noLaterOpacity.schema.attrs.push_back({"Oi@1", store::AttrType::Color});
+  refused(noLaterOpacity, "has no 'Oi@2'");
   store::StoreMeta backwards = meta;
   backwards.shadingTimes = {1.0, 0.0};
   try {
