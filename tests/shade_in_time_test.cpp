@@ -136,7 +136,8 @@ TEST(ShadeInTime, OpacityFollowsTimeOnlyWhereItCanChange) {
   const std::string half = edited(kRotatingSquare, "Color [1 1 1]\n", "Color [1 1 1]\nOpacity [0.5 0.5 0.5]\n");
   const Shaded constant = shade(dir, "constant", half, "--shade-in-time 0.01 --shade-times 3");
   EXPECT_EQ(numberBefore(constant.report, " of "), numberBefore(constant.report, " grids that may change")) << constant.report;
-  const store::StoreMeta& meta = store::StoreReader(constant.store).meta();
+  const store::StoreReader reader(constant.store);
+  const store::StoreMeta& meta = reader.meta();
   EXPECT_EQ(meta.shadingTimes.size(), 3u);
   EXPECT_GE(meta.schema.find("Ci@2"), 0);
   EXPECT_LT(meta.schema.find("Oi@1"), 0) << "a constant opacity needs no later times";
