@@ -70,6 +70,9 @@ struct ShadeContext {
   // Per attribute carried in time (Ci, Oi, output variables): its schema slot at each shading
   // time ([0]: the attribute itself, [k]: "name@k").
   std::vector<std::vector<int>> timedSlots{};
+  // Of Ci and Oi, the slots carried in time: what decides whether a grid's shading changed
+  // (Oi only where an opacity can change; elsewhere its later values are never kept).
+  std::vector<int> changeSlots{};
   bool viewInputs = false;  // the schema holds the view-dependent terms' inputs (Var::Cvi ...)
 };
 

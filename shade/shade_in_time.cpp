@@ -286,11 +286,7 @@ bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const Dic
   std::vector<LitLight> lights;
   float change = 0;
   if (reuse) reuse->recording = false, reuse->first = &out.attrs;
-  // Colour and opacity as the store carries them in time (opacity only where it can change:
-  // elsewhere its later values are never blended or interpolated, so not compared either).
-  std::vector<int> slots;
-  for (const std::vector<int>& timed : c.timedSlots)
-    if (timed[0] == c.ci || timed[0] == c.oi) slots.push_back(timed[0]);
+  const std::vector<int>& slots = c.changeSlots;
   CoarseLattice lattice;
   const bool coarse = c.tolerance > 0 && lattice.set(g, c.timeStride);
   auto values = [&](size_t k, int slot) -> std::vector<float>& { return k == 0 ? out.attrs[size_t(slot)] : at[k][size_t(slot)]; };

@@ -519,6 +519,7 @@ ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::Gri
       if (store::StoreMeta::timedIndex(name) || meta.schema.find(store::StoreMeta::timedName(name, 1)) < 0) continue;
       std::vector<int> slots{int(ai)};
       for (size_t k = 1; k < iv.times.size(); ++k) slots.push_back(meta.schema.find(store::StoreMeta::timedName(name, k)));
+      if (int(ai) == context.ci || int(ai) == context.oi) context.changeSlots.push_back(int(ai));
       context.timedSlots.push_back(std::move(slots));
     }
     for (const auto& l : scene.lights) context.lightMoves.push_back(lightMoves(l, iv.open, iv.close));

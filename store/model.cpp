@@ -4,7 +4,6 @@
 #include <cmath>
 #include <cstring>
 #include <set>
-#include <string_view>
 
 #include "common/error.h"
 
@@ -269,14 +268,14 @@ void StoreMeta::validate(const std::string& where) const {
     if (schema.attrs[size_t(i)].type != AttrType::Color) fail(where, "'", required, "' must be a color");
   }
   if (shadingTimes.size() > kMaxShadingTimes) fail(where, shadingTimes.size(), " shading times (at most ", kMaxShadingTimes, ")");
+  // The later opacities may be left out, all of them (the first time's holds throughout).
+  const bool laterOpacities = shadingTimes.size() > 1 && schema.find(timedName("Oi", 1)) >= 0;
   for (size_t k = 0; k < shadingTimes.size(); ++k) {
     if (!std::isfinite(shadingTimes[k])) fail(where, "shading time ", k, " is not finite");
     if (k > 0 && !(shadingTimes[k] > shadingTimes[k - 1]))
       fail(where, "shading times not strictly increasing (", shadingTimes[k - 1], " then ", shadingTimes[k], ")");
-    // The later opacities may be left out, all of them (the first time's holds throughout).
-    const bool laterOpacities = shadingTimes.size() > 1 && schema.find(timedName("Oi", 1)) >= 0;
-    for (const char* base : {"Ci", "Oi"}) {
-      if (k == 0 || (base == std::string_view("Oi") && !laterOpacities)) continue;
+    for (const char* base : {"Ci", laterOpacities ? "Oi" : nullptr}) {
+      if (k == 0 || !base) continue;
       const int i = schema.find(timedName(base, k));
       if (i < 0) fail(where, "shading time ", k, " has no '", timedName(base, k), "' in the schema");
       const AttrDecl& a = schema.attrs[size_t(i)];

@@ -138,6 +138,7 @@ TEST(ShadeInTime, OpacityFollowsTimeOnlyWhereItCanChange) {
   EXPECT_EQ(numberBefore(constant.report, " of "), numberBefore(constant.report, " grids that may change")) << constant.report;
   const store::StoreReader reader(constant.store);
   const store::StoreMeta& meta = reader.meta();
+  // Shading times are the shutter instants the store carries (no clock is read anywhere here).
   EXPECT_EQ(meta.shadingTimes.size(), 3u);
   EXPECT_GE(meta.schema.find("Ci@2"), 0);
   EXPECT_LT(meta.schema.find("Oi@1"), 0) << "a constant opacity needs no later times";
@@ -151,7 +152,7 @@ TEST(ShadeInTime, OpacityFollowsTimeOnlyWhereItCanChange) {
   const std::string fading = edited(kRotatingSquare, "Color [1 1 1]\n", "Color [1 1 1]\nMotionBegin [0 1]\nOpacity [1 1 1]\nOpacity [0.2 0.2 0.2]\nMotionEnd\n");
   const Shaded animated = shade(dir, "animated", fading, "--shade-in-time 0.01 --shade-times 3");
   EXPECT_GE(store::StoreReader(animated.store).meta().schema.find("Oi@2"), 0) << "an animated opacity is carried in time";
-  for (double t : {0.0, 0.25, 0.5, 1.0})
+  for (double t : {0.0, 0.25, 0.5, 1.0})  // t: a shutter instant (frames), not a duration
     EXPECT_NEAR(alpha(instant(dir, animated.store, t, "animated-" + std::to_string(int(t * 100))), 16, 16), 1.0 - 0.8 * t, 1e-3) << "t=" << t;
 }
 

@@ -1068,9 +1068,6 @@ TEST(ShadeRib, BadInputNamesFileAndLine) {
   }
 }
 
-}  // namespace
-}  // namespace reshutter::shade
-
 // MovingCasters promises to be conservative: false only when no caster can shadow any point of
 // the receiver's box from the light. Brute force: random casters, receivers and lights (a point
 // light, a square area light, a sharp and a soft distant light); wherever some segment from a
@@ -1078,7 +1075,6 @@ TEST(ShadeRib, BadInputNamesFileAndLine) {
 // light's cone) passes through a caster's box, mayShadow must say so. And it must cull: many
 // receivers far from every caster's shadow come back false.
 TEST(ShadeShadows, MovingCastersNeverMissACasterBetweenAReceiverAndItsLight) {
-  using namespace reshutter::shade;
   std::mt19937 rng(20261127);
   auto uniform = [&](double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng); };
   auto randomBox = [&](double spread, double size) {
@@ -1155,3 +1151,6 @@ TEST(ShadeShadows, MovingCastersNeverMissACasterBetweenAReceiverAndItsLight) {
   EXPECT_GT(shadowed, 500);
   EXPECT_GT(culled, 500);
 }
+
+}  // namespace
+}  // namespace reshutter::shade
