@@ -134,7 +134,8 @@ struct ShadeCommand {
                                                        r.shade.laterVertices, " vertex shadings at later times and ", r.shade.interpolatedVertices,
                                                        " vertices whose change was interpolated between them (--shade-in-time-stride), ",
                                                        r.shade.rigidMicropolygons, " moving micropolygons in ", r.shade.rigidCasters,
-                                                       " rigidly moving shadow casters (a still BVH each, instanced)")
+                                                       " rigidly moving shadow casters (a still BVH each, instanced; fixed at ",
+                                                       r.shade.fixedCasterTimes, " shading times)")
                                                  : std::string()));
     });
     shade::readRibScene(scene, sceneBuilder, opt.dice.cullMargin);

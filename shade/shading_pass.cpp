@@ -462,7 +462,7 @@ std::unique_ptr<ShadowScene> buildShadowScene(const ShadeContext& c, const Split
     }
     if (!boxes.empty()) *movingCasters = MovingCasters(c.lit, std::move(boxes));
   }
-  return c.times.size() > 1 ? std::make_unique<ShadowScene>(pieces, c.times.front(), c.times.back(), motions) : std::make_unique<ShadowScene>(pieces);
+  return c.times.size() > 1 ? std::make_unique<ShadowScene>(pieces, c.times.front(), c.times.back(), motions, c.times) : std::make_unique<ShadowScene>(pieces);
 }
 
 // The texture search path with relative entries taken from the RIB file's directory, which is
@@ -555,6 +555,7 @@ ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::Gri
     }
     stats.shadowMicropolygons = shadows->micropolygons();
     stats.rigidCasters = shadows->rigidInstances(), stats.rigidMicropolygons = shadows->rigidMicropolygons();
+    stats.fixedCasterTimes = shadows->fixedTimes();
     stats.shadowBuildSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }
   context.shadows = shadows.get();

@@ -19,12 +19,19 @@ namespace reshutter::shade {
 
 struct ShadowScene::Impl {
   RTCDevice device = nullptr;
-  RTCScene still = nullptr, moving = nullptr;  // moving: only when some piece moves
-  std::vector<RTCScene> instanced;             // the rigidly moving pieces' own BVHs, instanced in `moving`
-  double open = 0, close = 0;                  // the moving pieces' interval (Embree's ray time 0 to 1)
+  RTCScene still = nullptr;
+  RTCScene deforming = nullptr;  // the pieces whose vertices move, in time steps (only when some do)
+  RTCScene rigid = nullptr;      // the rigidly moving pieces' BVHs, instanced with motion-blurred transforms
+  std::vector<RTCScene> instanced;  // those pieces' own BVHs
+  // `rigid` at each of the chosen times, its transforms fixed: a ray through a static instance
+  // skips the blend and inversion of a matrix per instance and the motion boxes per BVH node.
+  std::vector<double> fixedAt;
+  std::vector<RTCScene> fixed;
+  double open = 0, close = 0;  // the moving pieces' interval (Embree's ray time 0 to 1)
   ~Impl() {
-    if (still) rtcReleaseScene(still);
-    if (moving) rtcReleaseScene(moving);
+    for (RTCScene s : {still, deforming, rigid})
+      if (s) rtcReleaseScene(s);
+    for (RTCScene s : fixed) rtcReleaseScene(s);
     for (RTCScene s : instanced) rtcReleaseScene(s);
     if (device) rtcReleaseDevice(device);
   }
@@ -82,7 +89,8 @@ unsigned stepsFor(const ShadowScene::Piece& p, double open, double close) {
 
 }  // namespace
 
-ShadowScene::ShadowScene(std::span<const Piece> pieces, double open, double close, std::span<const RigidMotion> rigid) : impl_(std::make_unique<Impl>()) {
+ShadowScene::ShadowScene(std::span<const Piece> pieces, double open, double close, std::span<const RigidMotion> rigid, std::span<const double> fixAt)
+    : impl_(std::make_unique<Impl>()) {
   impl_->open = open, impl_->close = close;
   impl_->device = rtcNewDevice(nullptr);
   if (!impl_->device) fail("shadows", "Embree could not start (rtcNewDevice)");
@@ -92,9 +100,9 @@ ShadowScene::ShadowScene(std::span<const Piece> pieces, double open, double clos
     rtcSetSceneBuildQuality(scene, RTC_BUILD_QUALITY_MEDIUM);
     return scene;
   };
-  auto movingScene = [&] {
-    if (!impl_->moving) impl_->moving = newScene();
-    return impl_->moving;
+  auto ensure = [&](RTCScene& scene) {
+    if (!scene) scene = newScene();
+    return scene;
   };
   impl_->still = newScene();
   // One quad geometry of `members`' micropolygons in `steps` time steps (a geometry's vertex
@@ -145,7 +153,15 @@ ShadowScene::ShadowScene(std::span<const Piece> pieces, double open, double clos
     else if (r >= 0) fail("shadows", "a piece names rigid motion ", r, " of ", rigid.size(), " outside an interval that moves it");
     else groups[stepsFor(pieces[i], open, close)].push_back(i);
   }
-  for (const auto& [steps, members] : groups) attachQuads(steps > 1 ? movingScene() : impl_->still, members, steps);
+  for (const auto& [steps, members] : groups) attachQuads(steps > 1 ? ensure(impl_->deforming) : impl_->still, members, steps);
+  auto setTransform = [](RTCGeometry instance, unsigned step, const glm::dmat4& m) {
+    float columns[12];
+    for (int c = 0; c < 4; ++c)
+      for (int row = 0; row < 3; ++row) columns[3 * c + row] = float(m[c][row]);
+    rtcSetGeometryTransform(instance, step, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, columns);
+  };
+  if (interval) impl_->fixedAt.assign(fixAt.begin(), fixAt.end());
+  impl_->fixed.assign(impl_->fixedAt.size(), nullptr);
   for (size_t r = 0; r < rigid.size(); ++r) {
     if (rigidMembers[r].empty()) continue;
     const RigidMotion& motion = rigid[r];
@@ -159,24 +175,32 @@ ShadowScene::ShadowScene(std::span<const Piece> pieces, double open, double clos
     rtcSetGeometryInstancedScene(instance, local);
     const unsigned steps = stepsForKnots(motion.times, open, close);
     rtcSetGeometryTimeStepCount(instance, steps);
-    for (unsigned s = 0; s < steps; ++s) {
-      // The blend of the knots' matrices at the step's time, as stepPositions() blends positions.
-      const glm::dmat4 m = motion.at(open + (close - open) * double(s) / double(steps - 1));
-      float columns[12];
-      for (int c = 0; c < 4; ++c)
-        for (int row = 0; row < 3; ++row) columns[3 * c + row] = float(m[c][row]);
-      rtcSetGeometryTransform(instance, s, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, columns);
-    }
+    // The blend of the knots' matrices at each step's time, as stepPositions() blends positions.
+    for (unsigned s = 0; s < steps; ++s) setTransform(instance, s, motion.at(open + (close - open) * double(s) / double(steps - 1)));
     rtcCommitGeometry(instance);
-    rtcAttachGeometry(movingScene(), instance);
+    rtcAttachGeometry(ensure(impl_->rigid), instance);
     rtcReleaseGeometry(instance);
+    for (size_t k = 0; k < impl_->fixedAt.size(); ++k) {
+      // The knots' matrices blended at that time, as the vertices move (MotionXform::at).
+      const double t = std::clamp(impl_->fixedAt[k], open, close);
+      RTCGeometry still = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_INSTANCE);
+      rtcSetGeometryInstancedScene(still, local);
+      setTransform(still, 0, motion.at(t));
+      rtcCommitGeometry(still);
+      rtcAttachGeometry(ensure(impl_->fixed[k]), still);
+      rtcReleaseGeometry(still);
+    }
   }
-  rtcCommitScene(impl_->still);
-  if (impl_->moving) rtcCommitScene(impl_->moving);
+  if (!impl_->rigid) impl_->fixedAt.clear(), impl_->fixed.clear();
+  for (RTCScene s : {impl_->still, impl_->deforming, impl_->rigid})
+    if (s) rtcCommitScene(s);
+  for (RTCScene s : impl_->fixed) rtcCommitScene(s);
   check(impl_->device, "build the shadow scene");
 }
 
 ShadowScene::~ShadowScene() = default;
+
+size_t ShadowScene::fixedTimes() const { return impl_->fixed.size(); }
 
 namespace {
 bool occludedIn(RTCScene scene, const glm::dvec3& origin, const glm::dvec3& dir, double tfar, float time) {
@@ -200,9 +224,12 @@ bool ShadowScene::occludedByStill(const glm::dvec3& origin, const glm::dvec3& di
 }
 
 bool ShadowScene::occludedByMoving(const glm::dvec3& origin, const glm::dvec3& dir, double tfar, double time) const {
-  if (!impl_->moving) return false;
   const double span = impl_->close - impl_->open;
-  return occludedIn(impl_->moving, origin, dir, tfar, span > 0 ? float(std::clamp((time - impl_->open) / span, 0.0, 1.0)) : 0.f);
+  const float rayTime = span > 0 ? float(std::clamp((time - impl_->open) / span, 0.0, 1.0)) : 0.f;
+  RTCScene rigid = impl_->rigid;
+  for (size_t k = 0; k < impl_->fixedAt.size(); ++k)
+    if (impl_->fixedAt[k] == time) rigid = impl_->fixed[k];
+  return occludedIn(rigid, origin, dir, tfar, rayTime) || occludedIn(impl_->deforming, origin, dir, tfar, rayTime);
 }
 
 namespace {

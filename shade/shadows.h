@@ -44,9 +44,13 @@ class ShadowScene {
   /// between two micropolygons that share an edge). With `open` < `close`, moving pieces move
   /// over that interval (their knots inside it; Embree's time steps are even, so uneven knots
   /// are resampled onto 2 × knots even steps) and occludedByMoving() takes a time. Still and
-  /// moving micropolygons go to two BVHs: rays at a still point need only the moving one at
-  /// later times, and the still one carries no time steps.
-  explicit ShadowScene(std::span<const Piece> pieces, double open = 0, double close = 0, std::span<const RigidMotion> rigid = {});
+  /// moving micropolygons go to separate BVHs: rays at a still point need only the moving ones
+  /// at later times, and the still one carries no time steps. At each of `fixAt` (the
+  /// shading times) the rigid motions are also instanced with their transforms fixed at that
+  /// time, which occludedByMoving() at exactly that time traces instead: the same positions,
+  /// without Embree blending and inverting a matrix per instance per ray.
+  explicit ShadowScene(std::span<const Piece> pieces, double open = 0, double close = 0, std::span<const RigidMotion> rigid = {},
+                       std::span<const double> fixAt = {});
   ~ShadowScene();
   ShadowScene(const ShadowScene&) = delete;
   ShadowScene& operator=(const ShadowScene&) = delete;
@@ -60,6 +64,8 @@ class ShadowScene {
   /// The rigid motions instanced, and the micropolygons moving that way.
   uint64_t rigidInstances() const { return rigidInstances_; }
   uint64_t rigidMicropolygons() const { return rigidMicropolygons_; }
+  /// The times at which the rigid motions are also instanced fixed (0 without rigid motions).
+  size_t fixedTimes() const;
 
  private:
   struct Impl;

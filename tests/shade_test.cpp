@@ -1152,5 +1152,71 @@ TEST(ShadeShadows, MovingCastersNeverMissACasterBetweenAReceiverAndItsLight) {
   EXPECT_GT(culled, 500);
 }
 
+// Shading in time traces rays at the shading times through the rigid casters instanced with
+// their transforms fixed at those times (ShadowScene's fixAt), and at any other time through the
+// motion-blurred instances. A ray must be blocked exactly where the casters stand at its time: a
+// square moving rigidly over three uneven knots (turning and sliding), and a square deforming
+// (its top edge rising), against the analytic intersection at the ray's time. Rays within a hair
+// of an edge are left out (ties). Embree's motion blur steps evenly, so uneven knots are
+// resampled onto 6 steps (t = 0, 0.2, ... 1) and its instances are exact only at those: the
+// other times checked are steps, and at t = 0.25, between the steps either side of the knot at
+// 0.3, a scene without fixed times must miss the truth somewhere - which shows that the fixed
+// instances were the ones traced.
+TEST(ShadeShadows, CastersFixedAtShadingTimesBlockWhereTheyStandThen) {
+  using glm::dvec3;
+  ShadowScene::Piece rigid, deforming;
+  rigid.P = {{-1, -1, 5}, {1, -1, 5}, {1, 1, 5}, {-1, 1, 5}};
+  rigid.corners = {0, 1, 2, 3};
+  rigid.rigid = 0;
+  // x in [6, 8] at z = 7; y from -1 to 1 at the open, to 3 at the close.
+  deforming.P = {{6, -1, 7}, {8, -1, 7}, {8, 1, 7}, {6, 1, 7}, {6, -1, 7}, {8, -1, 7}, {8, 3, 7}, {6, 3, 7}};
+  deforming.corners = {0, 1, 2, 3};
+  deforming.knots = {0, 1};
+  auto placed = [](double dx, double dy, double degrees) {
+    return glm::translate(glm::dmat4(1.0), dvec3(dx, dy, 0)) * glm::rotate(glm::dmat4(1.0), glm::radians(degrees), dvec3(0, 0, 1));
+  };
+  const std::vector<ShadowScene::RigidMotion> motions{ShadowScene::RigidMotion({0, 0.3, 1}, {glm::dmat4(1.0), placed(1, 0.5, 30), placed(3, 0, 80)})};
+  const std::vector<ShadowScene::Piece> pieces{rigid, deforming};
+  const std::vector<double> shadingTimes{0, 0.25, 1};
+  const ShadowScene scene(pieces, 0, 1, motions, shadingTimes);
+  EXPECT_EQ(scene.fixedTimes(), 3u);
+  EXPECT_EQ(scene.rigidInstances(), 1u);
+  // Without rigid motions there is nothing to fix.
+  EXPECT_EQ(ShadowScene(std::vector<ShadowScene::Piece>{deforming}, 0, 1, {}, shadingTimes).fixedTimes(), 0u);
+  const ShadowScene blurredOnly(pieces, 0, 1, motions);
+  EXPECT_EQ(blurredOnly.fixedTimes(), 0u);
+
+  std::mt19937 rng(20261128);
+  auto uniform = [&](double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng); };
+  constexpr double kTie = 1e-3;
+  for (double t : {0.0, 0.25, 1.0, 0.2, 0.8}) {
+    const glm::dmat4 toSquare = glm::inverse(motions[0].at(t));
+    int hitsRigid = 0, hitsDeforming = 0, misses = 0, blurredWrong = 0;
+    for (int i = 0; i < 4000; ++i) {
+      const dvec3 origin(uniform(-3, 10), uniform(-3, 5), 0), target(uniform(-3, 10), uniform(-3, 5), 10);
+      const dvec3 dir = glm::normalize(target - origin);
+      // Where the ray crosses each square's plane, and how far inside (> 0) or outside (< 0) the
+      // square that point lies.
+      const dvec3 atRigid = origin + (5 / dir.z) * dir, atDeforming = origin + (7 / dir.z) * dir;
+      const glm::dvec4 local = toSquare * glm::dvec4(atRigid, 1);
+      const double insideRigid = 1 - std::max(std::abs(local.x), std::abs(local.y));
+      const double top = 1 + 2 * t;
+      const double insideDeforming = std::min({atDeforming.x - 6, 8 - atDeforming.x, atDeforming.y + 1, top - atDeforming.y});
+      if (std::abs(insideRigid) < kTie || std::abs(insideDeforming) < kTie) continue;
+      const bool blocked = insideRigid > 0 || insideDeforming > 0;
+      ASSERT_EQ(scene.occludedByMoving(origin, dir, INFINITY, t), blocked) << "t=" << t << " ray " << i;
+      EXPECT_FALSE(scene.occludedByStill(origin, dir, INFINITY));
+      hitsRigid += insideRigid > 0, hitsDeforming += insideDeforming > 0, misses += !blocked;
+      blurredWrong += blurredOnly.occludedByMoving(origin, dir, INFINITY, t) != blocked;
+    }
+    if (t == 0.25) EXPECT_GT(blurredWrong, 10) << "between Embree's steps its blend of matrices is off the knots'";
+    else EXPECT_EQ(blurredWrong, 0) << "t=" << t << " is one of Embree's steps";
+    // Both casters were hit and missed at this time.
+    EXPECT_GT(hitsRigid, 100) << "t=" << t;
+    EXPECT_GT(hitsDeforming, 100) << "t=" << t;
+    EXPECT_GT(misses, 1000) << "t=" << t;
+  }
+}
+
 }  // namespace
 }  // namespace reshutter::shade
