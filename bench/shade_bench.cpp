@@ -4,7 +4,7 @@
 // compression and I/O, what `reshutter shade` costs).
 // Usage: shade_bench [--quick] [--dir DIR]      (one line of results per configuration)
 //        shade_bench --shadows                    (the demo with shadows off and on)
-//        shade_bench --shade-in-time [--quick] [--only once|t0.03|t0.01|t0[,...]] [--threads N] [--res W H] [--repeat N] [--stride N]
+//        shade_bench --shade-in-time [--quick] [--only once|t0.03|t0.01|t0[,...]] [--threads N] [--res W H] [--repeat N] [--stride N] [--times N]
 //                                                  (the demo shaded once and in time, into stores;
 //                                                   --quick: 640x360 only)
 //        shade_bench --motion-factors DIR          (demo stores for motion factor 0, 0.5, 1, 2, 4 in DIR,
@@ -96,6 +96,7 @@ int main(int argc, char** argv) {
   std::string only;     // --only LABEL[,LABEL...]: those configurations alone (with --shade-in-time: once, t0.03, t0.01, t0)
   int resW = 0, resH = 0;  // --res W H: that frame size alone (with --shade-in-time)
   int repeat = 1;          // --repeat N: each configuration N times in this process (warm: the later runs)
+  int shadingTimes = 5;    // --times N: shading times of the in-time configurations
   std::string dir = std::filesystem::temp_directory_path().string(), mfDir;
   for (int i = 1; i < argc; ++i) {
     if (!std::strcmp(argv[i], "--quick")) quick = true;
@@ -107,9 +108,10 @@ int main(int argc, char** argv) {
     else if (!std::strcmp(argv[i], "--only") && i + 1 < argc) only = argv[++i];
     else if (!std::strcmp(argv[i], "--stride") && i + 1 < argc) timeStride = std::atoi(argv[++i]);
     else if (!std::strcmp(argv[i], "--repeat") && i + 1 < argc) repeat = std::max(1, std::atoi(argv[++i]));
+    else if (!std::strcmp(argv[i], "--times") && i + 1 < argc) shadingTimes = std::max(2, std::atoi(argv[++i]));
     else if (!std::strcmp(argv[i], "--res") && i + 2 < argc) resW = std::atoi(argv[i + 1]), resH = std::atoi(argv[i + 2]), i += 2;
     else {
-      std::fprintf(stderr, "usage: shade_bench [--quick] [--dir DIR] [--threads N] [--shadows | --shade-in-time [--only LABEL[,LABEL...]] [--res W H] [--repeat N] [--stride N]]\n");
+      std::fprintf(stderr, "usage: shade_bench [--quick] [--dir DIR] [--threads N] [--shadows | --shade-in-time [--only LABEL[,LABEL...]] [--res W H] [--repeat N] [--stride N] [--times N]]\n");
       return 2;
     }
   }
@@ -155,7 +157,7 @@ int main(int argc, char** argv) {
         for (double tol : {0.03, 0.01, 0.0}) {
           char label[16];
           std::snprintf(label, sizeof label, "t%g", tol);
-          if (wanted(label)) run(label, w, h, 1, n, store, 0, true, 1, tol, 5);
+          if (wanted(label)) run(label, w, h, 1, n, store, 0, true, 1, tol, shadingTimes);
         }
       }
     }

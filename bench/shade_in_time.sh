@@ -3,14 +3,15 @@
 # bench/shade_bench at 5 times, tolerance 0.01; OpenImageIO's texture module is loaded before the
 # timings (the pass alone).
 #
-#   bench/shade_in_time.sh [--rounds R] [--threads T] [--res W H] [--stride N] BUILD...
+#   bench/shade_in_time.sh [--rounds R] [--threads T] [--res W H] [--stride N] [--times N] BUILD...
 #       interleaved runs of each build, each in a fresh process: CPU seconds once and in time, and
 #       the ratio per round (the host is noisy: read the median of the ratios); --stride: the
 #       later times' coarse lattice (--shade-in-time-stride; builds from the thirty-first session on)
-#   bench/shade_in_time.sh --cachegrind [--res W H] [--stride N] BUILD...
+#       and --times: the shading times (--shade-times, default 5; builds from the thirty-third on)
+#   bench/shade_in_time.sh --cachegrind [--res W H] [--stride N] [--times N] BUILD...
 #       instructions of the whole process, one thread (repeatable); "none" is the process with
 #       the module loaded and nothing shaded, to subtract
-#   bench/shade_in_time.sh --breakdown [--res W H] [--stride N] BUILD...
+#   bench/shade_in_time.sh --breakdown [--res W H] [--stride N] [--times N] BUILD...
 #       where the extra of shading in time goes (callgrind, one thread, the pass alone): the
 #       later times, the store's writing, the rays through the moving scene (the accuracy study's
 #       size is --res 256 144)
@@ -18,7 +19,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 source bench/host.sh
 rounds=5 threads=1 w=640 h=360 cachegrind=0 breakdown=0
-builds=() stride=()
+builds=() passOptions=()
 while [[ $# -gt 0 ]]; do
   case "$1" in
     --rounds) rounds="$2"; shift ;;
@@ -26,14 +27,14 @@ while [[ $# -gt 0 ]]; do
     --res) w="$2"; h="$3"; shift 2 ;;
     --cachegrind) cachegrind=1 ;;
     --breakdown) breakdown=1 ;;
-    --stride) stride=(--stride "$2"); shift ;;
-    -*) echo "usage: bench/shade_in_time.sh [--cachegrind | --breakdown] [--rounds R] [--threads T] [--res W H] [--stride N] BUILD..." >&2; exit 2 ;;
+    --stride | --times) passOptions+=("$1" "$2"); shift ;;
+    -*) echo "usage: bench/shade_in_time.sh [--cachegrind | --breakdown] [--rounds R] [--threads T] [--res W H] [--stride N] [--times N] BUILD..." >&2; exit 2 ;;
     *) builds+=("$1") ;;
   esac
   shift
 done
 [[ ${#builds[@]} -gt 0 ]] || { echo "bench/shade_in_time.sh: name at least one build directory" >&2; exit 2; }
-bench() { "$1/bench/shade_bench" --shade-in-time --threads "$2" --only "$3" --res "$w" "$h" "${stride[@]}"; }
+bench() { "$1/bench/shade_bench" --shade-in-time --threads "$2" --only "$3" --res "$w" "$h" "${passOptions[@]}"; }
 if [[ $cachegrind == 1 ]]; then
   command -v valgrind >/dev/null || { echo "bench/shade_in_time.sh: --cachegrind needs valgrind (apt-get install valgrind)" >&2; exit 1; }
   for b in "${builds[@]}"; do
@@ -41,7 +42,7 @@ if [[ $cachegrind == 1 ]]; then
     [[ -f "$shim" ]] || { echo "$shim missing: build the bench targets" >&2; exit 1; }
     for label in none once t0.01; do
       n=$(LD_PRELOAD="$shim" valgrind --tool=cachegrind --cache-sim=no --cachegrind-out-file=/dev/null \
-            "$b/bench/shade_bench" --shade-in-time --threads 1 --only "$label" --res "$w" "$h" "${stride[@]}" 2>&1 | awk '/I +refs/ {gsub(",", "", $NF); print $NF}')
+            "$b/bench/shade_bench" --shade-in-time --threads 1 --only "$label" --res "$w" "$h" "${passOptions[@]}" 2>&1 | awk '/I +refs/ {gsub(",", "", $NF); print $NF}')
       echo "$b ${w}x$h $label $n instructions"
     done
   done
@@ -56,7 +57,7 @@ if [[ $breakdown == 1 ]]; then
     [[ -f "$shim" ]] || { echo "$shim missing: build the bench targets" >&2; exit 1; }
     for label in once t0.01; do
       LD_PRELOAD="$shim" valgrind --tool=callgrind --callgrind-out-file="$tmp/$label.out" \
-        "$b/bench/shade_bench" --shade-in-time --threads 1 --only "$label" --res "$w" "$h" "${stride[@]}" >/dev/null 2>&1 &
+        "$b/bench/shade_bench" --shade-in-time --threads 1 --only "$label" --res "$w" "$h" "${passOptions[@]}" >/dev/null 2>&1 &
     done
     wait
     # Inclusive instructions of the first function whose name matches, per run.
