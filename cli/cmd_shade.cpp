@@ -130,6 +130,7 @@ struct ShadeCommand {
                  r.shade.shadingTimes.size() > 1 ? cat("; in time: ", r.shade.blendedTimes, " grid times blended between shaded ones, ", r.shade.reusedVertices,
                                                        " vertex shadings kept from the first time (only shadows could change, and did not), ",
                                                        r.shade.stillOnlyRays, " rays against still micropolygons only (no moving caster could block them), ",
+                                                       r.shade.candidateStillOnlyRays, " rays of candidates against them only (no moving caster could shadow the grid from the ray's light), ",
                                                        r.shade.carriedTimes, " grid times of rigidly moving grids carried from the first (not diced again), ",
                                                        r.shade.laterVertices, " vertex shadings at later times and ", r.shade.interpolatedVertices,
                                                        " vertices whose change was interpolated between them (--shade-in-time-stride), ",

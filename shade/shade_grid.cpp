@@ -102,8 +102,8 @@ void storeViewInputs(const ShadeContext& c, size_t i, const SurfaceOutput& so, c
 }  // namespace
 
 void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g, std::span<const uint32_t> corners, std::span<const LitLight> lights,
-                   double time, size_t k, uint64_t leafIndex, std::vector<std::vector<float>>& attrs, uint64_t& shadowRays, ShadowReuse* reuse,
-                   bool stillCastersOnly, std::span<const uint32_t> only) {
+                   double time, size_t k, uint64_t leafIndex, std::vector<std::vector<float>>& attrs, RayCounts& rayCounts, ShadowReuse* reuse,
+                   std::span<const uint8_t> movingShadows, std::span<const uint32_t> only) {
   const Attributes& a = *p.attrs;
   const SurfaceShader shader = a.surface.at(time);
   // A RIS material's own colour and presence replace the primitive's.
@@ -172,7 +172,7 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
   if (reuse && reuse->recording) reuse->visibility.assign(nV * lights.size(), 1.f), reuse->traced.assign(nV * lights.size(), {}), reuse->open.clear();
   const bool reusing = reuse && !reuse->recording;
   std::vector<ShadowRay> rays;
-  auto byMoving = [&](const ShadowRay& r) { return !stillCastersOnly && c.shadows->occludedByMoving(r.origin, r.dir, r.tfar, time); };
+  auto movingMayShadow = [&](size_t li) { return movingShadows.empty() || (li < movingShadows.size() && movingShadows[li]); };
   const size_t count = only.empty() ? nV : only.size();
   for (size_t n = 0; n < count; ++n) {
     const size_t i = only.empty() ? n : only[n];
@@ -202,8 +202,15 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
           const ShadowReuse::Traced& t = reuse->traced[i * lights.size() + li];
           if (t.n == 0) continue;
           n = t.n;
-          for (size_t r = t.first; r < size_t(t.first) + t.open; ++r) visible += !byMoving(reuse->open[r]);
-          shadowRays += t.open;
+          if (movingMayShadow(li)) {
+            for (size_t r = t.first; r < size_t(t.first) + t.open; ++r) {
+              const ShadowRay& ray = reuse->open[r];
+              visible += !c.shadows->occludedByMoving(ray.origin, ray.dir, ray.tfar, time);
+            }
+          } else {
+            visible = t.open, rayCounts.stillOnly += t.open;
+          }
+          rayCounts.traced += t.open;
         } else {
           glm::dvec3 L, Cl;
           if (!lights[li].shadows || !illuminate(lights[li], in.P, L, Cl) || !(glm::dot(L, Nf) > 0)) continue;
@@ -213,12 +220,14 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
           if (n == 0) continue;
           ShadowReuse::Traced* t = reuse ? &reuse->traced[i * lights.size() + li] : nullptr;
           if (t) t->n = uint32_t(n), t->first = uint32_t(reuse->open.size());
+          const bool moving = movingMayShadow(li);
           for (const ShadowRay& r : rays) {
             if (c.shadows->occludedByStill(r.origin, r.dir, r.tfar)) continue;
             if (t) reuse->open.push_back(r), ++t->open;
-            visible += !byMoving(r);
+            visible += !moving || !c.shadows->occludedByMoving(r.origin, r.dir, r.tfar, time);
           }
-          shadowRays += rays.size();
+          rayCounts.traced += rays.size();
+          if (!moving) rayCounts.stillOnly += rays.size();
         }
         const double share = double(visible) / double(n);
         shadowed[li].Cl0 *= share;

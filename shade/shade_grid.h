@@ -95,15 +95,22 @@ struct ShadowReuse {
   uint64_t reusedVertices = 0;
 };
 
+/// Shadow rays a grid's shading counted.
+struct RayCounts {
+  uint64_t traced = 0;     // towards lights (a grid only shadows change: its first time's, again at each later time)
+  uint64_t stillOnly = 0;  // of them, against the still micropolygons only: no moving caster can shadow the grid from their light
+};
+
 /// Shades every vertex of the diced grid `g` (its corners: `corners`) of primitive `p` at `time`,
 /// shading time k of the pass (0: the first), into `attrs` (parallel to the schema); `reuse`
 /// (shading in time, a grid only shadows change): the first time records its rays, later times
-/// reuse them; `stillCastersOnly`: no moving caster can shadow the grid (not a candidate for
-/// shading in time), so its rays skip the moving micropolygons; `only`: shade just these
-/// vertices (a later time on a coarser lattice), leaving the others' outputs as they are.
+/// reuse them; `movingShadows` (shading in time): per light of `lights`, whether a moving caster
+/// may shadow the grid from it (MovingCasters) - where none can, its rays skip the moving
+/// micropolygons; empty: every light's rays trace them; `only`: shade just these vertices (a
+/// later time on a coarser lattice), leaving the others' outputs as they are.
 void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g, std::span<const uint32_t> corners, std::span<const LitLight> lights,
-                   double time, size_t k, uint64_t leafIndex, std::vector<std::vector<float>>& attrs, uint64_t& shadowRays, ShadowReuse* reuse = nullptr,
-                   bool stillCastersOnly = false, std::span<const uint32_t> only = {});
+                   double time, size_t k, uint64_t leafIndex, std::vector<std::vector<float>>& attrs, RayCounts& rays, ShadowReuse* reuse = nullptr,
+                   std::span<const uint8_t> movingShadows = {}, std::span<const uint32_t> only = {});
 
 /// Whether the affine part of `m` can be inverted without losing most of its digits: its
 /// determinant against the cube of its longest column (1 for a rotation at any scale; a column
@@ -115,8 +122,10 @@ bool animated(const Attributes& a);
 bool lightMoves(const Light& l, double open, double close);
 /// Whether anything in the scene can make shading differ over [open, close].
 bool sceneMayShadeInTime(const FrameScene& scene, double open, double close);
-/// Whether grid `g` of primitive `pi` can shade differently at another time of the interval.
-bool mayShadeDifferently(const ShadeContext& c, uint32_t pi, std::span<const glm::vec3> positions, uint32_t nV, bool moves, std::span<const uint32_t> lights);
+/// Whether grid `g` of primitive `pi` can shade differently at another time of the interval;
+/// `movingShadows`: per light, whether a moving caster may shadow the grid from it.
+bool mayShadeDifferently(const ShadeContext& c, uint32_t pi, std::span<const glm::vec3> positions, uint32_t nV, bool moves, std::span<const uint32_t> lights,
+                         std::vector<uint8_t>& movingShadows);
 /// Whether only moving casters' shadows can change a grid's shading (ShadowReuse applies).
 bool onlyShadowsChange(const ShadeContext& c, uint32_t pi, bool moves, std::span<const uint32_t> lights);
 /// What shading candidates at the other times did (ShadeStats says what each counts).
@@ -125,7 +134,7 @@ struct InTimeCounts {
   uint64_t laterVertices = 0, interpolatedVertices = 0;
 };
 /// Shades a candidate at the other times; whether it kept them (shade_in_time.cpp).
-bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const DicedGrid& g, bool moves, std::span<const uint32_t> lightIdx, uint64_t leafIndex,
-                 GridOut& out, uint64_t& shadowRays, ShadowReuse* reuse, InTimeCounts& counts);
+bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const DicedGrid& g, bool moves, std::span<const uint32_t> lightIdx,
+                 std::span<const uint8_t> movingShadows, uint64_t leafIndex, GridOut& out, RayCounts& rays, ShadowReuse* reuse, InTimeCounts& counts);
 
 }  // namespace reshutter::shade::pass

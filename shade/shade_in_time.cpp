@@ -234,28 +234,32 @@ bool lightMoves(const Light& l, double open, double close) { return l.xform.movi
 /// it) can shade differently at another time of the interval - decided from what the scene says
 /// moves or changes, conservatively: shading at the other times then confirms it. A grid that
 /// stands still under fixed lights, an unlit constant one, and a matte one translating rigidly
-/// under fixed distant lights that cast no shadows cannot.
-bool mayShadeDifferently(const ShadeContext& c, uint32_t pi, std::span<const glm::vec3> positions, uint32_t nV, bool moves, std::span<const uint32_t> lights) {
+/// under fixed distant lights that cast no shadows cannot. `movingShadows`, per light: whether
+/// a moving caster may shadow the grid from it over the interval (a moving light: may) - all
+/// false when the grid cannot shade differently.
+bool mayShadeDifferently(const ShadeContext& c, uint32_t pi, std::span<const glm::vec3> positions, uint32_t nV, bool moves, std::span<const uint32_t> lights,
+                         std::vector<uint8_t>& movingShadows) {
+  movingShadows.assign(lights.size(), 0);
   const Attributes& a = *c.scene.prims[pi].attrs;
-  if (animated(a)) return true;
   const SurfaceShader& sh = a.surface.values[0];
-  if (sh.kind == SurfaceKind::Constant) return false;
-  const bool lit = usesLights(sh.kind);
-  bool shadowed = false, local = false;
-  if (lit)
-    for (uint32_t li : lights) {
+  bool shadowed = false, local = false, lightMoves = false, castersMay = false;
+  if (usesLights(sh.kind)) {
+    ShadowBox recv;  // over every knot's positions, when a light may need it
+    for (size_t j = 0; j < lights.size(); ++j) {
+      const uint32_t li = lights[j];
       if (li >= c.lit.size()) continue;
-      if (c.lightMoves[li]) return true;
-      shadowed |= c.shadows && c.lit[li].shadows;
+      const bool casts = c.shadows && c.lit[li].shadows;
+      lightMoves |= c.lightMoves[li], shadowed |= casts;
       local |= c.lit[li].kind != LightKind::Distant && c.lit[li].kind != LightKind::Ambient;
+      if (!casts || (!c.lightMoves[li] && c.movingCasters.empty())) continue;
+      if (!c.lightMoves[li] && !(recv.lo.x <= recv.hi.x))
+        for (const glm::vec3& q : positions) recv.add(q);
+      movingShadows[j] = c.lightMoves[li] || c.movingCasters.mayShadow(li, recv);  // a moving caster's shadow may move over it
+      castersMay |= movingShadows[j] != 0;
     }
-  if (shadowed && !c.movingCasters.empty()) {  // a moving caster's shadow may move over it
-    ShadowBox recv;
-    for (const glm::vec3& q : positions) recv.add(q);
-    for (uint32_t li : lights)
-      if (c.movingCasters.mayShadow(li, recv)) return true;
   }
-  if (!moves) return false;
+  if (animated(a) || lightMoves || castersMay) return true;
+  if (sh.kind == SurfaceKind::Constant || !moves) return false;
   if (sh.kind != SurfaceKind::Matte) return true;  // view-dependent terms (or defaultsurface's headlight)
   return shadowed || local || !translatesRigidly(positions, nV, c.split.knots[pi].size());
 }
@@ -277,8 +281,8 @@ bool onlyShadowsChange(const ShadeContext& c, uint32_t pi, bool moves, std::span
 /// ends are shaded; where the middle's colour lies within the tolerance of the blend of its
 /// ends, the span's other times are blended too rather than shaded (linear between the shaded
 /// times, as the re-sampler blends them). Tolerance 0 shades every time.
-bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const DicedGrid& g, bool moves, std::span<const uint32_t> lightIdx, uint64_t leafIndex,
-                 GridOut& out, uint64_t& shadowRays, ShadowReuse* reuse, InTimeCounts& counts) {
+bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const DicedGrid& g, bool moves, std::span<const uint32_t> lightIdx,
+                 std::span<const uint8_t> movingShadows, uint64_t leafIndex, GridOut& out, RayCounts& rays, ShadowReuse* reuse, InTimeCounts& counts) {
   const Primitive& p = c.scene.prims[pi];
   const size_t T = c.times.size();
   std::vector<std::vector<std::vector<float>>> at(T);
@@ -309,11 +313,11 @@ bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const Dic
       if (li < c.lit.size()) lights.push_back(reuse ? c.lit[li] : c.litAt[k][li]);
     if (coarse) {
       auto shade = [&](std::span<const uint32_t> only) {
-        shadeVertices(c, p, *geometry, out.corners, lights, c.times[k], k, leafIndex, at[k], shadowRays, reuse, false, only);
+        shadeVertices(c, p, *geometry, out.corners, lights, c.times[k], k, leafIndex, at[k], rays, reuse, movingShadows, only);
       };
       lattice.shadeTime(c, out.attrs, at[k], shade, counts);
     } else {
-      shadeVertices(c, p, *geometry, out.corners, lights, c.times[k], k, leafIndex, at[k], shadowRays, reuse);
+      shadeVertices(c, p, *geometry, out.corners, lights, c.times[k], k, leafIndex, at[k], rays, reuse, movingShadows);
       counts.laterVertices += g.numVertices;
     }
     for (int slot : slots) {

@@ -60,7 +60,7 @@ struct Batch {
   size_t first = 0, count = 0;  // into the flattened leaf list
   std::vector<GridOut> grids;
   uint64_t dropped = 0, trimmed = 0, shadowRays = 0;
-  uint64_t timeCandidates = 0, timed = 0, timedMicropolygons = 0, reusedVertices = 0, stillOnlyRays = 0;
+  uint64_t timeCandidates = 0, timed = 0, timedMicropolygons = 0, reusedVertices = 0, stillOnlyRays = 0, candidateStillOnlyRays = 0;
   InTimeCounts inTime;
 };
 
@@ -209,7 +209,8 @@ void shadeBatch(const ShadeContext& c, Batch& b) {
   std::vector<LitLight> lights;
   std::vector<uint32_t> lightIdx;  // the frame's lights that light the primitive
   const Attributes* lightsOf = nullptr;
-  uint64_t shadowRays = 0;
+  RayCounts rays;
+  std::vector<uint8_t> movingShadows;  // per light of the grid's: may a moving caster shadow it (shading in time)
   b.grids.resize(b.count);
   for (size_t n = 0; n < b.count; ++n) {
     const auto [pi, leaf] = c.split.flat[b.first + n];
@@ -232,29 +233,33 @@ void shadeBatch(const ShadeContext& c, Batch& b) {
     // Shading in time: whether the grid is a candidate is known from its positions, before it is
     // shaded, so that a grid only shadows change records its rays (ShadowReuse).
     bool candidate = false, moves = false;
+    movingShadows.clear();  // shading once: every light's rays trace the one BVH
+    if (c.times.size() > 1) movingShadows.assign(lightIdx.size(), 0);
     if (c.times.size() > 1 && !g.corners.empty()) {
       moves = c.split.knots[pi].size() > 1 && !store::verticesStandStill(g.positions, g.numVertices, 0, g.numVertices);
-      candidate = mayShadeDifferently(c, pi, g.positions, g.numVertices, moves, lightIdx);
+      candidate = mayShadeDifferently(c, pi, g.positions, g.numVertices, moves, lightIdx, movingShadows);
     }
     ShadowReuse reuse;
     ShadowReuse* reusing = candidate && c.shadows && onlyShadowsChange(c, pi, moves, lightIdx) ? &reuse : nullptr;
     out.positions = std::move(g.positions);
     out.corners = std::move(g.corners);
-    // A grid no moving caster can shadow (mayShadeDifferently() tells) need not trace the moving
-    // micropolygons: with shading in time they are a BVH of their own, with motion blur.
-    const bool stillCastersOnly = c.times.size() > 1 && !candidate;
-    const uint64_t raysBefore = shadowRays;
-    shadeVertices(c, p, g, out.corners, lights, c.shadeAt, 0, b.first + n, out.attrs, shadowRays, reusing, stillCastersOnly);
-    if (stillCastersOnly) b.stillOnlyRays += shadowRays - raysBefore;
+    // Shading in time: the moving micropolygons are a BVH of their own, with motion blur, which a
+    // grid's rays need not trace from a light no moving caster can shadow it from - any light,
+    // for a grid that is not a candidate (mayShadeDifferently() tells).
+    const uint64_t stillOnlyBefore = rays.stillOnly;
+    shadeVertices(c, p, g, out.corners, lights, c.shadeAt, 0, b.first + n, out.attrs, rays, reusing, movingShadows);
+    if (!candidate) b.stillOnlyRays += rays.stillOnly - stillOnlyBefore;
     if (candidate) {
       ++b.timeCandidates;
-      if (shadeInTime(c, pi, *leaf, g, moves, lightIdx, b.first + n, out, shadowRays, reusing, b.inTime))
+      const bool kept = shadeInTime(c, pi, *leaf, g, moves, lightIdx, movingShadows, b.first + n, out, rays, reusing, b.inTime);
+      b.candidateStillOnlyRays += rays.stillOnly - stillOnlyBefore;
+      if (kept)
         ++b.timed, b.timedMicropolygons += out.corners.size() / 4;
       b.reusedVertices += reuse.reusedVertices;
     }
     g = DicedGrid{};
   }
-  b.shadowRays = shadowRays;
+  b.shadowRays = rays.traced;
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -277,6 +282,7 @@ class GridSender {
     stats_.laterVertices += b.inTime.laterVertices;
     stats_.interpolatedVertices += b.inTime.interpolatedVertices;
     stats_.stillOnlyRays += b.stillOnlyRays;
+    stats_.candidateStillOnlyRays += b.candidateStillOnlyRays;
     stats_.timedMicropolygons += b.timedMicropolygons;
     for (GridOut& go : b.grids)
       if (!go.corners.empty()) sendGrid(go);

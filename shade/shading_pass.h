@@ -85,6 +85,7 @@ struct ShadeStats {
   uint64_t interpolatedVertices = 0;  // of candidates' later times, vertices whose change was interpolated on the coarse lattice (timeStride)
   uint64_t reusedVertices = 0;       // vertex shadings at later times that kept the first time's outputs (only shadows could change, and did not)
   uint64_t stillOnlyRays = 0;        // rays of grids no moving caster can shadow, traced against the still micropolygons only
+  uint64_t candidateStillOnlyRays = 0;  // the same for candidates' rays towards a light no moving caster can shadow them from
   std::vector<double> shadingTimes;  // empty: shaded once
   double shadeAt = 0;
   double seconds = 0;

@@ -331,6 +331,36 @@ TEST(ShadeInTime, ShadowsFollowTheCasterThroughTheShutter) {
   }
 }
 
+// A second shadowing light, low from the side: the sphere's shadow from it falls far to one side
+// (x < -1.5), so floor grids under its path (-1.5 < x < 1.5) the overhead light makes candidates
+// but that no moving caster can shadow from the low light send that light's rays past the moving
+// micropolygons (counted). Which must change nothing: at each shading time the floor matches the
+// sphere frozen there and shaded once.
+TEST(ShadeInTime, RaysTowardsALightNoMovingCasterCanShadowFromSkipTheMovingOnes) {
+  ScratchDir dir;
+  const std::string scene = edited(kMovingSphereOverFloor, "Color [1 1 1]\nSurface \"matte\"\n",
+                                   "LightSource \"shadowdistant\" 3 \"from\" [2 1 0] \"to\" [0 0 0] \"intensity\" [0.5] \"shadowname\" \"raytrace\"\n"
+                                   "Color [1 1 1]\nSurface \"matte\"\n");
+  const Shaded inTime = shade(dir, "inTime", scene, "--shade-in-time 0.05");
+  EXPECT_GT(numberBefore(inTime.report, " rays of candidates against them only"), 100u) << inTime.report;
+  for (double t : {0.5, 1.0}) {
+    const std::string frozen =
+        edited(scene, "MotionBegin [0 1]\nTranslate -1 2 0\nTranslate 1 2 0\nMotionEnd", "Translate " + std::to_string(-1 + 2 * t) + " 2 0");
+    const std::string tag = std::to_string(int(t * 10));
+    const Shaded still = shade(dir, "frozen" + tag, frozen, "");
+    const auto a = instant(dir, inTime.store, t, "inTime-at" + tag), b = instant(dir, still.store, t, "frozen-at" + tag);
+    int differ = 0, sideShadow = 0;
+    for (int y = 0; y < 64; ++y)
+      for (int x = 0; x < 64; ++x) {
+        differ += std::abs(red(a, x, y) - red(b, x, y)) > 0.02f;
+        // In the low light's shadow: 0.1 ambient + 1 overhead, against 1.1 + 0.5 cos(63.4°) lit.
+        sideShadow += x < 20 && std::abs(red(b, x, y) - 1.1f) < 0.03f;
+      }
+    EXPECT_GT(sideShadow, 20) << "t=" << t << ": the low light's shadow of the sphere is on the floor";
+    EXPECT_LT(differ, 12) << "t=" << t;
+  }
+}
+
 // Later times shaded on a coarser lattice (--shade-in-time-stride): the floor's moving shadow
 // is a sharp change, which the lattice must find and shade in full; a plastic sphere moving past
 // a point light changes smoothly, which the lattice interpolates. Either way each instant must
