@@ -224,6 +224,7 @@ bool ShadowScene::occludedByStill(const glm::dvec3& origin, const glm::dvec3& di
 }
 
 bool ShadowScene::occludedByMoving(const glm::dvec3& origin, const glm::dvec3& dir, double tfar, double time) const {
+  if (!impl_->rigid && !impl_->deforming) return false;
   const double span = impl_->close - impl_->open;
   const float rayTime = span > 0 ? float(std::clamp((time - impl_->open) / span, 0.0, 1.0)) : 0.f;
   RTCScene rigid = impl_->rigid;
