@@ -172,7 +172,8 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
   if (reuse && reuse->recording) reuse->visibility.assign(nV * lights.size(), 1.f), reuse->traced.assign(nV * lights.size(), {}), reuse->open.clear();
   const bool reusing = reuse && !reuse->recording;
   std::vector<ShadowRay> rays;
-  auto movingMayShadow = [&](size_t li) { return movingShadows.empty() || (li < movingShadows.size() && movingShadows[li]); };
+  const bool anyMoves = c.shadows && c.shadows->moves();
+  auto movingMayShadow = [&](size_t li) { return anyMoves && (movingShadows.empty() || (li < movingShadows.size() && movingShadows[li])); };
   const size_t count = only.empty() ? nV : only.size();
   for (size_t n = 0; n < count; ++n) {
     const size_t i = only.empty() ? n : only[n];

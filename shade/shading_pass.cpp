@@ -248,7 +248,7 @@ void shadeBatch(const ShadeContext& c, Batch& b) {
     // for a grid that is not a candidate (mayShadeDifferently() tells).
     const uint64_t stillOnlyBefore = rays.stillOnly;
     shadeVertices(c, p, g, out.corners, lights, c.shadeAt, 0, b.first + n, out.attrs, rays, reusing, movingShadows);
-    if (!candidate) b.stillOnlyRays += rays.stillOnly - stillOnlyBefore;
+    if (c.times.size() > 1 && !candidate) b.stillOnlyRays += rays.stillOnly - stillOnlyBefore;
     if (candidate) {
       ++b.timeCandidates;
       const bool kept = shadeInTime(c, pi, *leaf, g, moves, lightIdx, movingShadows, b.first + n, out, rays, reusing, b.inTime);

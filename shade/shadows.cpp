@@ -201,6 +201,7 @@ ShadowScene::ShadowScene(std::span<const Piece> pieces, double open, double clos
 ShadowScene::~ShadowScene() = default;
 
 size_t ShadowScene::fixedTimes() const { return impl_->fixed.size(); }
+bool ShadowScene::moves() const { return impl_->rigid || impl_->deforming; }
 
 namespace {
 bool occludedIn(RTCScene scene, const glm::dvec3& origin, const glm::dvec3& dir, double tfar, float time) {

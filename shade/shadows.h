@@ -66,6 +66,8 @@ class ShadowScene {
   uint64_t rigidMicropolygons() const { return rigidMicropolygons_; }
   /// The times at which the rigid motions are also instanced fixed (0 without rigid motions).
   size_t fixedTimes() const;
+  /// Whether any micropolygon moves (occludedByMoving() can say true).
+  bool moves() const;
 
  private:
   struct Impl;
