@@ -223,6 +223,10 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
           if (t) t->n = uint32_t(n), t->first = uint32_t(reuse->open.size());
           const bool moving = movingMayShadow(li);
           for (const ShadowRay& r : rays) {
+            if (moving && !t) {  // no rays to keep for later times: still and moving in one traversal
+              visible += !c.shadows->occluded(r.origin, r.dir, r.tfar, time);
+              continue;
+            }
             if (c.shadows->occludedByStill(r.origin, r.dir, r.tfar)) continue;
             if (t) reuse->open.push_back(r), ++t->open;
             visible += !moving || !c.shadows->occludedByMoving(r.origin, r.dir, r.tfar, time);

@@ -27,11 +27,15 @@ struct ShadowScene::Impl {
   // skips the blend and inversion of a matrix per instance and the motion boxes per BVH node.
   std::vector<double> fixedAt;
   std::vector<RTCScene> fixed;
+  // Per fixed time, everything at once: `still` and `deforming` instanced as they are and the
+  // rigid casters fixed there - one traversal for a ray that needs both answers only together.
+  std::vector<RTCScene> whole;
   double open = 0, close = 0;  // the moving pieces' interval (Embree's ray time 0 to 1)
   ~Impl() {
     for (RTCScene s : {still, deforming, rigid})
       if (s) rtcReleaseScene(s);
     for (RTCScene s : fixed) rtcReleaseScene(s);
+    for (RTCScene s : whole) rtcReleaseScene(s);
     for (RTCScene s : instanced) rtcReleaseScene(s);
     if (device) rtcReleaseDevice(device);
   }
@@ -161,7 +165,7 @@ ShadowScene::ShadowScene(std::span<const Piece> pieces, double open, double clos
     rtcSetGeometryTransform(instance, step, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, columns);
   };
   if (interval) impl_->fixedAt.assign(fixAt.begin(), fixAt.end());
-  impl_->fixed.assign(impl_->fixedAt.size(), nullptr);
+  impl_->fixed.assign(impl_->fixedAt.size(), nullptr), impl_->whole.assign(impl_->fixedAt.size(), nullptr);
   for (size_t r = 0; r < rigid.size(); ++r) {
     if (rigidMembers[r].empty()) continue;
     const RigidMotion& motion = rigid[r];
@@ -183,18 +187,32 @@ ShadowScene::ShadowScene(std::span<const Piece> pieces, double open, double clos
     for (size_t k = 0; k < impl_->fixedAt.size(); ++k) {
       // The knots' matrices blended at that time, as the vertices move (MotionXform::at).
       const double t = std::clamp(impl_->fixedAt[k], open, close);
-      RTCGeometry still = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_INSTANCE);
-      rtcSetGeometryInstancedScene(still, local);
-      setTransform(still, 0, motion.at(t));
-      rtcCommitGeometry(still);
-      rtcAttachGeometry(ensure(impl_->fixed[k]), still);
-      rtcReleaseGeometry(still);
+      RTCGeometry fixedInstance = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_INSTANCE);
+      rtcSetGeometryInstancedScene(fixedInstance, local);
+      setTransform(fixedInstance, 0, motion.at(t));
+      rtcCommitGeometry(fixedInstance);
+      rtcAttachGeometry(ensure(impl_->fixed[k]), fixedInstance);
+      rtcAttachGeometry(ensure(impl_->whole[k]), fixedInstance);  // Embree instances one level deep: the BVH itself, not `fixed`
+      rtcReleaseGeometry(fixedInstance);
     }
   }
-  if (!impl_->rigid) impl_->fixedAt.clear(), impl_->fixed.clear();
+  if (!impl_->rigid) impl_->fixedAt.clear(), impl_->fixed.clear(), impl_->whole.clear();
   for (RTCScene s : {impl_->still, impl_->deforming, impl_->rigid})
     if (s) rtcCommitScene(s);
   for (RTCScene s : impl_->fixed) rtcCommitScene(s);
+  auto attachWhole = [&](RTCScene whole, RTCScene scene) {
+    RTCGeometry instance = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_INSTANCE);
+    rtcSetGeometryInstancedScene(instance, scene);
+    setTransform(instance, 0, glm::dmat4(1.0));
+    rtcCommitGeometry(instance);
+    rtcAttachGeometry(whole, instance);
+    rtcReleaseGeometry(instance);
+  };
+  for (RTCScene whole : impl_->whole) {
+    attachWhole(whole, impl_->still);
+    if (impl_->deforming) attachWhole(whole, impl_->deforming);
+    rtcCommitScene(whole);
+  }
   check(impl_->device, "build the shadow scene");
 }
 
@@ -222,6 +240,15 @@ bool occludedIn(RTCScene scene, const glm::dvec3& origin, const glm::dvec3& dir,
 
 bool ShadowScene::occludedByStill(const glm::dvec3& origin, const glm::dvec3& dir, double tfar) const {
   return occludedIn(impl_->still, origin, dir, tfar, 0.f);
+}
+
+bool ShadowScene::occluded(const glm::dvec3& origin, const glm::dvec3& dir, double tfar, double time) const {
+  for (size_t k = 0; k < impl_->fixedAt.size(); ++k)
+    if (impl_->fixedAt[k] == time) {
+      const double span = impl_->close - impl_->open;
+      return occludedIn(impl_->whole[k], origin, dir, tfar, span > 0 ? float(std::clamp((time - impl_->open) / span, 0.0, 1.0)) : 0.f);
+    }
+  return occludedByStill(origin, dir, tfar) || occludedByMoving(origin, dir, tfar, time);
 }
 
 bool ShadowScene::occludedByMoving(const glm::dvec3& origin, const glm::dvec3& dir, double tfar, double time) const {

@@ -60,6 +60,9 @@ class ShadowScene {
   /// interval). A ray is blocked when either says so. Thread-safe.
   bool occludedByStill(const glm::dvec3& origin, const glm::dvec3& dir, double tfar) const;
   bool occludedByMoving(const glm::dvec3& origin, const glm::dvec3& dir, double tfar, double time) const;
+  /// occludedByStill() || occludedByMoving(), in one traversal of every micropolygon at a time
+  /// the rigid motions are fixed at (for a ray whose two answers are not needed apart).
+  bool occluded(const glm::dvec3& origin, const glm::dvec3& dir, double tfar, double time) const;
   uint64_t micropolygons() const { return micropolygons_; }
   /// The rigid motions instanced, and the micropolygons moving that way.
   uint64_t rigidInstances() const { return rigidInstances_; }
