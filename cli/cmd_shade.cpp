@@ -136,7 +136,7 @@ struct ShadeCommand {
                                                        " vertices whose change was interpolated between them (--shade-in-time-stride), ",
                                                        r.shade.rigidMicropolygons, " moving micropolygons in ", r.shade.rigidCasters,
                                                        " rigidly moving shadow casters (a still BVH each, instanced; fixed at ",
-                                                       r.shade.fixedCasterTimes, " shading times)")
+                                                       r.shade.fixedCasterInstants, " shading times)")
                                                  : std::string()));
     });
     shade::readRibScene(scene, sceneBuilder, opt.dice.cullMargin);

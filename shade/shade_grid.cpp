@@ -221,9 +221,9 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
           if (n == 0) continue;
           ShadowReuse::Traced* t = reuse ? &reuse->traced[i * lights.size() + li] : nullptr;
           if (t) t->n = uint32_t(n), t->first = uint32_t(reuse->open.size());
-          const bool moving = movingMayShadow(li);
+          const bool moving = movingMayShadow(li), together = moving && !t;  // no rays to keep for later times: one traversal of both
           for (const ShadowRay& r : rays) {
-            if (moving && !t) {  // no rays to keep for later times: still and moving in one traversal
+            if (together) {
               visible += !c.shadows->occluded(r.origin, r.dir, r.tfar, time);
               continue;
             }

@@ -233,8 +233,7 @@ void shadeBatch(const ShadeContext& c, Batch& b) {
     // Shading in time: whether the grid is a candidate is known from its positions, before it is
     // shaded, so that a grid only shadows change records its rays (ShadowReuse).
     bool candidate = false, moves = false;
-    movingShadows.clear();  // shading once: every light's rays trace the one BVH
-    if (c.times.size() > 1) movingShadows.assign(lightIdx.size(), 0);
+    movingShadows.assign(c.times.size() > 1 ? lightIdx.size() : 0, 0);  // empty, shading once: every light's rays trace the one BVH
     if (c.times.size() > 1 && !g.corners.empty()) {
       moves = c.split.knots[pi].size() > 1 && !store::verticesStandStill(g.positions, g.numVertices, 0, g.numVertices);
       candidate = mayShadeDifferently(c, pi, g.positions, g.numVertices, moves, lightIdx, movingShadows);
@@ -561,7 +560,7 @@ ShadeStats shadeFrame(const FrameScene& scene, const ShadeOptions& o, store::Gri
     }
     stats.shadowMicropolygons = shadows->micropolygons();
     stats.rigidCasters = shadows->rigidInstances(), stats.rigidMicropolygons = shadows->rigidMicropolygons();
-    stats.fixedCasterTimes = shadows->fixedTimes();
+    stats.fixedCasterInstants = shadows->fixedInstants();
     stats.shadowBuildSeconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
   }
   context.shadows = shadows.get();

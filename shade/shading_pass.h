@@ -74,7 +74,7 @@ struct ShadeStats {
   uint64_t missingTextures = 0;                     // textures that could not be read (shown magenta)
   uint64_t shadowMicropolygons = 0;                 // in the shadow scene (0: no light asked for shadows)
   uint64_t rigidCasters = 0, rigidMicropolygons = 0;  // shading in time: the rigid motions instanced in it, and the micropolygons moved so
-  uint64_t fixedCasterTimes = 0;                    // shading in time: the shading times at which those instances are also fixed (ShadowScene)
+  uint64_t fixedCasterInstants = 0;                 // shading in time: how many shading instants those instances are also fixed at (ShadowScene)
   uint64_t shadowRays = 0;                          // traced towards lights
   double shadowBuildSeconds = 0;                    // dicing the frame for the shadow scene and building its BVH
   uint64_t timeCandidateGrids = 0;                  // shading in time: grids whose shading could change, shaded at every time

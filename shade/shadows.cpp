@@ -31,6 +31,17 @@ struct ShadowScene::Impl {
   // rigid casters fixed there - one traversal for a ray that needs both answers only together.
   std::vector<RTCScene> whole;
   double open = 0, close = 0;  // the moving pieces' interval (Embree's ray time 0 to 1)
+  /// Embree's ray time (0 to 1 over the interval) of a time in frames.
+  float rayTime(double time) const {
+    const double span = close - open;
+    return span > 0 ? float(std::clamp((time - open) / span, 0.0, 1.0)) : 0.f;
+  }
+  /// Which of `fixedAt` is exactly `time`; -1 for none.
+  int fixedIndex(double time) const {
+    for (size_t k = 0; k < fixedAt.size(); ++k)
+      if (fixedAt[k] == time) return int(k);
+    return -1;
+  }
   ~Impl() {
     for (RTCScene s : {still, deforming, rigid})
       if (s) rtcReleaseScene(s);
@@ -164,6 +175,15 @@ ShadowScene::ShadowScene(std::span<const Piece> pieces, double open, double clos
       for (int row = 0; row < 3; ++row) columns[3 * c + row] = float(m[c][row]);
     rtcSetGeometryTransform(instance, step, RTC_FORMAT_FLOAT3X4_COLUMN_MAJOR, columns);
   };
+  // An instance of `local` with the transform `m` at every step, into each of `scenes`.
+  auto attachStatic = [&](RTCScene local, const glm::dmat4& m, std::initializer_list<RTCScene> scenes) {
+    RTCGeometry instance = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_INSTANCE);
+    rtcSetGeometryInstancedScene(instance, local);
+    setTransform(instance, 0, m);
+    rtcCommitGeometry(instance);
+    for (RTCScene scene : scenes) rtcAttachGeometry(scene, instance);
+    rtcReleaseGeometry(instance);
+  };
   if (interval) impl_->fixedAt.assign(fixAt.begin(), fixAt.end());
   impl_->fixed.assign(impl_->fixedAt.size(), nullptr), impl_->whole.assign(impl_->fixedAt.size(), nullptr);
   for (size_t r = 0; r < rigid.size(); ++r) {
@@ -184,33 +204,18 @@ ShadowScene::ShadowScene(std::span<const Piece> pieces, double open, double clos
     rtcCommitGeometry(instance);
     rtcAttachGeometry(ensure(impl_->rigid), instance);
     rtcReleaseGeometry(instance);
-    for (size_t k = 0; k < impl_->fixedAt.size(); ++k) {
-      // The knots' matrices blended at that time, as the vertices move (MotionXform::at).
-      const double t = std::clamp(impl_->fixedAt[k], open, close);
-      RTCGeometry fixedInstance = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_INSTANCE);
-      rtcSetGeometryInstancedScene(fixedInstance, local);
-      setTransform(fixedInstance, 0, motion.at(t));
-      rtcCommitGeometry(fixedInstance);
-      rtcAttachGeometry(ensure(impl_->fixed[k]), fixedInstance);
-      rtcAttachGeometry(ensure(impl_->whole[k]), fixedInstance);  // Embree instances one level deep: the BVH itself, not `fixed`
-      rtcReleaseGeometry(fixedInstance);
-    }
+    // At each fixed time, the knots' matrices blended there, as the vertices move
+    // (MotionXform::at). `whole` takes the BVH itself: Embree instances one level deep.
+    for (size_t k = 0; k < impl_->fixedAt.size(); ++k)
+      attachStatic(local, motion.at(std::clamp(impl_->fixedAt[k], open, close)), {ensure(impl_->fixed[k]), ensure(impl_->whole[k])});
   }
   if (!impl_->rigid) impl_->fixedAt.clear(), impl_->fixed.clear(), impl_->whole.clear();
   for (RTCScene s : {impl_->still, impl_->deforming, impl_->rigid})
     if (s) rtcCommitScene(s);
   for (RTCScene s : impl_->fixed) rtcCommitScene(s);
-  auto attachWhole = [&](RTCScene whole, RTCScene scene) {
-    RTCGeometry instance = rtcNewGeometry(impl_->device, RTC_GEOMETRY_TYPE_INSTANCE);
-    rtcSetGeometryInstancedScene(instance, scene);
-    setTransform(instance, 0, glm::dmat4(1.0));
-    rtcCommitGeometry(instance);
-    rtcAttachGeometry(whole, instance);
-    rtcReleaseGeometry(instance);
-  };
   for (RTCScene whole : impl_->whole) {
-    attachWhole(whole, impl_->still);
-    if (impl_->deforming) attachWhole(whole, impl_->deforming);
+    attachStatic(impl_->still, glm::dmat4(1.0), {whole});
+    if (impl_->deforming) attachStatic(impl_->deforming, glm::dmat4(1.0), {whole});
     rtcCommitScene(whole);
   }
   check(impl_->device, "build the shadow scene");
@@ -218,7 +223,7 @@ ShadowScene::ShadowScene(std::span<const Piece> pieces, double open, double clos
 
 ShadowScene::~ShadowScene() = default;
 
-size_t ShadowScene::fixedTimes() const { return impl_->fixed.size(); }
+size_t ShadowScene::fixedInstants() const { return impl_->fixed.size(); }
 bool ShadowScene::moves() const { return impl_->rigid || impl_->deforming; }
 
 namespace {
@@ -243,22 +248,15 @@ bool ShadowScene::occludedByStill(const glm::dvec3& origin, const glm::dvec3& di
 }
 
 bool ShadowScene::occluded(const glm::dvec3& origin, const glm::dvec3& dir, double tfar, double time) const {
-  for (size_t k = 0; k < impl_->fixedAt.size(); ++k)
-    if (impl_->fixedAt[k] == time) {
-      const double span = impl_->close - impl_->open;
-      return occludedIn(impl_->whole[k], origin, dir, tfar, span > 0 ? float(std::clamp((time - impl_->open) / span, 0.0, 1.0)) : 0.f);
-    }
+  if (const int k = impl_->fixedIndex(time); k >= 0) return occludedIn(impl_->whole[size_t(k)], origin, dir, tfar, impl_->rayTime(time));
   return occludedByStill(origin, dir, tfar) || occludedByMoving(origin, dir, tfar, time);
 }
 
 bool ShadowScene::occludedByMoving(const glm::dvec3& origin, const glm::dvec3& dir, double tfar, double time) const {
-  if (!impl_->rigid && !impl_->deforming) return false;
-  const double span = impl_->close - impl_->open;
-  const float rayTime = span > 0 ? float(std::clamp((time - impl_->open) / span, 0.0, 1.0)) : 0.f;
-  RTCScene rigid = impl_->rigid;
-  for (size_t k = 0; k < impl_->fixedAt.size(); ++k)
-    if (impl_->fixedAt[k] == time) rigid = impl_->fixed[k];
-  return occludedIn(rigid, origin, dir, tfar, rayTime) || occludedIn(impl_->deforming, origin, dir, tfar, rayTime);
+  if (!moves()) return false;
+  const float rayTime = impl_->rayTime(time);
+  const int k = impl_->fixedIndex(time);
+  return occludedIn(k >= 0 ? impl_->fixed[size_t(k)] : impl_->rigid, origin, dir, tfar, rayTime) || occludedIn(impl_->deforming, origin, dir, tfar, rayTime);
 }
 
 namespace {

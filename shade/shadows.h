@@ -67,8 +67,9 @@ class ShadowScene {
   /// The rigid motions instanced, and the micropolygons moving that way.
   uint64_t rigidInstances() const { return rigidInstances_; }
   uint64_t rigidMicropolygons() const { return rigidMicropolygons_; }
-  /// The times at which the rigid motions are also instanced fixed (0 without rigid motions).
-  size_t fixedTimes() const;
+  /// How many shutter instants the rigid motions are also instanced fixed at (0 without rigid
+  /// motions): a count of instants, not a duration.
+  size_t fixedInstants() const;
   /// Whether any micropolygon moves (occludedByMoving() can say true).
   bool moves() const;
 

@@ -418,7 +418,8 @@ TEST(ShadeInTime, RotatingAndDeformingCastersShadowAsTheyStandAtEachTime) {
   const std::string scene = edited(base, "WorldEnd", bar + growing + "WorldEnd");
   const Shaded inTime = shade(dir, "inTime", scene, "--shade-in-time 0 --shade-times 3");
   EXPECT_EQ(numberBefore(inTime.report, " rigidly moving shadow casters"), 1u) << "the bar alone: " << inTime.report;
-  // Its instance also fixed at each shading time, where the shading rays are traced.
+  // Its instance also fixed at each shading time, where the shading rays are traced (the report
+  // counts the shutter instants it is fixed at; nothing here is timed).
   EXPECT_EQ(numberBefore(inTime.report, " shading times)"), 3u) << inTime.report;
   EXPECT_GT(numberBefore(inTime.report, " grid times of rigidly moving grids carried"), 0u) << inTime.report;
   for (int k : {1, 2}) {

@@ -1182,12 +1182,12 @@ TEST(ShadeShadows, CastersFixedAtShadingTimesBlockWhereTheyStandThen) {
   const std::vector<ShadowScene::Piece> pieces{rigid, deforming, still};
   const std::vector<double> shadingTimes{0, 0.25, 1};
   const ShadowScene scene(pieces, 0, 1, motions, shadingTimes);
-  EXPECT_EQ(scene.fixedTimes(), 3u);
+  EXPECT_EQ(scene.fixedInstants(), 3u);  // a count of shutter instants
   EXPECT_EQ(scene.rigidInstances(), 1u);
   // Without rigid motions there is nothing to fix.
-  EXPECT_EQ(ShadowScene(std::vector<ShadowScene::Piece>{deforming}, 0, 1, {}, shadingTimes).fixedTimes(), 0u);
+  EXPECT_EQ(ShadowScene(std::vector<ShadowScene::Piece>{deforming}, 0, 1, {}, shadingTimes).fixedInstants(), 0u);
   const ShadowScene blurredOnly(pieces, 0, 1, motions);
-  EXPECT_EQ(blurredOnly.fixedTimes(), 0u);
+  EXPECT_EQ(blurredOnly.fixedInstants(), 0u);
 
   std::mt19937 rng(20261128);
   auto uniform = [&](double lo, double hi) { return std::uniform_real_distribution<double>(lo, hi)(rng); };
