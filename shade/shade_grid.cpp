@@ -101,9 +101,25 @@ void storeViewInputs(const ShadeContext& c, size_t i, const SurfaceOutput& so, c
 
 }  // namespace
 
+void shadowBias(const DicedGrid& g, std::span<const uint32_t> corners, std::span<const uint8_t> wanted, std::vector<float>& bias) {
+  const size_t nV = g.numVertices;
+  bias.assign(nV, 0.f);
+  auto unwanted = [&](uint32_t v) { return !wanted.empty() && !wanted[v]; };
+  for (size_t m = 0; m + 4 <= corners.size(); m += 4) {
+    const uint32_t* q = &corners[m];
+    const int n = q[3] == store::kNoCorner ? 3 : 4;
+    for (int j = 0; j < n; ++j) {
+      const uint32_t v = q[j], w = q[(j + 1) % n];
+      if (v >= nV || w >= nV || (unwanted(v) && unwanted(w))) continue;
+      const float half = float(0.5 * glm::length(g.P[w] - g.P[v]));
+      bias[v] = std::max(bias[v], half), bias[w] = std::max(bias[w], half);
+    }
+  }
+}
+
 void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g, std::span<const uint32_t> corners, std::span<const LitLight> lights,
                    double time, size_t k, uint64_t leafIndex, std::vector<std::vector<float>>& attrs, RayCounts& rayCounts, ShadowReuse* reuse,
-                   std::span<const uint8_t> movingShadows, std::span<const uint32_t> only) {
+                   std::span<const uint8_t> movingShadows, std::span<const uint32_t> only, std::vector<float>* biasOfTime) {
   const Attributes& a = *p.attrs;
   const SurfaceShader shader = a.surface.at(time);
   // A RIS material's own colour and presence replace the primitive's.
@@ -120,9 +136,6 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
   };
   std::vector<Footprint> footprint;
   TextureLookup::Map map;
-  // A shadow ray starts half a micropolygon off the surface (the diced surface cuts corners of
-  // the true one by about that much).
-  std::vector<float> bias;
   // Shading some vertices only: what the others would need is not made.
   std::vector<uint8_t> wanted;
   if (!only.empty()) {
@@ -130,18 +143,15 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
     for (uint32_t i : only) wanted[i] = 1;
   }
   auto unwanted = [&](uint32_t v) { return !wanted.empty() && !wanted[v]; };
-  if (traces) {
-    bias.assign(nV, 0.f);
-    for (size_t m = 0; m + 4 <= corners.size(); m += 4) {
-      const uint32_t* q = &corners[m];
-      const int n = q[3] == store::kNoCorner ? 3 : 4;
-      for (int j = 0; j < n; ++j) {
-        const uint32_t v = q[j], w = q[(j + 1) % n];
-        if (v >= nV || w >= nV || (unwanted(v) && unwanted(w))) continue;
-        const float half = float(0.5 * glm::length(g.P[w] - g.P[v]));
-        bias[v] = std::max(bias[v], half), bias[w] = std::max(bias[w], half);
-      }
-    }
+  // A later time reusing the first time's rays lifts none; the lifts of one time serve every call
+  // at that time (the coarse lattice, then its refinement).
+  const bool reusing = reuse && !reuse->recording;
+  std::vector<float> ownBias;
+  std::span<const float> bias;
+  if (traces && !reusing) {
+    if (!biasOfTime) shadowBias(g, corners, wanted, ownBias), bias = ownBias;
+    else if (biasOfTime->empty()) shadowBias(g, corners, {}, *biasOfTime);
+    if (biasOfTime) bias = *biasOfTime;
   }
   std::vector<LitLight> shadowed;
   if (traces) shadowed.assign(lights.begin(), lights.end());
@@ -170,7 +180,6 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
   // says less, 0 for the others (kept only for the view-dependent terms' inputs).
   std::vector<float> visibility(keepView ? c.lit.size() : 0, 0.f);
   if (reuse && reuse->recording) reuse->visibility.assign(nV * lights.size(), 1.f), reuse->traced.assign(nV * lights.size(), {}), reuse->open.clear();
-  const bool reusing = reuse && !reuse->recording;
   std::vector<ShadowRay> rays;
   const bool anyMoves = c.shadows && c.shadows->moves();
   auto movingMayShadow = [&](size_t li) { return anyMoves && (movingShadows.empty() || (li < movingShadows.size() && movingShadows[li])); };

@@ -107,10 +107,17 @@ struct RayCounts {
 /// reuse them; `movingShadows` (shading in time): per light of `lights`, whether a moving caster
 /// may shadow the grid from it (MovingCasters) - where none can, its rays skip the moving
 /// micropolygons; empty: every light's rays trace them; `only`: shade just these vertices (a
-/// later time on a coarser lattice), leaving the others' outputs as they are.
+/// later time on a coarser lattice), leaving the others' outputs as they are; `biasOfTime`: the
+/// shadow rays' lifts off the surface at this time (shadowBias()), made for every vertex by the
+/// first call that needs them and read by the later calls at the same time (null: made here).
 void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g, std::span<const uint32_t> corners, std::span<const LitLight> lights,
                    double time, size_t k, uint64_t leafIndex, std::vector<std::vector<float>>& attrs, RayCounts& rays, ShadowReuse* reuse = nullptr,
-                   std::span<const uint8_t> movingShadows = {}, std::span<const uint32_t> only = {});
+                   std::span<const uint8_t> movingShadows = {}, std::span<const uint32_t> only = {}, std::vector<float>* biasOfTime = nullptr);
+
+/// How far each vertex's shadow rays start off the surface: half its longest micropolygon edge
+/// (the diced surface cuts corners of the true one by about that much); only for the vertices
+/// `wanted` marks (empty: every vertex), whose values do not depend on the others.
+void shadowBias(const DicedGrid& g, std::span<const uint32_t> corners, std::span<const uint8_t> wanted, std::vector<float>& bias);
 
 /// Whether the affine part of `m` can be inverted without losing most of its digits: its
 /// determinant against the cube of its longest column (1 for a rotation at any scale; a column

@@ -288,6 +288,7 @@ bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const Dic
   std::vector<std::vector<std::vector<float>>> at(T);
   DicedGrid gk;
   std::vector<LitLight> lights;
+  std::vector<float> biasOfTime;
   float change = 0;
   if (reuse) reuse->recording = false, reuse->first = &out.attrs;
   const std::vector<int>& slots = c.changeSlots;
@@ -312,8 +313,9 @@ bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const Dic
     for (uint32_t li : lightIdx)  // reusing: the lights stand still, and the first time's rays need the first time's lights
       if (li < c.lit.size()) lights.push_back(reuse ? c.lit[li] : c.litAt[k][li]);
     if (coarse) {
+      biasOfTime.clear();
       auto shade = [&](std::span<const uint32_t> only) {
-        shadeVertices(c, p, *geometry, out.corners, lights, c.times[k], k, leafIndex, at[k], rays, reuse, movingShadows, only);
+        shadeVertices(c, p, *geometry, out.corners, lights, c.times[k], k, leafIndex, at[k], rays, reuse, movingShadows, only, &biasOfTime);
       };
       lattice.shadeTime(c, out.attrs, at[k], shade, counts);
     } else {
