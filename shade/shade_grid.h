@@ -139,6 +139,7 @@ bool onlyShadowsChange(const ShadeContext& c, uint32_t pi, bool moves, std::span
 struct InTimeCounts {
   uint64_t blendedTimes = 0, carriedTimes = 0;
   uint64_t laterVertices = 0, interpolatedVertices = 0;
+  uint64_t steadyTimes = 0;  // later grid times whose coarse points all kept their first values
 };
 /// Shades a candidate at the other times; whether it kept them (shade_in_time.cpp).
 bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const DicedGrid& g, bool moves, std::span<const uint32_t> lightIdx,

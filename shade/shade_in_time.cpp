@@ -91,6 +91,23 @@ class CoarseLattice {
     shaded_.assign(g.numVertices, 0);
     shade(std::span<const uint32_t>(coarse_));
     for (uint32_t v : coarse_) shaded_[v] = 1;
+    // Nothing changed at the coarse points (a still grid no moving shadow reached at this time,
+    // most often): every change to interpolate is zero, so the rest take the first time's values
+    // as the blend below would make them (+ 0: a negative zero comes out positive there too).
+    if (steadyAtCoarse(c, first, values)) {
+      for (const std::vector<int>& timed : c.timedSlots) {
+        const size_t slot = size_t(timed[0]);
+        if (first[slot].empty() || values[slot].size() != first[slot].size()) continue;
+        const size_t N = size_t(store::componentCount(c.schema.attrs[slot].type));
+        for (uint32_t v = 0; v < g.numVertices; ++v)
+          if (!shaded_[v])
+            for (size_t n = 0; n < N; ++n) values[slot][v * N + n] = first[slot][v * N + n] + 0.f;
+      }
+      counts.laterVertices += coarse_.size();
+      counts.interpolatedVertices += g.numVertices - coarse_.size();
+      ++counts.steadyTimes;
+      return;
+    }
     // The change of colour and opacity since the first time at each coarse point, components
     // 0-2 Ci, 3-5 Oi.
     const size_t A = cu_.size(), B = cv_.size();
@@ -194,6 +211,18 @@ class CoarseLattice {
   std::vector<float> delta_, bendU_, bendV_;  // per coarse point (b * A + a) and component: the change of Ci and Oi, its bends
 
   uint32_t at(int i, int j) const { return g_->lattice[size_t(j) * size_t(row_) + size_t(i)]; }
+  /// Whether every value carried in time is at every coarse point what it was at the first time.
+  bool steadyAtCoarse(const ShadeContext& c, const std::vector<std::vector<float>>& first, const std::vector<std::vector<float>>& values) const {
+    for (const std::vector<int>& timed : c.timedSlots) {
+      const size_t slot = size_t(timed[0]);
+      if (first[slot].empty() || values[slot].size() != first[slot].size()) continue;
+      const size_t N = size_t(store::componentCount(c.schema.attrs[slot].type));
+      for (uint32_t v : coarse_)
+        for (size_t n = 0; n < N; ++n)
+          if (values[slot][v * N + n] != first[slot][v * N + n]) return false;
+    }
+    return true;
+  }
   /// Each blended vertex's value of an attribute of N components: its first-time value plus the
   /// change at its cell's corners, weighted (the corners are shaded, never blended).
   template <size_t N>

@@ -280,6 +280,7 @@ class GridSender {
     stats_.carriedTimes += b.inTime.carriedTimes;
     stats_.laterVertices += b.inTime.laterVertices;
     stats_.interpolatedVertices += b.inTime.interpolatedVertices;
+    stats_.steadyTimes += b.inTime.steadyTimes;
     stats_.stillOnlyRays += b.stillOnlyRays;
     stats_.candidateStillOnlyRays += b.candidateStillOnlyRays;
     stats_.timedMicropolygons += b.timedMicropolygons;
