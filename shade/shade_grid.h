@@ -141,8 +141,10 @@ struct InTimeCounts {
   uint64_t laterVertices = 0, interpolatedVertices = 0;
   uint64_t steadyTimes = 0;  // later grid times whose coarse points all kept their first values
 };
-/// Shades a candidate at the other times; whether it kept them (shade_in_time.cpp).
+/// Shades a candidate at the other times (`firstBias`: its shadow rays' lifts at the first time,
+/// empty when none were made); whether it kept them (shade_in_time.cpp).
 bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const DicedGrid& g, bool moves, std::span<const uint32_t> lightIdx,
-                 std::span<const uint8_t> movingShadows, uint64_t leafIndex, GridOut& out, RayCounts& rays, ShadowReuse* reuse, InTimeCounts& counts);
+                 std::span<const uint8_t> movingShadows, std::span<const float> firstBias, uint64_t leafIndex, GridOut& out, RayCounts& rays,
+                 ShadowReuse* reuse, InTimeCounts& counts);
 
 }  // namespace reshutter::shade::pass

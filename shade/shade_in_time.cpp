@@ -311,7 +311,8 @@ bool onlyShadowsChange(const ShadeContext& c, uint32_t pi, bool moves, std::span
 /// ends, the span's other times are blended too rather than shaded (linear between the shaded
 /// times, as the re-sampler blends them). Tolerance 0 shades every time.
 bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const DicedGrid& g, bool moves, std::span<const uint32_t> lightIdx,
-                 std::span<const uint8_t> movingShadows, uint64_t leafIndex, GridOut& out, RayCounts& rays, ShadowReuse* reuse, InTimeCounts& counts) {
+                 std::span<const uint8_t> movingShadows, std::span<const float> firstBias, uint64_t leafIndex, GridOut& out, RayCounts& rays, ShadowReuse* reuse,
+                 InTimeCounts& counts) {
   const Primitive& p = c.scene.prims[pi];
   const size_t T = c.times.size();
   std::vector<std::vector<std::vector<float>>> at(T);
@@ -329,10 +330,14 @@ bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const Dic
     // A grid that stands still has the same shading geometry at every time (only its lights,
     // shadows and shader can differ): no second dicing.
     const DicedGrid* geometry = &g;
+    // The shadow rays' lifts: the first time's where the micropolygons keep their shape (a still
+    // grid, or one carried rigidly), else made anew at this time.
+    biasOfTime.assign(firstBias.begin(), firstBias.end());
     if (moves) {
       if (carryRigidly(p, g, c.shadeAt, c.times[k], gk)) {
         ++counts.carriedTimes;
       } else {
+        biasOfTime.clear();
         diceLeaf(p, leaf, c.split.knots[pi], c.times[k], c.nearClip, c.perspective, gk);
         if (gk.numVertices != g.numVertices || gk.corners != out.corners) return false;
       }
@@ -342,13 +347,12 @@ bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const Dic
     for (uint32_t li : lightIdx)  // reusing: the lights stand still, and the first time's rays need the first time's lights
       if (li < c.lit.size()) lights.push_back(reuse ? c.lit[li] : c.litAt[k][li]);
     if (coarse) {
-      biasOfTime.clear();
       auto shade = [&](std::span<const uint32_t> only) {
         shadeVertices(c, p, *geometry, out.corners, lights, c.times[k], k, leafIndex, at[k], rays, reuse, movingShadows, only, &biasOfTime);
       };
       lattice.shadeTime(c, out.attrs, at[k], shade, counts);
     } else {
-      shadeVertices(c, p, *geometry, out.corners, lights, c.times[k], k, leafIndex, at[k], rays, reuse, movingShadows);
+      shadeVertices(c, p, *geometry, out.corners, lights, c.times[k], k, leafIndex, at[k], rays, reuse, movingShadows, {}, &biasOfTime);
       counts.laterVertices += g.numVertices;
     }
     for (int slot : slots) {

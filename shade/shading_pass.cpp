@@ -211,6 +211,7 @@ void shadeBatch(const ShadeContext& c, Batch& b) {
   const Attributes* lightsOf = nullptr;
   RayCounts rays;
   std::vector<uint8_t> movingShadows;  // per light of the grid's: may a moving caster shadow it (shading in time)
+  std::vector<float> firstBias;        // the grid's shadow-ray lifts at the first time, for its later times
   b.grids.resize(b.count);
   for (size_t n = 0; n < b.count; ++n) {
     const auto [pi, leaf] = c.split.flat[b.first + n];
@@ -246,11 +247,12 @@ void shadeBatch(const ShadeContext& c, Batch& b) {
     // grid's rays need not trace from a light no moving caster can shadow it from - any light,
     // for a grid that is not a candidate (mayShadeDifferently() tells).
     const uint64_t stillOnlyBefore = rays.stillOnly;
-    shadeVertices(c, p, g, out.corners, lights, c.shadeAt, 0, b.first + n, out.attrs, rays, reusing, movingShadows);
+    firstBias.clear();
+    shadeVertices(c, p, g, out.corners, lights, c.shadeAt, 0, b.first + n, out.attrs, rays, reusing, movingShadows, {}, &firstBias);
     if (c.times.size() > 1 && !candidate) b.stillOnlyRays += rays.stillOnly - stillOnlyBefore;
     if (candidate) {
       ++b.timeCandidates;
-      const bool kept = shadeInTime(c, pi, *leaf, g, moves, lightIdx, movingShadows, b.first + n, out, rays, reusing, b.inTime);
+      const bool kept = shadeInTime(c, pi, *leaf, g, moves, lightIdx, movingShadows, firstBias, b.first + n, out, rays, reusing, b.inTime);
       b.candidateStillOnlyRays += rays.stillOnly - stillOnlyBefore;
       if (kept)
         ++b.timed, b.timedMicropolygons += out.corners.size() / 4;
