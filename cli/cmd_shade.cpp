@@ -201,7 +201,7 @@ void addShadeCommand(CLI::App& app, Registry& registry) {
                   "colours) at --shade-times times too, and keep them where the colour changes by more than this tolerance (0: always); re-sampling "
                   "then blends each sample's colour at its own time. off: shade once (error against time in docs/accuracy.md)")
       ->capture_default_str();
-  sub->add_option("--shade-times", cmd->shadingTimes, "With --shade-in-time: shading times spread evenly over the interval, its open and close included (4 with tolerance 0.03: 1.26x the single pass on the demo, shading error still under 16-spp noise; 5: a third less error for 1.36x; docs/accuracy.md)")
+  sub->add_option("--shade-times", cmd->shadingTimes, "With --shade-in-time: shading times spread evenly over the interval, its open and close included (4 with tolerance 0.03: 1.27x the single pass on the demo, shading error still under 16-spp noise; 5: a third less error for 1.36x; docs/accuracy.md)")
       ->capture_default_str();
   sub->add_option("--shade-in-time-stride", cmd->timeStride,
                   "With --shade-in-time: shade the later times at every Nth vertex of a grid, and in full only where the change since the open "

@@ -32,13 +32,18 @@ bool translatesRigidly(std::span<const glm::vec3> P, size_t nV, size_t K) {
 /// to rounding without evaluating the surface again. False when the primitive's shape changes
 /// over time (deformation keys, a camera-facing kind), a transform is nearly singular, or the
 /// motion turns it inside out (the dicing's winding changes, so the grid is diced again and
-/// found to differ).
-bool carryRigidly(const Primitive& p, const DicedGrid& g, double shadeAt, double t, DicedGrid& out) {
+/// found to differ). `keepsLengths`: whether the carry keeps every length to 0.1 % (the blend of
+/// two knots' rotations shrinks what it turns).
+bool carryRigidly(const Primitive& p, const DicedGrid& g, double shadeAt, double t, DicedGrid& out, bool& keepsLengths) {
   if (p.times.size() > 1 || p.kind == PrimKind::Curve || p.kind == PrimKind::Point) return false;
   const glm::dmat4 from = p.xform->at(shadeAt), to = p.xform->at(t);
   if (!wellInvertible(from) || !wellInvertible(to) || (glm::determinant(from) < 0) != (glm::determinant(to) < 0)) return false;
   const glm::dmat4 R = to * glm::inverse(from);
   const glm::dmat3 normals = glm::inverseTranspose(glm::dmat3(R));
+  const glm::dmat3 gram = glm::transpose(glm::dmat3(R)) * glm::dmat3(R);  // the identity for a rotation
+  keepsLengths = true;
+  for (int i = 0; i < 3; ++i)
+    for (int j = 0; j < 3; ++j) keepsLengths &= std::abs(gram[i][j] - (i == j ? 1.0 : 0.0)) <= 1e-3;
   const size_t nV = g.numVertices;
   out.nu = g.nu, out.nv = g.nv, out.numVertices = g.numVertices;
   out.positions.clear(), out.corners.clear();
@@ -330,12 +335,14 @@ bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const Dic
     // A grid that stands still has the same shading geometry at every time (only its lights,
     // shadows and shader can differ): no second dicing.
     const DicedGrid* geometry = &g;
-    // The shadow rays' lifts: the first time's where the micropolygons keep their shape (a still
-    // grid, or one carried rigidly), else made anew at this time.
+    // The shadow rays' lifts: the first time's where the micropolygons keep their size (a still
+    // grid, or one carried without shrinking), else made anew at this time.
     biasOfTime.assign(firstBias.begin(), firstBias.end());
     if (moves) {
-      if (carryRigidly(p, g, c.shadeAt, c.times[k], gk)) {
+      bool keepsLengths = false;
+      if (carryRigidly(p, g, c.shadeAt, c.times[k], gk, keepsLengths)) {
         ++counts.carriedTimes;
+        if (!keepsLengths) biasOfTime.clear();
       } else {
         biasOfTime.clear();
         diceLeaf(p, leaf, c.split.knots[pi], c.times[k], c.nearClip, c.perspective, gk);
