@@ -134,7 +134,7 @@ struct ShadeCommand {
                                                        r.shade.carriedTimes, " grid times of rigidly moving grids carried from the first (not diced again), ",
                                                        r.shade.laterVertices, " vertex shadings at later times and ", r.shade.interpolatedVertices,
                                                        " vertices whose change was interpolated between them (--shade-in-time-stride), ",
-                                                       r.shade.steadyTimes, " grid times unchanged at those shaded (the rest kept their first values), ",
+                                                       r.shade.steadyShadings, " later grid shadings unchanged at their coarse points (the rest kept their first values), ",
                                                        r.shade.rigidMicropolygons, " moving micropolygons in ", r.shade.rigidCasters,
                                                        " rigidly moving shadow casters (a still BVH each, instanced; fixed at ",
                                                        r.shade.fixedCasterInstants, " shading times)")

@@ -101,16 +101,15 @@ void storeViewInputs(const ShadeContext& c, size_t i, const SurfaceOutput& so, c
 
 }  // namespace
 
-void shadowBias(const DicedGrid& g, std::span<const uint32_t> corners, std::span<const uint8_t> wanted, std::vector<float>& bias) {
+void shadowBias(const DicedGrid& g, std::span<const uint32_t> corners, std::vector<float>& bias) {
   const size_t nV = g.numVertices;
   bias.assign(nV, 0.f);
-  auto unwanted = [&](uint32_t v) { return !wanted.empty() && !wanted[v]; };
   for (size_t m = 0; m + 4 <= corners.size(); m += 4) {
     const uint32_t* q = &corners[m];
     const int n = q[3] == store::kNoCorner ? 3 : 4;
     for (int j = 0; j < n; ++j) {
       const uint32_t v = q[j], w = q[(j + 1) % n];
-      if (v >= nV || w >= nV || (unwanted(v) && unwanted(w))) continue;
+      if (v >= nV || w >= nV) continue;
       const float half = float(0.5 * glm::length(g.P[w] - g.P[v]));
       bias[v] = std::max(bias[v], half), bias[w] = std::max(bias[w], half);
     }
@@ -119,7 +118,7 @@ void shadowBias(const DicedGrid& g, std::span<const uint32_t> corners, std::span
 
 void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g, std::span<const uint32_t> corners, std::span<const LitLight> lights,
                    double time, size_t k, uint64_t leafIndex, std::vector<std::vector<float>>& attrs, RayCounts& rayCounts, ShadowReuse* reuse,
-                   std::span<const uint8_t> movingShadows, std::span<const uint32_t> only, std::vector<float>* biasOfTime) {
+                   std::span<const uint8_t> movingShadows, std::span<const uint32_t> only, std::vector<float>& bias) {
   const Attributes& a = *p.attrs;
   const SurfaceShader shader = a.surface.at(time);
   // A RIS material's own colour and presence replace the primitive's.
@@ -146,13 +145,7 @@ void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g
   // A later time reusing the first time's rays lifts none; the lifts of one time serve every call
   // at that time (the coarse lattice, then its refinement).
   const bool reusing = reuse && !reuse->recording;
-  std::vector<float> ownBias;
-  std::span<const float> bias;
-  if (traces && !reusing) {
-    if (!biasOfTime) shadowBias(g, corners, wanted, ownBias), bias = ownBias;
-    else if (biasOfTime->empty()) shadowBias(g, corners, {}, *biasOfTime);
-    if (biasOfTime) bias = *biasOfTime;
-  }
+  if (traces && !reusing && bias.empty()) shadowBias(g, corners, bias);
   std::vector<LitLight> shadowed;
   if (traces) shadowed.assign(lights.begin(), lights.end());
   if (c.textures && !shader.textureName.empty()) {

@@ -107,17 +107,16 @@ struct RayCounts {
 /// reuse them; `movingShadows` (shading in time): per light of `lights`, whether a moving caster
 /// may shadow the grid from it (MovingCasters) - where none can, its rays skip the moving
 /// micropolygons; empty: every light's rays trace them; `only`: shade just these vertices (a
-/// later time on a coarser lattice), leaving the others' outputs as they are; `biasOfTime`: the
-/// shadow rays' lifts off the surface at this time (shadowBias()), made for every vertex by the
-/// first call that needs them and read by the later calls at the same time (null: made here).
+/// later time on a coarser lattice), leaving the others' outputs as they are; `bias`: the shadow
+/// rays' lifts off the surface at this time (shadowBias()), made by the first call that needs
+/// them when empty and read by the later calls at the same time.
 void shadeVertices(const ShadeContext& c, const Primitive& p, const DicedGrid& g, std::span<const uint32_t> corners, std::span<const LitLight> lights,
-                   double time, size_t k, uint64_t leafIndex, std::vector<std::vector<float>>& attrs, RayCounts& rays, ShadowReuse* reuse = nullptr,
-                   std::span<const uint8_t> movingShadows = {}, std::span<const uint32_t> only = {}, std::vector<float>* biasOfTime = nullptr);
+                   double time, size_t k, uint64_t leafIndex, std::vector<std::vector<float>>& attrs, RayCounts& rays, ShadowReuse* reuse,
+                   std::span<const uint8_t> movingShadows, std::span<const uint32_t> only, std::vector<float>& bias);
 
 /// How far each vertex's shadow rays start off the surface: half its longest micropolygon edge
-/// (the diced surface cuts corners of the true one by about that much); only for the vertices
-/// `wanted` marks (empty: every vertex), whose values do not depend on the others.
-void shadowBias(const DicedGrid& g, std::span<const uint32_t> corners, std::span<const uint8_t> wanted, std::vector<float>& bias);
+/// (the diced surface cuts corners of the true one by about that much).
+void shadowBias(const DicedGrid& g, std::span<const uint32_t> corners, std::vector<float>& bias);
 
 /// Whether the affine part of `m` can be inverted without losing most of its digits: its
 /// determinant against the cube of its longest column (1 for a rotation at any scale; a column
@@ -139,7 +138,7 @@ bool onlyShadowsChange(const ShadeContext& c, uint32_t pi, bool moves, std::span
 struct InTimeCounts {
   uint64_t blendedTimes = 0, carriedTimes = 0;
   uint64_t laterVertices = 0, interpolatedVertices = 0;
-  uint64_t steadyTimes = 0;  // later grid times whose coarse points all kept their first values
+  uint64_t steadyShadings = 0;  // later shadings of a grid whose coarse points all kept their first values
 };
 /// Shades a candidate at the other times (`firstBias`: its shadow rays' lifts at the first time,
 /// empty when none were made); whether it kept them (shade_in_time.cpp).

@@ -99,18 +99,22 @@ class CoarseLattice {
     // Nothing changed at the coarse points (a still grid no moving shadow reached at this time,
     // most often): every change to interpolate is zero, so the rest take the first time's values
     // as the blend below would make them (+ 0: a negative zero comes out positive there too).
-    if (steadyAtCoarse(c, first, values)) {
-      for (const std::vector<int>& timed : c.timedSlots) {
-        const size_t slot = size_t(timed[0]);
-        if (first[slot].empty() || values[slot].size() != first[slot].size()) continue;
-        const size_t N = size_t(store::componentCount(c.schema.attrs[slot].type));
+    const bool steady = eachCarried(c, first, values, [&](size_t slot, size_t N) {
+      for (uint32_t v : coarse_)
+        for (size_t n = 0; n < N; ++n)
+          if (values[slot][v * N + n] != first[slot][v * N + n]) return false;
+      return true;
+    });
+    if (steady) {
+      eachCarried(c, first, values, [&](size_t slot, size_t N) {
         for (uint32_t v = 0; v < g.numVertices; ++v)
           if (!shaded_[v])
             for (size_t n = 0; n < N; ++n) values[slot][v * N + n] = first[slot][v * N + n] + 0.f;
-      }
+        return true;
+      });
       counts.laterVertices += coarse_.size();
       counts.interpolatedVertices += g.numVertices - coarse_.size();
-      ++counts.steadyTimes;
+      ++counts.steadyShadings;
       return;
     }
     // The change of colour and opacity since the first time at each coarse point, components
@@ -190,15 +194,13 @@ class CoarseLattice {
         blends_.push_back({v, {at(i0, j0), at(i1, j0), at(i0, j1), at(i1, j1)}, {(1 - wu) * (1 - wv), wu * (1 - wv), (1 - wu) * wv, wu * wv}});
       }
     counts.interpolatedVertices += blends_.size();
-    for (const std::vector<int>& timed : c.timedSlots) {
-      const size_t slot = size_t(timed[0]);
-      // A view-dependent input is absent on grids whose shader has no such term.
-      if (first[slot].empty() || values[slot].size() != first[slot].size()) continue;
-      if (store::componentCount(c.schema.attrs[slot].type) == 3)
+    eachCarried(c, first, values, [&](size_t slot, size_t N) {
+      if (N == 3)
         interpolate<3>(first[slot].data(), values[slot].data());
       else
         interpolate<1>(first[slot].data(), values[slot].data());
-    }
+      return true;
+    });
   }
 
  private:
@@ -216,15 +218,15 @@ class CoarseLattice {
   std::vector<float> delta_, bendU_, bendV_;  // per coarse point (b * A + a) and component: the change of Ci and Oi, its bends
 
   uint32_t at(int i, int j) const { return g_->lattice[size_t(j) * size_t(row_) + size_t(i)]; }
-  /// Whether every value carried in time is at every coarse point what it was at the first time.
-  bool steadyAtCoarse(const ShadeContext& c, const std::vector<std::vector<float>>& first, const std::vector<std::vector<float>>& values) const {
+  /// Calls f(slot, components) for each attribute carried in time that the grid has (a
+  /// view-dependent input is absent on grids whose shader has no such term), until f says false;
+  /// whether none did.
+  template <class F>
+  static bool eachCarried(const ShadeContext& c, const std::vector<std::vector<float>>& first, const std::vector<std::vector<float>>& values, F&& f) {
     for (const std::vector<int>& timed : c.timedSlots) {
       const size_t slot = size_t(timed[0]);
       if (first[slot].empty() || values[slot].size() != first[slot].size()) continue;
-      const size_t N = size_t(store::componentCount(c.schema.attrs[slot].type));
-      for (uint32_t v : coarse_)
-        for (size_t n = 0; n < N; ++n)
-          if (values[slot][v * N + n] != first[slot][v * N + n]) return false;
+      if (!f(slot, size_t(store::componentCount(c.schema.attrs[slot].type)))) return false;
     }
     return true;
   }
@@ -355,11 +357,11 @@ bool shadeInTime(const ShadeContext& c, uint32_t pi, const Leaf& leaf, const Dic
       if (li < c.lit.size()) lights.push_back(reuse ? c.lit[li] : c.litAt[k][li]);
     if (coarse) {
       auto shade = [&](std::span<const uint32_t> only) {
-        shadeVertices(c, p, *geometry, out.corners, lights, c.times[k], k, leafIndex, at[k], rays, reuse, movingShadows, only, &biasOfTime);
+        shadeVertices(c, p, *geometry, out.corners, lights, c.times[k], k, leafIndex, at[k], rays, reuse, movingShadows, only, biasOfTime);
       };
       lattice.shadeTime(c, out.attrs, at[k], shade, counts);
     } else {
-      shadeVertices(c, p, *geometry, out.corners, lights, c.times[k], k, leafIndex, at[k], rays, reuse, movingShadows, {}, &biasOfTime);
+      shadeVertices(c, p, *geometry, out.corners, lights, c.times[k], k, leafIndex, at[k], rays, reuse, movingShadows, {}, biasOfTime);
       counts.laterVertices += g.numVertices;
     }
     for (int slot : slots) {

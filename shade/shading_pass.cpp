@@ -248,7 +248,7 @@ void shadeBatch(const ShadeContext& c, Batch& b) {
     // for a grid that is not a candidate (mayShadeDifferently() tells).
     const uint64_t stillOnlyBefore = rays.stillOnly;
     firstBias.clear();
-    shadeVertices(c, p, g, out.corners, lights, c.shadeAt, 0, b.first + n, out.attrs, rays, reusing, movingShadows, {}, &firstBias);
+    shadeVertices(c, p, g, out.corners, lights, c.shadeAt, 0, b.first + n, out.attrs, rays, reusing, movingShadows, {}, firstBias);
     if (c.times.size() > 1 && !candidate) b.stillOnlyRays += rays.stillOnly - stillOnlyBefore;
     if (candidate) {
       ++b.timeCandidates;
@@ -282,7 +282,7 @@ class GridSender {
     stats_.carriedTimes += b.inTime.carriedTimes;
     stats_.laterVertices += b.inTime.laterVertices;
     stats_.interpolatedVertices += b.inTime.interpolatedVertices;
-    stats_.steadyTimes += b.inTime.steadyTimes;
+    stats_.steadyShadings += b.inTime.steadyShadings;
     stats_.stillOnlyRays += b.stillOnlyRays;
     stats_.candidateStillOnlyRays += b.candidateStillOnlyRays;
     stats_.timedMicropolygons += b.timedMicropolygons;

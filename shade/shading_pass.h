@@ -83,7 +83,7 @@ struct ShadeStats {
   uint64_t carriedTimes = 0;         // moving candidates' later times carried by their rigid motion from the first, not diced again
   uint64_t laterVertices = 0;        // vertex shadings at candidates' later times (blended times shade none)
   uint64_t interpolatedVertices = 0;  // of candidates' later times, vertices whose change was interpolated on the coarse lattice (timeStride)
-  uint64_t steadyTimes = 0;          // of candidates' later times on the coarse lattice, those whose coarse points all kept their first values (the rest copied)
+  uint64_t steadyShadings = 0;       // candidates' later shadings on the coarse lattice whose coarse points all kept their first values (the rest copied)
   uint64_t reusedVertices = 0;       // vertex shadings at later times that kept the first time's outputs (only shadows could change, and did not)
   uint64_t stillOnlyRays = 0;        // rays of grids no moving caster can shadow, traced against the still micropolygons only
   uint64_t candidateStillOnlyRays = 0;  // the same for candidates' rays towards a light no moving caster can shadow them from

@@ -128,12 +128,12 @@ TEST(ShadeShadows, CastersFixedAtShadingTimesBlockWhereTheyStandThen) {
   };
   const std::vector<ShadowScene::RigidMotion> motions{ShadowScene::RigidMotion({0, 0.3, 1}, {glm::dmat4(1.0), placed(1, 0.5, 30), placed(3, 0, 80)})};
   const std::vector<ShadowScene::Piece> pieces{rigid, deforming, still};
-  const std::vector<double> shadingTimes{0, 0.25, 1};
-  const ShadowScene scene(pieces, 0, 1, motions, shadingTimes);
+  const std::vector<double> fixAt{0, 0.25, 1};
+  const ShadowScene scene(pieces, 0, 1, motions, fixAt);
   EXPECT_EQ(scene.fixedInstants(), 3u);  // a count of shutter instants
   EXPECT_EQ(scene.rigidInstances(), 1u);
   // Without rigid motions there is nothing to fix.
-  EXPECT_EQ(ShadowScene(std::vector<ShadowScene::Piece>{deforming}, 0, 1, {}, shadingTimes).fixedInstants(), 0u);
+  EXPECT_EQ(ShadowScene(std::vector<ShadowScene::Piece>{deforming}, 0, 1, {}, fixAt).fixedInstants(), 0u);
   const ShadowScene blurredOnly(pieces, 0, 1, motions);
   EXPECT_EQ(blurredOnly.fixedInstants(), 0u);
 
