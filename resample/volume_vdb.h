@@ -31,18 +31,6 @@ inline openvdb::Vec3d toVdb(const glm::dvec3& v) { return {v.x, v.y, v.z}; }
 
 // A linear grid's world -> index map as a glm matrix (column vectors).
 glm::dmat4 indexFromWorld(const openvdb::GridBase& grid);
-inline openvdb::Vec3d apply(const glm::dmat4& m, const glm::dvec3& p) { return toVdb(glm::dvec3(m * glm::dvec4(p, 1.0))); }
-
-// An affine map written out, so that the per-step transforms inline (glm's 4×4 product is a call
-// at -O2, and a tenth of a march's time).
-struct Affine {
-  glm::dvec3 x{1, 0, 0}, y{0, 1, 0}, z{0, 0, 1}, t{0.0};
-  Affine() = default;
-  explicit Affine(const glm::dmat4& m) : x(m[0]), y(m[1]), z(m[2]), t(m[3]) {}
-  glm::dvec3 operator()(const glm::dvec3& p) const { return x * p.x + y * p.y + z * p.z + t; }
-  glm::dvec3 linear(const glm::dvec3& d) const { return x * d.x + y * d.y + z * d.z; }  // a direction
-  openvdb::Vec3d vdb(const glm::dvec3& p) const { return toVdb((*this)(p)); }
-};
 
 // The volumes of a render, read and checked, in their files' world spaces.
 struct VdbScene final : VolumeSceneEngine {

@@ -23,6 +23,27 @@ using namespace reshutter::resample;
 using namespace reshutter::test;
 using namespace reshutter::test::retime;
 
+namespace {
+
+// Pixels where any channel of two images read back differs in its bits (or the images' windows
+// or channel lists differ: every pixel).
+size_t differingPixels(const FlatImage& a, const FlatImage& b) {
+  if (a.x0 != b.x0 || a.y0 != b.y0 || a.width != b.width || a.height != b.height || a.channels.size() != b.channels.size())
+    return size_t(a.width) * size_t(a.height);
+  size_t n = 0;
+  for (size_t i = 0; i < size_t(a.width) * size_t(a.height); ++i) {
+    bool same = true;
+    for (size_t c = 0; c < a.channels.size(); ++c) {
+      const ImageChannel &x = a.channels[c], &y = b.channels[c];
+      same &= x.name == y.name && (x.isUInt ? x.u[i] == y.u[i] : std::memcmp(&x.f[i], &y.f[i], sizeof(float)) == 0);
+    }
+    n += !same;
+  }
+  return n;
+}
+
+}  // namespace
+
 // Decoded parts are released after their last bucket (RenderSpec::keepDecoded) except from the
 // stores the next render reads: a two-pass frame's second field decodes nothing the first field
 // decoded, and the next frame's first field decodes its own store's parts.
@@ -87,8 +108,8 @@ TEST(RetimeCli, FieldsAndRetimeWriteSequencesThatOpenElsewhere) {
   }
   // 24 → 30 fps, 180°: output frame k exposes [0.8k, 0.8k + 0.4], frame 2 within store 1, frame 4
   // [3.2, 3.6] within store 3; the square's coverage over that interval is known exactly.
-  CommandResult retime = runReshutter("retime " + shot + " --from-fps 24 --to-fps 30 --frames 2-4x2 --spp 64 --filter box:1 -o " + dir.path("r.####.exr"));
-  ASSERT_EQ(retime.exitCode, 0) << retime.err;
+  CommandResult retimed = runReshutter("retime " + shot + " --from-fps 24 --to-fps 30 --frames 2-4x2 --spp 64 --filter box:1 -o " + dir.path("r.####.exr"));
+  ASSERT_EQ(retimed.exitCode, 0) << retimed.err;
   EXPECT_FALSE(std::filesystem::exists(dir.path("r.0003.exr")));
   for (int k : {2, 4}) {
     const std::string path = dir.path("r.000" + std::to_string(k) + ".exr");
@@ -113,9 +134,9 @@ TEST(RetimeCli, RetimeFramesEqualResampleOfTheSameInterval) {
   for (int64_t f = 1; f <= 4; ++f) frameStore(m, f, dir.path("shot.000" + std::to_string(f) + ".mps"));
   const std::string shot = dir.path("shot.####.mps"), common = " --spp 64 --filter box:1 --aov id --aov z";
   struct Case {
-    std::string retime;    // arguments after the stores
+    std::string retimeArgs;    // arguments after the stores
     int frame;             // the output frame compared
-    std::string resample;  // the equivalent `resample` of one store
+    std::string resampleArgs;  // the equivalent `resample` of one store
     double open, close;    // the interval both render (absolute frames)
   };
   // 24 → 32: frame 3 is nominally at 2.25 (exact in binary, as store 2's 0.25 is).
@@ -130,24 +151,24 @@ TEST(RetimeCli, RetimeFramesEqualResampleOfTheSameInterval) {
   };
   for (const Case& c : cases) {
     const std::string out = dir.path("r.####.exr"), ref = dir.path("ref.exr");
-    CommandResult r = runReshutter("retime " + shot + " " + c.retime + common + " -o " + out);
-    ASSERT_EQ(r.exitCode, 0) << c.retime << ": " << r.err;
-    r = runReshutter("resample " + dir.path(c.resample) + common + " -o " + ref);
-    ASSERT_EQ(r.exitCode, 0) << c.resample << ": " << r.err;
+    CommandResult r = runReshutter("retime " + shot + " " + c.retimeArgs + common + " -o " + out);
+    ASSERT_EQ(r.exitCode, 0) << c.retimeArgs << ": " << r.err;
+    r = runReshutter("resample " + dir.path(c.resampleArgs) + common + " -o " + ref);
+    ASSERT_EQ(r.exitCode, 0) << c.resampleArgs << ": " << r.err;
     const std::string frame = dir.path("r.000" + std::to_string(c.frame) + ".exr");
     const ExrShutter a = readExrShutter(frame), b = readExrShutter(ref);
-    EXPECT_EQ(a.open, c.open) << c.retime;
-    EXPECT_EQ(a.close, c.close) << c.retime;
-    EXPECT_EQ(b.open, c.open) << c.resample;
-    EXPECT_EQ(b.close, c.close) << c.resample;
+    EXPECT_EQ(a.open, c.open) << c.retimeArgs;
+    EXPECT_EQ(a.close, c.close) << c.retimeArgs;
+    EXPECT_EQ(b.open, c.open) << c.resampleArgs;
+    EXPECT_EQ(b.close, c.close) << c.resampleArgs;
     const FlatImage x = readFlatExr(frame), y = readFlatExr(ref);
-    EXPECT_EQ(differingPixels(x, y), 0u) << c.retime << " against resample " << c.resample;
+    EXPECT_EQ(differingPixels(x, y), 0u) << c.retimeArgs << " against resample " << c.resampleArgs;
     EXPECT_GT(x.channels.size(), 5u) << "R G B A Z, id and z";
     // And the frame is not just any image: the square's coverage over that interval, not over one
     // a tenth of a frame later.
     const double error = coverageError(x, m, c.open, c.close), shifted = coverageError(x, m, c.open + 0.1, c.close + 0.1);
-    EXPECT_LT(error, 0.02) << c.retime;
-    EXPECT_GT(shifted, 3 * error) << c.retime;
+    EXPECT_LT(error, 0.02) << c.retimeArgs;
+    EXPECT_GT(shifted, 3 * error) << c.retimeArgs;
   }
 }
 

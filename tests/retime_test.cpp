@@ -23,6 +23,27 @@ using namespace reshutter::resample;
 using namespace reshutter::test;
 using namespace reshutter::test::retime;
 
+namespace {
+
+RenderSpec baseSpec(std::vector<Source> sources, ShutterModel shutter, int n = 8) {
+  RenderSpec spec;
+  spec.sources = std::move(sources);
+  spec.shutter = std::move(shutter);
+  spec.samplesX = spec.samplesY = n;
+  spec.filter = FilterSpec::parse("box:1", "t");
+  spec.progress = false;
+  return spec;
+}
+
+bool sameBits(const RenderResult& a, const RenderResult& b) {
+  if (a.image.channels.size() != b.image.channels.size()) return false;
+  for (size_t c = 0; c < a.image.channels.size(); ++c)
+    if (a.image.channels[c].f != b.image.channels[c].f || a.image.channels[c].u != b.image.channels[c].u) return false;
+  return true;
+}
+
+}  // namespace
+
 TEST(RetimeFields, SinglePassEqualsTwoPassBitForBitWithOneRowFilters) {
   ScratchDir dir;
   Motion m;

@@ -1,9 +1,9 @@
 // Helpers of the re-timing tests (retime_test.cpp, retime_cli_test.cpp): a square moving through
-// absolute time, its per-frame stores, its exact coverage error, and bit-for-bit comparisons.
+// absolute time, its per-frame stores, its exact coverage error, and a row of deep output
+// flattened against the flat image.
 #pragma once
 
 #include <cmath>
-#include <cstring>
 #include <memory>
 #include <string>
 #include <vector>
@@ -15,6 +15,7 @@
 namespace reshutter::test::retime {
 
 using namespace reshutter::resample;
+
 // A square moving continuously through absolute time: x(t) = x0 + vx·t px (t in frames).
 struct Motion {
   double x0 = -20.3, y0 = 6.6, w = 11.7, h = 13.2, vx = 9.35, vy = 1.45, z = 10;
@@ -52,33 +53,6 @@ inline double coverageError(const RenderResult& r, const Motion& m, double a, do
   return coverageError(r.image, m, a, b, shapeT, shapeW);
 }
 
-// Pixels where any channel of two images read back differs in its bits (or the images' windows
-// or channel lists differ: every pixel).
-inline size_t differingPixels(const FlatImage& a, const FlatImage& b) {
-  if (a.x0 != b.x0 || a.y0 != b.y0 || a.width != b.width || a.height != b.height || a.channels.size() != b.channels.size())
-    return size_t(a.width) * size_t(a.height);
-  size_t n = 0;
-  for (size_t i = 0; i < size_t(a.width) * size_t(a.height); ++i) {
-    bool same = true;
-    for (size_t c = 0; c < a.channels.size(); ++c) {
-      const ImageChannel &x = a.channels[c], &y = b.channels[c];
-      same &= x.name == y.name && (x.isUInt ? x.u[i] == y.u[i] : std::memcmp(&x.f[i], &y.f[i], sizeof(float)) == 0);
-    }
-    n += !same;
-  }
-  return n;
-}
-
-inline RenderSpec baseSpec(std::vector<Source> sources, ShutterModel shutter, int n = 8) {
-  RenderSpec spec;
-  spec.sources = std::move(sources);
-  spec.shutter = std::move(shutter);
-  spec.samplesX = spec.samplesY = n;
-  spec.filter = FilterSpec::parse("box:1", "t");
-  spec.progress = false;
-  return spec;
-}
-
 // Largest |flattened deep − flat| over R G B A on row y (absolute) of a render.
 inline double rowFlattenError(const DeepImage& deep, const FlatImage& flat, int y) {
   double worst = 0;
@@ -91,13 +65,4 @@ inline double rowFlattenError(const DeepImage& deep, const FlatImage& flat, int 
   }
   return worst;
 }
-
-inline bool sameBits(const RenderResult& a, const RenderResult& b) {
-  if (a.image.channels.size() != b.image.channels.size()) return false;
-  for (size_t c = 0; c < a.image.channels.size(); ++c)
-    if (a.image.channels[c].f != b.image.channels[c].f || a.image.channels[c].u != b.image.channels[c].u) return false;
-  return true;
-}
-
-
 }  // namespace reshutter::test::retime
