@@ -172,13 +172,44 @@ inline __attribute__((always_inline)) void accumulateFixed(int nRuntime, const f
   }
 }
 
+// accumulateFixed<4, 16>() with the four channels' sums held in four vectors of eight and each
+// tap's two weight vectors loaded once for all channels; GCC kept the generic loop's sums in
+// memory and reloaded the weights per channel (536 instructions a pixel at 9 taps; this: ~190).
+// Every lane adds the same products in the same order (tap by tap, samples 0-7 then 8-15), so the
+// sums are bit-identical to the generic loop's.
+// The loads return vectors by value; inlined, so no call ever passes one (GCC's -Wpsabi note
+// about the non-AVX clone's calling convention does not apply).
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wpsabi"
+inline __attribute__((always_inline)) void accumulateRgba16(const float* const* in, const float* const* w, const size_t* offset, int taps, float lanes[8][8]) {
+  typedef float Vec8 __attribute__((vector_size(32)));
+  auto load = [](const float* p) {
+    Vec8 v;
+    __builtin_memcpy(&v, p, sizeof v);
+    return v;
+  };
+  Vec8 acc0 = load(lanes[0]), acc1 = load(lanes[1]), acc2 = load(lanes[2]), acc3 = load(lanes[3]);
+  const float *in0 = in[0], *in1 = in[1], *in2 = in[2], *in3 = in[3];
+  for (int j = 0; j < taps; ++j) {
+    const Vec8 w0 = load(w[j]), w1 = load(w[j] + 8);
+    const size_t o = offset[j];
+    acc0 += w0 * load(in0 + o), acc0 += w1 * load(in0 + o + 8);
+    acc1 += w0 * load(in1 + o), acc1 += w1 * load(in1 + o + 8);
+    acc2 += w0 * load(in2 + o), acc2 += w1 * load(in2 + o + 8);
+    acc3 += w0 * load(in3 + o), acc3 += w1 * load(in3 + o + 8);
+  }
+  __builtin_memcpy(lanes[0], &acc0, sizeof acc0), __builtin_memcpy(lanes[1], &acc1, sizeof acc1);
+  __builtin_memcpy(lanes[2], &acc2, sizeof acc2), __builtin_memcpy(lanes[3], &acc3, sizeof acc3);
+}
+#pragma GCC diagnostic pop
+
 }  // namespace
 
 #if defined(__x86_64__) && !defined(__clang__)
 __attribute__((target_clones("avx2", "default")))
 #endif
 void accumulateTaps(int n, int nc, const float* const* in, const float* const* w, const size_t* offset, int taps, float lanes[8][8], float tail[8]) {
-  if (n == 16 && nc == 4) return accumulateFixed<4, 16>(n, in, w, offset, taps, lanes, tail);  // RGBA at 16 spp, the common case
+  if (n == 16 && nc == 4) return accumulateRgba16(in, w, offset, taps, lanes);  // RGBA at 16 spp, the common case (no tail)
   // Channels never mix, so up to four at a time give the same sums.
   for (int c = 0; c < nc; c += 4) {
     switch (std::min(4, nc - c)) {

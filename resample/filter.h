@@ -43,6 +43,9 @@ class FilterTable {
     return &weights_[((size_t(pattern) * span() + size_t(dy + margin_)) * span() + size_t(dx + margin_)) * spp_];
   }
   float weightSum(int pattern, int dx, int dy) const { return sums_[(size_t(pattern) * span() + size_t(dy + margin_)) * span() + size_t(dx + margin_)]; }
+  /// The same by tap number, tap = (dy + margin) * span + dx + margin.
+  const float* tapWeights(int pattern, int tap) const { return &weights_[(size_t(pattern) * size_t(span() * span()) + size_t(tap)) * spp_]; }
+  float tapWeightSum(int pattern, int tap) const { return sums_[size_t(pattern) * size_t(span() * span()) + size_t(tap)]; }
 
  private:
   int margin_, spp_;

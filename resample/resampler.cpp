@@ -579,21 +579,24 @@ class BucketFilter {
     const int N = N_;
     const int m = table.margin();
     // Eight partial sums per channel over every neighbour (accumulateTaps), added up once at the end.
-    float lanes[8][8] = {};
-    float tail[8] = {};
-    float wsum = 0;
     const size_t nc = in.size();
-    const int taps = table.span() * table.span();
+    float lanes[8][8];
+    float tail[8];
+    for (size_t c = 0; c < nc; ++c) std::fill_n(lanes[c], 8, 0.f), tail[c] = 0.f;
+    float wsum = 0;
+    const int span = table.span(), taps = span * span;
     ts_.tapWeights.resize(size_t(taps)), ts_.tapOffsets.resize(size_t(taps));
     const float** tapWeight = ts_.tapWeights.data();
     size_t* tapOffset = ts_.tapOffsets.data();
-    for (int dy = -m; dy <= m; ++dy)
-      for (int dx = -m; dx <= m; ++dx) {
-        const size_t q = size_t(py - rg_.y0 + dy) * rg_.w + size_t(px - rg_.x0 + dx);
+    // Taps in (dy, dx) order, as the table numbers them.
+    size_t rowStart = size_t(py - rg_.y0 - m) * rg_.w + size_t(px - rg_.x0 - m);
+    for (int tap = 0, row = 0; row < span; ++row, rowStart += size_t(rg_.w))
+      for (int col = 0; col < span; ++col, ++tap) {
+        const size_t q = rowStart + size_t(col);
         const int pat = ts_.patterns[q];
-        *tapWeight++ = table.weights(pat, dx, dy);
-        *tapOffset++ = q * N;
-        wsum += table.weightSum(pat, dx, dy);
+        tapWeight[tap] = table.tapWeights(pat, tap);
+        tapOffset[tap] = q * N;
+        wsum += table.tapWeightSum(pat, tap);
       }
     const float* channels[8];
     for (size_t c = 0; c < nc; ++c) channels[c] = in[c]->data();
