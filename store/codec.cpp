@@ -268,14 +268,14 @@ void compress(std::span<const uint8_t> raw, int level, std::vector<uint8_t>& out
   out.assign(scratch.begin(), scratch.begin() + long(n));
 }
 
-void decompress(std::span<const uint8_t> compressed, size_t rawSize, std::vector<uint8_t>& out, const std::string& where) {
+void decompress(std::span<const uint8_t> compressed, size_t rawSize, std::vector<uint8_t>& out, const std::function<std::string()>& where) {
   unsigned long long declared = ZSTD_getFrameContentSize(compressed.data(), compressed.size());
   if (declared == ZSTD_CONTENTSIZE_ERROR || declared == ZSTD_CONTENTSIZE_UNKNOWN || declared != rawSize)
-    fail(where, "compressed payload is corrupt (frame size does not match the index)");
+    fail(where(), "compressed payload is corrupt (frame size does not match the index)");
   out.resize(rawSize);
   thread_local std::unique_ptr<ZSTD_DCtx, size_t (*)(ZSTD_DCtx*)> ctx(ZSTD_createDCtx(), ZSTD_freeDCtx);
   size_t n = ZSTD_decompressDCtx(ctx.get(), out.data(), out.size(), compressed.data(), compressed.size());
-  if (ZSTD_isError(n) || n != rawSize) fail(where, "compressed payload is corrupt (", ZSTD_isError(n) ? ZSTD_getErrorName(n) : "short", ")");
+  if (ZSTD_isError(n) || n != rawSize) fail(where(), "compressed payload is corrupt (", ZSTD_isError(n) ? ZSTD_getErrorName(n) : "short", ")");
 }
 
 uint64_t checksum(std::span<const uint8_t> bytes) { return XXH3_64bits(bytes.data(), bytes.size()); }

@@ -19,7 +19,9 @@
 #pragma once
 
 #include <cstdint>
+#include <functional>
 #include <span>
+#include <string>
 #include <vector>
 
 #include "store/model.h"
@@ -34,9 +36,11 @@ void encodeRaw(const Schema& schema, const TilePart& part, uint64_t attrPresence
 /// Inverse of encodeRaw; `raw` must be exactly rawPayloadSize(...) bytes (the caller checks).
 void decodeRaw(const Schema& schema, std::span<const uint8_t> raw, uint64_t attrPresence, TilePart& part);
 
-/// zstd wrappers; decompress throws Error(where) unless the frame holds exactly `rawSize` bytes.
+/// zstd wrappers; decompress throws Error(where()) unless the frame holds exactly `rawSize` bytes
+/// (`where` is called only then: a render decodes thousands of parts, and naming each cost more
+/// than checking its checksum).
 void compress(std::span<const uint8_t> raw, int level, std::vector<uint8_t>& out);
-void decompress(std::span<const uint8_t> compressed, size_t rawSize, std::vector<uint8_t>& out, const std::string& where);
+void decompress(std::span<const uint8_t> compressed, size_t rawSize, std::vector<uint8_t>& out, const std::function<std::string()>& where);
 
 /// 64-bit checksum (XXH3) of a byte range.
 uint64_t checksum(std::span<const uint8_t> bytes);

@@ -19,6 +19,31 @@
 
 namespace reshutter::store {
 
+namespace {
+
+// No float is an infinity or a NaN (an exponent of all ones).
+bool allFinite(const float* f, size_t n) {
+  uint32_t bad = 0;
+  for (size_t k = 0; k < n; ++k) {
+    uint32_t bits;
+    std::memcpy(&bits, f + k, 4);
+    bad |= uint32_t((bits & 0x7f800000u) == 0x7f800000u);
+  }
+  return bad == 0;
+}
+
+// Every corner names one of the part's vertices (a triangle's fourth corner may be kNoCorner).
+bool cornersValid(const TilePart& part) {
+  const uint32_t* c = part.corners.data();
+  const uint32_t nV = part.numVertices;
+  uint32_t bad = 0;
+  for (size_t m = 0; m < part.numMicropolygons; ++m)
+    bad |= uint32_t(c[m * 4] >= nV) | uint32_t(c[m * 4 + 1] >= nV) | uint32_t(c[m * 4 + 2] >= nV) | uint32_t(c[m * 4 + 3] >= nV && c[m * 4 + 3] != kNoCorner);
+  return bad == 0;
+}
+
+}  // namespace
+
 struct StoreReader::Impl {
   std::string path;
   ReaderOptions options;
@@ -135,26 +160,29 @@ struct StoreReader::Impl {
     std::span<const uint8_t> compressed(data + e.offset, e.compressedSize);
     if (checksum(compressed) != e.checksum) fail(where(i), "checksum mismatch (the file is damaged)");
     thread_local std::vector<uint8_t> raw;
-    decompress(compressed, e.rawSize, raw, where(i));
+    decompress(compressed, e.rawSize, raw, [&] { return where(i); });
     if (releasing) releasePages(e.offset, e.compressedSize);
     TilePart part;
     part.numVertices = e.numVertices;
     part.numMicropolygons = e.numMicropolygons;
     part.numKnots = uint32_t(e.knots.size());
     decodeRaw(meta.schema, raw, e.attrPresence, part);
-    for (uint32_t m = 0; m < part.numMicropolygons; ++m)
-      for (int j = 0; j < 4; ++j) {
-        uint32_t c = part.corners[size_t(m) * 4 + j];
-        if (c >= part.numVertices && !(j == 3 && c == kNoCorner)) fail(where(i), "micropolygon ", m, " names vertex ", c, " of ", part.numVertices);
+    // Every part is checked whole, in branch-free passes the compiler vectorises; the loops that
+    // name the offender run only when one fails.
+    if (!cornersValid(part))
+      for (uint32_t m = 0; m < part.numMicropolygons; ++m)
+        for (int j = 0; j < 4; ++j) {
+          uint32_t c = part.corners[size_t(m) * 4 + j];
+          if (c >= part.numVertices && !(j == 3 && c == kNoCorner)) fail(where(i), "micropolygon ", m, " names vertex ", c, " of ", part.numVertices);
+        }
+    if (!allFinite(reinterpret_cast<const float*>(part.positions.data()), part.positions.size() * 3))
+      for (size_t v = 0; v < part.positions.size(); ++v) {
+        const auto& p = part.positions[v];
+        if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
+          fail(where(i), "vertex ", v % std::max(1u, part.numVertices), " at knot ", v / std::max(1u, part.numVertices), " has a non-finite position");
       }
-    for (size_t v = 0; v < part.positions.size(); ++v) {
-      const auto& p = part.positions[v];
-      if (!std::isfinite(p.x) || !std::isfinite(p.y) || !std::isfinite(p.z))
-        fail(where(i), "vertex ", v % std::max(1u, part.numVertices), " at knot ", v / std::max(1u, part.numVertices), " has a non-finite position");
-    }
     for (size_t a = 0; a < part.attrs.size(); ++a)
-      for (float f : part.attrs[a].f)
-        if (!std::isfinite(f)) fail(where(i), "attribute '", meta.schema.attrs[a].name, "' holds a non-finite value");
+      if (!allFinite(part.attrs[a].f.data(), part.attrs[a].f.size())) fail(where(i), "attribute '", meta.schema.attrs[a].name, "' holds a non-finite value");
     return part;
   }
 

@@ -293,6 +293,20 @@ TEST(StoreBadInputHard, NonFinitePositionsAreRejectedOnWriteAndOnRead) {
     craftWithPart(path, meta, e, q);
     expectRejected(path, "non-finite position");
   }
+  // A lossless attribute keeps its bits, so a non-finite value reaches the reader too; the last
+  // vertex's last component, so a check that stopped short would miss it.
+  for (float bad : {NAN, INFINITY, -INFINITY}) {
+    TilePart q = oneQuad(schema, {0, 0, 5});
+    q.attrs[1].f.back() = bad;
+    TileEntry e;
+    e.tx = e.ty = 0;
+    e.numMicropolygons = 1, e.numVertices = 4;
+    e.attrPresence = 3;
+    e.knots.resize(1);
+    std::string path = dir.path("nan-oi.mps");
+    craftWithPart(path, meta, e, q);
+    expectRejected(path, "attribute 'Oi' holds a non-finite value");
+  }
 }
 
 TEST(StoreBadInput, CornerIndexOutOfRange) {

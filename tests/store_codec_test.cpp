@@ -96,7 +96,7 @@ TEST(StoreCodec, RawPayloadRoundTripAndSize) {
   EXPECT_EQ(raw.size(), rawPayloadSize(schema, part.numVertices, part.numMicropolygons, 3, presence));
   std::vector<uint8_t> z, back;
   compress(raw, 3, z);
-  decompress(z, raw.size(), back, "test");
+  decompress(z, raw.size(), back, [] { return std::string("test"); });
   EXPECT_EQ(back, raw);
   TilePart out;
   out.numVertices = part.numVertices, out.numMicropolygons = part.numMicropolygons, out.numKnots = 3;
@@ -110,5 +110,5 @@ TEST(StoreCodec, RawPayloadRoundTripAndSize) {
     for (size_t i = 0; i < part.attrs[a].f.size(); ++i) EXPECT_EQ(std::bit_cast<uint32_t>(out.attrs[a].f[i]), std::bit_cast<uint32_t>(part.attrs[a].f[i]));
     EXPECT_EQ(out.attrs[a].u, part.attrs[a].u);
   }
-  EXPECT_THROW(decompress(z, raw.size() + 1, back, "test"), Error);
+  EXPECT_THROW(decompress(z, raw.size() + 1, back, [] { return std::string("test"); }), Error);
 }
