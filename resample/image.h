@@ -11,17 +11,14 @@
 
 #include <glm/mat4x4.hpp>
 
-#include "common/huge_pages.h"
-
 namespace reshutter::resample {
 
 struct ImageChannel {
   std::string name;  // "R", "A", "Z", "N.X", "id"
   bool isUInt = false;
   bool half = false;  // written as half (float channels only)
-  // Huge-paged: a 1080p channel is 8 MB, whose 2 K small-page faults the render would take serially.
-  HugePagedVector<float> f;
-  HugePagedVector<uint32_t> u;
+  std::vector<float> f;
+  std::vector<uint32_t> u;
 };
 
 /// A flat image: the data window [x0, x0+width) × [y0, y0+height) of a fullWidth × fullHeight

@@ -1,8 +1,5 @@
-#include <cstdint>
-#include <cstdio>
 #include <filesystem>
 #include <fstream>
-#include <string>
 
 #include <gtest/gtest.h>
 
@@ -10,7 +7,6 @@
 #include "common/check.h"
 #include "common/error.h"
 #include "common/frame_range.h"
-#include "common/huge_pages.h"
 #include "tests/test_util.h"
 
 using namespace reshutter;
@@ -128,42 +124,4 @@ TEST(FrameRange, FramesOnDiskAreTheFilesThePatternExpandsTo) {
   EXPECT_EQ(framesOnDisk(dir.path("@@.mps")), (std::vector<int64_t>{12}));
   EXPECT_TRUE(framesOnDisk(dir.path("missing/shot.####.mps")).empty());
   EXPECT_TRUE(framesOnDisk(dir.path("shot.0001.mps")).empty());  // no placeholder
-}
-
-// The VmFlags of the mapping holding p in /proc/self/smaps ("" if none is found).
-static std::string vmFlagsAt(const void* p) {
-  std::ifstream smaps("/proc/self/smaps");
-  const auto at = reinterpret_cast<uintptr_t>(p);
-  bool inside = false;
-  for (std::string line; std::getline(smaps, line);) {
-    unsigned long lo = 0, hi = 0;
-    if (std::sscanf(line.c_str(), "%lx-%lx ", &lo, &hi) == 2) {  // a mapping's first line
-      inside = at >= lo && at < hi;
-      continue;
-    }
-    if (inside && line.rfind("VmFlags:", 0) == 0) return line;
-  }
-  return "";
-}
-
-TEST(HugePages, LargeBlocksStartOnAHugePageAndCarryTheAdvice) {
-  HugePagedVector<float> image;
-  image.assign(size_t(1920) * 1080, 0.5f);  // one 1080p channel: 8.3 MB
-  ASSERT_EQ(reinterpret_cast<uintptr_t>(image.data()) % kHugePageBytes, 0u) << "a large block must start on a huge-page boundary";
-  EXPECT_EQ(image[0], 0.5f);
-  EXPECT_EQ(image.back(), 0.5f);
-  // Whether the kernel backs the pages with huge ones depends on its THP mode and free memory;
-  // that the advice reached the mapping does not ("hg" in VmFlags: MADV_HUGEPAGE).
-  std::ifstream thp("/sys/kernel/mm/transparent_hugepage/enabled");
-  std::string mode;
-  std::getline(thp, mode);
-  if (mode.empty()) GTEST_SKIP() << "this kernel has no transparent huge pages";
-  const std::string flags = vmFlagsAt(image.data() + kHugePageBytes / sizeof(float));
-  ASSERT_FALSE(flags.empty()) << "no mapping in /proc/self/smaps holds the block";
-  EXPECT_NE(flags.find(" hg"), std::string::npos) << flags;
-
-  // Small blocks come from the ordinary heap and are not advised.
-  HugePagedVector<uint32_t> small(1000, 7u);
-  EXPECT_EQ(small[999], 7u);
-  EXPECT_EQ(vmFlagsAt(small.data()).find(" hg"), std::string::npos);
 }
