@@ -219,6 +219,13 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   std::vector<float> cullZ;         // [cull time * nV + v - vBase]: camera depth
   std::vector<EdgeQuad> segEdges;   // [segment * 5 + edge] for the current micropolygon
   std::vector<uint8_t> segReady;
+  // Marks every segment's edges unmade, per micropolygon: nearly always one segment, which a
+  // store does without std::fill's call to memset (1.75 M calls, 28 M instructions, on the
+  // moving bench crop).
+  void resetSegments() {
+    if (segReady.size() == 1) segReady[0] = 0;
+    else std::fill(segReady.begin(), segReady.end(), 0);
+  }
   std::vector<uint8_t> vertexStamp;  // [v - vBase]: theta projections computed for this vertex
   std::vector<float> thetaBox;       // current micropolygon's raster box per theta: x0[T] y0[T] x1[T] y1[T]
 

@@ -123,7 +123,7 @@ inline void BucketRasterizer::Impl::drawLinear(const MovingPart& mp, uint32_t mi
   ++stats.linearMicropolygons;
   const float zCull = lb.zCull;
   const MovingBox& box = lb.box;
-  std::fill(segReady.begin(), segReady.end(), 0);
+  resetSegments();
   const uint8_t flags = mp.part.flags[mi];
   // Strata share one pixel range while their combined motion stays under half the
   // micropolygon's size (at least half a pixel): short intervals and slow motion then pay the
@@ -289,7 +289,7 @@ inline bool BucketRasterizer::Impl::rasterizeLinearInChunk(const MovingPart& mp,
   }
   ++stats.linearMicropolygons;
   ++stats.chunkGatheredMicropolygons;
-  std::fill(segReady.begin(), segReady.end(), 0);
+  resetSegments();
   const kernels::Candidates sorted{sortedIndex.data(), sortedT.data(), sortedX.data(), sortedY.data()};
   size_t n = 0;
   for (int cy = cm.cy0; cy <= cm.cy1; ++cy) {

@@ -199,7 +199,7 @@ void BucketRasterizer::Impl::drawMoving(const MovingPart& mp, uint32_t mi) {
     vertexStamp[v] = 1;
     projectVertexPath(mt, part, vBase, v);
   }
-  std::fill(segReady.begin(), segReady.end(), 0);
+  resetSegments();
   const uint8_t flags = part.flags[mi];
 
   // The micropolygon's raster box at every theta time (min/max over its corners), in
