@@ -1,6 +1,7 @@
 #include "resample/bucket_samples.h"
 
 #include <algorithm>
+#include <type_traits>
 
 #if defined(__SSE2__)
 #include <emmintrin.h>
@@ -107,40 +108,32 @@ void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
       // A global box shutter (the usual case): time() is open + u * length for every sample,
       // the same sum, without its per-sample test.
       const ShutterGroup& group = shutter.groups()[size_t(g)];
-      const bool globalBox = shutter.rolling().duration == 0.0 && group.shape.isBox();
+      const bool boxTimes = drawTimes && shutter.rolling().duration == 0.0 && group.shape.isBox();
       const double open = group.open, length = group.length();
-      if (drawTimes && !lensPlanes && globalBox) {
-        // The usual moving render: the loop below's values for this case, without its per-sample
-        // tests (about half its instructions).
-        const float fx = float(gx), fy = float(gy);
+      // The pixel's choices as compile-time flags, so that the sample loop tests nothing per
+      // sample (it had: half its instructions, in the usual moving render).
+      auto writeSamples = [&](auto lens, auto box) {
+        constexpr bool kLens = decltype(lens)::value, kBox = decltype(box)::value;
         uint32_t* slots = &idxOf[size_t(p) * N];
         for (int i = 0; i < N; ++i) {
-          const size_t idx = size_t(stratumOf[size_t(i)]) * PS + size_t(p);
+          const size_t plane = kLens ? lensOf[size_t(i)] : stratumOf[size_t(i)];
+          const size_t idx = plane * PS + size_t(p);
+          if constexpr (kLens) {
+            const glm::vec2 l = disk[size_t(i)];
+            lx[idx] = l.x, ly[idx] = l.y;
+          }
           const glm::vec2 o = pattern.offset(pat, i);
-          sx[idx] = fx + o.x, sy[idx] = fy + o.y;
-          st[idx] = float(open + double(u[size_t(i)]) * length - tBase);
+          const float x = float(gx) + o.x, y = float(gy) + o.y;
+          sx[idx] = x, sy[idx] = y;
+          if constexpr (kBox) st[idx] = float(open + double(u[size_t(i)]) * length - tBase);
+          else st[idx] = drawTimes ? float(shutter.time(g, y, u[size_t(i)]) - tBase) : mid;
           slots[i] = uint32_t(idx);
         }
-        continue;
-      }
-      for (int i = 0; i < N; ++i) {
-        const size_t plane = lensPlanes ? lensOf[size_t(i)] : stratumOf[size_t(i)];
-        const size_t idx = plane * PS + size_t(p);
-        if (lensPlanes) {
-          const glm::vec2 l = disk[size_t(i)];
-          lx[idx] = l.x, ly[idx] = l.y;
-        }
-        glm::vec2 o = pattern.offset(pat, i);
-        const float x = float(gx) + o.x, y = float(gy) + o.y;
-        sx[idx] = x, sy[idx] = y;
-        if (drawTimes) {
-          const double t = globalBox ? open + double(u[size_t(i)]) * length : shutter.time(g, y, u[size_t(i)]);
-          st[idx] = float(t - tBase);
-        } else {
-          st[idx] = mid;
-        }
-        idxOf[size_t(p) * N + i] = uint32_t(idx);
-      }
+      };
+      const std::true_type yes;
+      const std::false_type no;
+      if (lensPlanes) boxTimes ? writeSamples(yes, yes) : writeSamples(yes, no);
+      else boxTimes ? writeSamples(no, yes) : writeSamples(no, no);
     }
   }
   if (!drawTimes) {

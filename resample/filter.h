@@ -39,11 +39,10 @@ class FilterTable {
   int margin() const { return margin_; }  // neighbours each side
   int span() const { return 2 * margin_ + 1; }
   /// Weights for `pattern` at neighbour offset (dx, dy) ∈ [-margin, margin]², one per sample.
-  const float* weights(int pattern, int dx, int dy) const {
-    return &weights_[((size_t(pattern) * span() + size_t(dy + margin_)) * span() + size_t(dx + margin_)) * spp_];
-  }
-  float weightSum(int pattern, int dx, int dy) const { return sums_[(size_t(pattern) * span() + size_t(dy + margin_)) * span() + size_t(dx + margin_)]; }
-  /// The same by tap number, tap = (dy + margin) * span + dx + margin.
+  const float* weights(int pattern, int dx, int dy) const { return tapWeights(pattern, tapOf(dx, dy)); }
+  float weightSum(int pattern, int dx, int dy) const { return tapWeightSum(pattern, tapOf(dx, dy)); }
+  /// The same by tap number: tapOf(dx, dy), neighbours in (dy, dx) order.
+  int tapOf(int dx, int dy) const { return (dy + margin_) * span() + dx + margin_; }
   const float* tapWeights(int pattern, int tap) const { return &weights_[(size_t(pattern) * size_t(span() * span()) + size_t(tap)) * spp_]; }
   float tapWeightSum(int pattern, int tap) const { return sums_[size_t(pattern) * size_t(span() * span()) + size_t(tap)]; }
 

@@ -134,10 +134,10 @@ TEST(RetimeCli, RetimeFramesEqualResampleOfTheSameInterval) {
   for (int64_t f = 1; f <= 4; ++f) frameStore(m, f, dir.path("shot.000" + std::to_string(f) + ".mps"));
   const std::string shot = dir.path("shot.####.mps"), common = " --spp 64 --filter box:1 --aov id --aov z";
   struct Case {
-    std::string retimeArgs;    // arguments after the stores
-    int frame;             // the output frame compared
-    std::string resampleArgs;  // the equivalent `resample` of one store
-    double open, close;    // the interval both render (absolute frames)
+    std::string args;           // `retime`'s arguments after the stores
+    int frame;                  // the output frame compared
+    std::string referenceArgs;  // the equivalent `resample` of one store
+    double open, close;         // the interval both render (absolute frames)
   };
   // 24 → 32: frame 3 is nominally at 2.25 (exact in binary, as store 2's 0.25 is).
   const Case cases[] = {
@@ -151,24 +151,24 @@ TEST(RetimeCli, RetimeFramesEqualResampleOfTheSameInterval) {
   };
   for (const Case& c : cases) {
     const std::string out = dir.path("r.####.exr"), ref = dir.path("ref.exr");
-    CommandResult r = runReshutter("retime " + shot + " " + c.retimeArgs + common + " -o " + out);
-    ASSERT_EQ(r.exitCode, 0) << c.retimeArgs << ": " << r.err;
-    r = runReshutter("resample " + dir.path(c.resampleArgs) + common + " -o " + ref);
-    ASSERT_EQ(r.exitCode, 0) << c.resampleArgs << ": " << r.err;
+    CommandResult r = runReshutter("retime " + shot + " " + c.args + common + " -o " + out);
+    ASSERT_EQ(r.exitCode, 0) << c.args << ": " << r.err;
+    r = runReshutter("resample " + dir.path(c.referenceArgs) + common + " -o " + ref);
+    ASSERT_EQ(r.exitCode, 0) << c.referenceArgs << ": " << r.err;
     const std::string frame = dir.path("r.000" + std::to_string(c.frame) + ".exr");
     const ExrShutter a = readExrShutter(frame), b = readExrShutter(ref);
-    EXPECT_EQ(a.open, c.open) << c.retimeArgs;
-    EXPECT_EQ(a.close, c.close) << c.retimeArgs;
-    EXPECT_EQ(b.open, c.open) << c.resampleArgs;
-    EXPECT_EQ(b.close, c.close) << c.resampleArgs;
+    EXPECT_EQ(a.open, c.open) << c.args;
+    EXPECT_EQ(a.close, c.close) << c.args;
+    EXPECT_EQ(b.open, c.open) << c.referenceArgs;
+    EXPECT_EQ(b.close, c.close) << c.referenceArgs;
     const FlatImage x = readFlatExr(frame), y = readFlatExr(ref);
-    EXPECT_EQ(differingPixels(x, y), 0u) << c.retimeArgs << " against resample " << c.resampleArgs;
+    EXPECT_EQ(differingPixels(x, y), 0u) << c.args << " against resample " << c.referenceArgs;
     EXPECT_GT(x.channels.size(), 5u) << "R G B A Z, id and z";
     // And the frame is not just any image: the square's coverage over that interval, not over one
     // a tenth of a frame later.
-    const double error = coverageError(x, m, c.open, c.close), shifted = coverageError(x, m, c.open + 0.1, c.close + 0.1);
-    EXPECT_LT(error, 0.02) << c.retimeArgs;
-    EXPECT_GT(shifted, 3 * error) << c.retimeArgs;
+    const double offOwn = coverageError(x, m, c.open, c.close), offLater = coverageError(x, m, c.open + 0.1, c.close + 0.1);
+    EXPECT_LT(offOwn, 0.02) << c.args << ": coverage off its own interval";
+    EXPECT_GT(offLater, 3 * offOwn) << c.args << ": an interval 0.1 frame later must fit worse";
   }
 }
 
