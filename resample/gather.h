@@ -106,6 +106,25 @@ struct LensCandidates {
 size_t gatherLensCells(Isa isa, const LensCells& cells, size_t stride, int c0, int r0, int c1, int r1, const LensBox& box, const LensCandidates& out,
                        size_t n);
 
+/// A depth layer's sort keys (raster_lens.cpp, sortLensLayer()): a sample's cell is that of its
+/// position sheared by the layer's displacement, col = int(clamp(x - cx u - x0, 0, maxCol)) and
+/// so for the row (each clamp `v >= 0 ? (v <= hi ? v : hi) : 0`, so a NaN takes cell 0), keyed
+/// key + row * cols + col. A sample is kept when its nearest surface so far lies beyond zMin and,
+/// where tileUsed is set, its tile of 8 × 8 cells is marked there (tileUsed[(row >> 3) tileCols +
+/// (col >> 3)], read 32 bits at a time: 3 bytes of room past its end).
+struct LensShear {
+  float cx, cy, x0, y0, maxCol, maxRow;
+  uint32_t cols, tileCols;
+  const uint8_t* tileUsed;
+  float zMin;
+};
+
+/// Appends the kept samples among slots [first, first + count) (x, y, u, v and depth indexed by
+/// slot) to slot[] and their cells to cell[] from position n, in slot order; returns the new
+/// count. Writes up to 15 entries past the count.
+size_t lensLayerCells(Isa isa, const LensShear& shear, const float* x, const float* y, const float* u, const float* v, const float* depth, size_t first,
+                      size_t count, uint32_t key, uint32_t* slot, uint32_t* cell, size_t n);
+
 /// The strata of one moving box: stratum s covers box times u in [u0[s], u1[s]] and its
 /// samples are plane s of `rows` (whose first/cols/rows describe the whole region).
 struct StrataSpans {

@@ -28,6 +28,7 @@ void RasterStats::add(const RasterStats& o) {
   lensMicropolygons += o.lensMicropolygons;
   lensScanned += o.lensScanned;
   lensLayers += o.lensLayers;
+  lensSparseLayers += o.lensSparseLayers;
   lensSegmentDraws += o.lensSegmentDraws;
   midIntervalSamples += o.midIntervalSamples;
   transparentParts += o.transparentParts;
@@ -54,7 +55,7 @@ void BucketRasterizer::Impl::begin(int rx0, int ry0, int rw, int rh) {
   for (auto* a : {&chunkT, &chunkX, &chunkY, &sortedT, &sortedX, &sortedY}) a->resize(slots + kPad);
   cellScratch.resize(slots + kPad);
   if (lensPlanes) {
-    lensCellOf.resize(slots);
+    lensKeptSlot.resize(slots + kPad), lensCellOf.resize(slots + kPad);
     lensSortedIndex.resize(slots + kPad);
     for (auto* a : {&lensSortedT, &lensSortedX, &lensSortedY, &lensSortedU, &lensSortedV, &candU, &candV}) a->resize(slots + kPad);
     lensDraws.clear(), lensChunks.clear();

@@ -46,9 +46,6 @@ void productRange(float l0, float l1, float k0, float k1, float& lo, float& hi) 
 // of field", chose it).
 constexpr float kLayerWidth = 4.f;
 
-// A sample left out of a layer's cells (sortLensLayer()).
-constexpr uint32_t kHidden = ~0u;
-
 }  // namespace
 
 void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileEntry& entry, const TilePart& part, const HitContext& hc, const Chunk& ch) {
@@ -274,7 +271,8 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
   bool times = false;
   // Tiles of 8 × 8 cells that some micropolygon's search box (over its whole motion) touches.
   const int tileCols = (g.cols + 7) / 8, tileRows = (g.rows + 7) / 8;
-  lensTileUsed.assign(size_t(tileCols) * size_t(tileRows), 0);
+  const size_t tiles = size_t(tileCols) * size_t(tileRows);
+  lensTileUsed.assign(tiles + 3, 0);  // the vector kernels read the marks 32 bits at a time
   auto tileAt = [](float v, int count) { return v >= 0.f ? (v < float(count) ? int(v) / 8 : (count - 1) / 8) : 0; };
   for (size_t i = first; i < last; ++i) {
     const LensDraw& e = lensDraws[lensOrder[i]];
@@ -287,14 +285,18 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
     const int ty0 = tileAt(q[2] - float(g.y0), g.rows), ty1 = tileAt(q[3] - float(g.y0), g.rows);
     for (int ty = ty0; ty <= ty1; ++ty) std::fill_n(&lensTileUsed[size_t(ty) * size_t(tileCols) + size_t(tx0)], tx1 - tx0 + 1, uint8_t(1));
   }
-  const uint8_t* __restrict used = lensTileUsed.data();
+  // No marks to read when the layer searches every tile (a dense layer).
+  const bool everyTile = std::all_of(lensTileUsed.begin(), lensTileUsed.begin() + ptrdiff_t(tiles), [](uint8_t m) { return m != 0; });
+  const uint8_t* used = everyTile ? nullptr : lensTileUsed.data();
+  stats.lensSparseLayers += !everyTile;
   // Keyed by time block, then cell: block b's cells are [b cells, (b + 1) cells).
   lensCellStart.assign(blocks * cells + 1, 0);
   lensCursor.resize(blocks * cells);
   // Locals the compiler knows do not alias the arrays written.
   uint32_t* __restrict start = lensCellStart.data();
   uint32_t* __restrict cursor = lensCursor.data();
-  uint32_t* __restrict cellOf = lensCellOf.data();
+  uint32_t* __restrict keptSlot = lensKeptSlot.data();
+  uint32_t* __restrict keptCell = lensCellOf.data();
   const float* __restrict xs = sx.data();
   const float* __restrict ys = sy.data();
   const float* __restrict ts = st.data();
@@ -308,36 +310,35 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
   float* __restrict outU = lensSortedU.data();
   float* __restrict outV = lensSortedV.data();
   const size_t planeStride = PS, count = size_t(P), planes = size_t(N);
-  const uint32_t cols = uint32_t(g.cols);
-  const float gx0 = float(g.x0), gy0 = float(g.y0), maxCol = float(g.cols - 1), maxRow = float(g.rows - 1);
   // Clamped into the grid (a NaN goes to its first cell): every sample has a cell, and a search
   // that reaches the grid's edge (or lies beyond it) finds it there.
-  auto clampTo = [](float v, float hi) { return v >= 0.f ? (v <= hi ? v : hi) : 0.f; };
+  const kernels::LensShear shear{cxl, cyl, float(g.x0), float(g.y0), float(g.cols - 1), float(g.rows - 1), uint32_t(g.cols), uint32_t(tileCols), used, zMin};
+  // The kept samples, in slot order, each with its cell.
+  size_t kept = 0;
   for (size_t s = 0; s < planes; ++s) {
-    const size_t base = s * planeStride;
-    for (size_t p = 0; p < count; ++p) {
-      const size_t j = base + p;
-      const int col = int(clampTo(xs[j] - cxl * us[j] - gx0, maxCol)), row = int(clampTo(ys[j] - cyl * vs[j] - gy0, maxRow));
-      const bool wanted = depth[j] > zMin && used[size_t(row >> 3) * size_t(tileCols) + size_t(col >> 3)];
-      cellOf[j] = wanted ? uint32_t(s / perBlock * cells) + uint32_t(row) * cols + uint32_t(col) : kHidden;
+    const uint32_t key = uint32_t(s / perBlock * cells);
+    if (vectorKernels) {
+      kept = kernels::lensLayerCells(isa, shear, xs, ys, us, vs, depth, s * planeStride, count, key, keptSlot, keptCell, kept);
+      continue;
     }
-    for (size_t p = 0; p < count; ++p) ++start[cellOf[base + p] + 1];  // kHidden + 1 wraps to 0: the slot nobody reads
+    auto clampTo = [](float v, float hi) { return v >= 0.f ? (v <= hi ? v : hi) : 0.f; };
+    for (size_t j = s * planeStride; j < s * planeStride + count; ++j) {
+      const uint32_t col = uint32_t(clampTo(xs[j] - shear.cx * us[j] - shear.x0, shear.maxCol));
+      const uint32_t row = uint32_t(clampTo(ys[j] - shear.cy * vs[j] - shear.y0, shear.maxRow));
+      keptSlot[kept] = uint32_t(j), keptCell[kept] = key + row * shear.cols + col;
+      kept += depth[j] > zMin && (!used || used[(row >> 3) * shear.tileCols + (col >> 3)]);
+    }
   }
-  start[0] = 0;
+  for (size_t i = 0; i < kept; ++i) ++start[keptCell[i] + 1];
   std::partial_sum(start, start + blocks * cells + 1, start);
   // Scatter: each cell's samples in slot order, with the copies the gather reads.
   std::copy(start, start + blocks * cells, cursor);
   auto scatter = [&](auto withTimes) {
-    for (size_t s = 0; s < planes; ++s) {
-      const size_t base = s * planeStride;
-      for (size_t p = 0; p < count; ++p) {
-        const size_t j = base + p;
-        if (cellOf[j] == kHidden) continue;
-        const uint32_t at = cursor[cellOf[j]]++;
-        outIndex[at] = uint32_t(j);
-        if constexpr (decltype(withTimes)::value) outT[at] = ts[j];
-        outX[at] = xs[j], outY[at] = ys[j], outU[at] = us[j], outV[at] = vs[j];
-      }
+    for (size_t i = 0; i < kept; ++i) {
+      const uint32_t j = keptSlot[i], at = cursor[keptCell[i]]++;
+      outIndex[at] = j;
+      if constexpr (decltype(withTimes)::value) outT[at] = ts[j];
+      outX[at] = xs[j], outY[at] = ys[j], outU[at] = us[j], outV[at] = vs[j];
     }
   };
   if (times) scatter(std::true_type{});

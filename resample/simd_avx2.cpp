@@ -571,6 +571,46 @@ size_t gatherLensCellsAvx2(const LensCells& cells, size_t stride, int c0, int r0
   return n;
 }
 
+// lensLayerCells() eight slots at a time: the clamps as max then min (max(v, 0) gives 0 for a
+// NaN, as the scalar `v >= 0` does; min(a, hi) is a < hi ? a : hi), the tile marks gathered as
+// 32-bit words whose low byte is the mark. Lanes past the count load nothing and are dropped.
+template <bool kTiles>
+size_t lensLayerCellsAvx2T(const LensShear& s, const float* xs, const float* ys, const float* us, const float* vs, const float* depth, size_t first,
+                           size_t count, uint32_t key, uint32_t* slot, uint32_t* cell, size_t n) {
+  const __m256 cx = _mm256_set1_ps(s.cx), cy = _mm256_set1_ps(s.cy), gx = _mm256_set1_ps(s.x0), gy = _mm256_set1_ps(s.y0);
+  const __m256 maxCol = _mm256_set1_ps(s.maxCol), maxRow = _mm256_set1_ps(s.maxRow), zero = _mm256_setzero_ps(), zMin = _mm256_set1_ps(s.zMin);
+  const __m256i cols = _mm256_set1_epi32(int(s.cols)), tileCols = _mm256_set1_epi32(int(s.tileCols)), keys = _mm256_set1_epi32(int(key));
+  const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), lowByte = _mm256_set1_epi32(0xFF);
+  for (size_t i = 0; i < count; i += 8) {
+    const size_t j = first + i;
+    const bool whole = count - i >= 8;
+    const __m256i in = _mm256_cmpgt_epi32(_mm256_set1_epi32(int(whole ? 8 : count - i)), lane);
+    auto load = [&](const float* a) { return whole ? _mm256_loadu_ps(a + j) : _mm256_maskload_ps(a + j, in); };
+    const __m256 x = load(xs), y = load(ys), u = load(us), v = load(vs), z = load(depth);
+    const __m256i col = _mm256_cvttps_epi32(_mm256_min_ps(_mm256_max_ps(_mm256_sub_ps(_mm256_sub_ps(x, _mm256_mul_ps(cx, u)), gx), zero), maxCol));
+    const __m256i row = _mm256_cvttps_epi32(_mm256_min_ps(_mm256_max_ps(_mm256_sub_ps(_mm256_sub_ps(y, _mm256_mul_ps(cy, v)), gy), zero), maxRow));
+    __m256i keep = _mm256_and_si256(in, _mm256_castps_si256(_mm256_cmp_ps(z, zMin, _CMP_GT_OQ)));
+    if constexpr (kTiles) {
+      const __m256i tile = _mm256_add_epi32(_mm256_mullo_epi32(_mm256_srli_epi32(row, 3), tileCols), _mm256_srli_epi32(col, 3));
+      const __m256i mark = _mm256_and_si256(_mm256_i32gather_epi32(reinterpret_cast<const int*>(s.tileUsed), tile, 1), lowByte);
+      keep = _mm256_andnot_si256(_mm256_cmpeq_epi32(mark, _mm256_setzero_si256()), keep);
+    }
+    const unsigned mask = unsigned(_mm256_movemask_ps(_mm256_castsi256_ps(keep)));
+    if (!mask) continue;
+    const __m256i perm = _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompress.perm[mask]));
+    const __m256i c = _mm256_add_epi32(keys, _mm256_add_epi32(_mm256_mullo_epi32(row, cols), col));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(slot + n), _mm256_permutevar8x32_epi32(_mm256_add_epi32(_mm256_set1_epi32(int(uint32_t(j))), lane), perm));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(cell + n), _mm256_permutevar8x32_epi32(c, perm));
+    n += size_t(__builtin_popcount(mask));
+  }
+  return n;
+}
+size_t lensLayerCellsAvx2(const LensShear& s, const float* x, const float* y, const float* u, const float* v, const float* depth, size_t first, size_t count,
+                          uint32_t key, uint32_t* slot, uint32_t* cell, size_t n) {
+  return s.tileUsed ? lensLayerCellsAvx2T<true>(s, x, y, u, v, depth, first, count, key, slot, cell, n)
+                    : lensLayerCellsAvx2T<false>(s, x, y, u, v, depth, first, count, key, slot, cell, n);
+}
+
 // sortByCell()'s cell of every candidate: MovingBox's u (insideAtOwnTime()'s operations), then
 // the compensated position's cell, clamped to the grid (a NaN clamps to the last cell: max and
 // min return their second operand). Eight and sixteen at a time.
@@ -594,6 +634,6 @@ void cellsOfAvx2(const CellGrid& g, const float* t, const float* x, const float*
 
 const IsaKernels kAvx2Kernels = {gatherInBoxAvx2, gatherStrataAvx2,           filterCandidatesAvx2,     cellsOfAvx2, avx2::projectLerped, linearEdgesAvx2,
                                  fixedEdgesAvx2,  testLinearEdgesAvx2<kMovingEdges>, testLinearEdgesAvx2<kFixedEdges>, testLinearEdgesAvx2<kLensEdges>,
-                                 gatherLensCellsAvx2};
+                                 gatherLensCellsAvx2, lensLayerCellsAvx2};
 
 }  // namespace reshutter::resample::kernels

@@ -460,11 +460,47 @@ size_t gatherLensCellsAvx512(const LensCells& cells, size_t stride, int c0, int 
 
 void fixedEdgesAvx512(const float* const at[4], const RasterScale& m, LinearEdges& out) { edgesAvx512<true>(at, at, m, out); }
 
+// lensLayerCells() sixteen slots at a time, the AVX2 kernel's operations lane for lane; the
+// kept lanes compressed in registers, then stored whole.
+template <bool kTiles>
+size_t lensLayerCellsAvx512T(const LensShear& s, const float* xs, const float* ys, const float* us, const float* vs, const float* depth, size_t first,
+                             size_t count, uint32_t key, uint32_t* slot, uint32_t* cell, size_t n) {
+  const __m512 cx = _mm512_set1_ps(s.cx), cy = _mm512_set1_ps(s.cy), gx = _mm512_set1_ps(s.x0), gy = _mm512_set1_ps(s.y0);
+  const __m512 maxCol = _mm512_set1_ps(s.maxCol), maxRow = _mm512_set1_ps(s.maxRow), zero = _mm512_setzero_ps(), zMin = _mm512_set1_ps(s.zMin);
+  const __m512i cols = _mm512_set1_epi32(int(s.cols)), tileCols = _mm512_set1_epi32(int(s.tileCols)), keys = _mm512_set1_epi32(int(key));
+  const __m512i lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15), lowByte = _mm512_set1_epi32(0xFF);
+  for (size_t i = 0; i < count; i += 16) {
+    const size_t j = first + i;
+    const __mmask16 in = count - i >= 16 ? __mmask16(0xFFFF) : __mmask16((1u << (count - i)) - 1);
+    const __m512 x = _mm512_maskz_loadu_ps(in, xs + j), y = _mm512_maskz_loadu_ps(in, ys + j), u = _mm512_maskz_loadu_ps(in, us + j);
+    const __m512 v = _mm512_maskz_loadu_ps(in, vs + j), z = _mm512_maskz_loadu_ps(in, depth + j);
+    const __m512i col = _mm512_cvttps_epi32(_mm512_min_ps(_mm512_max_ps(_mm512_sub_ps(_mm512_sub_ps(x, _mm512_mul_ps(cx, u)), gx), zero), maxCol));
+    const __m512i row = _mm512_cvttps_epi32(_mm512_min_ps(_mm512_max_ps(_mm512_sub_ps(_mm512_sub_ps(y, _mm512_mul_ps(cy, v)), gy), zero), maxRow));
+    __mmask16 keep = _mm512_mask_cmp_ps_mask(in, z, zMin, _CMP_GT_OQ);
+    if constexpr (kTiles) {
+      const __m512i tile = _mm512_add_epi32(_mm512_mullo_epi32(_mm512_srli_epi32(row, 3), tileCols), _mm512_srli_epi32(col, 3));
+      const __m512i mark = _mm512_mask_i32gather_epi32(_mm512_setzero_si512(), keep, tile, s.tileUsed, 1);
+      keep = _mm512_mask_test_epi32_mask(keep, mark, lowByte);
+    }
+    if (!keep) continue;
+    const __m512i c = _mm512_add_epi32(keys, _mm512_add_epi32(_mm512_mullo_epi32(row, cols), col));
+    _mm512_storeu_si512(slot + n, _mm512_maskz_compress_epi32(keep, _mm512_add_epi32(_mm512_set1_epi32(int(uint32_t(j))), lane)));
+    _mm512_storeu_si512(cell + n, _mm512_maskz_compress_epi32(keep, c));
+    n += size_t(__builtin_popcount(unsigned(keep)));
+  }
+  return n;
+}
+size_t lensLayerCellsAvx512(const LensShear& s, const float* x, const float* y, const float* u, const float* v, const float* depth, size_t first,
+                            size_t count, uint32_t key, uint32_t* slot, uint32_t* cell, size_t n) {
+  return s.tileUsed ? lensLayerCellsAvx512T<true>(s, x, y, u, v, depth, first, count, key, slot, cell, n)
+                    : lensLayerCellsAvx512T<false>(s, x, y, u, v, depth, first, count, key, slot, cell, n);
+}
+
 }  // namespace
 
 const IsaKernels kAvx512Kernels = {gatherInBoxAvx512, gatherStrataAvx512,           filterCandidatesAvx512,
                                    cellsOfAvx512,     avx2::projectLerped,          edgesAvx512<false>,
                                    fixedEdgesAvx512,  testLinearEdgesAvx512<kMovingEdges>, testLinearEdgesAvx512<kFixedEdges>,
-                                   testLinearEdgesAvx512<kLensEdges>, gatherLensCellsAvx512};
+                                   testLinearEdgesAvx512<kLensEdges>, gatherLensCellsAvx512, lensLayerCellsAvx512};
 
 }  // namespace reshutter::resample::kernels

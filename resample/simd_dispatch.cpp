@@ -47,6 +47,11 @@ size_t gatherLensCells(Isa isa, const LensCells& cells, size_t stride, int c0, i
   return kernelsFor(isa).gatherLensCells(cells, stride, c0, r0, c1, r1, box, out, n);
 }
 
+size_t lensLayerCells(Isa isa, const LensShear& shear, const float* x, const float* y, const float* u, const float* v, const float* depth, size_t first,
+                      size_t count, uint32_t key, uint32_t* slot, uint32_t* cell, size_t n) {
+  return kernelsFor(isa).lensLayerCells(shear, x, y, u, v, depth, first, count, key, slot, cell, n);
+}
+
 size_t gatherStrata(Isa isa, const SampleRows& region, const StrataSpans& spans, const MovingBox& box, const Candidates& out) {
   CHECK(spans.strata <= 64, "more than 64 time strata per pixel for the vector kernels");
   return kernelsFor(isa).gatherStrata(region, spans, box, out);

@@ -389,36 +389,47 @@ TEST(LensLayers, CullingIsExactAndTheSearchDoesNotGrowWithTheCircle) {
 
 TEST(LensDeterminism, BitIdenticalForAnyThreadCountBucketSizeAndInstructionSet) {
   ScratchDir dir;
-  for (const bool moving : {true, false}) {
-    const std::string path = dir.path(moving ? "moving.mps" : "still.mps");
-    const CommandResult gen = runReshutter(std::string("generate -n 40000 --width 128 --height 96 --transparent 0.3 --motion ") + (moving ? "12 --knots 3" : "0 --knots 1") +
-                                           " -o " + path);
+  struct Store {
+    const char* name;
+    std::string args;
+    bool moving, sparse;
+  };
+  // The sparse store's layers reach few tiles of their grids: their sorts read the tile marks.
+  for (const Store& st : {Store{"moving", "-n 40000 --transparent 0.3 --motion 12 --knots 3", true, false},
+                          Store{"still", "-n 40000 --transparent 0.3 --motion 0 --knots 1", false, false},
+                          Store{"sparse", "-n 700 --motion 0 --knots 1", false, true}}) {
+    const std::string path = dir.path(std::string(st.name) + ".mps");
+    const CommandResult gen = runReshutter("generate --width 128 --height 96 " + st.args + " -o " + path);
     ASSERT_EQ(gen.exitCode, 0) << gen.err;
     auto reader = std::make_shared<const store::StoreReader>(path);
     struct Variant {
       int threads, bucket;
-      bool vector;
+      bool vector, avx512;
     };
     std::vector<std::vector<float>> images;
-    for (const Variant v : {Variant{1, 32, true}, Variant{2, 16, true}, Variant{2, 57, true}, Variant{1, 24, false}}) {
+    for (const Variant v : {Variant{1, 32, true, true}, Variant{2, 16, true, true}, Variant{2, 57, true, false}, Variant{1, 24, false, false}}) {
       tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(v.threads));
       RenderSpec spec = specFor(reader, 0.1, 0.9, 4, 4, 42);
       spec.filter = FilterSpec::parse("gaussian:2x2", "test");
       spec.bucketSize = v.bucket;
       spec.raster.vectorKernels = v.vector;
+      spec.raster.avx512Kernels = v.avx512;
       spec.lens.fstop = 1, spec.lens.focalLength = 1, spec.lens.focalDistance = 20;  // depths 5 to 50: up to ~6 px
       // A moving store: planes pair time blocks with lens quadrants.
-      EXPECT_EQ(lensTimeBlocks(spec), moving ? 4 : 1);
+      EXPECT_EQ(lensTimeBlocks(spec), st.moving ? 4 : 1);
       const RenderResult r = render(spec);
       EXPECT_GT(r.stats.raster.lensMicropolygons, 0u);
       EXPECT_GT(r.stats.raster.lensLayers, 0u);
+      if (st.sparse) {
+        EXPECT_GT(r.stats.raster.lensSparseLayers, 0u) << "variant " << images.size();
+      }
       std::vector<float> all;
       for (const auto& c : r.image.channels) all.insert(all.end(), c.f.begin(), c.f.end());
       images.push_back(all);
     }
     for (size_t i = 1; i < images.size(); ++i) {
       ASSERT_EQ(images[i].size(), images[0].size());
-      EXPECT_EQ(std::memcmp(images[i].data(), images[0].data(), images[0].size() * sizeof(float)), 0) << (moving ? "moving" : "still") << " variant " << i;
+      EXPECT_EQ(std::memcmp(images[i].data(), images[0].data(), images[0].size() * sizeof(float)), 0) << st.name << " variant " << i;
     }
   }
 }
