@@ -220,5 +220,26 @@ struct EdgeHit {
 /// entries past n.
 size_t testLinearEdges(Isa isa, const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits);
 
+/// A moving micropolygon through a lens, raster_lens.cpp's testLens() lane for lane: corner j at
+/// a candidate's segment parameter f is P_j = a_j + f d_j (double; d = end - start of the knot
+/// segment), sheared for its lens point (Lx, Ly) = lensRadius (u, v) to S_j = (P_j.x + Lx q_j,
+/// P_j.y + Ly q_j, P_j.z) with q_j = P_j.z invD - 1; its edges toRaster(S_a × S_b) tested as
+/// coversFixed() tests them, and the depth from float(P_j.z). A triangle passes corner 2 as
+/// corner 3.
+struct MovingLensSetup {
+  const float* f;  // per candidate: segment parameter, lens point, raster position
+  const float* su;
+  const float* sv;
+  const float* sx;
+  const float* sy;
+  double a[3][4], d[3][4];  // [axis][corner]
+  double lensRadius, invD;
+  RasterScale scale;
+  bool triangle, cullBackFaces;
+};
+
+/// testLinearEdges() for MovingLensSetup's micropolygon: the same hits, undecided ones and list.
+size_t testMovingLens(Isa isa, const MovingLensSetup& setup, size_t n, EdgeHit* hits);
+
 }  // namespace kernels
 }  // namespace reshutter::resample

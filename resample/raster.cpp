@@ -57,7 +57,7 @@ void BucketRasterizer::Impl::begin(int rx0, int ry0, int rw, int rh) {
   if (lensPlanes) {
     lensKeptSlot.resize(slots + kPad), lensCellOf.resize(slots + kPad);
     lensSortedIndex.resize(slots + kPad);
-    for (auto* a : {&lensSortedT, &lensSortedX, &lensSortedY, &lensSortedU, &lensSortedV, &candU, &candV}) a->resize(slots + kPad);
+    for (auto* a : {&lensSortedT, &lensSortedX, &lensSortedY, &lensSortedU, &lensSortedV, &candU, &candV, &candF}) a->resize(slots + kPad);
     lensDraws.clear(), lensChunks.clear();
   }
   reset(slots);

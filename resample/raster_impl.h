@@ -113,7 +113,12 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   template <class ScalarTest>
   void recordKernelHits(const HitContext& hc, uint32_t m, const uint32_t* c, const kernels::EdgeTestSetup& setup, const kernels::LinearEdges& edges, size_t n,
                         ScalarTest scalarTest) {
-    const size_t hits = kernels::testLinearEdges(isa, setup, edges, n, edgeHits.data());
+    recordEdgeHits(hc, m, c, kernels::testLinearEdges(isa, setup, edges, n, edgeHits.data()), scalarTest);
+  }
+  // The first `hits` entries of edgeHits (a vector edge test's list) recorded, the undecided ones
+  // through scalarTest(sample index).
+  template <class ScalarTest>
+  void recordEdgeHits(const HitContext& hc, uint32_t m, const uint32_t* c, size_t hits, ScalarTest scalarTest) {
     for (size_t hi = 0; hi < hits; ++hi) {
       const kernels::EdgeHit& eh = edgeHits[hi];
       const uint32_t idx = candidates[eh.candidate];
@@ -286,6 +291,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   };
   void testLens(const LensChunk& lc, const HitContext& hc, uint32_t m, const uint32_t* c, bool tri, uint8_t flags, const LensSample& ls);  // moving
   void lensEdges(const store::TilePart& part, const uint32_t* c, bool tri);
+  void drawMovingLens(const LensChunk& lc, const HitContext& hc, const LensDraw& d, const uint32_t* c, bool tri, uint8_t flags, size_t n);
   void testStillLens(const HitContext& hc, uint32_t m, const uint32_t* c, bool tri, uint8_t flags, const LensSample& ls);
   struct StillLensEdges {  // a still micropolygon's raster edges (c[0..2] + Lx c[3..5]) + Ly c[6..8] per edge, and corner depths
     kernels::LinearEdges edges;
@@ -304,7 +310,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   std::vector<uint8_t> lensTileUsed;                // [tile of 8 × 8 cells]: some search of the layer reaches it
   SkewedArray<uint32_t> lensSortedIndex{4};         // the sorted samples' slots, times, positions and lens points
   SkewedArray<float> lensSortedT{12}, lensSortedX{20}, lensSortedY{28}, lensSortedU{36}, lensSortedV{44};
-  SkewedArray<float> candU{60}, candV{2};  // the lens path's candidates' lens points (candidates, candT, candX, candY hold the rest)
+  SkewedArray<float> candU{60}, candV{2}, candF{10};  // the lens path's candidates' lens points and, for a moving micropolygon's vector test, segment parameters (candidates, candT, candX, candY hold the rest)
 
   // ------------------------------------------------------------------------------------------
   // The linear path and chunk gathers (raster_linear.cpp)

@@ -423,6 +423,10 @@ void BucketRasterizer::Impl::drawLensQueued() {
     const uint32_t* c = &part.corners[size_t(d.m) * 4];
     const bool tri = c[3] == kNoCorner;
     const uint8_t flags = part.flags[d.m];
+    if (lc.moving && vectorKernels) {
+      drawMovingLens(lc, hc, d, c, tri, flags, n);
+      continue;
+    }
     if (lc.moving || !vectorKernels) {
       bool edgesReady = false;
       for (size_t i = 0; i < n; ++i) {
@@ -462,6 +466,51 @@ void BucketRasterizer::Impl::drawLensQueued() {
                      [&](uint32_t idx) { testStillLens(hc, d.m, c, tri, flags, LensSample{idx, st[idx], sx[idx], sy[idx], lx[idx], ly[idx]}); });
   }
   lensDraws.clear(), lensChunks.clear(), lensBlockF.clear();
+}
+
+// A moving micropolygon's n candidates with the vector kernels: those that pass the early depth
+// test, the coverage and the draw's time range, moved to the front with their segment
+// parameters, then testMovingLens() on them - testLens()' hits. A candidate whose time falls in
+// another knot segment than the first one's (a time on a knot, rounded) takes testLens() itself.
+void BucketRasterizer::Impl::drawMovingLens(const LensChunk& lc, const HitContext& hc, const LensDraw& d, const uint32_t* c, bool tri, uint8_t flags,
+                                            size_t n) {
+  uint32_t* __restrict index = candidates.data();
+  float* __restrict t = candT.data();
+  float* __restrict x = candX.data();
+  float* __restrict y = candY.data();
+  float* __restrict u = candU.data();
+  float* __restrict v = candV.data();
+  float* __restrict fs = candF.data();
+  size_t kept = 0;
+  uint32_t segment = ~0u;
+  for (size_t i = 0; i < n; ++i) {
+    const uint32_t idx = index[i];
+    if (!(zbuf[idx] > d.zCull)) continue;  // the early depth test
+    if (lc.cover.check && !Source::covers(double(t[i]), lc.cover.lo, lc.cover.hi, lc.cover.openEnd)) continue;
+    if (!(t[i] >= lc.segLo && t[i] < lc.segHi)) continue;  // another knot segment's sample
+    ++stats.sampleTests;
+    uint32_t k;
+    float f;
+    segmentAt(*lc.knots, double(t[i]) + lc.toLocal, k, f);
+    if (segment == ~0u) segment = k;
+    if (k != segment) {
+      testLens(lc, hc, d.m, c, tri, flags, LensSample{idx, t[i], x[i], y[i], u[i], v[i]});
+      continue;
+    }
+    index[kept] = idx, x[kept] = x[i], y[kept] = y[i], u[kept] = u[i], v[kept] = v[i], fs[kept] = f;
+    ++kept;
+  }
+  if (!kept) return;
+  const TilePart& part = *lc.part;
+  kernels::MovingLensSetup setup{fs, u, v, x, y, {}, {}, view.lensRadius, 1.0 / view.focalDistance, rasterScale, tri,
+                                 opt.backfaceCull && !(flags & store::kTwoSided)};
+  for (int j = 0; j < 4; ++j) {
+    const uint32_t corner = c[tri && j == 3 ? 2 : j];
+    const glm::dvec3 a(part.position(segment, corner)), b(part.position(segment + 1, corner)), delta = b - a;
+    for (int axis = 0; axis < 3; ++axis) setup.a[axis][j] = a[axis], setup.d[axis][j] = delta[axis];
+  }
+  recordEdgeHits(hc, d.m, c, kernels::testMovingLens(isa, setup, kept, edgeHits.data()),
+                 [&](uint32_t idx) { testLens(lc, hc, d.m, c, tri, flags, LensSample{idx, st[idx], sx[idx], sy[idx], lx[idx], ly[idx]}); });
 }
 
 // A still micropolygon's edges as functions of the lens point. With corners P_j sheared to

@@ -483,6 +483,60 @@ size_t testLinearEdgesAvx2(const EdgeTestSetup& s, const LinearEdges& E, size_t 
   return h;
 }
 
+// testMovingLens() four candidates at a time, testLens()'s operations lane for lane.
+size_t testMovingLensAvx2(const MovingLensSetup& s, size_t n, EdgeHit* hits) {
+  const __m256d sign = _mm256_set1_pd(-0.0), radius = _mm256_set1_pd(s.lensRadius), invD = _mm256_set1_pd(s.invD), one = _mm256_set1_pd(1.0);
+  const __m256d invAx = _mm256_set1_pd(s.scale.invAx), invAy = _mm256_set1_pd(s.scale.invAy), bx = _mm256_set1_pd(s.scale.bx), by = _mm256_set1_pd(s.scale.by);
+  size_t h = 0;
+  for (size_t i = 0; i < n; i += 4) {
+    const size_t live = n - i < 4 ? n - i : 4;  // lanes past n read padding and are masked off
+    const __m128 f = _mm_loadu_ps(s.f + i);
+    const __m256d fd = _mm256_cvtps_pd(f);
+    const __m256d Lx = _mm256_mul_pd(radius, _mm256_cvtps_pd(_mm_loadu_ps(s.su + i))), Ly = _mm256_mul_pd(radius, _mm256_cvtps_pd(_mm_loadu_ps(s.sv + i)));
+    __m256d Sx[4], Sy[4], Sz[4];
+    for (int j = 0; j < 4; ++j) {
+      const __m256d px = _mm256_add_pd(_mm256_set1_pd(s.a[0][j]), _mm256_mul_pd(fd, _mm256_set1_pd(s.d[0][j])));
+      const __m256d py = _mm256_add_pd(_mm256_set1_pd(s.a[1][j]), _mm256_mul_pd(fd, _mm256_set1_pd(s.d[1][j])));
+      Sz[j] = _mm256_add_pd(_mm256_set1_pd(s.a[2][j]), _mm256_mul_pd(fd, _mm256_set1_pd(s.d[2][j])));
+      const __m256d q = _mm256_sub_pd(_mm256_mul_pd(Sz[j], invD), one);
+      Sx[j] = _mm256_add_pd(px, _mm256_mul_pd(Lx, q)), Sy[j] = _mm256_add_pd(py, _mm256_mul_pd(Ly, q));
+    }
+    const __m256d rx = _mm256_cvtps_pd(_mm_loadu_ps(s.sx + i)), ry = _mm256_cvtps_pd(_mm_loadu_ps(s.sy + i));
+    // Edge k's value at the sample: toRaster(S_a × S_b), then edgeAt().
+    auto edge = [&](int k) {
+      const int a = kEdgeVerts[k][0], b = kEdgeVerts[k][1];
+      const __m256d cx = _mm256_sub_pd(_mm256_mul_pd(Sy[a], Sz[b]), _mm256_mul_pd(Sz[a], Sy[b]));
+      const __m256d cy = _mm256_sub_pd(_mm256_mul_pd(Sz[a], Sx[b]), _mm256_mul_pd(Sx[a], Sz[b]));
+      const __m256d cz = _mm256_sub_pd(_mm256_mul_pd(Sx[a], Sy[b]), _mm256_mul_pd(Sy[a], Sx[b]));
+      const __m256d ex = _mm256_mul_pd(cx, invAx), ey = _mm256_mul_pd(cy, invAy);
+      const __m256d ez = _mm256_sub_pd(_mm256_sub_pd(cz, _mm256_mul_pd(ex, bx)), _mm256_mul_pd(ey, by));
+      return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(rx, ex), _mm256_mul_pd(ry, ey)), ez);
+    };
+    const __m256d e0 = edge(0), e1 = edge(1), e4 = edge(4);
+    const int liveMask = (1 << live) - 1;
+    const TriangleMasks A = triangleMasks(e1, _mm256_xor_pd(e4, sign), e0, s.cullBackFaces);
+    int hitA = A.hit & liveMask, undecided = A.tie & liveMask, hitB = 0;
+    TriangleMasks B{};
+    const int needB = liveMask & ~hitA & ~undecided;
+    if (!s.triangle && needB) {
+      B = triangleMasks(edge(2), edge(3), e4, s.cullBackFaces);
+      hitB = B.hit & needB;
+      undecided |= B.tie & needB;
+      hitB &= ~undecided;
+    }
+    const int any = hitA | hitB | undecided;
+    if (!any) continue;
+    alignas(16) float bz[2][4][4];
+    for (int k = 0; k < 3; ++k) _mm_store_ps(bz[0][k], A.b[k]), _mm_store_ps(bz[1][k], B.b[k]);
+    __m128 zv[4];
+    for (int j = 0; j < 4; ++j) zv[j] = _mm256_cvtpd_ps(Sz[j]);
+    _mm_store_ps(bz[0][3], _mm_add_ps(_mm_add_ps(_mm_mul_ps(A.b[0], zv[0]), _mm_mul_ps(A.b[1], zv[1])), _mm_mul_ps(A.b[2], zv[2])));
+    _mm_store_ps(bz[1][3], _mm_add_ps(_mm_add_ps(_mm_mul_ps(B.b[0], zv[0]), _mm_mul_ps(B.b[1], zv[2])), _mm_mul_ps(B.b[2], zv[3])));
+    h = writeEdgeHits<4>(bz, unsigned(undecided), unsigned(hitB), unsigned(any), i, hits, h);
+  }
+  return h;
+}
+
 }  // namespace
 
 bool avx2::projectLerped(const float* a, const float* b, float f, size_t n, const ProjectionScale& s, float* xo, float* yo, float* zo, float box[4]) {
@@ -634,6 +688,6 @@ void cellsOfAvx2(const CellGrid& g, const float* t, const float* x, const float*
 
 const IsaKernels kAvx2Kernels = {gatherInBoxAvx2, gatherStrataAvx2,           filterCandidatesAvx2,     cellsOfAvx2, avx2::projectLerped, linearEdgesAvx2,
                                  fixedEdgesAvx2,  testLinearEdgesAvx2<kMovingEdges>, testLinearEdgesAvx2<kFixedEdges>, testLinearEdgesAvx2<kLensEdges>,
-                                 gatherLensCellsAvx2, lensLayerCellsAvx2};
+                                 gatherLensCellsAvx2, testMovingLensAvx2, lensLayerCellsAvx2};
 
 }  // namespace reshutter::resample::kernels

@@ -403,6 +403,59 @@ size_t testLinearEdgesAvx512(const EdgeTestSetup& s, const LinearEdges& E, size_
   return h;
 }
 
+// testMovingLens() eight candidates at a time, the AVX2 kernel's operations lane for lane.
+size_t testMovingLensAvx512(const MovingLensSetup& s, size_t n, EdgeHit* hits) {
+  const __m512i sign = _mm512_set1_epi64(int64_t(0x8000000000000000ull));
+  const __m512d radius = _mm512_set1_pd(s.lensRadius), invD = _mm512_set1_pd(s.invD), one = _mm512_set1_pd(1.0);
+  const __m512d invAx = _mm512_set1_pd(s.scale.invAx), invAy = _mm512_set1_pd(s.scale.invAy), bx = _mm512_set1_pd(s.scale.bx), by = _mm512_set1_pd(s.scale.by);
+  size_t h = 0;
+  for (size_t i = 0; i < n; i += 8) {
+    const size_t live = n - i < 8 ? n - i : 8;  // lanes past n read padding and are masked off
+    const __m512d fd = _mm512_cvtps_pd(_mm256_loadu_ps(s.f + i));
+    const __m512d Lx = _mm512_mul_pd(radius, _mm512_cvtps_pd(_mm256_loadu_ps(s.su + i))), Ly = _mm512_mul_pd(radius, _mm512_cvtps_pd(_mm256_loadu_ps(s.sv + i)));
+    __m512d Sx[4], Sy[4], Sz[4];
+    for (int j = 0; j < 4; ++j) {
+      const __m512d px = _mm512_add_pd(_mm512_set1_pd(s.a[0][j]), _mm512_mul_pd(fd, _mm512_set1_pd(s.d[0][j])));
+      const __m512d py = _mm512_add_pd(_mm512_set1_pd(s.a[1][j]), _mm512_mul_pd(fd, _mm512_set1_pd(s.d[1][j])));
+      Sz[j] = _mm512_add_pd(_mm512_set1_pd(s.a[2][j]), _mm512_mul_pd(fd, _mm512_set1_pd(s.d[2][j])));
+      const __m512d q = _mm512_sub_pd(_mm512_mul_pd(Sz[j], invD), one);
+      Sx[j] = _mm512_add_pd(px, _mm512_mul_pd(Lx, q)), Sy[j] = _mm512_add_pd(py, _mm512_mul_pd(Ly, q));
+    }
+    const __m512d rx = _mm512_cvtps_pd(_mm256_loadu_ps(s.sx + i)), ry = _mm512_cvtps_pd(_mm256_loadu_ps(s.sy + i));
+    auto edge = [&](int k) {
+      const int a = kEdgeVerts[k][0], b = kEdgeVerts[k][1];
+      const __m512d cx = _mm512_sub_pd(_mm512_mul_pd(Sy[a], Sz[b]), _mm512_mul_pd(Sz[a], Sy[b]));
+      const __m512d cy = _mm512_sub_pd(_mm512_mul_pd(Sz[a], Sx[b]), _mm512_mul_pd(Sx[a], Sz[b]));
+      const __m512d cz = _mm512_sub_pd(_mm512_mul_pd(Sx[a], Sy[b]), _mm512_mul_pd(Sy[a], Sx[b]));
+      const __m512d ex = _mm512_mul_pd(cx, invAx), ey = _mm512_mul_pd(cy, invAy);
+      const __m512d ez = _mm512_sub_pd(_mm512_sub_pd(cz, _mm512_mul_pd(ex, bx)), _mm512_mul_pd(ey, by));
+      return _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(rx, ex), _mm512_mul_pd(ry, ey)), ez);
+    };
+    const __m512d e0 = edge(0), e1 = edge(1), e4 = edge(4);
+    const unsigned liveMask = (1u << live) - 1;
+    const TriangleMasks512 A = triangleMasks512(e1, _mm512_castsi512_pd(_mm512_xor_si512(_mm512_castpd_si512(e4), sign)), e0, s.cullBackFaces);
+    unsigned hitA = A.hit & liveMask, undecided = A.tie & liveMask, hitB = 0;
+    TriangleMasks512 B{};
+    const unsigned needB = liveMask & ~hitA & ~undecided;
+    if (!s.triangle && needB) {
+      B = triangleMasks512(edge(2), edge(3), e4, s.cullBackFaces);
+      hitB = B.hit & needB;
+      undecided |= B.tie & needB;
+      hitB &= ~undecided;
+    }
+    const unsigned any = hitA | hitB | undecided;
+    if (!any) continue;
+    alignas(32) float bz[2][4][8];
+    for (int k = 0; k < 3; ++k) _mm256_store_ps(bz[0][k], A.b[k]), _mm256_store_ps(bz[1][k], B.b[k]);
+    __m256 zv[4];
+    for (int j = 0; j < 4; ++j) zv[j] = _mm512_cvtpd_ps(Sz[j]);
+    _mm256_store_ps(bz[0][3], _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(A.b[0], zv[0]), _mm256_mul_ps(A.b[1], zv[1])), _mm256_mul_ps(A.b[2], zv[2])));
+    _mm256_store_ps(bz[1][3], _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(B.b[0], zv[0]), _mm256_mul_ps(B.b[1], zv[2])), _mm256_mul_ps(B.b[2], zv[3])));
+    h = writeEdgeHits<8>(bz, undecided, hitB, any, i, hits, h);
+  }
+  return h;
+}
+
 void cellsOfAvx512(const CellGrid& g, const float* t, const float* x, const float* y, size_t n, uint16_t* cellOf) {
   const __m512 thetaA = _mm512_set1_ps(g.thetaA), invLen = _mm512_set1_ps(g.invLen), one = _mm512_set1_ps(1.f), zero = _mm512_setzero_ps();
   const __m512 dx = _mm512_set1_ps(g.dx), dy = _mm512_set1_ps(g.dy), gx = _mm512_set1_ps(g.x0), gy = _mm512_set1_ps(g.y0), inv = _mm512_set1_ps(g.invSize);
@@ -501,6 +554,6 @@ size_t lensLayerCellsAvx512(const LensShear& s, const float* x, const float* y, 
 const IsaKernels kAvx512Kernels = {gatherInBoxAvx512, gatherStrataAvx512,           filterCandidatesAvx512,
                                    cellsOfAvx512,     avx2::projectLerped,          edgesAvx512<false>,
                                    fixedEdgesAvx512,  testLinearEdgesAvx512<kMovingEdges>, testLinearEdgesAvx512<kFixedEdges>,
-                                   testLinearEdgesAvx512<kLensEdges>, gatherLensCellsAvx512, lensLayerCellsAvx512};
+                                   testLinearEdgesAvx512<kLensEdges>, gatherLensCellsAvx512, testMovingLensAvx512, lensLayerCellsAvx512};
 
 }  // namespace reshutter::resample::kernels
