@@ -91,6 +91,7 @@ struct LensCells {
   const float *t, *x, *y, *u, *v;
   const uint32_t* index;
   const uint32_t* start;
+  uint64_t* examined;  // += the samples in the cells searched (--stats)
 };
 
 /// The lens path's candidates: each one's slot, time, position and lens point (copies, so that

@@ -302,7 +302,8 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   std::vector<uint8_t> segmentTouches;  // [knot segment of a chunk's bound times]: its box reaches the region
   std::vector<LensChunk> lensChunks;
   std::vector<LensDraw> lensDraws;
-  std::vector<uint32_t> lensOrder;  // lensDraws by layer
+  std::vector<uint32_t> lensOrder;        // lensDraws by layer
+  std::vector<uint32_t> lensLayerStart;   // the counting sort's [layer]: its first place in lensOrder
   std::vector<float> lensBlockF;    // the lerping chunks' time blocks' spans of their lerp parameter
   LensGrid lensGrid;
   std::vector<uint32_t> lensCellStart, lensCursor;  // [cell]: the cell's first sorted sample; the scatter's cursors

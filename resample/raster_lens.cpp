@@ -247,6 +247,14 @@ void BucketRasterizer::Impl::queueLens(const LensChunk& lc, uint32_t chunk, uint
   float q[4];
   d.searchBox(0.f, 1.f, q);
   d.qm = 2e-3f + 1e-5f * std::max({std::abs(q[0]), std::abs(q[1]), std::abs(q[2]), std::abs(q[3]), std::abs(cxl), std::abs(cyl), mag + lc.kMag});
+  // A search box beyond every sample's sheared position (x - cxl u within the region widened by
+  // |cxl|, |u| <= 1; one pixel more for their rounding) admits none: nothing to draw here.
+  d.searchBox(0.f, 1.f, q);
+  const float reachX = std::abs(cxl) + 1.f, reachY = std::abs(cyl) + 1.f;
+  if (q[1] < float(x0) - reachX || q[0] > float(x0 + w) + reachX || q[3] < float(y0) - reachY || q[2] > float(y0 + h) + reachY) {
+    ++stats.lensCulledMicropolygons;
+    return;
+  }
   lensDraws.push_back(d);
 }
 
@@ -349,9 +357,23 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
 // first - within a layer).
 void BucketRasterizer::Impl::drawLensQueued() {
   if (lensDraws.empty()) return;
+  // Stably by layer: a counting sort over the layers' range (a bucket's layers are a few dozen
+  // consecutive numbers; the unbounded ones, INT32_MIN, first), a comparison sort if it is wide.
   lensOrder.resize(lensDraws.size());
-  std::iota(lensOrder.begin(), lensOrder.end(), 0u);
-  std::stable_sort(lensOrder.begin(), lensOrder.end(), [&](uint32_t a, uint32_t b) { return lensDraws[a].layer < lensDraws[b].layer; });
+  int32_t lo = INT32_MAX, hi = INT32_MIN;
+  for (const LensDraw& d : lensDraws)
+    if (d.layer != INT32_MIN) lo = std::min(lo, d.layer), hi = std::max(hi, d.layer);
+  if (lo > hi) lo = hi = 0;
+  if (int64_t(hi) - int64_t(lo) < (int64_t(1) << 16)) {
+    auto slotOf = [lo](int32_t layer) { return layer == INT32_MIN ? size_t(0) : size_t(int64_t(layer) - lo) + 1; };
+    lensLayerStart.assign(size_t(hi - lo) + 3, 0);
+    for (const LensDraw& d : lensDraws) ++lensLayerStart[slotOf(d.layer) + 1];
+    std::partial_sum(lensLayerStart.begin(), lensLayerStart.end(), lensLayerStart.begin());
+    for (uint32_t i = 0; i < uint32_t(lensDraws.size()); ++i) lensOrder[lensLayerStart[slotOf(lensDraws[i].layer)]++] = i;
+  } else {
+    std::iota(lensOrder.begin(), lensOrder.end(), 0u);
+    std::stable_sort(lensOrder.begin(), lensOrder.end(), [&](uint32_t a, uint32_t b) { return lensDraws[a].layer < lensDraws[b].layer; });
+  }
   uint32_t currentChunk = ~0u;
   HitContext hc{};
   int32_t sortedLayer = INT32_MIN;
@@ -399,17 +421,14 @@ void BucketRasterizer::Impl::drawLensQueued() {
         const int c0 = cellAt(q[0] - float(g.x0), g.cols), c1 = cellAt(q[1] - float(g.x0), g.cols);
         const int r0 = cellAt(q[2] - float(g.y0), g.rows), r1 = cellAt(q[3] - float(g.y0), g.rows);
         const uint32_t* start = lensCellStart.data() + size_t(b) * g.cells;
-        for (int r = r0; r <= r1; ++r) {
-          const size_t row = size_t(r) * size_t(g.cols);
-          stats.lensScanned += start[row + size_t(c1) + 1] - start[row + size_t(c0)];
-        }
         if (vectorKernels) {
           const kernels::LensCells cells{lensSortedT.data(), lensSortedX.data(), lensSortedY.data(), lensSortedU.data(), lensSortedV.data(),
-                                         lensSortedIndex.data(), start};
+                                         lensSortedIndex.data(), start, &stats.lensScanned};
           n = kernels::gatherLensCells(isa, cells, size_t(g.cols), c0, r0, c1, r1, box, cand, n);
         } else {
           for (int r = r0; r <= r1; ++r) {
             const size_t row = size_t(r) * size_t(g.cols);
+            stats.lensScanned += start[row + size_t(c1) + 1] - start[row + size_t(c0)];
             for (uint32_t i = start[row + size_t(c0)], e = start[row + size_t(c1) + 1]; i < e; ++i) {
               cand.index[n] = lensSortedIndex[i];
               cand.t[n] = lensSortedT[i], cand.x[n] = lensSortedX[i], cand.y[n] = lensSortedY[i], cand.u[n] = lensSortedU[i], cand.v[n] = lensSortedV[i];

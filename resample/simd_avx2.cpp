@@ -594,9 +594,11 @@ size_t gatherLensCellsAvx2(const LensCells& cells, size_t stride, int c0, int r0
   const __m256 cx0 = _mm256_set1_ps(box.cx0), cx1 = _mm256_set1_ps(box.cx1), cy0 = _mm256_set1_ps(box.cy0), cy1 = _mm256_set1_ps(box.cy1);
   const __m256 thetaA = _mm256_set1_ps(box.thetaA), invLen = _mm256_set1_ps(box.invLen), one = _mm256_set1_ps(1.f), zero = _mm256_setzero_ps();
   const __m256 mx0 = _mm256_set1_ps(box.mx0), mx1 = _mm256_set1_ps(box.mx1), my0 = _mm256_set1_ps(box.my0), my1 = _mm256_set1_ps(box.my1);
+  uint64_t examined = 0;
   for (int r = r0; r <= r1; ++r) {
     const size_t row = size_t(r) * stride;
     const uint32_t last = cells.start[row + size_t(c1) + 1];
+    examined += last - cells.start[row + size_t(c0)];
     for (uint32_t at = cells.start[row + size_t(c0)]; at < last; at += 8) {
       // Lanes past the run read the next cells' samples (or the arrays' room) and are masked off.
       const unsigned live = last - at >= 8 ? 0xFFu : (1u << (last - at)) - 1;
@@ -622,6 +624,7 @@ size_t gatherLensCellsAvx2(const LensCells& cells, size_t stride, int c0, int r0
       n = appendMasked(mask, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(cells.index + at)), t, x, y, {out.index, out.t, out.x, out.y}, n);
     }
   }
+  *cells.examined += examined;
   return n;
 }
 

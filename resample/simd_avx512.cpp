@@ -484,9 +484,11 @@ size_t gatherLensCellsAvx512(const LensCells& cells, size_t stride, int c0, int 
   // A box that does not lerp (invLen 0) has f = +0 for every sample, as the AVX2 kernel computes
   // it.
   const bool timed = box.invLen != 0.f;
+  uint64_t examined = 0;
   for (int r = r0; r <= r1; ++r) {
     const size_t row = size_t(r) * stride;
     const uint32_t last = cells.start[row + size_t(c1) + 1];
+    examined += last - cells.start[row + size_t(c0)];
     for (uint32_t at = cells.start[row + size_t(c0)]; at < last; at += 16) {
       const __mmask16 live = last - at >= 16 ? __mmask16(0xFFFF) : __mmask16((1u << (last - at)) - 1);
       const __m512 x = _mm512_maskz_loadu_ps(live, cells.x + at), y = _mm512_maskz_loadu_ps(live, cells.y + at);
@@ -508,6 +510,7 @@ size_t gatherLensCellsAvx512(const LensCells& cells, size_t stride, int c0, int 
       n = appendCompressed512({out.index, out.t, out.x, out.y}, n, in, _mm512_maskz_loadu_epi32(in, cells.index + at), t, x, y);
     }
   }
+  *cells.examined += examined;
   return n;
 }
 
