@@ -41,10 +41,10 @@ void productRange(float l0, float l1, float k0, float k1, float& lo, float& hi) 
 }
 
 // The layers' width, in raster pixels of displacement per unit of lens (a circle of confusion's
-// radius): a micropolygon searches about one more pixel each way than its pinhole box, and a
+// radius): a micropolygon searches up to half of it more each way than its pinhole box, and a
 // bucket sorts its samples once per layer that holds micropolygons (bench/RESULTS.md, "Depth
-// of field", chose it).
-constexpr float kLayerWidth = 4.f;
+// of field", chose it: 4 px while the sorts were scalar, 2 px since they are vector kernels).
+constexpr float kLayerWidth = 2.f;
 
 }  // namespace
 
