@@ -439,10 +439,40 @@ inline TriangleMasks triangleMasks(__m256d a0, __m256d a1, __m256d a2, bool cull
   return m;
 }
 
+// The rest of an edge test on four lanes, given edges 01 (e0), 12 (e1) and 02 (e4): triangle A
+// (p0 p1 p2, edges 12, 20 = -02, 01), then B (p0 p2 p3, edges 23, 30, 02 - edgeB(2), edgeB(3))
+// where A neither hits nor ties, the depths from the corner depths depths(zv) gives, and the
+// outcome appended to hits. Shared by the kernels that make their edges differently.
+template <class EdgeB, class Depths>
+inline __attribute__((always_inline)) size_t decideLanes(__m256d e0, __m256d e1, __m256d e4, EdgeB edgeB, Depths depths, int liveMask, bool triangle,
+                                                         bool cullBack, size_t i, EdgeHit* hits, size_t h) {
+  const TriangleMasks A = triangleMasks(e1, _mm256_xor_pd(e4, _mm256_set1_pd(-0.0)), e0, cullBack);
+  int hitA = A.hit & liveMask, undecided = A.tie & liveMask, hitB = 0;
+  TriangleMasks B{};
+  const int needB = liveMask & ~hitA & ~undecided;
+  if (!triangle && needB) {
+    B = triangleMasks(edgeB(2), edgeB(3), e4, cullBack);
+    hitB = B.hit & needB;
+    undecided |= B.tie & needB;
+    hitB &= ~undecided;
+  }
+  const int any = hitA | hitB | undecided;
+  if (!any) return h;
+  // Per triangle (A, B): barycentrics b0 b1 b2 and depth, by lane. Which triangle a sample hit
+  // is a coin toss, so the copy below indexes by it rather than branching on it.
+  alignas(16) float bz[2][4][4];
+  for (int k = 0; k < 3; ++k) _mm_store_ps(bz[0][k], A.b[k]), _mm_store_ps(bz[1][k], B.b[k]);
+  __m128 zv[4];
+  depths(zv);
+  _mm_store_ps(bz[0][3], _mm_add_ps(_mm_add_ps(_mm_mul_ps(A.b[0], zv[0]), _mm_mul_ps(A.b[1], zv[1])), _mm_mul_ps(A.b[2], zv[2])));
+  _mm_store_ps(bz[1][3], _mm_add_ps(_mm_add_ps(_mm_mul_ps(B.b[0], zv[0]), _mm_mul_ps(B.b[1], zv[2])), _mm_mul_ps(B.b[2], zv[3])));
+  return writeEdgeHits<4>(bz, unsigned(undecided), unsigned(hitB), unsigned(any), i, hits, h);
+}
+
 template <int kMode>
 size_t testLinearEdgesAvx2(const EdgeTestSetup& s, const LinearEdges& E, size_t n, EdgeHit* hits) {
   const __m128 fOffset = _mm_set1_ps(s.fOffset), fScale = _mm_set1_ps(s.fScale), zero = _mm_setzero_ps(), one = _mm_set1_ps(1.f);
-  const __m256d sign = _mm256_set1_pd(-0.0), lensRadius = _mm256_set1_pd(s.lensRadius);
+  const __m256d lensRadius = _mm256_set1_pd(s.lensRadius);
   size_t h = 0;
   for (size_t i = 0; i < n; i += 4) {
     const size_t live = n - i < 4 ? n - i : 4;  // lanes past n read padding and are masked off
@@ -454,38 +484,19 @@ size_t testLinearEdgesAvx2(const EdgeTestSetup& s, const LinearEdges& E, size_t 
     const __m256d gd = kMode == kLensEdges ? _mm256_mul_pd(lensRadius, _mm256_cvtps_pd(_mm_loadu_ps(s.sv + i))) : fd;
     const __m256d rx = _mm256_cvtps_pd(_mm_loadu_ps(s.sx + i)), ry = _mm256_cvtps_pd(_mm_loadu_ps(s.sy + i));
     const __m256d e0 = edgeValue<kMode>(E, 0, fd, gd, rx, ry), e1 = edgeValue<kMode>(E, 1, fd, gd, rx, ry), e4 = edgeValue<kMode>(E, 4, fd, gd, rx, ry);
-    const int liveMask = (1 << live) - 1;
-    // Triangle A = (p0 p1 p2) with edges 12, 20 (= -02), 01.
-    const TriangleMasks A = triangleMasks(e1, _mm256_xor_pd(e4, sign), e0, s.cullBackFaces);
-    int hitA = A.hit & liveMask, undecided = A.tie & liveMask, hitB = 0;
-    TriangleMasks B{};
-    const int needB = liveMask & ~hitA & ~undecided;
-    if (!s.triangle && needB) {
-      // Triangle B = (p0 p2 p3) with edges 23, 30, 02.
-      B = triangleMasks(edgeValue<kMode>(E, 2, fd, gd, rx, ry), edgeValue<kMode>(E, 3, fd, gd, rx, ry), e4, s.cullBackFaces);
-      hitB = B.hit & needB;
-      undecided |= B.tie & needB;
-      hitB &= ~undecided;
-    }
-    int any = hitA | hitB | undecided;
-    if (!any) continue;
-    // Per triangle (A, B): barycentrics b0 b1 b2 and depth, by lane. Which triangle a sample hit
-    // is a coin toss, so the copy below indexes by it rather than branching on it.
-    alignas(16) float bz[2][4][4];
-    for (int k = 0; k < 3; ++k) _mm_store_ps(bz[0][k], A.b[k]), _mm_store_ps(bz[1][k], B.b[k]);
     // Depths, as recordKernelHits() and the scalar tests compute them (operand order kept).
-    __m128 zv[4];
-    for (int j = 0; j < 4; ++j) zv[j] = _mm_add_ps(_mm_set1_ps(s.za[j]), _mm_mul_ps(f, _mm_set1_ps(s.zb[j] - s.za[j])));
-    _mm_store_ps(bz[0][3], _mm_add_ps(_mm_add_ps(_mm_mul_ps(A.b[0], zv[0]), _mm_mul_ps(A.b[1], zv[1])), _mm_mul_ps(A.b[2], zv[2])));
-    _mm_store_ps(bz[1][3], _mm_add_ps(_mm_add_ps(_mm_mul_ps(B.b[0], zv[0]), _mm_mul_ps(B.b[1], zv[2])), _mm_mul_ps(B.b[2], zv[3])));
-    h = writeEdgeHits<4>(bz, unsigned(undecided), unsigned(hitB), unsigned(any), i, hits, h);
+    auto depths = [&](__m128* zv) {
+      for (int j = 0; j < 4; ++j) zv[j] = _mm_add_ps(_mm_set1_ps(s.za[j]), _mm_mul_ps(f, _mm_set1_ps(s.zb[j] - s.za[j])));
+    };
+    h = decideLanes(e0, e1, e4, [&](int e) { return edgeValue<kMode>(E, e, fd, gd, rx, ry); }, depths, (1 << live) - 1, s.triangle, s.cullBackFaces, i,
+                    hits, h);
   }
   return h;
 }
 
 // testMovingLens() four candidates at a time, testLens()'s operations lane for lane.
 size_t testMovingLensAvx2(const MovingLensSetup& s, size_t n, EdgeHit* hits) {
-  const __m256d sign = _mm256_set1_pd(-0.0), radius = _mm256_set1_pd(s.lensRadius), invD = _mm256_set1_pd(s.invD), one = _mm256_set1_pd(1.0);
+  const __m256d radius = _mm256_set1_pd(s.lensRadius), invD = _mm256_set1_pd(s.invD), one = _mm256_set1_pd(1.0);
   const __m256d invAx = _mm256_set1_pd(s.scale.invAx), invAy = _mm256_set1_pd(s.scale.invAy), bx = _mm256_set1_pd(s.scale.bx), by = _mm256_set1_pd(s.scale.by);
   size_t h = 0;
   for (size_t i = 0; i < n; i += 4) {
@@ -512,27 +523,10 @@ size_t testMovingLensAvx2(const MovingLensSetup& s, size_t n, EdgeHit* hits) {
       const __m256d ez = _mm256_sub_pd(_mm256_sub_pd(cz, _mm256_mul_pd(ex, bx)), _mm256_mul_pd(ey, by));
       return _mm256_add_pd(_mm256_add_pd(_mm256_mul_pd(rx, ex), _mm256_mul_pd(ry, ey)), ez);
     };
-    const __m256d e0 = edge(0), e1 = edge(1), e4 = edge(4);
-    const int liveMask = (1 << live) - 1;
-    const TriangleMasks A = triangleMasks(e1, _mm256_xor_pd(e4, sign), e0, s.cullBackFaces);
-    int hitA = A.hit & liveMask, undecided = A.tie & liveMask, hitB = 0;
-    TriangleMasks B{};
-    const int needB = liveMask & ~hitA & ~undecided;
-    if (!s.triangle && needB) {
-      B = triangleMasks(edge(2), edge(3), e4, s.cullBackFaces);
-      hitB = B.hit & needB;
-      undecided |= B.tie & needB;
-      hitB &= ~undecided;
-    }
-    const int any = hitA | hitB | undecided;
-    if (!any) continue;
-    alignas(16) float bz[2][4][4];
-    for (int k = 0; k < 3; ++k) _mm_store_ps(bz[0][k], A.b[k]), _mm_store_ps(bz[1][k], B.b[k]);
-    __m128 zv[4];
-    for (int j = 0; j < 4; ++j) zv[j] = _mm256_cvtpd_ps(Sz[j]);
-    _mm_store_ps(bz[0][3], _mm_add_ps(_mm_add_ps(_mm_mul_ps(A.b[0], zv[0]), _mm_mul_ps(A.b[1], zv[1])), _mm_mul_ps(A.b[2], zv[2])));
-    _mm_store_ps(bz[1][3], _mm_add_ps(_mm_add_ps(_mm_mul_ps(B.b[0], zv[0]), _mm_mul_ps(B.b[1], zv[2])), _mm_mul_ps(B.b[2], zv[3])));
-    h = writeEdgeHits<4>(bz, unsigned(undecided), unsigned(hitB), unsigned(any), i, hits, h);
+    auto depths = [&](__m128* zv) {
+      for (int j = 0; j < 4; ++j) zv[j] = _mm256_cvtpd_ps(Sz[j]);
+    };
+    h = decideLanes(edge(0), edge(1), edge(4), edge, depths, (1 << live) - 1, s.triangle, s.cullBackFaces, i, hits, h);
   }
   return h;
 }

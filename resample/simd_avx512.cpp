@@ -361,10 +361,37 @@ inline TriangleMasks512 triangleMasks512(__m512d a0, __m512d a1, __m512d a2, boo
   return m;
 }
 
+// The rest of an edge test on eight lanes (decideLanes() in simd_avx2.cpp, lane for lane).
+template <class EdgeB, class Depths>
+inline __attribute__((always_inline)) size_t decideLanes512(__m512d e0, __m512d e1, __m512d e4, EdgeB edgeB, Depths depths, unsigned liveMask, bool triangle,
+                                                            bool cullBack, size_t i, EdgeHit* hits, size_t h) {
+  const __m512i sign = _mm512_set1_epi64(int64_t(0x8000000000000000ull));
+  // Triangle A = (p0 p1 p2) with edges 12, 20 (= -02), 01.
+  const TriangleMasks512 A = triangleMasks512(e1, _mm512_castsi512_pd(_mm512_xor_si512(_mm512_castpd_si512(e4), sign)), e0, cullBack);
+  unsigned hitA = A.hit & liveMask, undecided = A.tie & liveMask, hitB = 0;
+  TriangleMasks512 B{};
+  const unsigned needB = liveMask & ~hitA & ~undecided;
+  if (!triangle && needB) {
+    // Triangle B = (p0 p2 p3) with edges 23, 30, 02.
+    B = triangleMasks512(edgeB(2), edgeB(3), e4, cullBack);
+    hitB = B.hit & needB;
+    undecided |= B.tie & needB;
+    hitB &= ~undecided;
+  }
+  const unsigned any = hitA | hitB | undecided;
+  if (!any) return h;
+  alignas(32) float bz[2][4][8];
+  for (int k = 0; k < 3; ++k) _mm256_store_ps(bz[0][k], A.b[k]), _mm256_store_ps(bz[1][k], B.b[k]);
+  __m256 zv[4];
+  depths(zv);
+  _mm256_store_ps(bz[0][3], _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(A.b[0], zv[0]), _mm256_mul_ps(A.b[1], zv[1])), _mm256_mul_ps(A.b[2], zv[2])));
+  _mm256_store_ps(bz[1][3], _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(B.b[0], zv[0]), _mm256_mul_ps(B.b[1], zv[2])), _mm256_mul_ps(B.b[2], zv[3])));
+  return writeEdgeHits<8>(bz, undecided, hitB, any, i, hits, h);
+}
+
 template <int kMode>
 size_t testLinearEdgesAvx512(const EdgeTestSetup& s, const LinearEdges& E, size_t n, EdgeHit* hits) {
   const __m256 fOffset = _mm256_set1_ps(s.fOffset), fScale = _mm256_set1_ps(s.fScale), zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.f);
-  const __m512i sign = _mm512_set1_epi64(int64_t(0x8000000000000000ull));
   const __m512d lensRadius = _mm512_set1_pd(s.lensRadius);
   __m256 zDelta[4], zStart[4];
   for (int j = 0; j < 4; ++j) zStart[j] = _mm256_set1_ps(s.za[j]), zDelta[j] = _mm256_set1_ps(s.zb[j] - s.za[j]);
@@ -377,35 +404,17 @@ size_t testLinearEdgesAvx512(const EdgeTestSetup& s, const LinearEdges& E, size_
     const __m512d gd = kMode == kLensEdges ? _mm512_mul_pd(lensRadius, _mm512_cvtps_pd(_mm256_loadu_ps(s.sv + i))) : fd;
     const __m512d rx = _mm512_cvtps_pd(_mm256_loadu_ps(s.sx + i)), ry = _mm512_cvtps_pd(_mm256_loadu_ps(s.sy + i));
     const __m512d e0 = edgeValue512<kMode>(E, 0, fd, gd, rx, ry), e1 = edgeValue512<kMode>(E, 1, fd, gd, rx, ry), e4 = edgeValue512<kMode>(E, 4, fd, gd, rx, ry);
-    const unsigned liveMask = (1u << live) - 1;
-    // Triangle A = (p0 p1 p2) with edges 12, 20 (= -02), 01.
-    const TriangleMasks512 A = triangleMasks512(e1, _mm512_castsi512_pd(_mm512_xor_si512(_mm512_castpd_si512(e4), sign)), e0, s.cullBackFaces);
-    unsigned hitA = A.hit & liveMask, undecided = A.tie & liveMask, hitB = 0;
-    TriangleMasks512 B{};
-    const unsigned needB = liveMask & ~hitA & ~undecided;
-    if (!s.triangle && needB) {
-      // Triangle B = (p0 p2 p3) with edges 23, 30, 02.
-      B = triangleMasks512(edgeValue512<kMode>(E, 2, fd, gd, rx, ry), edgeValue512<kMode>(E, 3, fd, gd, rx, ry), e4, s.cullBackFaces);
-      hitB = B.hit & needB;
-      undecided |= B.tie & needB;
-      hitB &= ~undecided;
-    }
-    const unsigned any = hitA | hitB | undecided;
-    if (!any) continue;
-    alignas(32) float bz[2][4][8];
-    for (int k = 0; k < 3; ++k) _mm256_store_ps(bz[0][k], A.b[k]), _mm256_store_ps(bz[1][k], B.b[k]);
-    __m256 zv[4];
-    for (int j = 0; j < 4; ++j) zv[j] = _mm256_add_ps(zStart[j], _mm256_mul_ps(f, zDelta[j]));
-    _mm256_store_ps(bz[0][3], _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(A.b[0], zv[0]), _mm256_mul_ps(A.b[1], zv[1])), _mm256_mul_ps(A.b[2], zv[2])));
-    _mm256_store_ps(bz[1][3], _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(B.b[0], zv[0]), _mm256_mul_ps(B.b[1], zv[2])), _mm256_mul_ps(B.b[2], zv[3])));
-    h = writeEdgeHits<8>(bz, undecided, hitB, any, i, hits, h);
+    auto depths = [&](__m256* zv) {
+      for (int j = 0; j < 4; ++j) zv[j] = _mm256_add_ps(zStart[j], _mm256_mul_ps(f, zDelta[j]));
+    };
+    h = decideLanes512(e0, e1, e4, [&](int e) { return edgeValue512<kMode>(E, e, fd, gd, rx, ry); }, depths, (1u << live) - 1, s.triangle, s.cullBackFaces,
+                       i, hits, h);
   }
   return h;
 }
 
 // testMovingLens() eight candidates at a time, the AVX2 kernel's operations lane for lane.
 size_t testMovingLensAvx512(const MovingLensSetup& s, size_t n, EdgeHit* hits) {
-  const __m512i sign = _mm512_set1_epi64(int64_t(0x8000000000000000ull));
   const __m512d radius = _mm512_set1_pd(s.lensRadius), invD = _mm512_set1_pd(s.invD), one = _mm512_set1_pd(1.0);
   const __m512d invAx = _mm512_set1_pd(s.scale.invAx), invAy = _mm512_set1_pd(s.scale.invAy), bx = _mm512_set1_pd(s.scale.bx), by = _mm512_set1_pd(s.scale.by);
   size_t h = 0;
@@ -431,27 +440,10 @@ size_t testMovingLensAvx512(const MovingLensSetup& s, size_t n, EdgeHit* hits) {
       const __m512d ez = _mm512_sub_pd(_mm512_sub_pd(cz, _mm512_mul_pd(ex, bx)), _mm512_mul_pd(ey, by));
       return _mm512_add_pd(_mm512_add_pd(_mm512_mul_pd(rx, ex), _mm512_mul_pd(ry, ey)), ez);
     };
-    const __m512d e0 = edge(0), e1 = edge(1), e4 = edge(4);
-    const unsigned liveMask = (1u << live) - 1;
-    const TriangleMasks512 A = triangleMasks512(e1, _mm512_castsi512_pd(_mm512_xor_si512(_mm512_castpd_si512(e4), sign)), e0, s.cullBackFaces);
-    unsigned hitA = A.hit & liveMask, undecided = A.tie & liveMask, hitB = 0;
-    TriangleMasks512 B{};
-    const unsigned needB = liveMask & ~hitA & ~undecided;
-    if (!s.triangle && needB) {
-      B = triangleMasks512(edge(2), edge(3), e4, s.cullBackFaces);
-      hitB = B.hit & needB;
-      undecided |= B.tie & needB;
-      hitB &= ~undecided;
-    }
-    const unsigned any = hitA | hitB | undecided;
-    if (!any) continue;
-    alignas(32) float bz[2][4][8];
-    for (int k = 0; k < 3; ++k) _mm256_store_ps(bz[0][k], A.b[k]), _mm256_store_ps(bz[1][k], B.b[k]);
-    __m256 zv[4];
-    for (int j = 0; j < 4; ++j) zv[j] = _mm512_cvtpd_ps(Sz[j]);
-    _mm256_store_ps(bz[0][3], _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(A.b[0], zv[0]), _mm256_mul_ps(A.b[1], zv[1])), _mm256_mul_ps(A.b[2], zv[2])));
-    _mm256_store_ps(bz[1][3], _mm256_add_ps(_mm256_add_ps(_mm256_mul_ps(B.b[0], zv[0]), _mm256_mul_ps(B.b[1], zv[2])), _mm256_mul_ps(B.b[2], zv[3])));
-    h = writeEdgeHits<8>(bz, undecided, hitB, any, i, hits, h);
+    auto depths = [&](__m256* zv) {
+      for (int j = 0; j < 4; ++j) zv[j] = _mm512_cvtpd_ps(Sz[j]);
+    };
+    h = decideLanes512(edge(0), edge(1), edge(4), edge, depths, (1u << live) - 1, s.triangle, s.cullBackFaces, i, hits, h);
   }
   return h;
 }

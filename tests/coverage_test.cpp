@@ -26,6 +26,14 @@ struct Quad {
   bool triangle = false;
 };
 
+// The vector kernels' instruction sets this CPU runs.
+std::vector<kernels::Isa> vectorIsas() {
+  std::vector<kernels::Isa> isas;
+  for (kernels::Isa isa : {kernels::Isa::Avx2, kernels::Isa::Avx512})
+    if (kernels::available(isa)) isas.push_back(isa);
+  return isas;
+}
+
 bool fixedHit(const Quad& q, const kernels::RasterScale& s, bool cullBack, double x, double y, int& tri, float b[3]) {
   const glm::vec3* p[4] = {&q.p[0], &q.p[1], &q.p[2], &q.p[q.triangle ? 2 : 3]};
   glm::dvec3 E[5];
@@ -213,9 +221,7 @@ TEST(Coverage, BackFacesAreKnockedOutOnlyWhenAsked) {
 // The vector kernels give the scalar reference's edges bit for bit, and its decisions,
 // barycentrics and depths for every candidate they decide (the rest are exact ties they hand to it).
 TEST(Coverage, VectorKernelsMatchTheScalarReference) {
-  std::vector<kernels::Isa> isas;
-  for (kernels::Isa isa : {kernels::Isa::Avx2, kernels::Isa::Avx512})
-    if (kernels::available(isa)) isas.push_back(isa);
+  const std::vector<kernels::Isa> isas = vectorIsas();
   if (isas.empty()) GTEST_SKIP() << "this CPU runs no vector kernels";
   std::mt19937 rng(3);
   std::uniform_real_distribution<float> pos(-1.f, 1.f), depth(2.f, 6.f), step(-0.2f, 0.2f);
@@ -298,9 +304,7 @@ TEST(Coverage, VectorKernelsMatchTheScalarReference) {
 // (no shear) with corners and samples on integers, so that samples fall exactly on its edges: the
 // kernel must hand exactly those to the scalar tie rule.
 TEST(Coverage, MovingLensKernelMatchesTheScalarTest) {
-  std::vector<kernels::Isa> isas;
-  for (kernels::Isa isa : {kernels::Isa::Avx2, kernels::Isa::Avx512})
-    if (kernels::available(isa)) isas.push_back(isa);
+  const std::vector<kernels::Isa> isas = vectorIsas();
   if (isas.empty()) GTEST_SKIP() << "this CPU runs no vector kernels";
   std::mt19937 rng(5);
   std::uniform_real_distribution<float> pos(-1.f, 1.f), depth(2.f, 6.f), step(-0.2f, 0.2f), unit(0.f, 1.f);
