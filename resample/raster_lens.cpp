@@ -282,6 +282,7 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
   const size_t tiles = size_t(tileCols) * size_t(tileRows);
   lensTileUsed.assign(tiles + 3, 0);  // the vector kernels read the marks 32 bits at a time
   auto tileAt = [](float v, int count) { return v >= 0.f ? (v < float(count) ? int(v) / 8 : (count - 1) / 8) : 0; };
+  int usedX0 = tileCols, usedX1 = -1, usedY0 = tileRows, usedY1 = -1;  // the marked tiles' bounds
   for (size_t i = first; i < last; ++i) {
     const LensDraw& e = lensDraws[lensOrder[i]];
     const LensChunk& ec = lensChunks[e.chunk];
@@ -292,11 +293,24 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
     const int tx0 = tileAt(q[0] - float(g.x0), g.cols), tx1 = tileAt(q[1] - float(g.x0), g.cols);
     const int ty0 = tileAt(q[2] - float(g.y0), g.rows), ty1 = tileAt(q[3] - float(g.y0), g.rows);
     for (int ty = ty0; ty <= ty1; ++ty) std::fill_n(&lensTileUsed[size_t(ty) * size_t(tileCols) + size_t(tx0)], tx1 - tx0 + 1, uint8_t(1));
+    usedX0 = std::min(usedX0, tx0), usedX1 = std::max(usedX1, tx1), usedY0 = std::min(usedY0, ty0), usedY1 = std::max(usedY1, ty1);
   }
   // No marks to read when the layer searches every tile (a dense layer).
   const bool everyTile = std::all_of(lensTileUsed.begin(), lensTileUsed.begin() + ptrdiff_t(tiles), [](uint8_t m) { return m != 0; });
   const uint8_t* used = everyTile ? nullptr : lensTileUsed.data();
   stats.lensSparseLayers += !everyTile;
+  // The pixels whose samples can shear into a marked tile: the tiles' cells widened by the shear
+  // (|lens point| <= 1) and a pixel for rounding; a tile on the grid's edge also takes whatever is
+  // sheared beyond it. A sparse layer visits only those.
+  int px0 = x0, px1 = x0 + w - 1, py0 = y0, py1 = y0 + h - 1;
+  if (!everyTile) {
+    const int reachX = int(std::ceil(std::min(std::abs(cxl), 1e6f))) + 1, reachY = int(std::ceil(std::min(std::abs(cyl), 1e6f))) + 1;
+    if (usedX0 > 0) px0 = std::max(px0, g.x0 + usedX0 * 8 - reachX);
+    if ((usedX1 + 1) * 8 < g.cols) px1 = std::min(px1, g.x0 + (usedX1 + 1) * 8 + reachX);
+    if (usedY0 > 0) py0 = std::max(py0, g.y0 + usedY0 * 8 - reachY);
+    if ((usedY1 + 1) * 8 < g.rows) py1 = std::min(py1, g.y0 + (usedY1 + 1) * 8 + reachY);
+  }
+  const bool wholeRows = px0 == x0 && px1 == x0 + w - 1;
   // Keyed by time block, then cell: block b's cells are [b cells, (b + 1) cells).
   lensCellStart.assign(blocks * cells + 1, 0);
   lensCursor.resize(blocks * cells);
@@ -317,26 +331,34 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
   float* __restrict outY = lensSortedY.data();
   float* __restrict outU = lensSortedU.data();
   float* __restrict outV = lensSortedV.data();
-  const size_t planeStride = PS, count = size_t(P), planes = size_t(N);
+  const size_t planeStride = PS, planes = size_t(N);
   // Clamped into the grid (a NaN goes to its first cell): every sample has a cell, and a search
   // that reaches the grid's edge (or lies beyond it) finds it there.
   const kernels::LensShear shear{cxl, cyl, float(g.x0), float(g.y0), float(g.cols - 1), float(g.rows - 1), uint32_t(g.cols), uint32_t(tileCols), used, zMin};
   // The kept samples, in slot order, each with its cell.
   size_t kept = 0;
-  for (size_t s = 0; s < planes; ++s) {
-    const uint32_t key = uint32_t(s / perBlock * cells);
+  // Slots [begin, begin + n) of one plane, in order.
+  auto visit = [&](size_t begin, size_t n, uint32_t key) {
     if (vectorKernels) {
-      kept = kernels::lensLayerCells(isa, shear, xs, ys, us, vs, depth, s * planeStride, count, key, keptSlot, keptCell, kept);
-      continue;
+      kept = kernels::lensLayerCells(isa, shear, xs, ys, us, vs, depth, begin, n, key, keptSlot, keptCell, kept);
+      return;
     }
     auto clampTo = [](float v, float hi) { return v >= 0.f ? (v <= hi ? v : hi) : 0.f; };
-    for (size_t j = s * planeStride; j < s * planeStride + count; ++j) {
+    for (size_t j = begin; j < begin + n; ++j) {
       const uint32_t col = uint32_t(clampTo(xs[j] - shear.cx * us[j] - shear.x0, shear.maxCol));
       const uint32_t row = uint32_t(clampTo(ys[j] - shear.cy * vs[j] - shear.y0, shear.maxRow));
       keptSlot[kept] = uint32_t(j), keptCell[kept] = key + row * shear.cols + col;
       kept += depth[j] > zMin && (!used || used[(row >> 3) * shear.tileCols + (col >> 3)]);
     }
-  }
+  };
+  if (px0 <= px1 && py0 <= py1)
+    for (size_t s = 0; s < planes; ++s) {
+      const uint32_t key = uint32_t(s / perBlock * cells);
+      const size_t plane = s * planeStride;
+      if (wholeRows) visit(plane + size_t(py0 - y0) * size_t(w), size_t(py1 - py0 + 1) * size_t(w), key);
+      else
+        for (int py = py0; py <= py1; ++py) visit(plane + size_t(py - y0) * size_t(w) + size_t(px0 - x0), size_t(px1 - px0 + 1), key);
+    }
   for (size_t i = 0; i < kept; ++i) ++start[keptCell[i] + 1];
   std::partial_sum(start, start + blocks * cells + 1, start);
   // Scatter: each cell's samples in slot order, with the copies the gather reads.
