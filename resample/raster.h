@@ -142,8 +142,8 @@ struct RasterStats {
   uint64_t lensMicropolygons = 0;           // drawn on the lens path (depth of field)
   uint64_t lensScanned = 0;                 // samples the lens path's gathers examined (in the cells of their search boxes)
   uint64_t lensLayers = 0;                  // times the lens path sorted a bucket's samples for a layer of depths
-  uint64_t lensCulledMicropolygons = 0;     // lens micropolygons whose search box misses every sample of the bucket
   uint64_t lensSparseLayers = 0;            // of those, sorts that left out samples in tiles of cells no search of the layer reaches
+  uint64_t lensCulledMicropolygons = 0;     // lens micropolygons whose search box misses every sample of the bucket
   uint64_t lensSegmentDraws = 0;            // lens draws of moving micropolygons cut at their knots (one per knot segment of a bucket's times)
   uint64_t midIntervalSamples = 0;          // samples laid out at their row's middle time, none drawn (RasterOptions::sampleTimes)
   void add(const RasterStats& o);

@@ -307,7 +307,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   std::vector<float> lensBlockF;    // the lerping chunks' time blocks' spans of their lerp parameter
   LensGrid lensGrid;
   std::vector<uint32_t> lensCellStart, lensCursor;  // [cell]: the cell's first sorted sample; the scatter's cursors
-  std::vector<uint32_t> lensKeptSlot, lensCellOf;   // the samples a layer's sort keeps, in slot order, and their cells
+  std::vector<uint32_t> lensKeptSlot, lensKeptCell;  // the samples a layer's sort keeps, in slot order, and their cells
   std::vector<uint8_t> lensTileUsed;                // [tile of 8 × 8 cells]: some search of the layer reaches it
   SkewedArray<uint32_t> lensSortedIndex{4};         // the sorted samples' slots, times, positions and lens points
   SkewedArray<float> lensSortedT{12}, lensSortedX{20}, lensSortedY{28}, lensSortedU{36}, lensSortedV{44};

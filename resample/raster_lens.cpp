@@ -248,8 +248,9 @@ void BucketRasterizer::Impl::queueLens(const LensChunk& lc, uint32_t chunk, uint
   d.searchBox(0.f, 1.f, q);
   d.qm = 2e-3f + 1e-5f * std::max({std::abs(q[0]), std::abs(q[1]), std::abs(q[2]), std::abs(q[3]), std::abs(cxl), std::abs(cyl), mag + lc.kMag});
   // A search box beyond every sample's sheared position (x - cxl u within the region widened by
-  // |cxl|, |u| <= 1; one pixel more for their rounding) admits none: nothing to draw here.
-  d.searchBox(0.f, 1.f, q);
+  // |cxl|, |u| <= 1; one pixel more for their rounding) admits none: nothing to draw here. (The
+  // box above had qm = 0; widening it by qm is searchBox()'s last step.)
+  q[0] -= d.qm, q[1] += d.qm, q[2] -= d.qm, q[3] += d.qm;
   const float reachX = std::abs(cxl) + 1.f, reachY = std::abs(cyl) + 1.f;
   if (q[1] < float(x0) - reachX || q[0] > float(x0 + w) + reachX || q[3] < float(y0) - reachY || q[2] > float(y0 + h) + reachY) {
     ++stats.lensCulledMicropolygons;
@@ -318,7 +319,7 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
   uint32_t* __restrict start = lensCellStart.data();
   uint32_t* __restrict cursor = lensCursor.data();
   uint32_t* __restrict keptSlot = lensKeptSlot.data();
-  uint32_t* __restrict keptCell = lensCellOf.data();
+  uint32_t* __restrict keptCell = lensKeptCell.data();
   const float* __restrict xs = sx.data();
   const float* __restrict ys = sy.data();
   const float* __restrict ts = st.data();

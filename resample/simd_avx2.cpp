@@ -501,8 +501,7 @@ size_t testMovingLensAvx2(const MovingLensSetup& s, size_t n, EdgeHit* hits) {
   size_t h = 0;
   for (size_t i = 0; i < n; i += 4) {
     const size_t live = n - i < 4 ? n - i : 4;  // lanes past n read padding and are masked off
-    const __m128 f = _mm_loadu_ps(s.f + i);
-    const __m256d fd = _mm256_cvtps_pd(f);
+    const __m256d fd = _mm256_cvtps_pd(_mm_loadu_ps(s.f + i));
     const __m256d Lx = _mm256_mul_pd(radius, _mm256_cvtps_pd(_mm_loadu_ps(s.su + i))), Ly = _mm256_mul_pd(radius, _mm256_cvtps_pd(_mm_loadu_ps(s.sv + i)));
     __m256d Sx[4], Sy[4], Sz[4];
     for (int j = 0; j < 4; ++j) {

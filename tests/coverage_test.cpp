@@ -34,6 +34,15 @@ std::vector<kernels::Isa> vectorIsas() {
   return isas;
 }
 
+// A decided hit against the scalar test's: its triangle, barycentrics and depth (from corner
+// depths zv, the scalar paths' float arithmetic), bit for bit.
+void expectSameHit(const kernels::EdgeHit& vh, int tri, const float bary[3], const float zv[4]) {
+  EXPECT_EQ(int(vh.triangle), tri);
+  for (int k = 0; k < 3; ++k) EXPECT_EQ(vh.b[k], bary[k]);
+  const float z = tri == 0 ? bary[0] * zv[0] + bary[1] * zv[1] + bary[2] * zv[2] : bary[0] * zv[0] + bary[1] * zv[2] + bary[2] * zv[3];
+  EXPECT_EQ(vh.z, z);
+}
+
 bool fixedHit(const Quad& q, const kernels::RasterScale& s, bool cullBack, double x, double y, int& tri, float b[3]) {
   const glm::vec3* p[4] = {&q.p[0], &q.p[1], &q.p[2], &q.p[q.triangle ? 2 : 3]};
   glm::dvec3 E[5];
@@ -284,12 +293,9 @@ TEST(Coverage, VectorKernelsMatchTheScalarReference) {
           ASSERT_EQ(hit, vh != nullptr) << "trial " << trial << " candidate " << i;
           if (!hit) continue;
           ++hitsFound;
-          EXPECT_EQ(int(vh->triangle), tri);
-          for (int k = 0; k < 3; ++k) EXPECT_EQ(vh->b[k], bary[k]);
           float zv[4];
           for (int j = 0; j < 4; ++j) zv[j] = setup.za[j] + f * (setup.zb[j] - setup.za[j]);
-          const float z = tri == 0 ? bary[0] * zv[0] + bary[1] * zv[1] + bary[2] * zv[2] : bary[0] * zv[0] + bary[1] * zv[2] + bary[2] * zv[3];
-          EXPECT_EQ(vh->z, z);
+          expectSameHit(*vh, tri, bary, zv);
         }
       }
     }
@@ -376,11 +382,8 @@ TEST(Coverage, MovingLensKernelMatchesTheScalarTest) {
         ASSERT_EQ(hit, vh != nullptr) << "trial " << trial << " candidate " << i;
         if (!hit) continue;
         ++hitsFound;
-        EXPECT_EQ(int(vh->triangle), tri);
-        for (int k = 0; k < 3; ++k) EXPECT_EQ(vh->b[k], bary[k]);
         const float zv[4] = {float(P[0].z), float(P[1].z), float(P[2].z), float(P[3].z)};
-        const float z = tri == 0 ? bary[0] * zv[0] + bary[1] * zv[1] + bary[2] * zv[2] : bary[0] * zv[0] + bary[1] * zv[2] + bary[2] * zv[3];
-        EXPECT_EQ(vh->z, z);
+        expectSameHit(*vh, tri, bary, zv);
       }
     }
   }
