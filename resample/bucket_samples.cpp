@@ -16,6 +16,7 @@ BucketSamples::BucketSamples(const SamplePattern& p, const ShutterModel& s, int 
       lensPlanes(lensTimeBlocks >= 1),
       lensTimeBlocks(std::max(lensTimeBlocks, 1)),
       drawTimes(drawTimes || lensTimeBlocks > 1),  // time blocks pair lens points with the time strata
+      pixelMajor(!this->drawTimes && !lensPlanes),
       tBase(std::floor(s.earliest())) {}
 
 void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
@@ -23,6 +24,7 @@ void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
   constexpr size_t kLine = 64 / sizeof(float);
   PS = (size_t(P) + kLine - 1) / kLine * kLine;
   if ((PS / kLine) % 2 == 0) PS += kLine;
+  if (pixelMajor) PS = size_t(P);  // no planes to keep apart: N P slots
   const size_t slots = PS * N;
   sampleSlots = slots;
   // The vector kernels read up to 7 floats past a row's end.
@@ -63,37 +65,27 @@ void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
   // Without drawn times: planes in sample order, and one time per row, the middle of its interval.
   if (!drawTimes)
     for (int i = 0; i < N; ++i) stratumOf[size_t(i)] = uint16_t(i);
-  if (!drawTimes && !lensPlanes) {
-    // Plane i holds every pixel's sample i, so each plane's row is written in one contiguous run
-    // (the loop below writes every pixel's samples across all planes: N store streams). The same
-    // values: a third of the instructions of the general loop.
+  if (pixelMajor) {
+    // Each pixel's samples side by side, in sample order: slot p N + i, so idxOf is the identity
+    // and each pixel's samples are written in one run.
     std::vector<int> rowPattern(static_cast<size_t>(w));
     for (int py = 0; py < h; ++py) {
       const int gy = y0 + py;
       const float mid = float(shutter.time(rowGroup[size_t(py)], double(gy) + 0.5, 0.5) - tBase);
       for (int px = 0; px < w; ++px) rowPattern[size_t(px)] = pattern.patternOf(x0 + px, gy);
-      for (int i = 0; i < N; ++i) {
-        const size_t rowAt = size_t(i) * PS + size_t(py) * size_t(w);
-        float* __restrict xs = &sx[rowAt];
-        float* __restrict ys = &sy[rowAt];
-        float* __restrict ts = &st[rowAt];
-        for (int px = 0; px < w; ++px) {
-          const glm::vec2 o = pattern.offset(rowPattern[size_t(px)], i);
-          xs[px] = float(x0 + px) + o.x, ys[px] = float(gy) + o.y, ts[px] = mid;
-        }
-      }
-      // Slot numbers fit 32 bits (idxOf's type): p, p + PS, p + 2 PS, ..., four at a time.
-      const uint32_t planeStride = uint32_t(PS);
+      const size_t rowAt = size_t(py) * size_t(w) * size_t(N);
+      float* __restrict xs = &sx[rowAt];
+      float* __restrict ys = &sy[rowAt];
+      float* __restrict ts = &st[rowAt];
+      uint32_t* __restrict slots = &idxOf[rowAt];
       for (int px = 0; px < w; ++px) {
-        const uint32_t p = uint32_t(py * w + px);
-        uint32_t* slots = &idxOf[size_t(p) * size_t(N)];
-        int i = 0;
-#if defined(__SSE2__)
-        const __m128i step = _mm_set1_epi32(int(4 * planeStride));
-        __m128i four = _mm_add_epi32(_mm_set1_epi32(int(p)), _mm_setr_epi32(0, int(planeStride), int(2 * planeStride), int(3 * planeStride)));
-        for (; i + 4 <= N; i += 4, four = _mm_add_epi32(four, step)) _mm_storeu_si128(reinterpret_cast<__m128i*>(slots + i), four);
-#endif
-        for (; i < N; ++i) slots[i] = p + uint32_t(i) * planeStride;
+        const float fx = float(x0 + px), fy = float(gy);
+        for (int i = 0; i < N; ++i) {
+          const size_t at = size_t(px) * size_t(N) + size_t(i);
+          const glm::vec2 o = pattern.offset(rowPattern[size_t(px)], i);
+          xs[at] = fx + o.x, ys[at] = fy + o.y, ts[at] = mid;
+          slots[at] = uint32_t(rowAt + at);
+        }
       }
     }
   }

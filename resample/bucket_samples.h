@@ -1,7 +1,10 @@
 // A bucket's samples: where and when every sample of a region (bucket interior plus the filter's
-// margin) lies, stored stratum-major (plane s holds each pixel's sample in time stratum s), with
-// the time range of each stratum and shutter group; and the region tests the drawing paths make
-// against it (which pixels a raster box touches, whether a box misses the region).
+// margin) lies, stored stratum-major (plane s holds each pixel's sample in time stratum s) - or,
+// when no sample's time is drawn and there is no lens, pixel-major (each pixel's samples side by
+// side: only the static path draws then, and a micropolygon's samples are a few cache lines
+// instead of one or two per stratum) - with the time range of each stratum and shutter group; and
+// the region tests the drawing paths make against it (which pixels a raster box touches, whether
+// a box misses the region).
 //
 // Sample times are float offsets from one base shared by every bucket (tBase), so a sample's time
 // is the same whichever bucket computes it, and precise at any frame number.
@@ -71,6 +74,10 @@ struct BucketSamples {
   const bool lensPlanes;
   const int lensTimeBlocks;
   const bool drawTimes;
+  /// No drawn times and no lens: sample i of pixel p lies at slot p N + i (idxOf is the identity).
+  /// Only the static path draws then (every part stands still, or the shutter is an instant), and
+  /// it reads the samples through slot() and its gather's rows.
+  const bool pixelMajor;
 
   // Region.
   int x0 = 0, y0 = 0, w = 0, h = 0, P = 0;
@@ -79,8 +86,8 @@ struct BucketSamples {
   // maps to the same L1 set, and a micropolygon's 16 strata evict each other.
   size_t PS = 0;
   size_t sampleSlots = 0;                   // N * PS: the length of every per-sample array
-  SkewedArray<float> sx{0}, sy{8}, st{16};  // stratum-major: [s * PS + p]
-  std::vector<uint32_t> idxOf;              // [p * N + i] → s * PS + p (sample i of pixel p lies in stratum s)
+  SkewedArray<float> sx{0}, sy{8}, st{16};  // [slot(s, p)]
+  std::vector<uint32_t> idxOf;              // [p * N + i] → slot(s, p) (sample i of pixel p lies in stratum s)
   SkewedArray<float> lx{40}, ly{48};        // lensPlanes: the sample's point on the unit disk, [s * PS + p]
   std::vector<uint8_t> rowGroup;            // per region row
   std::vector<uint8_t> groupPresent;
@@ -92,6 +99,9 @@ struct BucketSamples {
   // time itself, so a field rendered alone and the same field inside an interlaced frame get
   // bit-identical times.
   double tBase = 0;
+
+  /// The slot of pixel p's sample in stratum (or plane) s: s PS + p, or p N + s when pixelMajor.
+  size_t slot(int s, size_t p) const { return pixelMajor ? p * size_t(N) + size_t(s) : size_t(s) * PS + p; }
 
   /// Where to test a micropolygon with raster box (bx0, by0)-(bx1, by1): the pixels its box
   /// touches, and the box (widened for float rounding) that each sample must lie in before its

@@ -32,6 +32,7 @@ void RasterStats::add(const RasterStats& o) {
   lensCulledMicropolygons += o.lensCulledMicropolygons;
   lensSegmentDraws += o.lensSegmentDraws;
   midIntervalSamples += o.midIntervalSamples;
+  pixelMajorSamples += o.pixelMajorSamples;
   transparentParts += o.transparentParts;
 }
 
@@ -64,6 +65,7 @@ void BucketRasterizer::Impl::begin(int rx0, int ry0, int rw, int rh) {
   reset(slots);
   stats = RasterStats{};
   if (!drawTimes) stats.midIntervalSamples = uint64_t(P) * uint64_t(N);
+  if (pixelMajor) stats.pixelMajorSamples = uint64_t(P) * uint64_t(N);
   volumesHere = volumes && volumes->touches(double(x0), double(y0), double(x0 + w), double(y0 + h));
   if (volumesHere) volumes->beginRegion(x0, y0, w, h);
   queued.clear(), chunks.clear(), movingTimes.clear();

@@ -146,6 +146,7 @@ struct RasterStats {
   uint64_t lensCulledMicropolygons = 0;     // lens micropolygons whose search box misses every sample of the bucket
   uint64_t lensSegmentDraws = 0;            // lens draws of moving micropolygons cut at their knots (one per knot segment of a bucket's times)
   uint64_t midIntervalSamples = 0;          // samples laid out at their row's middle time, none drawn (RasterOptions::sampleTimes)
+  uint64_t pixelMajorSamples = 0;           // of those, laid out pixel-major (no lens: BucketSamples::pixelMajor)
   void add(const RasterStats& o);
 };
 

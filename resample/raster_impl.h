@@ -17,6 +17,7 @@
 #include <memory>
 #include <vector>
 
+#include "common/check.h"
 #include "resample/bucket_samples.h"
 #include "resample/coverage.h"
 #include "resample/gather.h"
@@ -103,6 +104,9 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   // any) in pixels [px0, px1] × [py0, py1] that lie in `box` at their own time and inside the
   // source's coverage; returns the new count.
   size_t gatherCandidates(int s0, int s1, int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover, float zCull, size_t n);
+  // gatherCandidates() of every stratum when the samples are pixel-major: each row of the box's
+  // pixels is one run of their samples.
+  size_t gatherPixelMajor(int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover, float zCull, size_t n);
   // The candidate arrays from entry n on.
   kernels::Candidates candidateList(size_t n = 0) { return kernels::Candidates{candidates.data(), candT.data(), candX.data(), candY.data()}.from(n); }
 
@@ -387,6 +391,10 @@ inline glm::vec3 positionAt(const store::TilePart& part, const store::Schedule& 
 // branches would mispredict.
 inline size_t BucketRasterizer::Impl::gatherCandidates(int s0, int s1, int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover,
                                                        float zCull, size_t n) {
+  if (pixelMajor) {
+    CHECK(s0 == 0 && s1 == N, "pixel-major samples are gathered for every stratum at once");
+    return gatherPixelMajor(g, px0, py0, px1, py1, box, cover, zCull, n);
+  }
   if (vectorKernels && !cover.check) {
     const kernels::SampleRows rows{st.data(),
                                    sx.data(),
@@ -423,6 +431,37 @@ inline size_t BucketRasterizer::Impl::gatherCandidates(int s0, int s1, int g, in
         n += in;
       }
     }
+  return n;
+}
+
+inline size_t BucketRasterizer::Impl::gatherPixelMajor(int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover, float zCull,
+                                                       size_t n) {
+  const size_t rowSamples = size_t(w) * size_t(N), first = size_t(py0 - y0) * rowSamples + size_t(px0 - x0) * size_t(N);
+  const int cols = (px1 - px0 + 1) * N, rows = py1 - py0 + 1;
+  const uint8_t* groups = multiGroup && g >= 0 ? &rowGroup[size_t(py0 - y0)] : nullptr;
+  if (vectorKernels && !cover.check) {
+    const kernels::SampleRows r{st.data(), sx.data(), sy.data(), first, rowSamples, cols, rows, groups, uint8_t(g), 1, sampleSlots, zbuf.data(), zCull};
+    return kernels::gatherInBox(isa, r, box, candidateList(), n);
+  }
+  uint32_t* __restrict cand = candidates.data();
+  float* __restrict ct = candT.data();
+  float* __restrict cx = candX.data();
+  float* __restrict cy = candY.data();
+  for (int row = 0; row < rows; ++row) {
+    if (groups && groups[row] != g) continue;
+    const size_t rowStart = first + size_t(row) * rowSamples;
+    for (int col = 0; col < cols; ++col) {
+      const uint32_t idx = uint32_t(rowStart + size_t(col));
+      const float t = st[idx];
+      const float u = std::min(std::max((t - box.thetaA) * box.invLen, 0.f), 1.f);
+      const float x = sx[idx], y = sy[idx];
+      bool in = (x >= box.x0 + u * box.dx0) & (x <= box.x1 + u * box.dx1) & (y >= box.y0 + u * box.dy0) & (y <= box.y1 + u * box.dy1);
+      if (cover.check) in &= Source::covers(double(t), cover.lo, cover.hi, cover.openEnd);
+      in &= zbuf[idx] > zCull;
+      cand[n] = idx, ct[n] = t, cx[n] = x, cy[n] = y;
+      n += in;
+    }
+  }
   return n;
 }
 

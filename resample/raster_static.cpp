@@ -84,7 +84,7 @@ void BucketRasterizer::Impl::rasterizeStatic(const Source& src, const TilePart& 
       for (int px = px0; px <= px1; ++px) {
         const size_t p = size_t(py - y0) * w + size_t(px - x0);
         for (int s = 0; s < N; ++s) {
-          const size_t idx = size_t(s) * PS + p;
+          const size_t idx = slot(s, p);
           if (sx[idx] < sbx0 || sx[idx] > sbx1 || sy[idx] < sby0 || sy[idx] > sby1) continue;
           if (checkCover && !Source::covers(tBase + st[idx], covLo, covHi, src.endShared)) continue;
           if (!(zbuf[idx] > zCull)) continue;  // the early depth test

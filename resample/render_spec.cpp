@@ -27,7 +27,8 @@ std::string RenderStats::report() const {
   const double ste = raster.sampleTests ? double(raster.hits) / double(raster.sampleTests) : 0.0;
   s << std::fixed;
   s << "  samples            " << samples << " (" << buckets << " buckets)\n";
-  if (raster.midIntervalSamples) s << "  sample times       none drawn (an instant, or nothing in the render reads them)\n";
+  if (raster.midIntervalSamples)
+    s << "  sample times       none drawn (an instant, or nothing in the render reads them)" << (raster.pixelMajorSamples ? "; samples pixel-major" : "") << "\n";
   s << "  sample tests       " << raster.sampleTests << "\n";
   s << "  hits               " << raster.hits << "\n";
   s << "  test efficiency    " << ste << " (hits / tests)\n";

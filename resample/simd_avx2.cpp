@@ -176,8 +176,8 @@ __attribute__((always_inline)) inline size_t gatherRows(const BoxLanes& b, const
         const __m256 t = _mm256_loadu_ps(r.st + at), x = _mm256_loadu_ps(r.sx + at), y = _mm256_loadu_ps(r.sy + at);
         const __m256 visible = _mm256_cmp_ps(_mm256_loadu_ps(r.depth + at), zCull, _CMP_GT_OQ);
         const __m256i live = _mm256_cmpgt_epi32(_mm256_set1_epi32(r.cols - c), lane);
-        n = appendLanes(_mm256_and_ps(insideAtOwnTime(b, t, x, y), visible), live, _mm256_add_epi32(_mm256_set1_epi32(int(uint32_t(at))), lane), t, x, y, out,
-                        n);
+        const __m256 in = kFixed ? insideFixed(b, x, y) : insideAtOwnTime(b, t, x, y);
+        n = appendLanes(_mm256_and_ps(in, visible), live, _mm256_add_epi32(_mm256_set1_epi32(int(uint32_t(at))), lane), t, x, y, out, n);
       }
     }
   return n;

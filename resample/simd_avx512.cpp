@@ -153,6 +153,24 @@ size_t gatherRows512(const BoxLanes512& b, const SampleRows& r, const Candidates
       return n;
     }
   }
+  if (r.planes == 1 && r.cols >= 8) {
+    // Long rows (pixel-major samples: a row of pixels is one run of their samples): sixteen
+    // consecutive samples a vector, the row's end masked off.
+    const __m512i lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
+    for (int row = 0; row < r.rows; ++row) {
+      if (r.rowGroup && r.rowGroup[row] != r.group) continue;
+      const size_t base = r.first + size_t(row) * r.stride;
+      for (int c = 0; c < r.cols; c += 16) {
+        const size_t at = base + size_t(c);
+        const __mmask16 live = r.cols - c >= 16 ? __mmask16(0xFFFF) : __mmask16((1u << (r.cols - c)) - 1);
+        const __m512 t = _mm512_maskz_loadu_ps(live, r.st + at), x = _mm512_maskz_loadu_ps(live, r.sx + at), y = _mm512_maskz_loadu_ps(live, r.sy + at);
+        const __mmask16 visible = _mm512_mask_cmp_ps_mask(live, _mm512_maskz_loadu_ps(live, r.depth + at), zCull, _CMP_GT_OQ);
+        const __mmask16 k = kFixed ? insideFixed512(visible, b, x, y) : insideAtOwnTime512(visible, b, t, x, y);
+        n = appendCompressed512(out, n, k, _mm512_add_epi32(_mm512_set1_epi32(int(uint32_t(at))), lane), t, x, y);
+      }
+    }
+    return n;
+  }
   Segments seg;
   for (int plane = 0; plane < r.planes; ++plane) {
     const size_t planeBase = r.first + size_t(plane) * r.planeStride;

@@ -539,12 +539,18 @@ TEST(ResampleHard, UntimedSamplesGiveTheImageOfDrawnTimes) {
         drawn = render(spec);
         spec.raster.skipUnreadTimes = true;
         EXPECT_EQ(drawn->stats.raster.midIntervalSamples, 0u) << what;
+        EXPECT_EQ(drawn->stats.raster.pixelMajorSamples, 0u) << what;
         ASSERT_GT(drawn->stats.raster.hits, 0u) << what;
       }
       const RenderResult skipped = render(spec);
       EXPECT_GE(skipped.stats.raster.midIntervalSamples, skipped.stats.samples) << what;  // every sample, margins included
       if (shutter == 5) {
         EXPECT_GT(skipped.stats.raster.lensMicropolygons, 0u) << what;
+        EXPECT_EQ(skipped.stats.raster.pixelMajorSamples, 0u) << what;  // lens planes
+      } else {
+        // Without a lens the skipped render's samples are pixel-major: the layout the drawn
+        // render's stratum planes are held to.
+        EXPECT_EQ(skipped.stats.raster.pixelMajorSamples, skipped.stats.raster.midIntervalSamples) << what;
       }
       expectSameOutputs(skipped, *drawn, what);
     }
@@ -553,21 +559,29 @@ TEST(ResampleHard, UntimedSamplesGiveTheImageOfDrawnTimes) {
   // not, and so is the moving image.
   auto moving = syntheticStore(dir, SyntheticCase{"moving", 3, 8, 0.2}, 4000, 5);
   EXPECT_EQ(render(comparisonSpec(moving, 0)).stats.raster.midIntervalSamples, 0u);
-  RenderSpec instant = comparisonSpec(moving, 3);
-  instant.deep = true;
-  std::optional<RenderResult> drawn;
-  for (const KernelSet& k : kernelSets()) {
-    instant.raster.vectorKernels = k.vector, instant.raster.avx512Kernels = k.avx512;
-    if (!drawn) {
-      instant.raster.skipUnreadTimes = false;
-      drawn = render(instant);
-      instant.raster.skipUnreadTimes = true;
-      EXPECT_EQ(drawn->stats.raster.midIntervalSamples, 0u) << k.name;
+  // Two instants as interlaced fields too: each field's rows drawn at its own instant.
+  for (int fields = 0; fields < 2; ++fields) {
+    RenderSpec instant = comparisonSpec(moving, 3);
+    if (fields) instant.shutter = ShutterModel::fields({1.6, 1.6}, {1.7, 1.7}, 0);
+    instant.deep = true;
+    std::optional<RenderResult> drawn;
+    for (const KernelSet& k : kernelSets()) {
+      const std::string what = std::string(fields ? "moving at two field instants, " : "moving at an instant, ") + k.name;
+      instant.raster.vectorKernels = k.vector, instant.raster.avx512Kernels = k.avx512;
+      if (!drawn) {
+        instant.raster.skipUnreadTimes = false;
+        drawn = render(instant);
+        instant.raster.skipUnreadTimes = true;
+        EXPECT_EQ(drawn->stats.raster.midIntervalSamples, 0u) << what;
+      }
+      const RenderResult skipped = render(instant);
+      EXPECT_GT(skipped.stats.raster.midIntervalSamples, 0u) << what;
+      EXPECT_EQ(skipped.stats.raster.pixelMajorSamples, skipped.stats.raster.midIntervalSamples) << what;
+      // One instant: some are culled; two: each field draws them at its own instant.
+      if (fields) EXPECT_GT(skipped.stats.raster.staticMicropolygons, skipped.stats.raster.micropolygons) << what;
+      else EXPECT_LT(skipped.stats.raster.staticMicropolygons, skipped.stats.raster.micropolygons) << what;
+      expectSameOutputs(skipped, *drawn, what);
     }
-    const RenderResult skipped = render(instant);
-    EXPECT_GT(skipped.stats.raster.midIntervalSamples, 0u) << k.name;
-    EXPECT_LT(skipped.stats.raster.staticMicropolygons, skipped.stats.raster.micropolygons) << k.name;  // some took a moving path
-    expectSameOutputs(skipped, *drawn, std::string("moving at an instant, ") + k.name);
   }
   // So does a render where a store covers only part of the shutter.
   RenderSpec beyond = comparisonSpec(reader, 0);
@@ -681,6 +695,71 @@ TEST(ResampleHard, OcclusionKeepsNearerSurfacesDrawnLast) {
     for (auto [a, b] : {std::pair{0.0, 1.0}, std::pair{0.3, 0.55}, std::pair{0.5, 0.5 + 1e-7}, std::pair{0.5 + 3e-8, 0.5 + 6e-8}})
       EXPECT_LT(compareWithRayCaster(s, dir.path("layers.mps"), a, b), 3e-3) << knots[1] << " " << a << ":" << b;
   }
+}
+
+// The box gather (kernels::gatherInBox) against its definition, restated here: every sample of
+// the rows whose position lies in the box at its own time and whose depth lies beyond zCull,
+// each once, with copies of its time and position. Row layouts as the rasterizer makes them:
+// stratum planes of short rows, and pixel-major rows (one plane, a pixel's samples side by
+// side) long enough for the whole-vector loads; fixed and moving boxes; with and without a
+// row-group filter (fields).
+TEST(ResampleHard, BoxGathersFindExactlyTheSamplesInTheBox) {
+  if (!kernels::available()) GTEST_SKIP() << "this CPU has no AVX2";
+  Rng rng(71);
+  const size_t slots = 4096;
+  std::vector<float> st(slots + 16), sx(slots + 16), sy(slots + 16), depth(slots + 16);
+  for (size_t i = 0; i < slots + 16; ++i) {
+    st[i] = float(rng.uniform()), sx[i] = float(rng.uniform() * 8), sy[i] = float(rng.uniform() * 8);
+    depth[i] = float(1 + rng.uniform());
+  }
+  const std::vector<uint8_t> groups = {0, 1, 0, 1, 0, 1, 0, 1};
+  std::vector<uint32_t> index(slots + 16);
+  std::vector<float> ct(slots + 16), cx(slots + 16), cy(slots + 16);
+  const kernels::Candidates out{index.data(), ct.data(), cx.data(), cy.data()};
+  size_t longRowGathers = 0;
+  for (int trial = 0; trial < 400; ++trial) {
+    const bool pixelMajor = trial % 2, moving = trial % 4 >= 2, grouped = trial % 8 >= 4;
+    kernels::SampleRows r{st.data(), sx.data(), sy.data(), 0, 0, 0, 0};
+    r.rows = 1 + int(rng.below(4));
+    r.cols = pixelMajor ? 16 * (1 + int(rng.below(3))) - int(rng.below(4)) : 1 + int(rng.below(6));
+    r.planes = pixelMajor ? 1 : 1 + int(rng.below(16));
+    r.stride = size_t(r.cols) + rng.below(8);
+    r.planeStride = r.stride * size_t(r.rows) + rng.below(8);
+    r.first = rng.below(64);
+    r.depth = depth.data(), r.zCull = float(1 + rng.uniform() * 0.5);
+    if (grouped) r.rowGroup = groups.data(), r.group = uint8_t(rng.below(2));
+    ASSERT_LE(r.first + size_t(r.planes - 1) * r.planeStride + size_t(r.rows - 1) * r.stride + size_t(r.cols), slots);
+    kernels::MovingBox box{float(rng.uniform() * 4), 0, float(4 + rng.uniform() * 4), 0, float(rng.uniform() * 4), 0, float(4 + rng.uniform() * 4), 0};
+    if (moving) box.dx0 = box.dx1 = float(rng.uniform() * 2 - 1), box.dy0 = box.dy1 = float(rng.uniform() * 2 - 1), box.thetaA = 0.2f, box.invLen = 1.5f;
+    // The definition, in the kernels' float operations.
+    std::vector<uint32_t> expected;
+    for (int plane = 0; plane < r.planes; ++plane)
+      for (int row = 0; row < r.rows; ++row) {
+        if (r.rowGroup && r.rowGroup[row] != r.group) continue;
+        for (int col = 0; col < r.cols; ++col) {
+          const size_t i = r.first + size_t(plane) * r.planeStride + size_t(row) * r.stride + size_t(col);
+          const float u = std::min(std::max((st[i] - box.thetaA) * box.invLen, 0.f), 1.f);
+          const bool in = sx[i] >= box.x0 + u * box.dx0 && sx[i] <= box.x1 + u * box.dx1 && sy[i] >= box.y0 + u * box.dy0 && sy[i] <= box.y1 + u * box.dy1;
+          if (in && depth[i] > r.zCull) expected.push_back(uint32_t(i));
+        }
+      }
+    for (kernels::Isa isa : {kernels::Isa::Avx2, kernels::Isa::Avx512}) {
+      if (!kernels::available(isa)) continue;
+      SCOPED_TRACE(std::string(isa == kernels::Isa::Avx512 ? "avx512" : "avx2") + " trial " + std::to_string(trial));
+      const size_t n = kernels::gatherInBox(isa, r, box, out, 3);  // appended after three entries
+      ASSERT_GE(n, 3u);
+      std::vector<uint32_t> got(index.begin() + 3, index.begin() + std::ptrdiff_t(n));
+      for (size_t k = 3; k < n; ++k) {
+        EXPECT_EQ(ct[k], st[index[k]]);
+        EXPECT_EQ(cx[k], sx[index[k]]);
+        EXPECT_EQ(cy[k], sy[index[k]]);
+      }
+      std::sort(got.begin(), got.end());
+      EXPECT_EQ(got, expected);
+    }
+    longRowGathers += pixelMajor && !expected.empty();
+  }
+  EXPECT_GT(longRowGathers, 100u);  // the long rows' loads found samples
 }
 
 // The vector edge test's three outcomes on a hand-made triangle: a sample inside is a hit with
