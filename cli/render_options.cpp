@@ -54,7 +54,11 @@ void RenderOptions::addTo(CLI::App* app) {
       ->check(CLI::Range(0.0, 1.0))
       ->group("Compositing");
   app->add_flag("--backface-cull", backfaceCull, "Knock out micropolygons facing away (unless two-sided)")->group("Compositing");
-  app->add_option("--bucket", bucket, "Bucket size in pixels")->capture_default_str()->group("Performance");
+  app->add_option("--bucket", bucket,
+                  "Bucket size in pixels; 0 (the default) chooses: 64 when nothing reads the samples' times and there is no lens (a motion-free "
+                  "store, or an instant), else 96 (measured: bench/RESULTS.md); the image is the same for any size")
+      ->capture_default_str()
+      ->group("Performance");
   app->add_option("--cache-mb", cacheMb,
                   "Decoded tile cache per store, MB (parts leave it after their last bucket; the budget bounds what a sequence keeps for its next frame)")
       ->capture_default_str()

@@ -22,7 +22,7 @@ struct RenderOptions {
   std::vector<int> res;   // W H
   std::vector<int> crop;  // x0 x1 y0 y1 (pixels, end exclusive)
   uint64_t seed = 0;
-  int bucket = resample::kDefaultBucketSize;
+  int bucket = resample::kAutoBucketSize;
   double opacityThreshold = 0.996;
   bool backfaceCull = false;
   bool half = false;

@@ -26,7 +26,7 @@ std::string RenderStats::report() const {
   s.precision(3);
   const double ste = raster.sampleTests ? double(raster.hits) / double(raster.sampleTests) : 0.0;
   s << std::fixed;
-  s << "  samples            " << samples << " (" << buckets << " buckets)\n";
+  s << "  samples            " << samples << " (" << buckets << " buckets of " << bucketSize << " px)\n";
   if (raster.midIntervalSamples)
     s << "  sample times       none drawn (an instant, or nothing in the render reads them)" << (raster.pixelMajorSamples ? "; samples pixel-major" : "") << "\n";
   s << "  sample tests       " << raster.sampleTests << "\n";

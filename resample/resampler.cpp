@@ -170,7 +170,7 @@ Window validateSpec(const RenderSpec& spec) {
       fail("--crop", "the crop window ", spec.cropX0, " ", spec.cropX1, " ", spec.cropY0, " ", spec.cropY1, " lies outside the ", w.W, "x", w.H, " image");
   }
   if (spec.samplesX < 1 || spec.samplesY < 1 || spec.samplesX * spec.samplesY > 4096) fail("--spp", "samples per pixel must be 1 to 4096");
-  if (spec.bucketSize < 4 || spec.bucketSize > 1024) fail("--bucket", "bucket size must be 4 to 1024");
+  if (spec.bucketSize != kAutoBucketSize && (spec.bucketSize < 4 || spec.bucketSize > 1024)) fail("--bucket", "bucket size must be 4 to 1024 (or 0: chosen per render)");
   return w;
 }
 
@@ -246,8 +246,7 @@ struct Plan {
         N(pattern.spp()),
         aovs(resolveAovs(spec.aovs, meta0.schema, spec.filter)),
         mainTable(spec.filter, pattern),
-        aovTables(aovFilterTables(aovs, pattern)),
-        buckets(planBuckets(win, spec.bucketSize)) {
+        aovTables(aovFilterTables(aovs, pattern)) {
     // Samples beyond the bucket: as many pixels as the widest filter reaches.
     margin = mainTable.margin();
     for (const auto& t : aovTables) margin = std::max(margin, t->margin());
@@ -281,6 +280,9 @@ struct Plan {
       volumes = std::move(scene);
     }
     rasterOptions.sampleTimes = !rasterOptions.skipUnreadTimes || drawsSampleTimes(sources, shutter, carried, volumes != nullptr);
+    // What the samples' layout gains from (kStillBucketSize's comment), known only now.
+    bucketSize = spec.bucketSize != kAutoBucketSize ? spec.bucketSize : !rasterOptions.sampleTimes && !view.lens() ? kStillBucketSize : kBucketSize;
+    buckets = planBuckets(win, bucketSize);
     if (volumes) {
       volumeCamera.ax = view.ax, volumeCamera.bx = view.bx, volumeCamera.ay = view.ay, volumeCamera.by = view.by;
       volumeCamera.perspective = view.perspective;
@@ -309,7 +311,8 @@ struct Plan {
   const std::vector<AovChannel> aovs;
   const FilterTable mainTable;                                // R G B A
   const std::vector<std::unique_ptr<FilterTable>> aovTables;  // per output variable
-  const std::vector<Bucket> buckets;
+  int bucketSize = 0;
+  std::vector<Bucket> buckets;
   /// Per source: its parts carried into `cam` when its primary camera stands elsewhere, else null.
   std::vector<std::unique_ptr<const CarriedStore>> carried;
   std::vector<uint8_t> unseen;  // per output pixel (W × H), from another camera: 1 where no shading camera looked
@@ -755,6 +758,7 @@ RenderResult render(const RenderSpec& spec) {
   progress.finish();
 
   addThreadStats(threads, result.stats);
+  result.stats.bucketSize = plan.bucketSize;
   if (plan.volumeLighting) result.stats.volumes.shadowSteps += plan.volumeLighting->buildSteps();
   result.stats.wallSeconds = secondsBetween(wallStart, Clock::now());
   addCacheStats(cacheBefore, result.stats);

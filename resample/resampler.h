@@ -30,9 +30,15 @@ struct AovRequest {
   static AovRequest parse(const std::string& text, const std::string& where);
 };
 
-/// Buckets of 96×96 pixels: with the vector kernels 10 % less CPU than 64 and 30 % less than 32,
-/// within the noise of 48 and 128 (bench/RESULTS.md); images are the same for any size.
-inline constexpr int kDefaultBucketSize = 96;
+/// Bucket sizes, measured (bench/RESULTS.md); images are the same for any size. RenderSpec's
+/// default, kAutoBucketSize, picks one per render: kStillBucketSize where the samples are
+/// pixel-major (no time drawn, no lens: BucketSamples::pixelMajor), whose static path gathers a
+/// micropolygon's samples from a few cache lines and gains from a bucket that stays in L2 (64:
+/// 5-10 % less render wall than 96); else kBucketSize (with motion, 10 % less CPU than 64 and 30 %
+/// less than 32, within the noise of 48 and 128; through a lens 64 is 10 % slower).
+inline constexpr int kBucketSize = 96;
+inline constexpr int kStillBucketSize = 64;
+inline constexpr int kAutoBucketSize = 0;
 
 struct RenderSpec {
   std::vector<Source> sources;  // stores in time order; sources[0] sets camera and schema
@@ -45,7 +51,7 @@ struct RenderSpec {
   FilterSpec filter;  // for R G B A (Z always takes zmin)
   std::vector<AovRequest> aovs;
   RasterOptions raster;
-  int bucketSize = kDefaultBucketSize;
+  int bucketSize = kAutoBucketSize;  // pixels; kAutoBucketSize: chosen per render
   size_t cacheBytes = size_t(256) << 20;  // decoded-part cache per store
   /// A decoded part leaves its store's cache once the last bucket that needs it is done with it
   /// (StoreReader::release), so that memory is reused rather than grown to the cache budget.
@@ -96,6 +102,7 @@ int lensTimeBlocks(const RenderSpec& spec);
 struct RenderStats {
   RasterStats raster;
   int buckets = 0;
+  int bucketSize = 0;  // the size the render used (RenderSpec::bucketSize, or the one it chose)
   // Summed over threads. setup: the bucket's samples and its part list; parts: fetching parts,
   // which is decoding them, or waiting while another thread decodes one both buckets need.
   double setupSeconds = 0, partsSeconds = 0, rasterSeconds = 0, resolveSeconds = 0, filterSeconds = 0;

@@ -552,6 +552,10 @@ TEST(ResampleHard, UntimedSamplesGiveTheImageOfDrawnTimes) {
         // render's stratum planes are held to.
         EXPECT_EQ(skipped.stats.raster.pixelMajorSamples, skipped.stats.raster.midIntervalSamples) << what;
       }
+      // The bucket size chosen for each layout (the spec leaves it to the render).
+      EXPECT_EQ(spec.bucketSize, kAutoBucketSize);
+      EXPECT_EQ(skipped.stats.bucketSize, skipped.stats.raster.pixelMajorSamples ? kStillBucketSize : kBucketSize) << what;
+      EXPECT_EQ(drawn->stats.bucketSize, kBucketSize) << what;
       expectSameOutputs(skipped, *drawn, what);
     }
   }
