@@ -179,7 +179,7 @@ struct ProjectionScale {
 /// Points p_i = a_i + f (b_i - a_i) for i < n (a and b: xyz triples), projected: x[i], y[i] their
 /// raster position (x[i] NaN where there is none, y[i] then unspecified), z[i] the depth p_i.z;
 /// project()'s operations, bit for bit. Returns whether any x is NaN; box = min x, min y, max x,
-/// max y over the others.
+/// max y over the others. With b == a (a still chunk) p_i is a_i itself, not lerped.
 bool projectLerped(Isa isa, const float* a, const float* b, float f, size_t n, const ProjectionScale& scale, float* x, float* y, float* z, float box[4]);
 
 }  // namespace reshutter::resample::kernels

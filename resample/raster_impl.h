@@ -149,6 +149,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   void testStatic(const HitContext& hc, uint32_t m, const uint32_t* c, bool tri, const glm::dvec3 E[5], const float zv[4], uint32_t idx);
 
   std::vector<float> projX, projY;  // per chunk vertex (static) or [(v - vBase) * T + theta] (moving); projX NaN = before the near plane
+  std::vector<float> projZ;         // the static path's vertex depths, as the projection kernel writes them
 
   // ------------------------------------------------------------------------------------------
   // The moving path (raster_moving.cpp)

@@ -19,12 +19,23 @@ void BucketRasterizer::Impl::rasterizeStatic(const Source& src, const TilePart& 
   const bool checkCover = !Source::covers(tMin, covLo, covHi, src.endShared) || !Source::covers(tMax, covLo, covHi, src.endShared);
   const uint32_t vBase = ch.vLo, nV = ch.vHi - ch.vLo + 1;
   projX.resize(nV), projY.resize(nV);
-  // Each vertex is projected once, not once per micropolygon that shares it (about four).
-  for (size_t i = 0; i < nV; ++i)
-    if (!project(chunkPos[i], projX[i], projY[i])) projX[i] = NAN;
-  // A chunk wholly outside the region (a part's edge beyond the bucket, usually) is dropped
-  // whole: its box and margin bound every micropolygon's, so testArea() would reject each.
-  if (pointsMissRegion(projX.data(), projY.data(), nV, 1.f)) {
+  // Each vertex is projected once, not once per micropolygon that shares it (about four). A
+  // chunk wholly outside the region (a part's edge beyond the bucket, usually) is dropped whole:
+  // its box and margin bound every micropolygon's, so testArea() would reject each.
+  bool missesRegion;
+  if (vectorKernels) {
+    // project()'s values eight at a time, with the chunk's box (pointsMissRegion()'s, over
+    // the same points).
+    projZ.resize(nV);
+    float box[4];
+    const bool unbounded = kernels::projectLerped(isa, &chunkPos[0].x, &chunkPos[0].x, 0.f, nV, projectionScale, projX.data(), projY.data(), projZ.data(), box);
+    missesRegion = !unbounded && boxMissesRegion(box[0], box[1], box[2], box[3], 1.f);
+  } else {
+    for (size_t i = 0; i < nV; ++i)
+      if (!project(chunkPos[i], projX[i], projY[i])) projX[i] = NAN;
+    missesRegion = pointsMissRegion(projX.data(), projY.data(), nV, 1.f);
+  }
+  if (missesRegion) {
     stats.chunkCulledMicropolygons += ch.m1 - ch.m0;
     return;
   }

@@ -532,21 +532,30 @@ size_t testMovingLensAvx2(const MovingLensSetup& s, size_t n, EdgeHit* hits) {
 
 }  // namespace
 
+namespace {
+
+// Points i .. i + 7 of an xyz-triple array as x, y and z vectors (three loads, blends and lane
+// permutes in place of 24 scalar loads).
+inline void pointsOf8(const float* p, __m256& x, __m256& y, __m256& z) {
+  const __m256 m0 = _mm256_loadu_ps(p), m1 = _mm256_loadu_ps(p + 8), m2 = _mm256_loadu_ps(p + 16);
+  // m0 = x0 y0 z0 x1 y1 z1 x2 y2, m1 = z2 x3 y3 z3 x4 y4 z4 x5, m2 = y5 z5 x6 y6 z6 x7 y7 z7
+  x = _mm256_permutevar8x32_ps(_mm256_blend_ps(_mm256_blend_ps(m0, m1, 0x92), m2, 0x24), _mm256_setr_epi32(0, 3, 6, 1, 4, 7, 2, 5));
+  y = _mm256_permutevar8x32_ps(_mm256_blend_ps(_mm256_blend_ps(m0, m1, 0x24), m2, 0x49), _mm256_setr_epi32(1, 4, 7, 2, 5, 0, 3, 6));
+  z = _mm256_permutevar8x32_ps(_mm256_blend_ps(_mm256_blend_ps(m0, m1, 0x49), m2, 0x92), _mm256_setr_epi32(2, 5, 0, 3, 6, 1, 4, 7));
+}
+
+}  // namespace
+
 bool avx2::projectLerped(const float* a, const float* b, float f, size_t n, const ProjectionScale& s, float* xo, float* yo, float* zo, float box[4]) {
   const __m128 fv = _mm_set1_ps(f), nearClip = _mm_set1_ps(s.nearClip), inf = _mm_set1_ps(INFINITY), absMask = _mm_castsi128_ps(_mm_set1_epi32(0x7FFFFFFF));
   const __m256d ax = _mm256_set1_pd(s.ax), bx = _mm256_set1_pd(s.bx), ay = _mm256_set1_pd(s.ay), by = _mm256_set1_pd(s.by), one = _mm256_set1_pd(1.0);
+  // The same points at both ends (a still chunk): no lerp, so that p is a itself (a + 0 (a - a)
+  // would turn -0 into +0).
+  const bool lerp = a != b;
   __m128 lo_x = inf, lo_y = inf, hi_x = _mm_set1_ps(-INFINITY), hi_y = hi_x;
   int bad = 0;
-  for (size_t i = 0; i < n; i += 4) {
-    // Lanes past n repeat the last point (harmless to the box) and are not stored.
-    size_t at[4];
-    for (size_t l = 0; l < 4; ++l) at[l] = 3 * (i + l < n ? i + l : n - 1);
-    auto lane = [&](const float* p, int k) { return _mm_setr_ps(p[at[0] + k], p[at[1] + k], p[at[2] + k], p[at[3] + k]); };
-    __m128 p[3];
-    for (int k = 0; k < 3; ++k) {
-      const __m128 pa = lane(a, k);
-      p[k] = _mm_add_ps(pa, _mm_mul_ps(fv, _mm_sub_ps(lane(b, k), pa)));  // a + f * (b - a), glm's order
-    }
+  // Four points' projection: stored at i (only the first `count`), and into the box.
+  auto project4 = [&](const __m128 p[3], size_t i, size_t count) {
     const __m256d px = _mm256_cvtps_pd(p[0]), py = _mm256_cvtps_pd(p[1]);
     __m128 x, y, ok;
     if (s.perspective) {
@@ -564,13 +573,39 @@ bool avx2::projectLerped(const float* a, const float* b, float f, size_t n, cons
     bad |= _mm_movemask_ps(ok) ^ 0xF;
     lo_x = _mm_min_ps(lo_x, _mm_blendv_ps(inf, x, ok)), hi_x = _mm_max_ps(hi_x, _mm_blendv_ps(_mm_set1_ps(-INFINITY), x, ok));
     lo_y = _mm_min_ps(lo_y, _mm_blendv_ps(inf, y, ok)), hi_y = _mm_max_ps(hi_y, _mm_blendv_ps(_mm_set1_ps(-INFINITY), y, ok));
-    if (i + 4 <= n) {
+    if (count == 4) {
       _mm_storeu_ps(xo + i, x), _mm_storeu_ps(yo + i, y), _mm_storeu_ps(zo + i, p[2]);
     } else {
       alignas(16) float tx[4], ty[4], tz[4];
       _mm_store_ps(tx, x), _mm_store_ps(ty, y), _mm_store_ps(tz, p[2]);
-      for (size_t l = 0; i + l < n; ++l) xo[i + l] = tx[l], yo[i + l] = ty[l], zo[i + l] = tz[l];
+      for (size_t l = 0; l < count; ++l) xo[i + l] = tx[l], yo[i + l] = ty[l], zo[i + l] = tz[l];
     }
+  };
+  size_t i = 0;
+  // Eight whole points at a time, read as three vectors of each end.
+  for (; i + 8 <= n; i += 8) {
+    __m256 p8[3];
+    pointsOf8(a + 3 * i, p8[0], p8[1], p8[2]);
+    if (lerp) {
+      __m256 q8[3];
+      pointsOf8(b + 3 * i, q8[0], q8[1], q8[2]);
+      for (int k = 0; k < 3; ++k) p8[k] = _mm256_add_ps(p8[k], _mm256_mul_ps(_mm256_set1_ps(f), _mm256_sub_ps(q8[k], p8[k])));  // a + f * (b - a), glm's order
+    }
+    const __m128 lo[3] = {_mm256_castps256_ps128(p8[0]), _mm256_castps256_ps128(p8[1]), _mm256_castps256_ps128(p8[2])};
+    const __m128 hi[3] = {_mm256_extractf128_ps(p8[0], 1), _mm256_extractf128_ps(p8[1], 1), _mm256_extractf128_ps(p8[2], 1)};
+    project4(lo, i, 4), project4(hi, i + 4, 4);
+  }
+  for (; i < n; i += 4) {
+    // Lanes past n repeat the last point (harmless to the box) and are not stored.
+    size_t at[4];
+    for (size_t l = 0; l < 4; ++l) at[l] = 3 * (i + l < n ? i + l : n - 1);
+    auto lane = [&](const float* p, int k) { return _mm_setr_ps(p[at[0] + k], p[at[1] + k], p[at[2] + k], p[at[3] + k]); };
+    __m128 p[3];
+    for (int k = 0; k < 3; ++k) {
+      const __m128 pa = lane(a, k);
+      p[k] = lerp ? _mm_add_ps(pa, _mm_mul_ps(fv, _mm_sub_ps(lane(b, k), pa))) : pa;  // a + f * (b - a), glm's order
+    }
+    project4(p, i, std::min<size_t>(4, n - i));
   }
   alignas(16) float r[4][4];
   _mm_store_ps(r[0], lo_x), _mm_store_ps(r[1], lo_y), _mm_store_ps(r[2], hi_x), _mm_store_ps(r[3], hi_y);

@@ -3,6 +3,7 @@
 // of 1e-6 px and 5000 px, knots 1e-7 frames apart, exact depth ties, filters whose weights sum to
 // ~0 at the border. Each asserts finite output and agreement with the brute-force ray caster
 // (tests/resample_test_util.h) within a stated bound.
+#include <bit>
 #include <cmath>
 #include <cstdio>
 #include <filesystem>
@@ -764,6 +765,75 @@ TEST(ResampleHard, BoxGathersFindExactlyTheSamplesInTheBox) {
     longRowGathers += pixelMajor && !expected.empty();
   }
   EXPECT_GT(longRowGathers, 100u);  // the long rows' loads found samples
+}
+
+// The projection kernel (kernels::projectLerped) against the rasterizer's project(), restated:
+// p = a + f (b - a) (or a itself when b is a), then raster x = float(ax (x / z) + bx) in double,
+// NaN before the near plane or where x or y is not finite; the box over the others. Counts that
+// are not multiples of eight (the kernels' whole-vector loop and their tail), points behind the
+// eye, at infinity and NaN, both projections.
+TEST(ResampleHard, ProjectionKernelIsProjectBitForBit) {
+  if (!kernels::available()) GTEST_SKIP() << "this CPU has no AVX2";
+  Rng rng(5);
+  for (int trial = 0; trial < 200; ++trial) {
+    const bool perspective = trial % 4 != 3, still = trial % 2;
+    const kernels::ProjectionScale scale{1000.0 + rng.uniform() * 500, 960.0, -1000.0 - rng.uniform() * 500, 540.0, 0.1f, perspective};
+    const size_t n = 1 + rng.below(40);
+    std::vector<float> a(3 * n), b(3 * n);
+    for (size_t i = 0; i < 3 * n; ++i) {
+      a[i] = float(rng.uniform(-2, 2)), b[i] = float(rng.uniform(-2, 2));
+      if (i % 3 == 2) a[i] = float(rng.uniform(-0.5, 6)), b[i] = float(rng.uniform(-0.5, 6));  // some behind the near plane
+    }
+    if (trial % 5 == 0) a[3 * rng.below(uint32_t(n))] = INFINITY;
+    if (trial % 7 == 0) a[3 * rng.below(uint32_t(n)) + 1] = NAN;
+    if (trial % 3 == 0) a[3 * rng.below(uint32_t(n))] = -0.f;
+    const float f = float(rng.uniform());
+    const float* to = still ? a.data() : b.data();
+    // The definition.
+    std::vector<float> ex(n), ey(n), ez(n);
+    bool expectBad = false;
+    float lo[2] = {INFINITY, INFINITY}, hi[2] = {-INFINITY, -INFINITY};
+    for (size_t i = 0; i < n; ++i) {
+      float p[3];
+      for (int k = 0; k < 3; ++k) p[k] = still ? a[3 * i + k] : a[3 * i + k] + f * (to[3 * i + k] - a[3 * i + k]);
+      ez[i] = p[2];
+      double px = p[0], py = p[1];
+      if (perspective) {
+        const double iz = 1.0 / double(p[2]);
+        px *= iz, py *= iz;
+      }
+      const float x = float(scale.ax * px + scale.bx), y = float(scale.ay * py + scale.by);
+      const bool ok = (!perspective || p[2] >= scale.nearClip) && std::isfinite(x) && std::isfinite(y);
+      ex[i] = ok ? x : NAN, ey[i] = y;
+      expectBad |= !ok;
+      if (ok) lo[0] = std::min(lo[0], x), lo[1] = std::min(lo[1], y), hi[0] = std::max(hi[0], x), hi[1] = std::max(hi[1], y);
+    }
+    for (kernels::Isa isa : {kernels::Isa::Avx2, kernels::Isa::Avx512}) {
+      if (!kernels::available(isa)) continue;
+      SCOPED_TRACE(std::string(isa == kernels::Isa::Avx512 ? "avx512" : "avx2") + " trial " + std::to_string(trial));
+      std::vector<float> x(n + 8, 7.f), y(n + 8, 7.f), z(n + 8, 7.f);
+      float box[4];
+      const bool bad = kernels::projectLerped(isa, a.data(), to, f, n, scale, x.data(), y.data(), z.data(), box);
+      EXPECT_EQ(bad, expectBad);
+      for (size_t i = 0; i < n; ++i) {
+        EXPECT_EQ(std::isnan(x[i]), std::isnan(ex[i])) << i;
+        if (!std::isnan(ex[i])) {
+          EXPECT_EQ(std::bit_cast<uint32_t>(x[i]), std::bit_cast<uint32_t>(ex[i])) << i;
+          EXPECT_EQ(std::bit_cast<uint32_t>(y[i]), std::bit_cast<uint32_t>(ey[i])) << i;
+        }
+        if (!std::isnan(ez[i])) {
+          EXPECT_EQ(std::bit_cast<uint32_t>(z[i]), std::bit_cast<uint32_t>(ez[i])) << i;
+        }
+      }
+      EXPECT_EQ(x[n], 7.f);  // nothing written past n
+      if (lo[0] <= hi[0]) {
+        EXPECT_EQ(box[0], lo[0]);
+        EXPECT_EQ(box[1], lo[1]);
+        EXPECT_EQ(box[2], hi[0]);
+        EXPECT_EQ(box[3], hi[1]);
+      }
+    }
+  }
 }
 
 // The vector edge test's three outcomes on a hand-made triangle: a sample inside is a hit with
