@@ -562,10 +562,66 @@ size_t lensLayerCellsAvx512(const LensShear& s, const float* x, const float* y, 
                     : lensLayerCellsAvx512T<false>(s, x, y, u, v, depth, first, count, key, slot, cell, n);
 }
 
+// projectLerped() eight points at a time: the points read with two permutes of three vector
+// loads (masked at the tail, so nothing past the last point is read), the projection in eight
+// double lanes; the AVX2 kernel's operations lane for lane.
+bool projectLerpedAvx512(const float* a, const float* b, float f, size_t n, const ProjectionScale& s, float* xo, float* yo, float* zo, float box[4]) {
+  const __m256 fv = _mm256_set1_ps(f), nearClip = _mm256_set1_ps(s.nearClip), inf = _mm256_set1_ps(INFINITY), ninf = _mm256_set1_ps(-INFINITY);
+  const __m512d ax = _mm512_set1_pd(s.ax), bx = _mm512_set1_pd(s.bx), ay = _mm512_set1_pd(s.ay), by = _mm512_set1_pd(s.by), one = _mm512_set1_pd(1.0);
+  const __m512i ix = _mm512_setr_epi32(0, 3, 6, 9, 12, 15, 18, 21, 0, 0, 0, 0, 0, 0, 0, 0), iy = _mm512_add_epi32(ix, _mm512_set1_epi32(1)),
+                iz = _mm512_add_epi32(ix, _mm512_set1_epi32(2));
+  const bool lerp = a != b;  // b == a: p is a itself, as the AVX2 kernel leaves it
+  __m256 lo_x = inf, lo_y = inf, hi_x = ninf, hi_y = ninf;
+  unsigned bad = 0;
+  for (size_t i = 0; i < n; i += 8) {
+    const size_t count = n - i < 8 ? n - i : 8, floats = 3 * count;
+    const __mmask8 live = __mmask8((1u << count) - 1);
+    const __mmask16 first = floats >= 16 ? __mmask16(0xFFFF) : __mmask16((1u << floats) - 1);
+    const __mmask16 rest = floats > 16 ? __mmask16((1u << (floats - 16)) - 1) : __mmask16(0);
+    auto points = [&](const float* p, __m256 q[3]) {
+      const __m512 lo = _mm512_maskz_loadu_ps(first, p + 3 * i), hi = _mm512_maskz_loadu_ps(rest, p + 3 * i + 16);
+      q[0] = _mm512_castps512_ps256(_mm512_permutex2var_ps(lo, ix, hi));
+      q[1] = _mm512_castps512_ps256(_mm512_permutex2var_ps(lo, iy, hi));
+      q[2] = _mm512_castps512_ps256(_mm512_permutex2var_ps(lo, iz, hi));
+    };
+    __m256 p[3];
+    points(a, p);
+    if (lerp) {
+      __m256 q[3];
+      points(b, q);
+      for (int k = 0; k < 3; ++k) p[k] = _mm256_add_ps(p[k], _mm256_mul_ps(fv, _mm256_sub_ps(q[k], p[k])));  // a + f * (b - a), glm's order
+    }
+    const __m512d px = _mm512_cvtps_pd(p[0]), py = _mm512_cvtps_pd(p[1]);
+    __m256 x, y;
+    __mmask8 ok = live;
+    if (s.perspective) {
+      const __m512d inv = _mm512_div_pd(one, _mm512_cvtps_pd(p[2]));
+      x = _mm512_cvtpd_ps(_mm512_add_pd(_mm512_mul_pd(ax, _mm512_mul_pd(px, inv)), bx));
+      y = _mm512_cvtpd_ps(_mm512_add_pd(_mm512_mul_pd(ay, _mm512_mul_pd(py, inv)), by));
+      ok = _mm256_mask_cmp_ps_mask(ok, p[2], nearClip, _CMP_GE_OQ);
+    } else {
+      x = _mm512_cvtpd_ps(_mm512_add_pd(_mm512_mul_pd(ax, px), bx));
+      y = _mm512_cvtpd_ps(_mm512_add_pd(_mm512_mul_pd(ay, py), by));
+    }
+    ok = _mm256_mask_cmp_ps_mask(ok, _mm256_andnot_ps(_mm256_set1_ps(-0.f), x), inf, _CMP_LT_OQ);
+    ok = _mm256_mask_cmp_ps_mask(ok, _mm256_andnot_ps(_mm256_set1_ps(-0.f), y), inf, _CMP_LT_OQ);
+    x = _mm256_mask_blend_ps(ok, _mm256_set1_ps(NAN), x);
+    bad |= unsigned(live & ~ok);
+    lo_x = _mm256_mask_min_ps(lo_x, ok, lo_x, x), hi_x = _mm256_mask_max_ps(hi_x, ok, hi_x, x);
+    lo_y = _mm256_mask_min_ps(lo_y, ok, lo_y, y), hi_y = _mm256_mask_max_ps(hi_y, ok, hi_y, y);
+    _mm256_mask_storeu_ps(xo + i, live, x), _mm256_mask_storeu_ps(yo + i, live, y), _mm256_mask_storeu_ps(zo + i, live, p[2]);
+  }
+  alignas(32) float r[4][8];
+  _mm256_store_ps(r[0], lo_x), _mm256_store_ps(r[1], lo_y), _mm256_store_ps(r[2], hi_x), _mm256_store_ps(r[3], hi_y);
+  box[0] = lowest(r[0], 8), box[1] = lowest(r[1], 8);
+  box[2] = highest(r[2], 8), box[3] = highest(r[3], 8);
+  return bad != 0;
+}
+
 }  // namespace
 
 const IsaKernels kAvx512Kernels = {gatherInBoxAvx512, gatherStrataAvx512,           filterCandidatesAvx512,
-                                   cellsOfAvx512,     avx2::projectLerped,          edgesAvx512<false>,
+                                   cellsOfAvx512,     projectLerpedAvx512,          edgesAvx512<false>,
                                    fixedEdgesAvx512,  testLinearEdgesAvx512<kMovingEdges>, testLinearEdgesAvx512<kFixedEdges>,
                                    testLinearEdgesAvx512<kLensEdges>, gatherLensCellsAvx512, testMovingLensAvx512, lensLayerCellsAvx512};
 
