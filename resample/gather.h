@@ -176,6 +176,30 @@ struct ProjectionScale {
   bool perspective;
 };
 
+/// The static path's per-micropolygon set-up for a run of a chunk's micropolygons (raster_static.cpp),
+/// eight at a time: each one's corner box from its corners' projections (a NaN x: unbounded),
+/// BucketSamples::testArea() of that box over the region, and the depth no hit can come nearer
+/// than (the nearest corner depth, less 1e-5 of it with occlusion culling, else -infinity) - the
+/// scalar code's values, bit for bit.
+struct StillAreaSetup {
+  const uint32_t* corners;   // the first micropolygon's four corners (a triangle's fourth: 0xffffffff)
+  uint32_t vBase;            // corner v is chunk vertex v - vBase
+  const float* projX;        // per chunk vertex: raster x (NaN: none) and y
+  const float* projY;
+  const float* positions;    // per chunk vertex: camera-space xyz
+  int x0, y0, w, h;          // the region, raster pixels
+  bool occlusionCulling;
+};
+/// Per micropolygon: state 0 (its box misses the region), 1 (drawn in pixels px0..px1 × py0..py1,
+/// samples within sx0..sx1 × sy0..sy1), 2 (unbounded: every pixel, every sample); and zCull. The
+/// arrays need room for the count rounded up to eight.
+struct StillAreas {
+  int32_t *px0, *py0, *px1, *py1;
+  float *sx0, *sy0, *sx1, *sy1, *zCull;
+  uint8_t* state;
+};
+void stillAreas(Isa isa, const StillAreaSetup& setup, size_t count, const StillAreas& out);
+
 /// Points p_i = a_i + f (b_i - a_i) for i < n (a and b: xyz triples), projected: x[i], y[i] their
 /// raster position (x[i] NaN where there is none, y[i] then unspecified), z[i] the depth p_i.z;
 /// project()'s operations, bit for bit. Returns whether any x is NaN; box = min x, min y, max x,

@@ -146,10 +146,18 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   // The static path (raster_static.cpp)
 
   void rasterizeStatic(const Source& src, const store::TilePart& part, const HitContext& hc, const glm::vec3* chunkPos, int onlyGroup, const Chunk& ch);
+  void rasterizeStaticVector(const store::TilePart& part, const HitContext& hc, const glm::vec3* chunkPos, int onlyGroup, const Chunk& ch);
   void testStatic(const HitContext& hc, uint32_t m, const uint32_t* c, bool tri, const glm::dvec3 E[5], const float zv[4], uint32_t idx);
 
   std::vector<float> projX, projY;  // per chunk vertex (static) or [(v - vBase) * T + theta] (moving); projX NaN = before the near plane
   std::vector<float> projZ;         // the static path's vertex depths, as the projection kernel writes them
+  // A chunk's micropolygons' test areas and cull depths (kernels::stillAreas()).
+  struct StillScratch {
+    static constexpr size_t kRoom = kChunkSize + 8;
+    alignas(32) int32_t px0[kRoom], py0[kRoom], px1[kRoom], py1[kRoom];
+    alignas(32) float sx0[kRoom], sy0[kRoom], sx1[kRoom], sy1[kRoom], zCull[kRoom];
+    alignas(32) uint8_t state[kRoom];
+  } stillScratch;
 
   // ------------------------------------------------------------------------------------------
   // The moving path (raster_moving.cpp)

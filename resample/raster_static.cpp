@@ -39,6 +39,10 @@ void BucketRasterizer::Impl::rasterizeStatic(const Source& src, const TilePart& 
     stats.chunkCulledMicropolygons += ch.m1 - ch.m0;
     return;
   }
+  if (vectorKernels && !checkCover) {
+    rasterizeStaticVector(part, hc, chunkPos, onlyGroup, ch);
+    return;
+  }
   for (uint32_t m = ch.m0; m < ch.m1; ++m) {
     const uint32_t* c = &part.corners[size_t(m) * 4];
     const bool tri = c[3] == kNoCorner;
@@ -68,27 +72,6 @@ void BucketRasterizer::Impl::rasterizeStatic(const Source& src, const TilePart& 
     const float sbx0 = ta.sx0, sby0 = ta.sy0, sbx1 = ta.sx1, sby1 = ta.sy1;
     ++stats.staticMicropolygons;
     const float zCull = cullDepth(*std::min_element(zv, zv + nc));
-    if (vectorKernels && !checkCover) {
-      // Every stratum's samples in the box that pass the early depth test, then the vector
-      // edge test with fixed edges.
-      const MovingBox box{ta.sx0, 0.f, ta.sx1, 0.f, ta.sy0, 0.f, ta.sy1, 0.f, 0.f, 0.f};
-      const size_t n = gatherCandidates(0, N, onlyGroup, px0, py0, px1, py1, box, Coverage{false, 0, 0}, zCull, 0);
-      if (!n) continue;
-      stats.sampleTests += n;
-      // makeEdges()' values, four edges at a time; the scalar tie test makes its own.
-      const float* at[4];
-      for (int j = 0; j < 4; ++j) at[j] = &chunkPos[c[tri && j == 3 ? 2 : j] - vBase].x;
-      kernels::LinearEdges edges;
-      kernels::fixedEdges(isa, at, rasterScale, edges);
-      kernels::EdgeTestSetup setup{candT.data(), candX.data(), candY.data(), 0.f, 0.f, tri, opt.backfaceCull && !(part.flags[m] & store::kTwoSided), true};
-      std::copy(zv, zv + 4, setup.za), std::copy(zv, zv + 4, setup.zb);
-      bool edgesMade = false;
-      recordKernelHits(hc, m, c, setup, edges, n, [&](uint32_t idx) {
-        if (!edgesMade) makeEdges(), edgesMade = true;
-        testStatic(hc, m, c, tri, E, zv, idx);
-      });
-      continue;
-    }
     makeEdges();
     for (int py = py0; py <= py1; ++py) {
       if (onlyGroup >= 0 && rowGroup[size_t(py - y0)] != onlyGroup) continue;
@@ -104,6 +87,48 @@ void BucketRasterizer::Impl::rasterizeStatic(const Source& src, const TilePart& 
         }
       }
     }
+  }
+}
+
+// rasterizeStatic() with the vector kernels, for a chunk that reaches the region and a source that
+// covers every sample's time: the micropolygons' boxes, test areas and cull depths eight at a
+// time (stillAreas(), the scalar loop's values), then for each one that reaches a sample every
+// stratum's samples in its box that pass the early depth test, and the vector edge test with
+// fixed edges.
+void BucketRasterizer::Impl::rasterizeStaticVector(const TilePart& part, const HitContext& hc, const glm::vec3* chunkPos, int onlyGroup, const Chunk& ch) {
+  const uint32_t vBase = ch.vLo, count = ch.m1 - ch.m0;
+  StillScratch& a = stillScratch;
+  const kernels::StillAreas areas{a.px0, a.py0, a.px1, a.py1, a.sx0, a.sy0, a.sx1, a.sy1, a.zCull, a.state};
+  const kernels::StillAreaSetup setup{&part.corners[size_t(ch.m0) * 4], vBase, projX.data(), projY.data(), &chunkPos[0].x, x0, y0, w, h, opt.occlusionCulling};
+  kernels::stillAreas(isa, setup, count, areas);
+  for (uint32_t i = 0; i < count; ++i) {
+    if (!a.state[i]) continue;
+    const uint32_t m = ch.m0 + i;
+    const uint32_t* c = &part.corners[size_t(m) * 4];
+    const bool tri = c[3] == kNoCorner;
+    // Unbounded (a corner before the near plane): testArea()'s whole region and every sample.
+    TestArea ta{x0, y0, x0 + w - 1, y0 + h - 1};
+    if (a.state[i] == 1) ta = TestArea{a.px0[i], a.py0[i], a.px1[i], a.py1[i], a.sx0[i], a.sy0[i], a.sx1[i], a.sy1[i]};
+    ++stats.staticMicropolygons;
+    const MovingBox box{ta.sx0, 0.f, ta.sx1, 0.f, ta.sy0, 0.f, ta.sy1, 0.f, 0.f, 0.f};
+    const size_t n = gatherCandidates(0, N, onlyGroup, ta.px0, ta.py0, ta.px1, ta.py1, box, Coverage{false, 0, 0}, a.zCull[i], 0);
+    if (!n) continue;
+    stats.sampleTests += n;
+    // fixedEdges()' values, four edges at a time; the scalar tie test makes its own.
+    const float* at[4];
+    const glm::vec3* p[4];
+    float zv[4];
+    for (int j = 0; j < 4; ++j) p[j] = &chunkPos[c[tri && j == 3 ? 2 : j] - vBase], at[j] = &p[j]->x, zv[j] = p[j]->z;
+    kernels::LinearEdges edges;
+    kernels::fixedEdges(isa, at, rasterScale, edges);
+    kernels::EdgeTestSetup test{candT.data(), candX.data(), candY.data(), 0.f, 0.f, tri, opt.backfaceCull && !(part.flags[m] & store::kTwoSided), true};
+    std::copy(zv, zv + 4, test.za), std::copy(zv, zv + 4, test.zb);
+    bool edgesMade = false;
+    glm::dvec3 E[5];
+    recordKernelHits(hc, m, c, test, edges, n, [&](uint32_t idx) {
+      if (!edgesMade) fixedEdges(p, tri, rasterScale, E), edgesMade = true;
+      testStatic(hc, m, c, tri, E, zv, idx);
+    });
   }
 }
 

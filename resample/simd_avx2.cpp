@@ -614,6 +614,59 @@ bool avx2::projectLerped(const float* a, const float* b, float f, size_t n, cons
   return bad != 0;
 }
 
+void avx2::stillAreas(const StillAreaSetup& s, size_t count, const StillAreas& out) {
+  const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), noCorner = _mm256_set1_epi32(-1), vBase = _mm256_set1_epi32(int(s.vBase));
+  const __m256 inf = _mm256_set1_ps(INFINITY), ninf = _mm256_set1_ps(-INFINITY), absMask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
+  const __m256 rx0 = _mm256_set1_ps(float(s.x0)), ry0 = _mm256_set1_ps(float(s.y0)), rx1 = _mm256_set1_ps(float(s.x0 + s.w)), ry1 = _mm256_set1_ps(float(s.y0 + s.h));
+  const __m256 rxm = _mm256_set1_ps(float(s.x0 - 1)), rym = _mm256_set1_ps(float(s.y0 - 1));
+  const __m256i lastX = _mm256_set1_epi32(s.x0 + s.w - 1), lastY = _mm256_set1_epi32(s.y0 + s.h - 1);
+  // clampTo(v, lo, hi) = v >= lo ? (v <= hi ? v : hi) : lo (NaN: lo), and floorInt(v) = int(v) -
+  // (float(int(v)) > v), as pixelRange() computes them.
+  auto clampTo = [](__m256 v, __m256 lo, __m256 hi) {
+    return _mm256_blendv_ps(lo, _mm256_blendv_ps(hi, v, _mm256_cmp_ps(v, hi, _CMP_LE_OQ)), _mm256_cmp_ps(v, lo, _CMP_GE_OQ));
+  };
+  auto floorInt = [](__m256 v) {
+    const __m256i i = _mm256_cvttps_epi32(v);
+    return _mm256_add_epi32(i, _mm256_castps_si256(_mm256_cmp_ps(_mm256_cvtepi32_ps(i), v, _CMP_GT_OQ)));  // -1 where it rounded up
+  };
+  for (size_t i = 0; i < count; i += 8) {
+    const int live = count - i >= 8 ? 8 : int(count - i);
+    const __m256i liveMask = _mm256_cmpgt_epi32(_mm256_set1_epi32(live), lane);
+    // Corner j of each micropolygon (lanes past the count: vertex vBase, harmless).
+    __m256i v[4];
+    const int* corners = reinterpret_cast<const int*>(s.corners + 4 * i);
+    for (int j = 0; j < 4; ++j)
+      v[j] = _mm256_mask_i32gather_epi32(vBase, corners, _mm256_add_epi32(_mm256_slli_epi32(lane, 2), _mm256_set1_epi32(j)), liveMask, 4);
+    v[3] = _mm256_blendv_epi8(v[3], v[2], _mm256_cmpeq_epi32(v[3], noCorner));  // a triangle: corner 2 again
+    __m256 bx0 = inf, by0 = inf, bx1 = ninf, by1 = ninf, zNear = _mm256_setzero_ps(), unbounded = _mm256_setzero_ps();
+    for (int j = 0; j < 4; ++j) {
+      const __m256i k = _mm256_sub_epi32(v[j], vBase);
+      const __m256 x = _mm256_i32gather_ps(s.projX, k, 4), y = _mm256_i32gather_ps(s.projY, k, 4);
+      const __m256 z = _mm256_i32gather_ps(s.positions + 2, _mm256_add_epi32(k, _mm256_add_epi32(k, k)), 4);
+      unbounded = _mm256_or_ps(unbounded, _mm256_cmp_ps(x, x, _CMP_UNORD_Q));
+      // std::min(b, x) is x < b ? x : b; a NaN x leaves the box as it was (the lane is unbounded).
+      bx0 = _mm256_min_ps(x, bx0), by0 = _mm256_min_ps(y, by0), bx1 = _mm256_max_ps(x, bx1), by1 = _mm256_max_ps(y, by1);
+      zNear = j == 0 ? z : _mm256_min_ps(z, zNear);  // *std::min_element: the first of the smallest
+    }
+    const __m256 zCull = s.occlusionCulling ? _mm256_sub_ps(zNear, _mm256_mul_ps(_mm256_set1_ps(1e-5f), _mm256_and_ps(zNear, absMask))) : ninf;
+    // pixelRange() and testArea()'s margin: 1e-3 px plus 1e-6 of the box's largest magnitude.
+    const __m256 mag = _mm256_max_ps(_mm256_max_ps(_mm256_and_ps(bx1, absMask), _mm256_and_ps(bx0, absMask)),
+                                     _mm256_max_ps(_mm256_and_ps(by1, absMask), _mm256_and_ps(by0, absMask)));
+    const __m256 m = _mm256_add_ps(_mm256_set1_ps(1e-3f), _mm256_mul_ps(_mm256_set1_ps(1e-6f), mag));
+    const __m256 lx = _mm256_sub_ps(bx0, m), ly = _mm256_sub_ps(by0, m), hx = _mm256_add_ps(bx1, m), hy = _mm256_add_ps(by1, m);
+    const __m256i px0 = floorInt(clampTo(lx, rx0, rx1)), py0 = floorInt(clampTo(ly, ry0, ry1));
+    const __m256i px1 = _mm256_min_epi32(lastX, floorInt(clampTo(hx, rxm, rx1))), py1 = _mm256_min_epi32(lastY, floorInt(clampTo(hy, rym, ry1)));
+    const __m256i inside = _mm256_andnot_si256(_mm256_or_si256(_mm256_cmpgt_epi32(px0, px1), _mm256_cmpgt_epi32(py0, py1)), _mm256_set1_epi32(1));
+    const __m256i state = _mm256_blendv_epi8(inside, _mm256_set1_epi32(2), _mm256_castps_si256(unbounded));
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(out.px0 + i), px0), _mm256_storeu_si256(reinterpret_cast<__m256i*>(out.py0 + i), py0);
+    _mm256_storeu_si256(reinterpret_cast<__m256i*>(out.px1 + i), px1), _mm256_storeu_si256(reinterpret_cast<__m256i*>(out.py1 + i), py1);
+    _mm256_storeu_ps(out.sx0 + i, lx), _mm256_storeu_ps(out.sy0 + i, ly), _mm256_storeu_ps(out.sx1 + i, hx), _mm256_storeu_ps(out.sy1 + i, hy);
+    _mm256_storeu_ps(out.zCull + i, zCull);
+    const __m128i s16 = _mm_packs_epi32(_mm256_castsi256_si128(state), _mm256_extracti128_si256(state, 1));
+    _mm_storel_epi64(reinterpret_cast<__m128i*>(out.state + i), _mm_packus_epi16(s16, s16));
+  }
+}
+
 namespace {
 
 size_t gatherLensCellsAvx2(const LensCells& cells, size_t stride, int c0, int r0, int c1, int r1, const LensBox& box, const LensCandidates& out, size_t n) {
@@ -717,7 +770,7 @@ void cellsOfAvx2(const CellGrid& g, const float* t, const float* x, const float*
 
 }  // namespace
 
-const IsaKernels kAvx2Kernels = {gatherInBoxAvx2, gatherStrataAvx2,           filterCandidatesAvx2,     cellsOfAvx2, avx2::projectLerped, linearEdgesAvx2,
+const IsaKernels kAvx2Kernels = {gatherInBoxAvx2, gatherStrataAvx2,           filterCandidatesAvx2,     cellsOfAvx2, avx2::projectLerped, avx2::stillAreas, linearEdgesAvx2,
                                  fixedEdgesAvx2,  testLinearEdgesAvx2<kMovingEdges>, testLinearEdgesAvx2<kFixedEdges>, testLinearEdgesAvx2<kLensEdges>,
                                  gatherLensCellsAvx2, testMovingLensAvx2, lensLayerCellsAvx2};
 

@@ -83,6 +83,8 @@ bool projectLerped(Isa isa, const float* a, const float* b, float f, size_t n, c
   return kernelsFor(isa).projectLerped(a, b, f, n, scale, x, y, z, box);
 }
 
+void stillAreas(Isa isa, const StillAreaSetup& setup, size_t count, const StillAreas& out) { kernelsFor(isa).stillAreas(setup, count, out); }
+
 void linearEdges(Isa isa, const float* const at[4], const float* const to[4], const RasterScale& scale, LinearEdges& out) {
   kernelsFor(isa).linearEdges(at, to, scale, out);
 }

@@ -30,6 +30,7 @@ struct IsaKernels {
   /// sortByCell()'s cell of each of n candidates (times t, positions x, y).
   void (*cellsOf)(const CellGrid& grid, const float* t, const float* x, const float* y, size_t n, uint16_t* cellOf);
   bool (*projectLerped)(const float* a, const float* b, float f, size_t n, const ProjectionScale& scale, float* x, float* y, float* z, float box[4]);
+  void (*stillAreas)(const StillAreaSetup& setup, size_t count, const StillAreas& out);
   void (*linearEdges)(const float* const at[4], const float* const to[4], const RasterScale& scale, LinearEdges& out);
   void (*fixedEdges)(const float* const at[4], const RasterScale& scale, LinearEdges& out);
   size_t (*testMovingEdges)(const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits);  // setup.fixed false
@@ -48,6 +49,7 @@ extern const IsaKernels kAvx512Kernels;
 // The AVX2 kernels that the AVX-512 table shares.
 namespace avx2 {
 bool projectLerped(const float* a, const float* b, float f, size_t n, const ProjectionScale& scale, float* x, float* y, float* z, float box[4]);
+void stillAreas(const StillAreaSetup& setup, size_t count, const StillAreas& out);
 }  // namespace avx2
 #endif
 

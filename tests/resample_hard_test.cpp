@@ -14,9 +14,11 @@
 #include <tbb/global_control.h>
 
 #include "common/random.h"
+#include "resample/bucket_samples.h"
 #include "resample/coverage.h"
 #include "resample/deep.h"
 #include "resample/gather.h"
+#include "store/model.h"
 #include "store/synthetic.h"
 #include "store/writer.h"
 #include "tests/resample_test_util.h"
@@ -834,6 +836,82 @@ TEST(ResampleHard, ProjectionKernelIsProjectBitForBit) {
       }
     }
   }
+}
+
+// The static path's set-up kernel (kernels::stillAreas) against the scalar loop it replaces: each
+// micropolygon's corner box from its corners' projections (a NaN x makes it unbounded), the
+// region's BucketSamples::testArea() of that box, and the cull depth (nearest corner, less 1e-5
+// of it). Random chunks of quads and triangles, some corners without a projection, some with a
+// NaN y, boxes inside, across and outside the region, counts that are not multiples of eight.
+TEST(ResampleHard, StillAreaKernelIsTheScalarTestArea) {
+  if (!kernels::available()) GTEST_SKIP() << "this CPU has no AVX2";
+  const SamplePattern pattern(4, 4, 1);
+  const ShutterModel shutter = ShutterModel::progressive(0.0, 1.0);
+  BucketSamples region(pattern, shutter);
+  Rng rng(17);
+  size_t drawn = 0, unbounded = 0, missed = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    const int rx0 = int(rng.below(200)) - 100, ry0 = int(rng.below(200)) - 100;
+    region.prepare(rx0, ry0, 8 + int(rng.below(60)), 8 + int(rng.below(60)));
+    const uint32_t nV = 20 + rng.below(60), count = 1 + rng.below(64), vBase = 1000 + rng.below(1000);
+    std::vector<float> px(nV), py(nV), pos(3 * nV);
+    for (uint32_t v = 0; v < nV; ++v) {
+      px[v] = float(rx0 + rng.uniform(-20, 90)), py[v] = float(ry0 + rng.uniform(-20, 90));
+      if (rng.below(40) == 0) px[v] = NAN;
+      if (rng.below(60) == 0) py[v] = NAN;
+      pos[3 * v] = 0.f, pos[3 * v + 1] = 0.f, pos[3 * v + 2] = float(rng.uniform(0.5, 50));
+    }
+    std::vector<uint32_t> corners(4 * size_t(count));
+    for (uint32_t m = 0; m < count; ++m) {
+      // Mostly a small quad of neighbouring vertices, sometimes scattered ones (large boxes).
+      const uint32_t first = rng.below(nV - 4), spread = rng.below(8) == 0 ? nV : 4;
+      for (int j = 0; j < 4; ++j) corners[4 * m + j] = vBase + (spread == 4 ? first + uint32_t(j) : rng.below(nV));
+      if (rng.below(4) == 0) corners[4 * m + 3] = store::kNoCorner;
+    }
+    for (bool occlusion : {true, false}) {
+      const kernels::StillAreaSetup setup{corners.data(), vBase, px.data(), py.data(), pos.data(), region.x0, region.y0, region.w, region.h, occlusion};
+      for (kernels::Isa isa : {kernels::Isa::Avx2, kernels::Isa::Avx512}) {
+        if (!kernels::available(isa)) continue;
+        SCOPED_TRACE(std::string(isa == kernels::Isa::Avx512 ? "avx512" : "avx2") + " trial " + std::to_string(trial));
+        std::vector<int32_t> x0(72), y0(72), x1(72), y1(72);
+        std::vector<float> sx0(72), sy0(72), sx1(72), sy1(72), zc(72);
+        std::vector<uint8_t> state(72);
+        kernels::stillAreas(isa, setup, count, {x0.data(), y0.data(), x1.data(), y1.data(), sx0.data(), sy0.data(), sx1.data(), sy1.data(), zc.data(), state.data()});
+        for (uint32_t m = 0; m < count; ++m) {
+          // The scalar loop's values.
+          const uint32_t* c = &corners[4 * m];
+          const int nc = c[3] == store::kNoCorner ? 3 : 4;
+          float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY, zv[4];
+          bool bounded = true;
+          for (int j = 0; j < nc; ++j) {
+            const uint32_t v = c[j] - vBase;
+            zv[j] = pos[3 * v + 2];
+            if (std::isnan(px[v])) bounded = false;
+            else bx0 = std::min(bx0, px[v]), by0 = std::min(by0, py[v]), bx1 = std::max(bx1, px[v]), by1 = std::max(by1, py[v]);
+          }
+          const float zNear = *std::min_element(zv, zv + nc);
+          EXPECT_EQ(zc[m], occlusion ? zNear - 1e-5f * std::abs(zNear) : -INFINITY) << m;
+          BucketSamples::TestArea ta;
+          const bool reaches = region.testArea(bounded, bx0, by0, bx1, by1, ta);
+          ASSERT_EQ(int(state[m]), !bounded ? 2 : reaches ? 1 : 0) << m;
+          if (state[m] != 1) continue;
+          EXPECT_EQ(x0[m], ta.px0) << m;
+          EXPECT_EQ(y0[m], ta.py0) << m;
+          EXPECT_EQ(x1[m], ta.px1) << m;
+          EXPECT_EQ(y1[m], ta.py1) << m;
+          EXPECT_EQ(sx0[m], ta.sx0) << m;
+          EXPECT_EQ(sy0[m], ta.sy0) << m;
+          EXPECT_EQ(sx1[m], ta.sx1) << m;
+          EXPECT_EQ(sy1[m], ta.sy1) << m;
+        }
+        for (uint32_t m = 0; m < count; ++m) drawn += state[m] == 1, unbounded += state[m] == 2, missed += state[m] == 0;
+      }
+    }
+  }
+  // Every outcome taken, many times.
+  EXPECT_GT(drawn, 1000u);
+  EXPECT_GT(unbounded, 100u);
+  EXPECT_GT(missed, 1000u);
 }
 
 // The vector edge test's three outcomes on a hand-made triangle: a sample inside is a hit with
