@@ -1,5 +1,9 @@
 #include "resample/hit_buffer.h"
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 #include "common/check.h"
 
 namespace reshutter::resample {
@@ -248,7 +252,29 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
   if (!anyFragments && !anyAovs && !volumesHere) {
     // Opaque surfaces only, no output variables (the common case): each sample is its nearest
     // surface's colour or empty, as the general loop below computes it, without its branches.
-    for (size_t slot = 0; slot < slots; ++slot) {
+    size_t slot = 0;
+#if defined(__SSE2__)
+    if (samples.pixelMajor) {
+      // The samples in output order (idxOf the identity): four at a time, the colour records
+      // transposed into r, g, b and matte; the same values (a hidden channel is +0 either way).
+      const __m128 inf = _mm_set1_ps(INFINITY), farZ = _mm_set1_ps(far), one = _mm_set1_ps(1.f);
+      const float* z = zbuf.data();
+      const float* c = &colour.data()->r;
+      for (; slot + 4 <= slots; slot += 4) {
+        const __m128 zo = _mm_loadu_ps(z + slot);
+        __m128 r = _mm_loadu_ps(c + 4 * slot), g = _mm_loadu_ps(c + 4 * slot + 4), b = _mm_loadu_ps(c + 4 * slot + 8), m = _mm_loadu_ps(c + 4 * slot + 12);
+        _MM_TRANSPOSE4_PS(r, g, b, m);
+        const __m128 hit = _mm_cmplt_ps(zo, inf);
+        const __m128 visible = _mm_and_ps(hit, _mm_castsi128_ps(_mm_cmpeq_epi32(_mm_castps_si128(m), _mm_setzero_si128())));
+        _mm_storeu_ps(&out.r[slot], _mm_and_ps(visible, r));
+        _mm_storeu_ps(&out.g[slot], _mm_and_ps(visible, g));
+        _mm_storeu_ps(&out.b[slot], _mm_and_ps(visible, b));
+        _mm_storeu_ps(&out.a[slot], _mm_and_ps(visible, one));
+        _mm_storeu_ps(&out.z[slot], _mm_or_ps(_mm_and_ps(hit, zo), _mm_andnot_ps(hit, farZ)));
+      }
+    }
+#endif
+    for (; slot < slots; ++slot) {
       prefetchSample(idxOf, slot + kPrefetchAhead, slots);
       const size_t k = idxOf[slot];
       const float zo = zbuf[k];

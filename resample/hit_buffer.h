@@ -27,6 +27,7 @@ struct SurfaceColour {
   float r, g, b;
   uint32_t matte;
 };
+static_assert(sizeof(SurfaceColour) == 16, "resolve() reads four records as four vectors");
 
 struct HitBuffer {
   HitBuffer(const std::vector<AovChannel>& aovs, const RasterOptions& options, float farClip, RasterStats& counters);

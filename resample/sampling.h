@@ -32,6 +32,8 @@ class SamplePattern {
   int patternOf(int px, int py) const;
   /// Position of sample i inside its pixel, in [0, 1)².
   glm::vec2 offset(int pattern, int i) const { return offsets_[size_t(pattern) * spp_ + i]; }
+  /// A pattern's spp offsets, side by side (x, y of sample 0, then of sample 1, ...).
+  const glm::vec2* offsets(int pattern) const { return &offsets_[size_t(pattern) * spp_]; }
   /// Time strata of the pixel's samples: stratumOf[i] is a permutation of 0..N-1; u[i] is the
   /// time variate (stratumOf[i] + jitter) / N ∈ [0, 1).
   void times(int px, int py, uint16_t* stratumOf, float* u) const;

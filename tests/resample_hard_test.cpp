@@ -561,6 +561,18 @@ TEST(ResampleHard, UntimedSamplesGiveTheImageOfDrawnTimes) {
       EXPECT_EQ(drawn->stats.bucketSize, kBucketSize) << what;
       expectSameOutputs(skipped, *drawn, what);
     }
+    // Colour alone (no output variable): the resolve's branch-free loop, which reads pixel-major
+    // samples four at a time.
+    RenderSpec plain = spec;
+    plain.aovs.clear(), plain.deep = false;
+    plain.raster.skipUnreadTimes = false;
+    const RenderResult plainDrawn = render(plain);
+    plain.raster.skipUnreadTimes = true;
+    const RenderResult plainSkipped = render(plain);
+    if (shutter != 5) {
+      EXPECT_GT(plainSkipped.stats.raster.pixelMajorSamples, 0u);
+    }
+    expectSameOutputs(plainSkipped, plainDrawn, "colour alone, shutter " + std::to_string(shutter));
   }
   // A moving store reads the times; but at an instant every sample's time is the same, drawn or
   // not, and so is the moving image.
