@@ -200,6 +200,13 @@ struct StillAreas {
 };
 void stillAreas(Isa isa, const StillAreaSetup& setup, size_t count, const StillAreas& out);
 
+/// The vertex range of `count` micropolygons' corners (four each; 0xffffffff, a triangle's missing
+/// fourth, is not a vertex): lo = smallest, hi = largest (lo > hi when there is none).
+void cornerRange(Isa isa, const uint32_t* corners, size_t count, uint32_t& lo, uint32_t& hi);
+/// The smallest z of n xyz triples, NaN ignored (std::min(nearest, z) in order: z < nearest ? z :
+/// nearest), or `nearest` when none is smaller.
+float nearestDepth(Isa isa, const float* xyz, size_t n, float nearest);
+
 /// Points p_i = a_i + f (b_i - a_i) for i < n (a and b: xyz triples), projected: x[i], y[i] their
 /// raster position (x[i] NaN where there is none, y[i] then unspecified), z[i] the depth p_i.z;
 /// project()'s operations, bit for bit. Returns whether any x is NaN; box = min x, min y, max x,

@@ -82,15 +82,25 @@ void BucketRasterizer::Impl::add(const Source& src, const TileEntry& entry, cons
   const uint32_t K = part.numKnots;
   for (uint32_t m0 = 0; m0 < part.numMicropolygons; m0 += kChunkSize) {
     Chunk ch{INFINITY, index, m0, std::min(part.numMicropolygons, m0 + kChunkSize), ~0u, 0, false};
-    for (uint32_t m = ch.m0; m < ch.m1; ++m)
-      for (int j = 0; j < 4; ++j) {
-        const uint32_t v = part.corners[size_t(m) * 4 + j];
-        if (v != kNoCorner) ch.vLo = std::min(ch.vLo, v), ch.vHi = std::max(ch.vHi, v);
-      }
+    // Both loops below eight at a time with the vector kernels (the same range and depth).
+    if (vectorKernels) {
+      kernels::cornerRange(isa, &part.corners[size_t(ch.m0) * 4], ch.m1 - ch.m0, ch.vLo, ch.vHi);
+    } else {
+      for (uint32_t m = ch.m0; m < ch.m1; ++m)
+        for (int j = 0; j < 4; ++j) {
+          const uint32_t v = part.corners[size_t(m) * 4 + j];
+          if (v != kNoCorner) ch.vLo = std::min(ch.vLo, v), ch.vHi = std::max(ch.vHi, v);
+        }
+    }
     if (ch.vLo > ch.vHi) continue;  // no corners: nothing to draw
     // The range's vertices (a grid's rows: few the chunk does not use) bound its depth.
-    for (uint32_t k = 0; k < K; ++k)
+    for (uint32_t k = 0; k < K; ++k) {
+      if (vectorKernels) {
+        ch.zNear = kernels::nearestDepth(isa, &part.position(k, ch.vLo).x, ch.vHi - ch.vLo + 1, ch.zNear);
+        continue;
+      }
       for (uint32_t v = ch.vLo; v <= ch.vHi; ++v) ch.zNear = std::min(ch.zNear, part.position(k, v).z);
+    }
     // Rows of a moving part that stand still (a deforming grid's pinned end, a store written
     // before the writer kept still grids static) take the static path.
     ch.still = K > 1 && store::verticesStandStill(part.positions, part.numVertices, ch.vLo, ch.vHi - ch.vLo + 1);

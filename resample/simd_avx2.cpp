@@ -614,6 +614,44 @@ bool avx2::projectLerped(const float* a, const float* b, float f, size_t n, cons
   return bad != 0;
 }
 
+void avx2::cornerRange(const uint32_t* corners, size_t count, uint32_t& lo, uint32_t& hi) {
+  // 0xffffffff is the largest unsigned value, so the min passes over it; the max sees 0 instead.
+  const __m256i none = _mm256_set1_epi32(-1);
+  __m256i l = none, h = _mm256_setzero_si256();
+  const size_t n = 4 * count;
+  size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    const __m256i v = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(corners + i));
+    l = _mm256_min_epu32(l, v), h = _mm256_max_epu32(h, _mm256_andnot_si256(_mm256_cmpeq_epi32(v, none), v));
+  }
+  alignas(32) uint32_t ls[8], hs[8];
+  _mm256_store_si256(reinterpret_cast<__m256i*>(ls), l), _mm256_store_si256(reinterpret_cast<__m256i*>(hs), h);
+  uint32_t a = ~0u, b = 0;
+  for (int k = 0; k < 8; ++k) a = ls[k] < a ? ls[k] : a, b = hs[k] > b ? hs[k] : b;
+  for (; i < n; ++i)
+    if (corners[i] != ~0u) a = corners[i] < a ? corners[i] : a, b = corners[i] > b ? corners[i] : b;
+  // No corner at all: lo > hi.
+  if (a == ~0u) b = 0;
+  lo = a, hi = b;
+}
+
+float avx2::nearestDepth(const float* xyz, size_t n, float nearest) {
+  // std::min(nearest, z) = z < nearest ? z : nearest lane by lane (a NaN z is passed over); the
+  // lanes' minima are exact, so their order does not matter.
+  __m256 m = _mm256_set1_ps(nearest);
+  size_t i = 0;
+  for (; i + 8 <= n; i += 8) {
+    __m256 x, y, z;
+    pointsOf8(xyz + 3 * i, x, y, z);
+    m = _mm256_min_ps(z, m);
+  }
+  alignas(32) float ms[8];
+  _mm256_store_ps(ms, m);
+  for (int k = 0; k < 8; ++k) nearest = ms[k] < nearest ? ms[k] : nearest;
+  for (; i < n; ++i) nearest = xyz[3 * i + 2] < nearest ? xyz[3 * i + 2] : nearest;
+  return nearest;
+}
+
 void avx2::stillAreas(const StillAreaSetup& s, size_t count, const StillAreas& out) {
   const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), noCorner = _mm256_set1_epi32(-1), vBase = _mm256_set1_epi32(int(s.vBase));
   const __m256 inf = _mm256_set1_ps(INFINITY), ninf = _mm256_set1_ps(-INFINITY), absMask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
@@ -770,7 +808,7 @@ void cellsOfAvx2(const CellGrid& g, const float* t, const float* x, const float*
 
 }  // namespace
 
-const IsaKernels kAvx2Kernels = {gatherInBoxAvx2, gatherStrataAvx2,           filterCandidatesAvx2,     cellsOfAvx2, avx2::projectLerped, avx2::stillAreas, linearEdgesAvx2,
+const IsaKernels kAvx2Kernels = {gatherInBoxAvx2, gatherStrataAvx2,           filterCandidatesAvx2,     cellsOfAvx2, avx2::projectLerped, avx2::stillAreas, avx2::cornerRange, avx2::nearestDepth, linearEdgesAvx2,
                                  fixedEdgesAvx2,  testLinearEdgesAvx2<kMovingEdges>, testLinearEdgesAvx2<kFixedEdges>, testLinearEdgesAvx2<kLensEdges>,
                                  gatherLensCellsAvx2, testMovingLensAvx2, lensLayerCellsAvx2};
 

@@ -83,6 +83,9 @@ bool projectLerped(Isa isa, const float* a, const float* b, float f, size_t n, c
   return kernelsFor(isa).projectLerped(a, b, f, n, scale, x, y, z, box);
 }
 
+void cornerRange(Isa isa, const uint32_t* corners, size_t count, uint32_t& lo, uint32_t& hi) { kernelsFor(isa).cornerRange(corners, count, lo, hi); }
+float nearestDepth(Isa isa, const float* xyz, size_t n, float nearest) { return kernelsFor(isa).nearestDepth(xyz, n, nearest); }
+
 void stillAreas(Isa isa, const StillAreaSetup& setup, size_t count, const StillAreas& out) { kernelsFor(isa).stillAreas(setup, count, out); }
 
 void linearEdges(Isa isa, const float* const at[4], const float* const to[4], const RasterScale& scale, LinearEdges& out) {

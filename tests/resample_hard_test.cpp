@@ -926,6 +926,41 @@ TEST(ResampleHard, StillAreaKernelIsTheScalarTestArea) {
   EXPECT_GT(missed, 1000u);
 }
 
+// A chunk's vertex range and nearest depth (kernels::cornerRange, nearestDepth) against the
+// scalar loops of BucketRasterizer's add(): triangles' missing corners are no vertex, a chunk of
+// triangles with no corner at all has an empty range, NaN depths are passed over, and counts
+// leave tails past the eight-wide loops.
+TEST(ResampleHard, ChunkRangeKernelsAreTheScalarLoops) {
+  if (!kernels::available()) GTEST_SKIP() << "this CPU has no AVX2";
+  Rng rng(23);
+  for (int trial = 0; trial < 500; ++trial) {
+    const size_t count = 1 + rng.below(64);
+    std::vector<uint32_t> corners(4 * count);
+    const uint32_t base = rng.below(1u << 20);
+    for (uint32_t& c : corners) c = rng.below(5) == 0 ? store::kNoCorner : base + rng.below(200);
+    if (trial % 50 == 0) std::fill(corners.begin(), corners.end(), store::kNoCorner);
+    uint32_t lo = ~0u, hi = 0;
+    for (uint32_t c : corners)
+      if (c != store::kNoCorner) lo = std::min(lo, c), hi = std::max(hi, c);
+    const size_t n = 1 + rng.below(90);
+    std::vector<float> xyz(3 * n);
+    for (float& v : xyz) v = float(rng.uniform(-5, 50));
+    if (trial % 3 == 0) xyz[3 * rng.below(uint32_t(n)) + 2] = NAN;
+    const float start = trial % 4 == 0 ? INFINITY : float(rng.uniform(0, 60));
+    float nearest = start;
+    for (size_t i = 0; i < n; ++i) nearest = std::min(nearest, xyz[3 * i + 2]);
+    for (kernels::Isa isa : {kernels::Isa::Avx2, kernels::Isa::Avx512}) {
+      if (!kernels::available(isa)) continue;
+      SCOPED_TRACE(std::string(isa == kernels::Isa::Avx512 ? "avx512" : "avx2") + " trial " + std::to_string(trial));
+      uint32_t klo = 7, khi = 7;
+      kernels::cornerRange(isa, corners.data(), count, klo, khi);
+      EXPECT_EQ(klo, lo);
+      EXPECT_EQ(khi, hi);
+      EXPECT_EQ(kernels::nearestDepth(isa, xyz.data(), n, start), nearest);
+    }
+  }
+}
+
 // The vector edge test's three outcomes on a hand-made triangle: a sample inside is a hit with
 // barycentrics summing to one, one outside is dropped, and one exactly on an edge is left to the
 // scalar tie rule.
