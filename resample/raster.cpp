@@ -157,7 +157,7 @@ void BucketRasterizer::Impl::rasterizeChunk(const Source& src, const TileEntry& 
       // A zero-length shutter: the exact instantaneous image, no time sampling.
       const double tau = shutter.groups()[size_t(g)].open - double(src.frame);
       instantPos.resize(ch.vHi - ch.vLo + 1);
-      for (uint32_t v = ch.vLo; v <= ch.vHi; ++v) instantPos[v - ch.vLo] = positionAt(part, knots, v, tau);
+      positionsAt(part, knots, ch.vLo, ch.vHi - ch.vLo + 1, tau, instantPos.data());
       rasterizeStatic(src, part, hc, instantPos.data(), G > 1 ? g : -1, ch);
     } else {
       rasterizeMoving(timesFor(src, entry.schedule, knots, g), part, knots, hc, ch);

@@ -17,6 +17,10 @@
 #include <memory>
 #include <vector>
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 #include "common/check.h"
 #include "resample/bucket_samples.h"
 #include "resample/coverage.h"
@@ -389,6 +393,34 @@ inline glm::vec3 positionAt(const store::TilePart& part, const store::Schedule& 
   const float f = float((tau - knots[k]) / (knots[k + 1] - knots[k]));
   const glm::vec3& a = part.position(k, v);
   return a + f * (part.position(k + 1, v) - a);
+}
+
+// positionAt() of vertices first .. first + count - 1, into out: every vertex shares the time's
+// knot segment and parameter, so they are found once and the lerp runs over the coordinates as
+// one array (the same a + f (b - a) per coordinate, four at a time).
+inline void positionsAt(const store::TilePart& part, const store::Schedule& knots, uint32_t first, uint32_t count, double tau, glm::vec3* out) {
+  const uint32_t K = part.numKnots;
+  const bool before = K == 1 || tau <= knots[0], after = !before && tau >= knots[K - 1];
+  if (before || after) {
+    std::copy_n(&part.position(before ? 0 : K - 1, first), count, out);
+    return;
+  }
+  uint32_t k = 0;
+  while (k + 2 < K && knots[k + 1] <= tau) ++k;
+  const float f = float((tau - knots[k]) / (knots[k + 1] - knots[k]));
+  const float* __restrict a = &part.position(k, first).x;
+  const float* __restrict b = &part.position(k + 1, first).x;
+  float* __restrict o = &out[0].x;
+  const size_t n = size_t(count) * 3;
+  size_t i = 0;
+#if defined(__SSE2__)
+  const __m128 f4 = _mm_set1_ps(f);
+  for (; i + 4 <= n; i += 4) {
+    const __m128 va = _mm_loadu_ps(a + i);
+    _mm_storeu_ps(o + i, _mm_add_ps(va, _mm_mul_ps(f4, _mm_sub_ps(_mm_loadu_ps(b + i), va))));
+  }
+#endif
+  for (; i < n; ++i) o[i] = a[i] + f * (b[i] - a[i]);
 }
 
 // ------------------------------------------------------------------------------------------
