@@ -961,6 +961,54 @@ TEST(ResampleHard, ChunkRangeKernelsAreTheScalarLoops) {
   }
 }
 
+// At an exact instant a moving store is the still store of its positions at that time: each
+// corner a + f (b - a) in float between the knots around the instant (f = (tau - t_k) / (t_k+1 -
+// t_k), rounded to float), the first or last knot's position outside them. So the instant's render
+// must be, bit for bit, the render of a still store written with those positions - at the knots,
+// between them, before the first and after the last, with the vector kernels and the scalar
+// loops. (The instant path finds the segment once per chunk and lerps its coordinates as one
+// array.)
+TEST(ResampleHard, AnInstantIsTheStillStoreOfItsPositions) {
+  ScratchDir dir;
+  TestScene moving = randomQuadScene(7, true);
+  moving.knotTimes = {0.2, 0.5, 0.8};  // the same positions at knots inside the frame
+  const auto movingReader = writeScene(moving, dir.path("moving.mps"));
+  const std::vector<double>& knots = moving.knotTimes;
+  for (double tau : {0.1, 0.2, 0.33, 0.5, 0.71, 0.8, 0.95}) {
+    TestScene still = moving;
+    still.knotTimes = {0.0};
+    for (size_t i = 0; i < moving.mps.size(); ++i) {
+      const TestMp& mp = moving.mps[i];
+      TestMp& out = still.mps[i];
+      out.knots.assign(1, {});
+      for (int j = 0; j < 4; ++j) {
+        glm::vec3 p;
+        if (tau <= knots.front() || mp.knots.size() == 1) p = glm::vec3(mp.knots.front()[size_t(j)]);
+        else if (tau >= knots.back()) p = glm::vec3(mp.knots.back()[size_t(j)]);
+        else {
+          size_t k = 0;
+          while (k + 2 < knots.size() && knots[k + 1] <= tau) ++k;
+          const float f = float((tau - knots[k]) / (knots[k + 1] - knots[k]));
+          const glm::vec3 a(mp.knots[k][size_t(j)]), b(mp.knots[k + 1][size_t(j)]);
+          for (int c = 0; c < 3; ++c) p[c] = a[c] + f * (b[c] - a[c]);
+        }
+        out.knots[0][size_t(j)] = glm::dvec3(p);
+      }
+    }
+    const auto stillReader = writeScene(still, dir.path("still.mps"));
+    for (const KernelSet& k : kernelSets()) {
+      const std::string what = std::string(k.name) + " at " + std::to_string(tau);
+      RenderSpec atInstant = specFor(movingReader, tau, tau, 4, 4, 5);
+      RenderSpec ofStill = specFor(stillReader, tau, tau, 4, 4, 5);
+      for (RenderSpec* spec : {&atInstant, &ofStill}) spec->raster.vectorKernels = k.vector, spec->raster.avx512Kernels = k.avx512;
+      const RenderResult a = render(atInstant), b = render(ofStill);
+      ASSERT_GT(a.stats.raster.hits, 0u) << what;
+      EXPECT_GT(a.stats.raster.staticMicropolygons, 0u) << what;  // the instant took the static path
+      expectSameOutputs(a, b, what);
+    }
+  }
+}
+
 // The vector edge test's three outcomes on a hand-made triangle: a sample inside is a hit with
 // barycentrics summing to one, one outside is dropped, and one exactly on an edge is left to the
 // scalar tie rule.
