@@ -1,0 +1,303 @@
+// The rasterizer's vector kernels against their definitions, restated in each test: the box
+// gathers, the projection, the static path's test areas, a chunk's vertex range and nearest
+// depth, and the edge test's three outcomes. (The renders that hold the kernels' images to the
+// scalar loops' are in resample_hard_test.cpp.)
+#include <algorithm>
+#include <bit>
+#include <cmath>
+#include <string>
+#include <vector>
+
+#include <gtest/gtest.h>
+
+#include "common/random.h"
+#include "resample/bucket_samples.h"
+#include "resample/coverage.h"
+#include "resample/gather.h"
+#include "store/model.h"
+
+using namespace reshutter;
+using namespace reshutter::resample;
+
+// The box gather (kernels::gatherInBox) against its definition, restated here: every sample of
+// the rows whose position lies in the box at its own time and whose depth lies beyond zCull,
+// each once, with copies of its time and position. Row layouts as the rasterizer makes them:
+// stratum planes of short rows, and pixel-major rows (one plane, a pixel's samples side by
+// side) long enough for the whole-vector loads; fixed and moving boxes; with and without a
+// row-group filter (fields).
+TEST(ResampleHard, BoxGathersFindExactlyTheSamplesInTheBox) {
+  if (!kernels::available()) GTEST_SKIP() << "this CPU has no AVX2";
+  Rng rng(71);
+  const size_t slots = 4096;
+  std::vector<float> st(slots + 16), sx(slots + 16), sy(slots + 16), depth(slots + 16);
+  for (size_t i = 0; i < slots + 16; ++i) {
+    st[i] = float(rng.uniform()), sx[i] = float(rng.uniform() * 8), sy[i] = float(rng.uniform() * 8);
+    depth[i] = float(1 + rng.uniform());
+  }
+  const std::vector<uint8_t> groups = {0, 1, 0, 1, 0, 1, 0, 1};
+  std::vector<uint32_t> index(slots + 16);
+  std::vector<float> ct(slots + 16), cx(slots + 16), cy(slots + 16);
+  const kernels::Candidates out{index.data(), ct.data(), cx.data(), cy.data()};
+  size_t longRowGathers = 0;
+  for (int trial = 0; trial < 400; ++trial) {
+    const bool pixelMajor = trial % 2, moving = trial % 4 >= 2, grouped = trial % 8 >= 4;
+    kernels::SampleRows r{st.data(), sx.data(), sy.data(), 0, 0, 0, 0};
+    r.rows = 1 + int(rng.below(4));
+    r.cols = pixelMajor ? 16 * (1 + int(rng.below(3))) - int(rng.below(4)) : 1 + int(rng.below(6));
+    r.planes = pixelMajor ? 1 : 1 + int(rng.below(16));
+    r.stride = size_t(r.cols) + rng.below(8);
+    r.planeStride = r.stride * size_t(r.rows) + rng.below(8);
+    r.first = rng.below(64);
+    r.depth = depth.data(), r.zCull = float(1 + rng.uniform() * 0.5);
+    if (grouped) r.rowGroup = groups.data(), r.group = uint8_t(rng.below(2));
+    ASSERT_LE(r.first + size_t(r.planes - 1) * r.planeStride + size_t(r.rows - 1) * r.stride + size_t(r.cols), slots);
+    kernels::MovingBox box{float(rng.uniform() * 4), 0, float(4 + rng.uniform() * 4), 0, float(rng.uniform() * 4), 0, float(4 + rng.uniform() * 4), 0};
+    if (moving) box.dx0 = box.dx1 = float(rng.uniform() * 2 - 1), box.dy0 = box.dy1 = float(rng.uniform() * 2 - 1), box.thetaA = 0.2f, box.invLen = 1.5f;
+    // The definition, in the kernels' float operations.
+    std::vector<uint32_t> expected;
+    for (int plane = 0; plane < r.planes; ++plane)
+      for (int row = 0; row < r.rows; ++row) {
+        if (r.rowGroup && r.rowGroup[row] != r.group) continue;
+        for (int col = 0; col < r.cols; ++col) {
+          const size_t i = r.first + size_t(plane) * r.planeStride + size_t(row) * r.stride + size_t(col);
+          const float u = std::min(std::max((st[i] - box.thetaA) * box.invLen, 0.f), 1.f);
+          const bool in = sx[i] >= box.x0 + u * box.dx0 && sx[i] <= box.x1 + u * box.dx1 && sy[i] >= box.y0 + u * box.dy0 && sy[i] <= box.y1 + u * box.dy1;
+          if (in && depth[i] > r.zCull) expected.push_back(uint32_t(i));
+        }
+      }
+    for (kernels::Isa isa : {kernels::Isa::Avx2, kernels::Isa::Avx512}) {
+      if (!kernels::available(isa)) continue;
+      SCOPED_TRACE(std::string(isa == kernels::Isa::Avx512 ? "avx512" : "avx2") + " trial " + std::to_string(trial));
+      const size_t n = kernels::gatherInBox(isa, r, box, out, 3);  // appended after three entries
+      ASSERT_GE(n, 3u);
+      std::vector<uint32_t> got(index.begin() + 3, index.begin() + std::ptrdiff_t(n));
+      for (size_t k = 3; k < n; ++k) {
+        EXPECT_EQ(ct[k], st[index[k]]);
+        EXPECT_EQ(cx[k], sx[index[k]]);
+        EXPECT_EQ(cy[k], sy[index[k]]);
+      }
+      std::sort(got.begin(), got.end());
+      EXPECT_EQ(got, expected);
+    }
+    longRowGathers += pixelMajor && !expected.empty();
+  }
+  EXPECT_GT(longRowGathers, 100u);  // the long rows' loads found samples
+}
+
+// The projection kernel (kernels::projectLerped) against the rasterizer's project(), restated:
+// p = a + f (b - a) (or a itself when b is a), then raster x = float(ax (x / z) + bx) in double,
+// NaN before the near plane or where x or y is not finite; the box over the others. Counts that
+// are not multiples of eight (the kernels' whole-vector loop and their tail), points behind the
+// eye, at infinity and NaN, both projections.
+TEST(ResampleHard, ProjectionKernelIsProjectBitForBit) {
+  if (!kernels::available()) GTEST_SKIP() << "this CPU has no AVX2";
+  Rng rng(5);
+  for (int trial = 0; trial < 200; ++trial) {
+    const bool perspective = trial % 4 != 3, still = trial % 2;
+    const kernels::ProjectionScale scale{1000.0 + rng.uniform() * 500, 960.0, -1000.0 - rng.uniform() * 500, 540.0, 0.1f, perspective};
+    const size_t n = 1 + rng.below(40);
+    std::vector<float> a(3 * n), b(3 * n);
+    for (size_t i = 0; i < 3 * n; ++i) {
+      a[i] = float(rng.uniform(-2, 2)), b[i] = float(rng.uniform(-2, 2));
+      if (i % 3 == 2) a[i] = float(rng.uniform(-0.5, 6)), b[i] = float(rng.uniform(-0.5, 6));  // some behind the near plane
+    }
+    if (trial % 5 == 0) a[3 * rng.below(uint32_t(n))] = INFINITY;
+    if (trial % 7 == 0) a[3 * rng.below(uint32_t(n)) + 1] = NAN;
+    if (trial % 3 == 0) a[3 * rng.below(uint32_t(n))] = -0.f;
+    const float f = float(rng.uniform());
+    const float* to = still ? a.data() : b.data();
+    // The definition.
+    std::vector<float> ex(n), ey(n), ez(n);
+    bool expectBad = false;
+    float lo[2] = {INFINITY, INFINITY}, hi[2] = {-INFINITY, -INFINITY};
+    for (size_t i = 0; i < n; ++i) {
+      float p[3];
+      for (int k = 0; k < 3; ++k) p[k] = still ? a[3 * i + k] : a[3 * i + k] + f * (to[3 * i + k] - a[3 * i + k]);
+      ez[i] = p[2];
+      double px = p[0], py = p[1];
+      if (perspective) {
+        const double iz = 1.0 / double(p[2]);
+        px *= iz, py *= iz;
+      }
+      const float x = float(scale.ax * px + scale.bx), y = float(scale.ay * py + scale.by);
+      const bool ok = (!perspective || p[2] >= scale.nearClip) && std::isfinite(x) && std::isfinite(y);
+      ex[i] = ok ? x : NAN, ey[i] = y;
+      expectBad |= !ok;
+      if (ok) lo[0] = std::min(lo[0], x), lo[1] = std::min(lo[1], y), hi[0] = std::max(hi[0], x), hi[1] = std::max(hi[1], y);
+    }
+    for (kernels::Isa isa : {kernels::Isa::Avx2, kernels::Isa::Avx512}) {
+      if (!kernels::available(isa)) continue;
+      SCOPED_TRACE(std::string(isa == kernels::Isa::Avx512 ? "avx512" : "avx2") + " trial " + std::to_string(trial));
+      std::vector<float> x(n + 8, 7.f), y(n + 8, 7.f), z(n + 8, 7.f);
+      float box[4];
+      const bool bad = kernels::projectLerped(isa, a.data(), to, f, n, scale, x.data(), y.data(), z.data(), box);
+      EXPECT_EQ(bad, expectBad);
+      for (size_t i = 0; i < n; ++i) {
+        EXPECT_EQ(std::isnan(x[i]), std::isnan(ex[i])) << i;
+        if (!std::isnan(ex[i])) {
+          EXPECT_EQ(std::bit_cast<uint32_t>(x[i]), std::bit_cast<uint32_t>(ex[i])) << i;
+          EXPECT_EQ(std::bit_cast<uint32_t>(y[i]), std::bit_cast<uint32_t>(ey[i])) << i;
+        }
+        if (!std::isnan(ez[i])) {
+          EXPECT_EQ(std::bit_cast<uint32_t>(z[i]), std::bit_cast<uint32_t>(ez[i])) << i;
+        }
+      }
+      EXPECT_EQ(x[n], 7.f);  // nothing written past n
+      if (lo[0] <= hi[0]) {
+        EXPECT_EQ(box[0], lo[0]);
+        EXPECT_EQ(box[1], lo[1]);
+        EXPECT_EQ(box[2], hi[0]);
+        EXPECT_EQ(box[3], hi[1]);
+      }
+    }
+  }
+}
+
+// The static path's set-up kernel (kernels::stillAreas) against the scalar loop it replaces: each
+// micropolygon's corner box from its corners' projections (a NaN x makes it unbounded), the
+// region's BucketSamples::testArea() of that box, and the cull depth (nearest corner, less 1e-5
+// of it). Random chunks of quads and triangles, some corners without a projection, some with a
+// NaN y, boxes inside, across and outside the region, counts that are not multiples of eight.
+TEST(ResampleHard, StillAreaKernelIsTheScalarTestArea) {
+  if (!kernels::available()) GTEST_SKIP() << "this CPU has no AVX2";
+  const SamplePattern pattern(4, 4, 1);
+  const ShutterModel shutter = ShutterModel::progressive(0.0, 1.0);
+  BucketSamples region(pattern, shutter);
+  Rng rng(17);
+  size_t drawn = 0, unbounded = 0, missed = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    const int rx0 = int(rng.below(200)) - 100, ry0 = int(rng.below(200)) - 100;
+    region.prepare(rx0, ry0, 8 + int(rng.below(60)), 8 + int(rng.below(60)));
+    const uint32_t nV = 20 + rng.below(60), count = 1 + rng.below(64), vBase = 1000 + rng.below(1000);
+    std::vector<float> px(nV), py(nV), pos(3 * nV);
+    for (uint32_t v = 0; v < nV; ++v) {
+      px[v] = float(rx0 + rng.uniform(-20, 90)), py[v] = float(ry0 + rng.uniform(-20, 90));
+      if (rng.below(40) == 0) px[v] = NAN;
+      if (rng.below(60) == 0) py[v] = NAN;
+      pos[3 * v] = 0.f, pos[3 * v + 1] = 0.f, pos[3 * v + 2] = float(rng.uniform(0.5, 50));
+    }
+    std::vector<uint32_t> corners(4 * size_t(count));
+    for (uint32_t m = 0; m < count; ++m) {
+      // Mostly a small quad of neighbouring vertices, sometimes scattered ones (large boxes).
+      const uint32_t first = rng.below(nV - 4), spread = rng.below(8) == 0 ? nV : 4;
+      for (int j = 0; j < 4; ++j) corners[4 * m + j] = vBase + (spread == 4 ? first + uint32_t(j) : rng.below(nV));
+      if (rng.below(4) == 0) corners[4 * m + 3] = store::kNoCorner;
+    }
+    for (bool occlusion : {true, false}) {
+      const kernels::StillAreaSetup setup{corners.data(), vBase, px.data(), py.data(), pos.data(), region.x0, region.y0, region.w, region.h, occlusion};
+      for (kernels::Isa isa : {kernels::Isa::Avx2, kernels::Isa::Avx512}) {
+        if (!kernels::available(isa)) continue;
+        SCOPED_TRACE(std::string(isa == kernels::Isa::Avx512 ? "avx512" : "avx2") + " trial " + std::to_string(trial));
+        std::vector<int32_t> x0(72), y0(72), x1(72), y1(72);
+        std::vector<float> sx0(72), sy0(72), sx1(72), sy1(72), zc(72);
+        std::vector<uint8_t> state(72);
+        kernels::stillAreas(isa, setup, count, {x0.data(), y0.data(), x1.data(), y1.data(), sx0.data(), sy0.data(), sx1.data(), sy1.data(), zc.data(), state.data()});
+        for (uint32_t m = 0; m < count; ++m) {
+          // The scalar loop's values.
+          const uint32_t* c = &corners[4 * m];
+          const int nc = c[3] == store::kNoCorner ? 3 : 4;
+          float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY, zv[4];
+          bool bounded = true;
+          for (int j = 0; j < nc; ++j) {
+            const uint32_t v = c[j] - vBase;
+            zv[j] = pos[3 * v + 2];
+            if (std::isnan(px[v])) bounded = false;
+            else bx0 = std::min(bx0, px[v]), by0 = std::min(by0, py[v]), bx1 = std::max(bx1, px[v]), by1 = std::max(by1, py[v]);
+          }
+          const float zNear = *std::min_element(zv, zv + nc);
+          EXPECT_EQ(zc[m], occlusion ? zNear - 1e-5f * std::abs(zNear) : -INFINITY) << m;
+          BucketSamples::TestArea ta;
+          const bool reaches = region.testArea(bounded, bx0, by0, bx1, by1, ta);
+          ASSERT_EQ(int(state[m]), !bounded ? 2 : reaches ? 1 : 0) << m;
+          if (state[m] != 1) continue;
+          EXPECT_EQ(x0[m], ta.px0) << m;
+          EXPECT_EQ(y0[m], ta.py0) << m;
+          EXPECT_EQ(x1[m], ta.px1) << m;
+          EXPECT_EQ(y1[m], ta.py1) << m;
+          EXPECT_EQ(sx0[m], ta.sx0) << m;
+          EXPECT_EQ(sy0[m], ta.sy0) << m;
+          EXPECT_EQ(sx1[m], ta.sx1) << m;
+          EXPECT_EQ(sy1[m], ta.sy1) << m;
+        }
+        for (uint32_t m = 0; m < count; ++m) drawn += state[m] == 1, unbounded += state[m] == 2, missed += state[m] == 0;
+      }
+    }
+  }
+  // Every outcome taken, many times.
+  EXPECT_GT(drawn, 1000u);
+  EXPECT_GT(unbounded, 100u);
+  EXPECT_GT(missed, 1000u);
+}
+
+// A chunk's vertex range and nearest depth (kernels::cornerRange, nearestDepth) against the
+// scalar loops of BucketRasterizer's add(): triangles' missing corners are no vertex, a chunk of
+// triangles with no corner at all has an empty range, NaN depths are passed over, and counts
+// leave tails past the eight-wide loops.
+TEST(ResampleHard, ChunkRangeKernelsAreTheScalarLoops) {
+  if (!kernels::available()) GTEST_SKIP() << "this CPU has no AVX2";
+  Rng rng(23);
+  for (int trial = 0; trial < 500; ++trial) {
+    const size_t count = 1 + rng.below(64);
+    std::vector<uint32_t> corners(4 * count);
+    const uint32_t base = rng.below(1u << 20);
+    for (uint32_t& c : corners) c = rng.below(5) == 0 ? store::kNoCorner : base + rng.below(200);
+    if (trial % 50 == 0) std::fill(corners.begin(), corners.end(), store::kNoCorner);
+    uint32_t lo = ~0u, hi = 0;
+    for (uint32_t c : corners)
+      if (c != store::kNoCorner) lo = std::min(lo, c), hi = std::max(hi, c);
+    const size_t n = 1 + rng.below(90);
+    std::vector<float> xyz(3 * n);
+    for (float& v : xyz) v = float(rng.uniform(-5, 50));
+    if (trial % 3 == 0) xyz[3 * rng.below(uint32_t(n)) + 2] = NAN;
+    const float start = trial % 4 == 0 ? INFINITY : float(rng.uniform(0, 60));
+    float nearest = start;
+    for (size_t i = 0; i < n; ++i) nearest = std::min(nearest, xyz[3 * i + 2]);
+    for (kernels::Isa isa : {kernels::Isa::Avx2, kernels::Isa::Avx512}) {
+      if (!kernels::available(isa)) continue;
+      SCOPED_TRACE(std::string(isa == kernels::Isa::Avx512 ? "avx512" : "avx2") + " trial " + std::to_string(trial));
+      uint32_t klo = 7, khi = 7;
+      kernels::cornerRange(isa, corners.data(), count, klo, khi);
+      EXPECT_EQ(klo, lo);
+      EXPECT_EQ(khi, hi);
+      EXPECT_EQ(kernels::nearestDepth(isa, xyz.data(), n, start), nearest);
+    }
+  }
+}
+
+// The vector edge test's three outcomes on a hand-made triangle: a sample inside is a hit with
+// barycentrics summing to one, one outside is dropped, and one exactly on an edge is left to the
+// scalar tie rule.
+TEST(ResampleHard, VectorEdgeTestHitsMissesAndDefersTies) {
+  if (!kernels::available()) GTEST_SKIP() << "this CPU has no AVX2";
+  // Orthographic-style homogeneous vertices (x, y, 1) of the triangle (0,0) (4,0) (0,4), fixed in
+  // time: edge (j,k) = V_j × V_k, evaluated as d · E with d = (x, y, 1).
+  const glm::dvec3 V[3] = {{0, 0, 1}, {4, 0, 1}, {0, 4, 1}};
+  auto cross = [](glm::dvec3 a, glm::dvec3 b) { return glm::cross(a, b); };
+  kernels::LinearEdges edges{};
+  const glm::dvec3 E[5] = {cross(V[0], V[1]), cross(V[1], V[2]), {}, {}, cross(V[0], V[2])};
+  for (int e = 0; e < 5; ++e) edges.c[0][e] = E[e].x, edges.c[1][e] = E[e].y, edges.c[2][e] = E[e].z;
+  // Samples: inside (1, 1), outside (5, 5), exactly on edge 01 (2, 0), inside (0.5, 2.5).
+  std::vector<float> st(16, 0.f), rx = {1, 5, 2, 0.5f}, ry = {1, 5, 0, 2.5f};
+  rx.resize(16), ry.resize(16);
+  const kernels::EdgeTestSetup setup{st.data(), rx.data(), ry.data(), 0.f, 0.f, true, false, true};
+  for (kernels::Isa isa : {kernels::Isa::Avx2, kernels::Isa::Avx512}) {
+    if (!kernels::available(isa)) continue;
+    SCOPED_TRACE(isa == kernels::Isa::Avx512 ? "avx512" : "avx2");
+    std::vector<kernels::EdgeHit> hits(16);
+    const size_t n = kernels::testLinearEdges(isa, setup, edges, 4, hits.data());
+    ASSERT_EQ(n, 3u);
+    EXPECT_EQ(hits[0].candidate, 0u);
+    EXPECT_FALSE(hits[0].undecided);
+    EXPECT_EQ(hits[1].candidate, 2u);
+    EXPECT_TRUE(hits[1].undecided);
+    EXPECT_EQ(hits[2].candidate, 3u);
+    EXPECT_FALSE(hits[2].undecided);
+    for (size_t h : {size_t(0), size_t(2)}) {
+      EXPECT_NEAR(hits[h].b[0] + hits[h].b[1] + hits[h].b[2], 1.f, 1e-6f);
+      // Barycentrics reproduce the sample position: sum b_j V_j.
+      const double x = hits[h].b[1] * 4.0, y = hits[h].b[2] * 4.0;
+      EXPECT_NEAR(x, rx[hits[h].candidate], 1e-5);
+      EXPECT_NEAR(y, ry[hits[h].candidate], 1e-5);
+    }
+  }
+}
