@@ -4,14 +4,7 @@
 // simd_isa.h for what it may include.
 #include <cmath>
 
-#pragma GCC diagnostic push
-#if !defined(__clang__)  // GCC's own warning (clang, the fuzz build's compiler, has no such group)
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#endif
-#pragma GCC diagnostic ignored "-Wuninitialized"
-#include <immintrin.h>
-#pragma GCC diagnostic pop
-
+#include "resample/simd_intrinsics.h"
 #include "resample/simd_isa.h"
 
 namespace reshutter::resample::kernels {

@@ -1,19 +1,12 @@
 // The vector kernels for AVX-512 (F, VL, BW, DQ, with BMI2): sample gathering (sixteen lanes, as
 // four row segments of up to four samples; the lens gather as row segments of sixteen), the exact
-// coverage test (eight candidates) and the edge set-up, the AVX2 kernels' operations lane for lane. The vertex projection is the AVX2 one
-// (an AVX-512 twin measured within the noise, bench/RESULTS.md). This file alone is compiled with the
-// AVX-512 flags; simd_dispatch.cpp calls it only on CPUs that run it. See simd_isa.h for what it
-// may include.
+// coverage test (eight candidates), the edge set-up and the vertex projection (eight double lanes),
+// the AVX2 kernels' operations lane for lane; the chunk set-up kernels are the AVX2 ones
+// (simd_avx2_setup.cpp). This file alone is compiled with the AVX-512 flags; simd_dispatch.cpp
+// calls it only on CPUs that run it. See simd_isa.h for what it may include.
 #include <cmath>
 
-#pragma GCC diagnostic push
-#if !defined(__clang__)  // GCC's own warning (clang, the fuzz build's compiler, has no such group)
-#pragma GCC diagnostic ignored "-Wmaybe-uninitialized"
-#endif
-#pragma GCC diagnostic ignored "-Wuninitialized"
-#include <immintrin.h>
-#pragma GCC diagnostic pop
-
+#include "resample/simd_intrinsics.h"
 #include "resample/simd_isa.h"
 
 namespace reshutter::resample::kernels {
