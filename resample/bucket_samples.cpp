@@ -16,7 +16,7 @@ BucketSamples::BucketSamples(const SamplePattern& p, const ShutterModel& s, int 
       lensPlanes(lensTimeBlocks >= 1),
       lensTimeBlocks(std::max(lensTimeBlocks, 1)),
       drawTimes(drawTimes || lensTimeBlocks > 1),  // time blocks pair lens points with the time strata
-      pixelMajor(!this->drawTimes && !lensPlanes),
+      pixelMajor(pixelMajorFor(this->drawTimes, lensPlanes)),
       tBase(std::floor(s.earliest())) {}
 
 void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {

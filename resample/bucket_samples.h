@@ -78,6 +78,8 @@ struct BucketSamples {
   /// Only the static path draws then (every part stands still, or the shutter is an instant), and
   /// it reads the samples through slot() and its gather's rows.
   const bool pixelMajor;
+  /// Whether a render's samples are pixel-major (for a plan that chooses by it before any bucket).
+  static bool pixelMajorFor(bool drawTimes, bool lens) { return !drawTimes && !lens; }
 
   // Region.
   int x0 = 0, y0 = 0, w = 0, h = 0, P = 0;

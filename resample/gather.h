@@ -186,7 +186,7 @@ struct StillAreaSetup {
   uint32_t vBase;            // corner v is chunk vertex v - vBase
   const float* projX;        // per chunk vertex: raster x (NaN: none) and y
   const float* projY;
-  const float* positions;    // per chunk vertex: camera-space xyz
+  const float* depth;        // per chunk vertex: camera depth (projectLerped()'s z)
   int x0, y0, w, h;          // the region, raster pixels
   bool occlusionCulling;
 };

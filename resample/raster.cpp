@@ -95,11 +95,9 @@ void BucketRasterizer::Impl::add(const Source& src, const TileEntry& entry, cons
     if (ch.vLo > ch.vHi) continue;  // no corners: nothing to draw
     // The range's vertices (a grid's rows: few the chunk does not use) bound its depth.
     for (uint32_t k = 0; k < K; ++k) {
-      if (vectorKernels) {
-        ch.zNear = kernels::nearestDepth(isa, &part.position(k, ch.vLo).x, ch.vHi - ch.vLo + 1, ch.zNear);
-        continue;
-      }
-      for (uint32_t v = ch.vLo; v <= ch.vHi; ++v) ch.zNear = std::min(ch.zNear, part.position(k, v).z);
+      if (vectorKernels) ch.zNear = kernels::nearestDepth(isa, &part.position(k, ch.vLo).x, ch.vHi - ch.vLo + 1, ch.zNear);
+      else
+        for (uint32_t v = ch.vLo; v <= ch.vHi; ++v) ch.zNear = std::min(ch.zNear, part.position(k, v).z);
     }
     // Rows of a moving part that stand still (a deforming grid's pinned end, a store written
     // before the writer kept still grids static) take the static path.

@@ -108,9 +108,6 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   // any) in pixels [px0, px1] × [py0, py1] that lie in `box` at their own time and inside the
   // source's coverage; returns the new count.
   size_t gatherCandidates(int s0, int s1, int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover, float zCull, size_t n);
-  // gatherCandidates() of every stratum when the samples are pixel-major: each row of the box's
-  // pixels is one run of their samples.
-  size_t gatherPixelMajor(int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover, float zCull, size_t n);
   // The candidate arrays from entry n on.
   kernels::Candidates candidateList(size_t n = 0) { return kernels::Candidates{candidates.data(), candT.data(), candX.data(), candY.data()}.from(n); }
 
@@ -154,7 +151,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   void testStatic(const HitContext& hc, uint32_t m, const uint32_t* c, bool tri, const glm::dvec3 E[5], const float zv[4], uint32_t idx);
 
   std::vector<float> projX, projY;  // per chunk vertex (static) or [(v - vBase) * T + theta] (moving); projX NaN = before the near plane
-  std::vector<float> projZ;         // the static path's vertex depths, as the projection kernel writes them
+  std::vector<float> projZ;         // the static path's vertex depths, as the projection kernel writes them (stillAreas() reads them)
   // A chunk's micropolygons' test areas and cull depths (kernels::stillAreas()).
   struct StillScratch {
     static constexpr size_t kRoom = kChunkSize + 8;
@@ -432,36 +429,29 @@ inline void positionsAt(const store::TilePart& part, const store::Schedule& knot
 // branches would mispredict.
 inline size_t BucketRasterizer::Impl::gatherCandidates(int s0, int s1, int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover,
                                                        float zCull, size_t n) {
+  // The box's samples as rows: each stratum plane's pixel rows, or - pixel-major - each row of
+  // the box's pixels as one run of their samples.
+  const uint8_t* groups = multiGroup && g >= 0 ? &rowGroup[size_t(py0 - y0)] : nullptr;
+  kernels::SampleRows rows{st.data(), sx.data(), sy.data(), 0, 0, 0, py1 - py0 + 1, groups, uint8_t(g), 1, 0, zbuf.data(), zCull};
   if (pixelMajor) {
     CHECK(s0 == 0 && s1 == N, "pixel-major samples are gathered for every stratum at once");
-    return gatherPixelMajor(g, px0, py0, px1, py1, box, cover, zCull, n);
+    rows.stride = size_t(w) * size_t(N), rows.first = size_t(py0 - y0) * rows.stride + size_t(px0 - x0) * size_t(N);
+    rows.cols = (px1 - px0 + 1) * N, rows.planeStride = sampleSlots;
+  } else {
+    rows.stride = size_t(w), rows.first = size_t(s0) * PS + size_t(py0 - y0) * w + size_t(px0 - x0);
+    rows.cols = px1 - px0 + 1, rows.planes = s1 - s0, rows.planeStride = PS;
   }
-  if (vectorKernels && !cover.check) {
-    const kernels::SampleRows rows{st.data(),
-                                   sx.data(),
-                                   sy.data(),
-                                   size_t(s0) * PS + size_t(py0 - y0) * w + size_t(px0 - x0),
-                                   size_t(w),
-                                   px1 - px0 + 1,
-                                   py1 - py0 + 1,
-                                   multiGroup && g >= 0 ? &rowGroup[size_t(py0 - y0)] : nullptr,
-                                   uint8_t(g),
-                                   s1 - s0,
-                                   PS,
-                                   zbuf.data(),
-                                   zCull};
-    return kernels::gatherInBox(isa, rows, box, candidateList(), n);
-  }
+  if (vectorKernels && !cover.check) return kernels::gatherInBox(isa, rows, box, candidateList(), n);
   uint32_t* __restrict cand = candidates.data();
   float* __restrict ct = candT.data();
   float* __restrict cx = candX.data();
   float* __restrict cy = candY.data();
-  for (int s = s0; s < s1; ++s)
-    for (int py = py0; py <= py1; ++py) {
-      if (multiGroup && g >= 0 && rowGroup[size_t(py - y0)] != g) continue;
-      const uint32_t rowBase = uint32_t(size_t(s) * PS + size_t(py - y0) * w - size_t(x0));
-      for (int px = px0; px <= px1; ++px) {
-        const uint32_t idx = rowBase + uint32_t(px);
+  for (int plane = 0; plane < rows.planes; ++plane)
+    for (int row = 0; row < rows.rows; ++row) {
+      if (groups && groups[row] != g) continue;
+      const size_t rowStart = rows.first + size_t(plane) * rows.planeStride + size_t(row) * rows.stride;
+      for (int col = 0; col < rows.cols; ++col) {
+        const uint32_t idx = uint32_t(rowStart + size_t(col));
         const float t = st[idx];
         const float u = std::min(std::max((t - box.thetaA) * box.invLen, 0.f), 1.f);  // minss/maxss, no branches
         const float x = sx[idx], y = sy[idx];
@@ -472,37 +462,6 @@ inline size_t BucketRasterizer::Impl::gatherCandidates(int s0, int s1, int g, in
         n += in;
       }
     }
-  return n;
-}
-
-inline size_t BucketRasterizer::Impl::gatherPixelMajor(int g, int px0, int py0, int px1, int py1, const MovingBox& box, const Coverage& cover, float zCull,
-                                                       size_t n) {
-  const size_t rowSamples = size_t(w) * size_t(N), first = size_t(py0 - y0) * rowSamples + size_t(px0 - x0) * size_t(N);
-  const int cols = (px1 - px0 + 1) * N, rows = py1 - py0 + 1;
-  const uint8_t* groups = multiGroup && g >= 0 ? &rowGroup[size_t(py0 - y0)] : nullptr;
-  if (vectorKernels && !cover.check) {
-    const kernels::SampleRows r{st.data(), sx.data(), sy.data(), first, rowSamples, cols, rows, groups, uint8_t(g), 1, sampleSlots, zbuf.data(), zCull};
-    return kernels::gatherInBox(isa, r, box, candidateList(), n);
-  }
-  uint32_t* __restrict cand = candidates.data();
-  float* __restrict ct = candT.data();
-  float* __restrict cx = candX.data();
-  float* __restrict cy = candY.data();
-  for (int row = 0; row < rows; ++row) {
-    if (groups && groups[row] != g) continue;
-    const size_t rowStart = first + size_t(row) * rowSamples;
-    for (int col = 0; col < cols; ++col) {
-      const uint32_t idx = uint32_t(rowStart + size_t(col));
-      const float t = st[idx];
-      const float u = std::min(std::max((t - box.thetaA) * box.invLen, 0.f), 1.f);
-      const float x = sx[idx], y = sy[idx];
-      bool in = (x >= box.x0 + u * box.dx0) & (x <= box.x1 + u * box.dx1) & (y >= box.y0 + u * box.dy0) & (y <= box.y1 + u * box.dy1);
-      if (cover.check) in &= Source::covers(double(t), cover.lo, cover.hi, cover.openEnd);
-      in &= zbuf[idx] > zCull;
-      cand[n] = idx, ct[n] = t, cx[n] = x, cy[n] = y;
-      n += in;
-    }
-  }
   return n;
 }
 

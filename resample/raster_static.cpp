@@ -99,7 +99,8 @@ void BucketRasterizer::Impl::rasterizeStaticVector(const TilePart& part, const H
   const uint32_t vBase = ch.vLo, count = ch.m1 - ch.m0;
   StillScratch& a = stillScratch;
   const kernels::StillAreas areas{a.px0, a.py0, a.px1, a.py1, a.sx0, a.sy0, a.sx1, a.sy1, a.zCull, a.state};
-  const kernels::StillAreaSetup setup{&part.corners[size_t(ch.m0) * 4], vBase, projX.data(), projY.data(), &chunkPos[0].x, x0, y0, w, h, opt.occlusionCulling};
+  // The vertices' depths as the projection left them in projZ (a still chunk's, not lerped).
+  const kernels::StillAreaSetup setup{&part.corners[size_t(ch.m0) * 4], vBase, projX.data(), projY.data(), projZ.data(), x0, y0, w, h, opt.occlusionCulling};
   kernels::stillAreas(isa, setup, count, areas);
   for (uint32_t i = 0; i < count; ++i) {
     if (!a.state[i]) continue;

@@ -21,6 +21,7 @@
 #include "common/error.h"
 #include "common/log.h"
 #include "common/progress.h"
+#include "resample/bucket_samples.h"
 #include "resample/camera_view.h"
 
 namespace reshutter::resample {
@@ -281,7 +282,8 @@ struct Plan {
     }
     rasterOptions.sampleTimes = !rasterOptions.skipUnreadTimes || drawsSampleTimes(sources, shutter, carried, volumes != nullptr);
     // What the samples' layout gains from (kStillBucketSize's comment), known only now.
-    bucketSize = spec.bucketSize != kAutoBucketSize ? spec.bucketSize : !rasterOptions.sampleTimes && !view.lens() ? kStillBucketSize : kBucketSize;
+    const bool pixelMajor = BucketSamples::pixelMajorFor(rasterOptions.sampleTimes, view.lens());
+    bucketSize = spec.bucketSize != kAutoBucketSize ? spec.bucketSize : pixelMajor ? kStillBucketSize : kBucketSize;
     buckets = planBuckets(win, bucketSize);
     if (volumes) {
       volumeCamera.ax = view.ax, volumeCamera.bx = view.bx, volumeCamera.ay = view.ay, volumeCamera.by = view.by;

@@ -157,7 +157,7 @@ void avx2::stillAreas(const StillAreaSetup& s, size_t count, const StillAreas& o
     for (int j = 0; j < 4; ++j) {
       const __m256i k = _mm256_sub_epi32(v[j], vBase);
       const __m256 x = _mm256_i32gather_ps(s.projX, k, 4), y = _mm256_i32gather_ps(s.projY, k, 4);
-      const __m256 z = _mm256_i32gather_ps(s.positions + 2, _mm256_add_epi32(k, _mm256_add_epi32(k, k)), 4);
+      const __m256 z = _mm256_i32gather_ps(s.depth, k, 4);
       unbounded = _mm256_or_ps(unbounded, _mm256_cmp_ps(x, x, _CMP_UNORD_Q));
       // std::min(b, x) is x < b ? x : b; a NaN x leaves the box as it was (the lane is unbounded).
       bx0 = _mm256_min_ps(x, bx0), by0 = _mm256_min_ps(y, by0), bx1 = _mm256_max_ps(x, bx1), by1 = _mm256_max_ps(y, by1);

@@ -169,12 +169,12 @@ TEST(ResampleHard, StillAreaKernelIsTheScalarTestArea) {
     const int rx0 = int(rng.below(200)) - 100, ry0 = int(rng.below(200)) - 100;
     region.prepare(rx0, ry0, 8 + int(rng.below(60)), 8 + int(rng.below(60)));
     const uint32_t nV = 20 + rng.below(60), count = 1 + rng.below(64), vBase = 1000 + rng.below(1000);
-    std::vector<float> px(nV), py(nV), pos(3 * nV);
+    std::vector<float> px(nV), py(nV), depth(nV);
     for (uint32_t v = 0; v < nV; ++v) {
       px[v] = float(rx0 + rng.uniform(-20, 90)), py[v] = float(ry0 + rng.uniform(-20, 90));
       if (rng.below(40) == 0) px[v] = NAN;
       if (rng.below(60) == 0) py[v] = NAN;
-      pos[3 * v] = 0.f, pos[3 * v + 1] = 0.f, pos[3 * v + 2] = float(rng.uniform(0.5, 50));
+      depth[v] = float(rng.uniform(0.5, 50));
     }
     std::vector<uint32_t> corners(4 * size_t(count));
     for (uint32_t m = 0; m < count; ++m) {
@@ -184,7 +184,7 @@ TEST(ResampleHard, StillAreaKernelIsTheScalarTestArea) {
       if (rng.below(4) == 0) corners[4 * m + 3] = store::kNoCorner;
     }
     for (bool occlusion : {true, false}) {
-      const kernels::StillAreaSetup setup{corners.data(), vBase, px.data(), py.data(), pos.data(), region.x0, region.y0, region.w, region.h, occlusion};
+      const kernels::StillAreaSetup setup{corners.data(), vBase, px.data(), py.data(), depth.data(), region.x0, region.y0, region.w, region.h, occlusion};
       for (kernels::Isa isa : {kernels::Isa::Avx2, kernels::Isa::Avx512}) {
         if (!kernels::available(isa)) continue;
         SCOPED_TRACE(std::string(isa == kernels::Isa::Avx512 ? "avx512" : "avx2") + " trial " + std::to_string(trial));
@@ -200,7 +200,7 @@ TEST(ResampleHard, StillAreaKernelIsTheScalarTestArea) {
           bool bounded = true;
           for (int j = 0; j < nc; ++j) {
             const uint32_t v = c[j] - vBase;
-            zv[j] = pos[3 * v + 2];
+            zv[j] = depth[v];
             if (std::isnan(px[v])) bounded = false;
             else bx0 = std::min(bx0, px[v]), by0 = std::min(by0, py[v]), bx1 = std::max(bx1, px[v]), by1 = std::max(by1, py[v]);
           }
