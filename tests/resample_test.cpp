@@ -742,6 +742,36 @@ TEST(ResampleCli, UnwritableOutputFailsBeforeAnythingIsWritten) {
   EXPECT_NE(r.err.find("no such directory"), std::string::npos) << r.err;
 }
 
+// --bucket 0 (the default) chooses the bucket size per render - 64 px for a motion-free store,
+// whose samples are pixel-major, 96 for a moving one - and --stats names it; a size given is
+// used as given, the image is the same (an independent reader's comparison), and a size outside
+// 4 to 1024 other than 0 is a one-line error naming the option, before anything is written.
+TEST(ResampleCli, BucketSizeIsChosenOrGivenAndCheckedAtTheDoor) {
+  ScratchDir dir;
+  const std::string still = dir.path("still.mps"), moving = dir.path("moving.mps");
+  ASSERT_EQ(runReshutter("generate -n 6000 --width 150 --height 100 --motion 0 --knots 1 -o " + still).exitCode, 0);
+  ASSERT_EQ(runReshutter("generate -n 6000 --width 150 --height 100 -o " + moving).exitCode, 0);
+  for (const auto& [store, chosen] : {std::pair{still, 64}, std::pair{moving, 96}}) {
+    const std::string automatic = dir.path("auto.exr"), given = dir.path("given.exr");
+    CommandResult r = runReshutter("resample " + store + " -o " + automatic + " --compression none --stats");
+    ASSERT_EQ(r.exitCode, 0) << r.err;
+    EXPECT_NE(r.out.find("buckets of " + std::to_string(chosen) + " px"), std::string::npos) << r.out;
+    CommandResult g = runReshutter("resample " + store + " -o " + given + " --compression none --stats --bucket 24");
+    ASSERT_EQ(g.exitCode, 0) << g.err;
+    EXPECT_NE(g.out.find("buckets of 24 px"), std::string::npos) << g.out;
+    CommandResult diff = runImageTool("idiff -q -fail 0 -failpercent 0 -warn 0 " + automatic + " " + given);
+    EXPECT_EQ(diff.exitCode, 0) << store << ": " << diff.out << diff.err;
+  }
+  for (const std::string bad : {"2", "-8", "2048"}) {
+    const std::string out = dir.path("bad.exr");
+    CommandResult r = runReshutter("resample " + still + " -o " + out + " --bucket " + bad);
+    EXPECT_EQ(r.exitCode, 1) << bad;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << bad << ": " << r.err;
+    EXPECT_NE(r.err.find("--bucket"), std::string::npos) << r.err;
+    EXPECT_FALSE(std::filesystem::exists(out)) << bad;
+  }
+}
+
 // --simd picks the inner loops' instruction set: every set this CPU runs writes the same file as
 // an independent reader sees it; one it does not run (AVX-512 on most desktops) is a one-line
 // error before anything is written.
