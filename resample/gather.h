@@ -200,6 +200,35 @@ struct StillAreas {
 };
 void stillAreas(Isa isa, const StillAreaSetup& setup, size_t count, const StillAreas& out);
 
+/// The lens path's per-micropolygon set-up for a still chunk (raster_lens.cpp, queueStillLens()):
+/// each one's pinhole box, its displacement range per unit of lens, its depth layer and how far
+/// its search strays from the layer's shear, and whether its search box reaches the region at
+/// all. stillLensDraw() is the definition (the scalar rasterizer runs it); the vector kernel
+/// computes its values eight at a time, bit for bit.
+struct StillLensSetup {
+  const uint32_t* corners;  // the first micropolygon's four corners (a triangle's fourth: 0xffffffff)
+  uint32_t vBase;           // corner v is chunk vertex v - vBase
+  const float* projX;       // per chunk vertex: raster x (NaN: none), y and camera depth
+  const float* projY;
+  const float* depth;
+  float lensAx, lensAy;  // raster displacement per unit of lens and of k = 1/d - 1/z
+  float invD;            // 1 / focal distance
+  float kMag;            // the rounding scale of the displacements (the chunk's)
+  float layerScale;      // layers per unit of k: max(|lensAx|, |lensAy|) / the layers' width
+  int x0, y0, w, h;      // the region, raster pixels
+  bool occlusionCulling;
+};
+/// Per micropolygon: state 0 (its search box misses every sample of the region), 1 (drawn: the
+/// other fields are LensDraw's), 2 (unbounded: a corner has no raster position; only zCull is
+/// set). The arrays need room for the count rounded up to eight.
+struct StillLensDraws {
+  float *zCull, *kl, *x0, *x1, *y0, *y1, *cx0, *cx1, *cy0, *cy1, *ex, *ey, *qm;
+  int32_t* layer;
+  uint8_t* state;
+};
+void stillLensDraw(const StillLensSetup& setup, size_t m, const StillLensDraws& out);
+void stillLensDraws(Isa isa, const StillLensSetup& setup, size_t count, const StillLensDraws& out);
+
 /// The vertex range of `count` micropolygons' corners (four each; 0xffffffff, a triangle's missing
 /// fourth, is not a vertex): lo = smallest, hi = largest (lo > hi when there is none).
 void cornerRange(Isa isa, const uint32_t* corners, size_t count, uint32_t& lo, uint32_t& hi);

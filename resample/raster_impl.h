@@ -297,6 +297,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   };
   void rasterizeLens(const Source& src, const store::TileEntry& entry, const store::TilePart& part, const HitContext& hc, const Chunk& ch);
   void queueLens(const LensChunk& lc, uint32_t chunk, uint32_t m);
+  void queueStillLens(const LensChunk& lc, uint32_t chunk, uint32_t m0, uint32_t m1);
   void sortLensLayer(size_t first, size_t last, float cxl, float cyl);
   void drawLensQueued();
   struct LensSample {  // a candidate: its slot and its copies of the sample's time, position and lens point
@@ -316,6 +317,9 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   std::vector<uint8_t> segmentTouches;  // [knot segment of a chunk's bound times]: its box reaches the region
   std::vector<LensChunk> lensChunks;
   std::vector<LensDraw> lensDraws;
+  std::vector<float> stillLensFields;  // queueStillLens()'s kernels::StillLensDraws, field by field
+  std::vector<int32_t> stillLensLayer;
+  std::vector<uint8_t> stillLensState;
   std::vector<uint32_t> lensOrder;        // lensDraws by layer
   std::vector<uint32_t> lensLayerStart;   // the counting sort's [layer]: its first place in lensOrder
   std::vector<float> lensBlockF;    // the lerping chunks' time blocks' spans of their lerp parameter

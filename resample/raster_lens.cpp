@@ -46,7 +46,85 @@ void productRange(float l0, float l1, float k0, float k1, float& lo, float& hi) 
 // of field", chose it: 4 px while the sorts were scalar, 2 px since they are vector kernels).
 constexpr float kLayerWidth = 2.f;
 
+// A queued micropolygon's place among the layers (queueLens() and stillLensDraw() alike): its
+// layer from its k over its knots' depths zkLo..zkHi, the layer's middle kl, how far its own
+// displacement per unit of lens, box.cx0..cy1, strays from the layer's (ex, ey), and the rounding
+// margin qm of the sheared positions, scaled by the search box over its whole motion (mag: its
+// box's and displacements' largest magnitude). q receives that search box widened by qm.
+struct LensPlace {
+  int32_t layer;
+  float kl, ex, ey, qm;
+};
+LensPlace placeInLayer(const kernels::LensBox& box, float zkLo, float zkHi, float invD, float lensAx, float lensAy, float mag, float kMag, float q[4]) {
+  LensPlace p;
+  const float kMid = 0.5f * ((invD - 1.f / zkLo) + (invD - 1.f / zkHi));
+  const float layerScale = std::max(std::abs(lensAx), std::abs(lensAy)) / kLayerWidth;
+  const float layerF = std::floor(kMid * layerScale);
+  p.layer = std::isfinite(layerF) ? int32_t(std::clamp(layerF, -1e9f, 1e9f)) : 0;
+  // The sheared positions a sample must have: x - cxl u lies in the box (over its motion)
+  // widened by what the displacement strays from the layer's, |c - cxl| |u| with |u| <= 1.
+  p.kl = (float(p.layer) + 0.5f) / layerScale;
+  const float cxl = lensAx * p.kl, cyl = lensAy * p.kl;
+  p.ex = std::max(std::abs(box.cx0 - cxl), std::abs(box.cx1 - cxl)), p.ey = std::max(std::abs(box.cy0 - cyl), std::abs(box.cy1 - cyl));
+  // The rounding of the sheared positions and of the per-sample box, scaled by the search box
+  // over the whole motion (LensDraw::searchBox() at f in [0, 1] with no margin yet; a time
+  // block's search narrows it).
+  const float f0 = 0.f, f1 = 1.f, none = 0.f;
+  q[0] = box.x0 + std::min(f0 * box.mx0, f1 * box.mx0) - p.ex - none, q[1] = box.x1 + std::max(f0 * box.mx1, f1 * box.mx1) + p.ex + none;
+  q[2] = box.y0 + std::min(f0 * box.my0, f1 * box.my0) - p.ey - none, q[3] = box.y1 + std::max(f0 * box.my1, f1 * box.my1) + p.ey + none;
+  p.qm = 2e-3f + 1e-5f * std::max({std::abs(q[0]), std::abs(q[1]), std::abs(q[2]), std::abs(q[3]), std::abs(cxl), std::abs(cyl), mag + kMag});
+  q[0] -= p.qm, q[1] += p.qm, q[2] -= p.qm, q[3] += p.qm;
+  return p;
+}
+
+// Whether search box q (placeInLayer()'s) admits any sample's sheared position: x - cxl u within
+// the region widened by |cxl| (|u| <= 1), and a pixel more for their rounding.
+bool searchReaches(const float q[4], float cxl, float cyl, int x0, int y0, int w, int h) {
+  const float reachX = std::abs(cxl) + 1.f, reachY = std::abs(cyl) + 1.f;
+  return !(q[1] < float(x0) - reachX || q[0] > float(x0 + w) + reachX || q[3] < float(y0) - reachY || q[2] > float(y0 + h) + reachY);
+}
+
 }  // namespace
+
+namespace kernels {
+
+void stillLensDraw(const StillLensSetup& s, size_t m, const StillLensDraws& out) {
+  const uint32_t* c = s.corners + 4 * m;
+  const int nc = c[3] == kNoCorner ? 3 : 4;
+  float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY, zLo = INFINITY, zHi = -INFINITY;
+  bool bounded = true;
+  for (int j = 0; j < nc; ++j) {
+    const size_t k = c[j] - s.vBase;
+    const float x = s.projX[k], y = s.projY[k];
+    if (std::isnan(x)) bounded = false;
+    bx0 = std::min(bx0, x), by0 = std::min(by0, y), bx1 = std::max(bx1, x), by1 = std::max(by1, y);
+    zLo = std::min(zLo, s.depth[k]), zHi = std::max(zHi, s.depth[k]);
+  }
+  out.zCull[m] = s.occlusionCulling ? zLo - 1e-5f * std::abs(zLo) : -INFINITY;
+  out.layer[m] = 0, out.kl[m] = out.ex[m] = out.ey[m] = out.qm[m] = 0.f;
+  out.x0[m] = out.x1[m] = out.y0[m] = out.y1[m] = out.cx0[m] = out.cx1[m] = out.cy0[m] = out.cy1[m] = 0.f;
+  if (!bounded) {
+    out.state[m] = 2;
+    return;
+  }
+  // Per lens unit the raster displacement lies in [cx0, cx1] (x) and [cy0, cy1] (y) for every
+  // depth the micropolygon takes.
+  const float kLo = s.invD - 1.f / zLo, kHi = s.invD - 1.f / zHi;
+  float cx0, cx1, cy0, cy1;
+  productRange(s.lensAx, s.lensAx, kLo, kHi, cx0, cx1);
+  productRange(s.lensAy, s.lensAy, kLo, kHi, cy0, cy1);
+  const float mag = std::max({std::abs(bx0), std::abs(bx1), std::abs(by0), std::abs(by1), std::abs(cx0), std::abs(cx1), std::abs(cy0), std::abs(cy1)});
+  const float margin = 2e-3f + 4e-6f * (mag + s.kMag);
+  const LensBox box{bx0 - margin, bx1 + margin, by0 - margin, by1 + margin, cx0, cx1, cy0, cy1};
+  float q[4];
+  const LensPlace p = placeInLayer(box, zLo, zHi, s.invD, s.lensAx, s.lensAy, mag, s.kMag, q);
+  out.state[m] = searchReaches(q, s.lensAx * p.kl, s.lensAy * p.kl, s.x0, s.y0, s.w, s.h) ? 1 : 0;
+  out.layer[m] = p.layer, out.kl[m] = p.kl, out.ex[m] = p.ex, out.ey[m] = p.ey, out.qm[m] = p.qm;
+  out.x0[m] = box.x0, out.x1[m] = box.x1, out.y0[m] = box.y0, out.y1[m] = box.y1;
+  out.cx0[m] = cx0, out.cx1[m] = cx1, out.cy0[m] = cy0, out.cy1[m] = cy1;
+}
+
+}  // namespace kernels
 
 void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileEntry& entry, const TilePart& part, const HitContext& hc, const Chunk& ch) {
   const auto& knots = src.knots(entry.schedule);
@@ -68,13 +146,20 @@ void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileE
   const size_t C = lensTimes.size();
   cullX.resize(C * nV), cullY.resize(C * nV), cullZ.resize(C * nV);
   segmentBounded.assign(C, 1);
-  for (size_t ci = 0; ci < C; ++ci)
-    for (uint32_t i = 0; i < nV; ++i) {
-      const glm::vec3 p = moving ? positionAt(part, knots, vBase + i, lensTimes[ci]) : part.position(0, vBase + i);
-      float x = 0, y = 0;
-      if (!project(p, x, y)) x = NAN, segmentBounded[ci] = 0;
-      cullX[ci * nV + i] = x, cullY[ci * nV + i] = y, cullZ[ci * nV + i] = p.z;
-    }
+  if (!moving && vectorKernels) {
+    // project()'s values eight at a time.
+    float box[4];
+    const float* at = &part.position(0, vBase).x;
+    if (kernels::projectLerped(isa, at, at, 0.f, nV, projectionScale, cullX.data(), cullY.data(), cullZ.data(), box)) segmentBounded[0] = 0;
+  } else {
+    for (size_t ci = 0; ci < C; ++ci)
+      for (uint32_t i = 0; i < nV; ++i) {
+        const glm::vec3 p = moving ? positionAt(part, knots, vBase + i, lensTimes[ci]) : part.position(0, vBase + i);
+        float x = 0, y = 0;
+        if (!project(p, x, y)) x = NAN, segmentBounded[ci] = 0;
+        cullX[ci * nV + i] = x, cullY[ci * nV + i] = y, cullZ[ci * nV + i] = p.z;
+      }
+  }
   const float lensAx = float(view.ax * view.lensRadius), lensAy = float(view.ay * view.lensRadius);
   const float invD = float(1.0 / view.focalDistance);
   // The box over bound times [b0, b1] (their corners' paths lie in it: a straight path projects
@@ -151,7 +236,56 @@ void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileE
     lc.segHi = seg + 1 < segments ? float(lensTimes[seg + 1] - toLocal) : INFINITY;
     lensChunks.push_back(lc);
     if (segments > 1) stats.lensSegmentDraws += ch.m1 - ch.m0;
-    for (uint32_t m = ch.m0; m < ch.m1; ++m) queueLens(lensChunks.back(), uint32_t(lensChunks.size() - 1), m);
+    if (moving)
+      for (uint32_t m = ch.m0; m < ch.m1; ++m) queueLens(lensChunks.back(), uint32_t(lensChunks.size() - 1), m);
+    else
+      queueStillLens(lensChunks.back(), uint32_t(lensChunks.size() - 1), ch.m0, ch.m1);
+  }
+}
+
+// A still chunk's micropolygons [m0, m1) queued as queueLens() would queue them: their set-up
+// from kernels::stillLensDraw(), or eight at a time from the vector kernel that matches it.
+void BucketRasterizer::Impl::queueStillLens(const LensChunk& lc, uint32_t chunk, uint32_t m0, uint32_t m1) {
+  const size_t count = m1 - m0, room = (count + 7) & ~size_t(7);
+  stillLensFields.resize(13 * room), stillLensLayer.resize(room), stillLensState.resize(room);
+  float* f = stillLensFields.data();
+  auto field = [&](int i) { return f + size_t(i) * room; };
+  const kernels::StillLensDraws out{field(0), field(1),  field(2),  field(3),  field(4),  field(5),          field(6),
+                                    field(7), field(8),  field(9),  field(10), field(11), field(12),         stillLensLayer.data(),
+                                    stillLensState.data()};
+  const kernels::StillLensSetup setup{&lc.part->corners[size_t(m0) * 4],
+                                      lc.vBase,
+                                      cullX.data(),
+                                      cullY.data(),
+                                      cullZ.data(),
+                                      lc.lensAx,
+                                      lc.lensAy,
+                                      lc.invD,
+                                      lc.kMag,
+                                      std::max(std::abs(lc.lensAx), std::abs(lc.lensAy)) / kLayerWidth,
+                                      x0,
+                                      y0,
+                                      w,
+                                      h,
+                                      opt.occlusionCulling};
+  if (vectorKernels) kernels::stillLensDraws(isa, setup, count, out);
+  else
+    for (size_t i = 0; i < count; ++i) kernels::stillLensDraw(setup, i, out);
+  for (size_t i = 0; i < count; ++i) {
+    const uint8_t state = out.state[i];
+    if (state == 0) {
+      ++stats.lensCulledMicropolygons;
+      continue;
+    }
+    LensDraw& d = lensDraws.emplace_back();
+    d.chunk = chunk, d.m = m0 + uint32_t(i), d.zCull = out.zCull[i];
+    if (state == 2) {  // a corner before the near plane: every sample is tested, in the layer drawn first
+      d.layer = INT32_MIN, d.kl = d.ex = d.ey = d.qm = 0.f;
+      d.box = kernels::LensBox{-INFINITY, INFINITY, -INFINITY, INFINITY, 0.f, 0.f, 0.f, 0.f};
+      continue;
+    }
+    d.layer = out.layer[i], d.kl = out.kl[i], d.ex = out.ex[i], d.ey = out.ey[i], d.qm = out.qm[i];
+    d.box = kernels::LensBox{out.x0[i], out.x1[i], out.y0[i], out.y1[i], out.cx0[i], out.cx1[i], out.cy0[i], out.cy1[i]};
   }
 }
 
@@ -233,26 +367,11 @@ void BucketRasterizer::Impl::queueLens(const LensChunk& lc, uint32_t chunk, uint
         for (int j = 0; j < nc; ++j) zkLo = std::min(zkLo, cullZ[ci * lc.nV + (c[j] - lc.vBase)]), zkHi = std::max(zkHi, cullZ[ci * lc.nV + (c[j] - lc.vBase)]);
     }
   }
-  const float kMid = 0.5f * ((lc.invD - 1.f / zkLo) + (lc.invD - 1.f / zkHi));
-  const float layerScale = std::max(std::abs(lc.lensAx), std::abs(lc.lensAy)) / kLayerWidth;
-  const float layerF = std::floor(kMid * layerScale);
-  d.layer = std::isfinite(layerF) ? int32_t(std::clamp(layerF, -1e9f, 1e9f)) : 0;
-  // The sheared positions a sample must have: x - cxl u lies in the box (over its motion)
-  // widened by what the displacement strays from the layer's, |c - cxl| |u| with |u| <= 1.
-  const float kl = (float(d.layer) + 0.5f) / layerScale, cxl = lc.lensAx * kl, cyl = lc.lensAy * kl;
-  const float ex = std::max(std::abs(cx0 - cxl), std::abs(cx1 - cxl)), ey = std::max(std::abs(cy0 - cyl), std::abs(cy1 - cyl));
-  // The rounding of the sheared positions and of the per-sample box, scaled by the search box
-  // over the whole motion (searchBox() narrows that to a time block's part of it).
-  d.ex = ex, d.ey = ey, d.qm = 0.f, d.kl = kl;
   float q[4];
-  d.searchBox(0.f, 1.f, q);
-  d.qm = 2e-3f + 1e-5f * std::max({std::abs(q[0]), std::abs(q[1]), std::abs(q[2]), std::abs(q[3]), std::abs(cxl), std::abs(cyl), mag + lc.kMag});
-  // A search box beyond every sample's sheared position (x - cxl u within the region widened by
-  // |cxl|, |u| <= 1; one pixel more for their rounding) admits none: nothing to draw here. (The
-  // box above had qm = 0; widening it by qm is searchBox()'s last step.)
-  q[0] -= d.qm, q[1] += d.qm, q[2] -= d.qm, q[3] += d.qm;
-  const float reachX = std::abs(cxl) + 1.f, reachY = std::abs(cyl) + 1.f;
-  if (q[1] < float(x0) - reachX || q[0] > float(x0 + w) + reachX || q[3] < float(y0) - reachY || q[2] > float(y0 + h) + reachY) {
+  const LensPlace p = placeInLayer(box, zkLo, zkHi, lc.invD, lc.lensAx, lc.lensAy, mag, lc.kMag, q);
+  d.layer = p.layer, d.kl = p.kl, d.ex = p.ex, d.ey = p.ey, d.qm = p.qm;
+  // A search box beyond every sample's sheared position admits none: nothing to draw here.
+  if (!searchReaches(q, lc.lensAx * p.kl, lc.lensAy * p.kl, x0, y0, w, h)) {
     ++stats.lensCulledMicropolygons;
     return;
   }
