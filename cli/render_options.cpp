@@ -56,7 +56,8 @@ void RenderOptions::addTo(CLI::App* app) {
   app->add_flag("--backface-cull", backfaceCull, "Knock out micropolygons facing away (unless two-sided)")->group("Compositing");
   app->add_option("--bucket", bucket,
                   "Bucket size in pixels; 0 (the default) chooses: 64 when nothing reads the samples' times and there is no lens (a motion-free "
-                  "store, or an instant), else 96 (measured: bench/RESULTS.md); the image is the same for any size")
+                  "store, or an instant), else 96; through a lens 48 to 128 by the typical circle of confusion (larger circles, larger "
+                  "buckets; motion adds 32) (measured: bench/RESULTS.md); the image is the same for any size")
       ->capture_default_str()
       ->group("Performance");
   app->add_option("--cache-mb", cacheMb,

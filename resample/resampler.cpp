@@ -231,6 +231,23 @@ bool drawsSampleTimes(const std::vector<Source>& sources, const ShutterModel& sh
   return false;
 }
 
+/// The bucket size kAutoBucketSize picks (resampler.h): through a lens, from the circle of
+/// confusion a micropolygon typically takes (ViewBounds::typicalCircle() over the sources, raster
+/// pixels of radius); else by the samples' layout.
+int chosenBucketSize(const std::vector<Source>& sources, const std::vector<std::unique_ptr<const CarriedStore>>& carried, const View& view,
+                     const store::Lens& lens, bool sampleTimes) {
+  if (!view.lens()) return BucketSamples::pixelMajorFor(sampleTimes, false) ? kStillBucketSize : kBucketSize;
+  double sum = 0, weight = 0;
+  for (size_t i = 0; i < sources.size(); ++i) {
+    const store::ViewBounds& bounds = carried[i] ? carried[i]->bounds() : sources[i].store->primaryBounds();
+    double n = 0;
+    for (const store::TileEntry& e : sources[i].store->entries()) n += double(e.numMicropolygons);
+    sum += n * bounds.typicalCircle(lens), weight += n;
+  }
+  const double radius = (weight > 0 ? sum / weight : 0.0) * std::max(std::abs(view.ax), std::abs(view.ay));
+  return lensBucketSize(radius, sampleTimes);
+}
+
 /// Everything the buckets read and none writes: the validated window and shutter, the camera's
 /// view, the sample pattern, the output variables and their filters, the buckets.
 struct Plan {
@@ -281,9 +298,8 @@ struct Plan {
       volumes = std::move(scene);
     }
     rasterOptions.sampleTimes = !rasterOptions.skipUnreadTimes || drawsSampleTimes(sources, shutter, carried, volumes != nullptr);
-    // What the samples' layout gains from (kStillBucketSize's comment), known only now.
-    const bool pixelMajor = BucketSamples::pixelMajorFor(rasterOptions.sampleTimes, view.lens());
-    bucketSize = spec.bucketSize != kAutoBucketSize ? spec.bucketSize : pixelMajor ? kStillBucketSize : kBucketSize;
+    // What the samples' layout and the lens gain from (kAutoBucketSize's comment), known only now.
+    bucketSize = spec.bucketSize != kAutoBucketSize ? spec.bucketSize : chosenBucketSize(sources, carried, view, lens, rasterOptions.sampleTimes);
     buckets = planBuckets(win, bucketSize);
     if (volumes) {
       volumeCamera.ax = view.ax, volumeCamera.bx = view.bx, volumeCamera.ay = view.ay, volumeCamera.by = view.by;

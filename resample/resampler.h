@@ -6,6 +6,8 @@
 // bucket size.
 #pragma once
 
+#include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <functional>
 #include <map>
@@ -34,11 +36,24 @@ struct AovRequest {
 /// default, kAutoBucketSize, picks one per render: kStillBucketSize where the samples are
 /// pixel-major (no time drawn, no lens: BucketSamples::pixelMajor), whose static path gathers a
 /// micropolygon's samples from a few cache lines and gains from a bucket that stays in L2 (64:
-/// 5-10 % less render wall than 96); else kBucketSize (with motion, 10 % less CPU than 64 and 30 %
-/// less than 32, within the noise of 48 and 128; through a lens 64 is 10 % slower).
+/// 5-10 % less render wall than 96); through a lens lensBucketSize(); else kBucketSize (with
+/// motion, 10 % less CPU than 64 and 30 % less than 32, within the noise of 48 and 128).
 inline constexpr int kBucketSize = 96;
 inline constexpr int kStillBucketSize = 64;
 inline constexpr int kAutoBucketSize = 0;
+
+/// Through a lens, from the circle of confusion a micropolygon typically takes (radius, raster
+/// pixels): a bucket's layer sorts and gathers want it small enough to stay in cache, and each
+/// micropolygon is drawn in every bucket its blurred footprint reaches, which wants it large
+/// against the circle. Fitted to the 1080p bench frames ("Depth of field" in bench/RESULTS.md):
+/// without sample times the best of 32-128 was 48 px at a 5 px circle, 48-80 at 10, 64 at 20, 80
+/// at 35, 96 at 50; with motion (its own blur widens each footprint) 96-128 at 5, 96 at 20, 128
+/// at 50.
+inline int lensBucketSize(double circleRadius, bool sampleTimes) {
+  const double fitted = std::round((45.0 + 1.15 * std::min(circleRadius, 1e3)) / 16.0) * 16.0;
+  const int still = int(std::clamp(std::isfinite(fitted) ? fitted : 128.0, 48.0, 128.0));
+  return sampleTimes ? std::clamp(still + 32, kBucketSize, 128) : still;
+}
 
 struct RenderSpec {
   std::vector<Source> sources;  // stores in time order; sources[0] sets camera and schema

@@ -35,6 +35,16 @@ std::pair<float, float> ViewBounds::depths() const {
   return d;
 }
 
+double ViewBounds::typicalCircle(const Lens& lens) const {
+  if (!lens.active()) return 0.0;
+  double sum = 0, weight = 0;
+  for (size_t i = 0; i < depthRange_.size(); ++i) {
+    const double coc = circleOfConfusion(lens, depthRange_[i].first, depthRange_[i].second), n = double((*entries_)[i].numMicropolygons);
+    if (std::isfinite(coc)) sum += n * coc, weight += n;
+  }
+  return weight > 0 ? sum / weight : 0.0;
+}
+
 void ViewBounds::visit(const RasterRect& rect, double t0, double t1, const std::function<void(size_t)>& fn, const Lens& lens) const {
   for (size_t i = 0; i < entries_->size(); ++i) {
     // A point at depth z moves by a L (1/d - 1/z) on the raster for lens point L: the part's depths

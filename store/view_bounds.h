@@ -33,6 +33,10 @@ class ViewBounds {
   RasterRect extent() const;
   /// The nearest and farthest camera depth a part reaches at any knot (infinities when empty).
   std::pair<float, float> depths() const;
+  /// The circle of confusion a micropolygon typically takes through `lens`: each part's largest
+  /// (circleOfConfusion() over its depths, in units of the projection's scale) weighted by its
+  /// micropolygons; parts that reach the eye plane are left out. 0 without a lens or parts.
+  double typicalCircle(const Lens& lens) const;
 
  private:
   const std::vector<TileEntry>* entries_ = nullptr;

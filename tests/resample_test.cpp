@@ -743,7 +743,8 @@ TEST(ResampleCli, UnwritableOutputFailsBeforeAnythingIsWritten) {
 }
 
 // --bucket 0 (the default) chooses the bucket size per render - 64 px for a motion-free store,
-// whose samples are pixel-major, 96 for a moving one - and --stats names it; a size given is
+// whose samples are pixel-major, 96 for a moving one, through a lens by its circle of confusion -
+// and --stats names it; a size given is
 // used as given, the image is the same (an independent reader's comparison), and a size outside
 // 4 to 1024 other than 0 is a one-line error naming the option, before anything is written.
 TEST(ResampleCli, BucketSizeIsChosenOrGivenAndCheckedAtTheDoor) {
@@ -762,6 +763,45 @@ TEST(ResampleCli, BucketSizeIsChosenOrGivenAndCheckedAtTheDoor) {
     CommandResult diff = runImageTool("idiff -q -fail 0 -failpercent 0 -warn 0 " + automatic + " " + given);
     EXPECT_EQ(diff.exitCode, 0) << store << ": " << diff.out << diff.err;
   }
+  // Through a lens the size follows the circle of confusion: the stores' depths are 5 to 50, so
+  // focused at 5 with a focal length of 1 the far circle's radius is 0.18 ay / (2 N) px (ay =
+  // 50 / tan 20 deg, the 40 degree view over 100 rows): about 2 px at f/6, 25 at f/0.5 and 100
+  // at f/0.125 - the smallest size, one between, the largest (motion: at least 96). Each lens
+  // image is also the one a given size makes.
+  auto bucketOf = [](const std::string& out) {
+    const size_t at = out.find("buckets of ");
+    return at == std::string::npos ? -1 : std::atoi(out.c_str() + at + 11);
+  };
+  for (const std::string& store : {still, moving}) {
+    std::vector<int> sizes;
+    for (const char* fstop : {"6", "0.5", "0.125"}) {
+      const std::string lens = std::string(" --fstop ") + fstop + " --focal-length 1 --focus-distance 5 --compression none --stats";
+      const std::string automatic = dir.path("lens_auto.exr"), given = dir.path("lens_given.exr");
+      CommandResult r = runReshutter("resample " + store + " -o " + automatic + lens);
+      ASSERT_EQ(r.exitCode, 0) << r.err;
+      EXPECT_NE(r.out.find("micropolygons through the lens"), std::string::npos) << r.out;
+      sizes.push_back(bucketOf(r.out));
+      ASSERT_EQ(runReshutter("resample " + store + " -o " + given + lens + " --bucket 40").exitCode, 0);
+      CommandResult diff = runImageTool("idiff -q -fail 0 -failpercent 0 -warn 0 " + automatic + " " + given);
+      EXPECT_EQ(diff.exitCode, 0) << store << " f/" << fstop << ": " << diff.out << diff.err;
+    }
+    if (store == still) {
+      EXPECT_EQ(sizes[0], 48);
+      EXPECT_TRUE(sizes[1] > 48 && sizes[1] < 128) << sizes[1];
+    } else {
+      EXPECT_EQ(sizes[0], 96);
+      EXPECT_TRUE(sizes[1] >= 96 && sizes[1] <= 128) << sizes[1];
+    }
+    EXPECT_EQ(sizes[2], 128);
+  }
+  // The rule itself: within 48-128, never smaller for a larger circle, at least 96 with motion.
+  int last = 0;
+  for (double radius = 0; radius <= 400; radius += 0.5) {
+    const int b = lensBucketSize(radius, false), m = lensBucketSize(radius, true);
+    EXPECT_TRUE(b >= 48 && b <= 128 && b >= last && m >= 96 && m <= 128 && m >= b) << radius;
+    last = b;
+  }
+  EXPECT_EQ(lensBucketSize(INFINITY, false), 128);
   for (const std::string bad : {"2", "-8", "2048"}) {
     const std::string out = dir.path("bad.exr");
     CommandResult r = runReshutter("resample " + still + " -o " + out + " --bucket " + bad);
