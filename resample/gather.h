@@ -200,17 +200,32 @@ struct StillAreas {
 };
 void stillAreas(Isa isa, const StillAreaSetup& setup, size_t count, const StillAreas& out);
 
-/// The lens path's per-micropolygon set-up for a still chunk (raster_lens.cpp, queueStillLens()):
-/// each one's pinhole box, its displacement range per unit of lens, its depth layer and how far
-/// its search strays from the layer's shear, and whether its search box reaches the region at
-/// all. stillLensDraw() is the definition (the scalar rasterizer runs it); the vector kernel
-/// computes its values eight at a time, bit for bit.
-struct StillLensSetup {
+/// How far perspective can make a projected corner stray from its linear schedule between
+/// depths za and zb, per pixel of its motion: x(u) = xa + (xb - xa) g(u) with
+/// g(u) - u = u (1 - u) (zb - za) / z(u), at most |dz| / (4 z_min). Inside one knot segment.
+inline float perspectiveLag(float za, float zb) { return std::abs(zb - za) / (4.f * (zb < za ? zb : za)) * 1.001f; }
+
+/// The lens path's per-micropolygon set-up for a run of one chunk's micropolygons, still or one
+/// knot segment's draw of moving ones (raster_lens.cpp, queueLensDraws()): each one's box for the
+/// per-sample test (lerped between the draw's two bound times), its displacement range per unit
+/// of lens, its depth layer and how far its search strays from the layer's shear, and whether its
+/// search box reaches the region at all. lensDraw() is the definition (the scalar rasterizer runs
+/// it); the vector kernel computes its values eight at a time, bit for bit.
+struct LensQueueSetup {
   const uint32_t* corners;  // the first micropolygon's four corners (a triangle's fourth: 0xffffffff)
-  uint32_t vBase;           // corner v is chunk vertex v - vBase
-  const float* projX;       // per chunk vertex: raster x (NaN: none), y and camera depth
-  const float* projY;
+  uint32_t vBase, nV;       // corner v is chunk vertex v - vBase, of nV
+  const float* projX;       // per chunk vertex at the draw's first bound time: raster x (NaN: none),
+  const float* projY;       // y and camera depth; with two bound times the second's follow, nV on
   const float* depth;
+  int times;                // the draw's bound times: 1 or 2
+  bool lerp;                // the box lerps between them (a knot segment's draw)
+  float uErr;               // with lerp: the rounding of a sample's lerp parameter
+  bool moving;              // the layer from the depths at the part's knots:
+  const float* const* knotXyz;  // per knot, vertex vBase's xyz (stride 3)
+  uint32_t numKnots;
+  float nearClip;           // ... unless a knot lies before it: then from
+  const float* allDepth;    // the depths at every bound time of the chunk (allTimes × nV)
+  uint32_t allTimes;
   float lensAx, lensAy;  // raster displacement per unit of lens and of k = 1/d - 1/z
   float invD;            // 1 / focal distance
   float kMag;            // the rounding scale of the displacements (the chunk's)
@@ -219,15 +234,18 @@ struct StillLensSetup {
   bool occlusionCulling;
 };
 /// Per micropolygon: state 0 (its search box misses every sample of the region), 1 (drawn: the
-/// other fields are LensDraw's), 2 (unbounded: a corner has no raster position; only zCull is
-/// set). The arrays need room for the count rounded up to eight.
-struct StillLensDraws {
-  float *zCull, *kl, *x0, *x1, *y0, *y1, *cx0, *cx1, *cy0, *cy1, *ex, *ey, *qm;
+/// other fields are LensDraw's and its box's; mx..my 0 without lerp), 2 (unbounded: a corner has
+/// no raster position; only zCull is set, the rest 0), and from the vector kernel 3: not set (a
+/// knot before the near plane; lensDraw() gives it). The arrays need room for the count rounded
+/// up to eight.
+struct LensDraws {
+  float *zCull, *kl, *x0, *x1, *y0, *y1, *cx0, *cx1, *cy0, *cy1, *ex, *ey, *qm, *mx0, *mx1, *my0, *my1;
   int32_t* layer;
   uint8_t* state;
+  static constexpr int kFloatFields = 17;
 };
-void stillLensDraw(const StillLensSetup& setup, size_t m, const StillLensDraws& out);
-void stillLensDraws(Isa isa, const StillLensSetup& setup, size_t count, const StillLensDraws& out);
+void lensDraw(const LensQueueSetup& setup, size_t m, const LensDraws& out);
+void lensDraws(Isa isa, const LensQueueSetup& setup, size_t count, const LensDraws& out);
 
 /// The vertex range of `count` micropolygons' corners (four each; 0xffffffff, a triangle's missing
 /// fourth, is not a vertex): lo = smallest, hi = largest (lo > hi when there is none).

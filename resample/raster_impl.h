@@ -226,10 +226,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   void testCandidatesVector(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, uint8_t flags, size_t n);
   void testCandidate(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, uint8_t flags, uint32_t idx);
 
-  // How far perspective can make a projected corner stray from its linear schedule between
-  // depths za and zb, per pixel of its motion: x(u) = xa + (xb - xa) g(u) with
-  // g(u) - u = u (1 - u) (zb - za) / z(u), at most |dz| / (4 z_min). Inside one knot segment.
-  static float perspectiveLag(float za, float zb) { return std::abs(zb - za) / (4.f * std::min(za, zb)) * 1.001f; }
+  static float perspectiveLag(float za, float zb) { return kernels::perspectiveLag(za, zb); }
 
   // Per-chunk scratch, indexed by vertex - the chunk's first vertex.
   std::vector<float> projRho;       // [(v - vBase) * T + theta]: perspective lag bound of theta interval (theta, theta+1)
@@ -296,8 +293,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
     size_t cells = 0;  // per block
   };
   void rasterizeLens(const Source& src, const store::TileEntry& entry, const store::TilePart& part, const HitContext& hc, const Chunk& ch);
-  void queueLens(const LensChunk& lc, uint32_t chunk, uint32_t m);
-  void queueStillLens(const LensChunk& lc, uint32_t chunk, uint32_t m0, uint32_t m1);
+  void queueLensDraws(const LensChunk& lc, uint32_t chunk, uint32_t m0, uint32_t m1);
   void sortLensLayer(size_t first, size_t last, float cxl, float cyl);
   void drawLensQueued();
   struct LensSample {  // a candidate: its slot and its copies of the sample's time, position and lens point
@@ -317,9 +313,10 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   std::vector<uint8_t> segmentTouches;  // [knot segment of a chunk's bound times]: its box reaches the region
   std::vector<LensChunk> lensChunks;
   std::vector<LensDraw> lensDraws;
-  std::vector<float> stillLensFields;  // queueStillLens()'s kernels::StillLensDraws, field by field
-  std::vector<int32_t> stillLensLayer;
-  std::vector<uint8_t> stillLensState;
+  std::vector<float> lensDrawFields;  // queueLensDraws()'s kernels::LensDraws, field by field
+  std::vector<int32_t> lensDrawLayer;
+  std::vector<uint8_t> lensDrawState;
+  std::vector<const float*> knotXyz;
   std::vector<uint32_t> lensOrder;        // lensDraws by layer
   std::vector<uint32_t> lensLayerStart;   // the counting sort's [layer]: its first place in lensOrder
   std::vector<float> lensBlockF;    // the lerping chunks' time blocks' spans of their lerp parameter
@@ -399,18 +396,32 @@ inline glm::vec3 positionAt(const store::TilePart& part, const store::Schedule& 
 // positionAt() of vertices first .. first + count - 1, into out: every vertex shares the time's
 // knot segment and parameter, so they are found once and the lerp runs over the coordinates as
 // one array (the same a + f (b - a) per coordinate, four at a time).
-inline void positionsAt(const store::TilePart& part, const store::Schedule& knots, uint32_t first, uint32_t count, double tau, glm::vec3* out) {
+// Where positionAt() takes a vertex at local time tau from: knot ka lerped to knot kb by f, or
+// knot ka itself (kb == ka: before the first knot, after the last, or a still part).
+inline void knotsAt(const store::TilePart& part, const store::Schedule& knots, double tau, uint32_t& ka, uint32_t& kb, float& f) {
   const uint32_t K = part.numKnots;
   const bool before = K == 1 || tau <= knots[0], after = !before && tau >= knots[K - 1];
+  f = 0.f;
   if (before || after) {
-    std::copy_n(&part.position(before ? 0 : K - 1, first), count, out);
+    ka = kb = before ? 0 : K - 1;
     return;
   }
   uint32_t k = 0;
   while (k + 2 < K && knots[k + 1] <= tau) ++k;
-  const float f = float((tau - knots[k]) / (knots[k + 1] - knots[k]));
-  const float* __restrict a = &part.position(k, first).x;
-  const float* __restrict b = &part.position(k + 1, first).x;
+  f = float((tau - knots[k]) / (knots[k + 1] - knots[k]));
+  ka = k, kb = k + 1;
+}
+
+inline void positionsAt(const store::TilePart& part, const store::Schedule& knots, uint32_t first, uint32_t count, double tau, glm::vec3* out) {
+  uint32_t ka, kb;
+  float f;
+  knotsAt(part, knots, tau, ka, kb, f);
+  if (ka == kb) {
+    std::copy_n(&part.position(ka, first), count, out);
+    return;
+  }
+  const float* __restrict a = &part.position(ka, first).x;
+  const float* __restrict b = &part.position(kb, first).x;
   float* __restrict o = &out[0].x;
   const size_t n = size_t(count) * 3;
   size_t i = 0;

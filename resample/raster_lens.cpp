@@ -88,21 +88,22 @@ bool searchReaches(const float q[4], float cxl, float cyl, int x0, int y0, int w
 
 namespace kernels {
 
-void stillLensDraw(const StillLensSetup& s, size_t m, const StillLensDraws& out) {
+void lensDraw(const LensQueueSetup& s, size_t m, const LensDraws& out) {
   const uint32_t* c = s.corners + 4 * m;
   const int nc = c[3] == kNoCorner ? 3 : 4;
   float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY, zLo = INFINITY, zHi = -INFINITY;
   bool bounded = true;
-  for (int j = 0; j < nc; ++j) {
-    const size_t k = c[j] - s.vBase;
-    const float x = s.projX[k], y = s.projY[k];
-    if (std::isnan(x)) bounded = false;
-    bx0 = std::min(bx0, x), by0 = std::min(by0, y), bx1 = std::max(bx1, x), by1 = std::max(by1, y);
-    zLo = std::min(zLo, s.depth[k]), zHi = std::max(zHi, s.depth[k]);
-  }
+  for (int ci = 0; ci < s.times; ++ci)
+    for (int j = 0; j < nc; ++j) {
+      const size_t k = size_t(ci) * s.nV + (c[j] - s.vBase);
+      const float x = s.projX[k], y = s.projY[k];
+      if (std::isnan(x)) bounded = false;
+      bx0 = std::min(bx0, x), by0 = std::min(by0, y), bx1 = std::max(bx1, x), by1 = std::max(by1, y);
+      zLo = std::min(zLo, s.depth[k]), zHi = std::max(zHi, s.depth[k]);
+    }
   out.zCull[m] = s.occlusionCulling ? zLo - 1e-5f * std::abs(zLo) : -INFINITY;
-  out.layer[m] = 0, out.kl[m] = out.ex[m] = out.ey[m] = out.qm[m] = 0.f;
-  out.x0[m] = out.x1[m] = out.y0[m] = out.y1[m] = out.cx0[m] = out.cx1[m] = out.cy0[m] = out.cy1[m] = 0.f;
+  out.layer[m] = 0;
+  for (float* f : {out.kl, out.x0, out.x1, out.y0, out.y1, out.cx0, out.cx1, out.cy0, out.cy1, out.ex, out.ey, out.qm, out.mx0, out.mx1, out.my0, out.my1}) f[m] = 0.f;
   if (!bounded) {
     out.state[m] = 2;
     return;
@@ -113,15 +114,61 @@ void stillLensDraw(const StillLensSetup& s, size_t m, const StillLensDraws& out)
   float cx0, cx1, cy0, cy1;
   productRange(s.lensAx, s.lensAx, kLo, kHi, cx0, cx1);
   productRange(s.lensAy, s.lensAy, kLo, kHi, cy0, cy1);
+  // With two bound times: the box at each end, for the per-sample lerp.
+  float e0[4] = {0, 0, 0, 0}, e1[4] = {0, 0, 0, 0}, lag = 0;
+  if (s.lerp) {
+    for (int end = 0; end < 2; ++end) {
+      float* e = end ? e1 : e0;
+      e[0] = e[1] = INFINITY, e[2] = e[3] = -INFINITY;
+      for (int j = 0; j < nc; ++j) {
+        const size_t k = size_t(end) * s.nV + (c[j] - s.vBase);
+        e[0] = std::min(e[0], s.projX[k]), e[1] = std::min(e[1], s.projY[k]), e[2] = std::max(e[2], s.projX[k]), e[3] = std::max(e[3], s.projY[k]);
+      }
+    }
+    for (int j = 0; j < nc; ++j) {
+      const size_t k = c[j] - s.vBase;
+      lag = std::max(lag, perspectiveLag(s.depth[k], s.depth[k + s.nV]));
+    }
+  }
+  // What the lerped boxes are widened by (perspective lag, the rounding of the sample's time),
+  // and the rounding margin of the projections and of any displacement the lens gives (|lens
+  // point| <= 1).
+  const float lagX = (lag + s.uErr + 1e-5f) * (bx1 - bx0), lagY = (lag + s.uErr + 1e-5f) * (by1 - by0);
   const float mag = std::max({std::abs(bx0), std::abs(bx1), std::abs(by0), std::abs(by1), std::abs(cx0), std::abs(cx1), std::abs(cy0), std::abs(cy1)});
   const float margin = 2e-3f + 4e-6f * (mag + s.kMag);
-  const LensBox box{bx0 - margin, bx1 + margin, by0 - margin, by1 + margin, cx0, cx1, cy0, cy1};
+  LensBox box{bx0 - margin, bx1 + margin, by0 - margin, by1 + margin, cx0, cx1, cy0, cy1};
+  if (s.lerp) {
+    box.x0 = e0[0] - (margin + lagX), box.y0 = e0[1] - (margin + lagY), box.x1 = e0[2] + (margin + lagX), box.y1 = e0[3] + (margin + lagY);
+    box.mx0 = e1[0] - e0[0], box.my0 = e1[1] - e0[1], box.mx1 = e1[2] - e0[2], box.my1 = e1[3] - e0[3];
+  }
+  // The layer: from the micropolygon's depths at its knots, which every bucket sees alike (the
+  // bound times above are the region's), so that the draw order - and with it which of two
+  // surfaces at exactly one depth a sample keeps - does not depend on the bucketing; every knot
+  // segment's draw of it takes the same layer.
+  float zkLo = zLo, zkHi = zHi;
+  if (s.moving) {
+    float lo = INFINITY, hi = -INFINITY;
+    for (uint32_t k = 0; k < s.numKnots; ++k)
+      for (int j = 0; j < nc; ++j) {
+        const float z = s.knotXyz[k][3 * size_t(c[j] - s.vBase) + 2];
+        lo = std::min(lo, z), hi = std::max(hi, z);
+      }
+    if (lo >= s.nearClip) {
+      zkLo = lo, zkHi = hi;
+    } else {  // a knot before the near plane: the depths at the region's bound times
+      zkLo = INFINITY, zkHi = -INFINITY;
+      for (uint32_t ci = 0; ci < s.allTimes; ++ci)
+        for (int j = 0; j < nc; ++j) zkLo = std::min(zkLo, s.allDepth[ci * s.nV + (c[j] - s.vBase)]), zkHi = std::max(zkHi, s.allDepth[ci * s.nV + (c[j] - s.vBase)]);
+    }
+  }
   float q[4];
-  const LensPlace p = placeInLayer(box, zLo, zHi, s.invD, s.lensAx, s.lensAy, mag, s.kMag, q);
+  const LensPlace p = placeInLayer(box, zkLo, zkHi, s.invD, s.lensAx, s.lensAy, mag, s.kMag, q);
+  // A search box beyond every sample's sheared position admits none: nothing to draw here.
   out.state[m] = searchReaches(q, s.lensAx * p.kl, s.lensAy * p.kl, s.x0, s.y0, s.w, s.h) ? 1 : 0;
   out.layer[m] = p.layer, out.kl[m] = p.kl, out.ex[m] = p.ex, out.ey[m] = p.ey, out.qm[m] = p.qm;
   out.x0[m] = box.x0, out.x1[m] = box.x1, out.y0[m] = box.y0, out.y1[m] = box.y1;
   out.cx0[m] = cx0, out.cx1[m] = cx1, out.cy0[m] = cy0, out.cy1[m] = cy1;
+  out.mx0[m] = box.mx0, out.mx1[m] = box.mx1, out.my0[m] = box.my0, out.my1[m] = box.my1;
 }
 
 }  // namespace kernels
@@ -146,11 +193,17 @@ void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileE
   const size_t C = lensTimes.size();
   cullX.resize(C * nV), cullY.resize(C * nV), cullZ.resize(C * nV);
   segmentBounded.assign(C, 1);
-  if (!moving && vectorKernels) {
-    // project()'s values eight at a time.
-    float box[4];
-    const float* at = &part.position(0, vBase).x;
-    if (kernels::projectLerped(isa, at, at, 0.f, nV, projectionScale, cullX.data(), cullY.data(), cullZ.data(), box)) segmentBounded[0] = 0;
+  if (vectorKernels) {
+    // project(positionAt()) eight vertices at a time.
+    for (size_t ci = 0; ci < C; ++ci) {
+      uint32_t ka = 0, kb = 0;
+      float f = 0.f;
+      if (moving) knotsAt(part, knots, lensTimes[ci], ka, kb, f);
+      float box[4];
+      if (kernels::projectLerped(isa, &part.position(ka, vBase).x, &part.position(kb, vBase).x, f, nV, projectionScale, cullX.data() + ci * nV,
+                                 cullY.data() + ci * nV, cullZ.data() + ci * nV, box))
+        segmentBounded[ci] = 0;
+    }
   } else {
     for (size_t ci = 0; ci < C; ++ci)
       for (uint32_t i = 0; i < nV; ++i) {
@@ -236,42 +289,40 @@ void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileE
     lc.segHi = seg + 1 < segments ? float(lensTimes[seg + 1] - toLocal) : INFINITY;
     lensChunks.push_back(lc);
     if (segments > 1) stats.lensSegmentDraws += ch.m1 - ch.m0;
-    if (moving)
-      for (uint32_t m = ch.m0; m < ch.m1; ++m) queueLens(lensChunks.back(), uint32_t(lensChunks.size() - 1), m);
-    else
-      queueStillLens(lensChunks.back(), uint32_t(lensChunks.size() - 1), ch.m0, ch.m1);
+    queueLensDraws(lensChunks.back(), uint32_t(lensChunks.size() - 1), ch.m0, ch.m1);
   }
 }
 
-// A still chunk's micropolygons [m0, m1) queued as queueLens() would queue them: their set-up
-// from kernels::stillLensDraw(), or eight at a time from the vector kernel that matches it.
-void BucketRasterizer::Impl::queueStillLens(const LensChunk& lc, uint32_t chunk, uint32_t m0, uint32_t m1) {
+// Micropolygons [m0, m1) of a lens chunk (one knot segment's draw, for a moving one) queued with
+// their boxes for the per-sample test and their layers, from the chunk's bound positions
+// (cullX/Y/Z): kernels::lensDraw(), or eight at a time the vector kernel that matches it. They
+// wait until the bucket's chunks are all in (drawLensQueued()).
+void BucketRasterizer::Impl::queueLensDraws(const LensChunk& lc, uint32_t chunk, uint32_t m0, uint32_t m1) {
+  const TilePart& part = *lc.part;
   const size_t count = m1 - m0, room = (count + 7) & ~size_t(7);
-  stillLensFields.resize(13 * room), stillLensLayer.resize(room), stillLensState.resize(room);
-  float* f = stillLensFields.data();
+  lensDrawFields.resize(kernels::LensDraws::kFloatFields * room), lensDrawLayer.resize(room), lensDrawState.resize(room);
+  float* f = lensDrawFields.data();
   auto field = [&](int i) { return f + size_t(i) * room; };
-  const kernels::StillLensDraws out{field(0), field(1),  field(2),  field(3),  field(4),  field(5),          field(6),
-                                    field(7), field(8),  field(9),  field(10), field(11), field(12),         stillLensLayer.data(),
-                                    stillLensState.data()};
-  const kernels::StillLensSetup setup{&lc.part->corners[size_t(m0) * 4],
-                                      lc.vBase,
-                                      cullX.data(),
-                                      cullY.data(),
-                                      cullZ.data(),
-                                      lc.lensAx,
-                                      lc.lensAy,
-                                      lc.invD,
-                                      lc.kMag,
-                                      std::max(std::abs(lc.lensAx), std::abs(lc.lensAy)) / kLayerWidth,
-                                      x0,
-                                      y0,
-                                      w,
-                                      h,
-                                      opt.occlusionCulling};
-  if (vectorKernels) kernels::stillLensDraws(isa, setup, count, out);
+  const kernels::LensDraws out{field(0),  field(1),  field(2),  field(3),  field(4),  field(5),  field(6),  field(7),  field(8),
+                               field(9),  field(10), field(11), field(12), field(13), field(14), field(15), field(16), lensDrawLayer.data(),
+                               lensDrawState.data()};
+  knotXyz.resize(part.numKnots);
+  for (uint32_t k = 0; k < part.numKnots; ++k) knotXyz[k] = &part.position(k, lc.vBase).x;
+  const size_t base = size_t(lc.cullBase) * lc.nV;
+  kernels::LensQueueSetup setup{};
+  setup.corners = &part.corners[size_t(m0) * 4], setup.vBase = lc.vBase, setup.nV = lc.nV;
+  setup.projX = cullX.data() + base, setup.projY = cullY.data() + base, setup.depth = cullZ.data() + base;
+  setup.times = int(lc.C), setup.lerp = lc.invLen > 0, setup.uErr = lc.uErr;
+  setup.moving = lc.moving, setup.knotXyz = knotXyz.data(), setup.numKnots = part.numKnots, setup.nearClip = view.nearClip;
+  setup.allDepth = cullZ.data(), setup.allTimes = lc.cullTimes;
+  setup.lensAx = lc.lensAx, setup.lensAy = lc.lensAy, setup.invD = lc.invD, setup.kMag = lc.kMag;
+  setup.layerScale = std::max(std::abs(lc.lensAx), std::abs(lc.lensAy)) / kLayerWidth;
+  setup.x0 = x0, setup.y0 = y0, setup.w = w, setup.h = h, setup.occlusionCulling = opt.occlusionCulling;
+  if (vectorKernels) kernels::lensDraws(isa, setup, count, out);
   else
-    for (size_t i = 0; i < count; ++i) kernels::stillLensDraw(setup, i, out);
+    for (size_t i = 0; i < count; ++i) kernels::lensDraw(setup, i, out);
   for (size_t i = 0; i < count; ++i) {
+    if (out.state[i] == 3) kernels::lensDraw(setup, i, out);  // a knot before the near plane
     const uint8_t state = out.state[i];
     if (state == 0) {
       ++stats.lensCulledMicropolygons;
@@ -286,96 +337,11 @@ void BucketRasterizer::Impl::queueStillLens(const LensChunk& lc, uint32_t chunk,
     }
     d.layer = out.layer[i], d.kl = out.kl[i], d.ex = out.ex[i], d.ey = out.ey[i], d.qm = out.qm[i];
     d.box = kernels::LensBox{out.x0[i], out.x1[i], out.y0[i], out.y1[i], out.cx0[i], out.cx1[i], out.cy0[i], out.cy1[i]};
-  }
-}
-
-// A micropolygon's box for the per-sample test and its layer, from the chunk's bound positions
-// (cullX/Y/Z): queued until the bucket's chunks are all in (drawLensQueued()).
-void BucketRasterizer::Impl::queueLens(const LensChunk& lc, uint32_t chunk, uint32_t m) {
-  const TilePart& part = *lc.part;
-  const uint32_t* c = &part.corners[size_t(m) * 4];
-  const int nc = c[3] == kNoCorner ? 3 : 4;
-  float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY, zLo = INFINITY, zHi = -INFINITY;
-  bool bounded = true;
-  for (size_t ci = lc.cullBase; ci < lc.cullBase + lc.C; ++ci)
-    for (int j = 0; j < nc; ++j) {
-      const size_t k = ci * lc.nV + (c[j] - lc.vBase);
-      const float x = cullX[k], y = cullY[k];
-      if (std::isnan(x)) bounded = false;
-      bx0 = std::min(bx0, x), by0 = std::min(by0, y), bx1 = std::max(bx1, x), by1 = std::max(by1, y);
-      zLo = std::min(zLo, cullZ[k]), zHi = std::max(zHi, cullZ[k]);
-    }
-  LensDraw d;
-  d.chunk = chunk, d.m = m, d.zCull = cullDepth(zLo);
-  if (!bounded) {
-    // A corner before the near plane: every sample is tested, in the layer drawn first.
-    d.layer = INT32_MIN;
-    d.box = kernels::LensBox{-INFINITY, INFINITY, -INFINITY, INFINITY, 0.f, 0.f, 0.f, 0.f};
-    lensDraws.push_back(d);
-    return;
-  }
-  // Per lens unit the raster displacement lies in [cx0, cx1] (x) and [cy0, cy1] (y) for every
-  // depth the micropolygon takes.
-  const float kLo = lc.invD - 1.f / zLo, kHi = lc.invD - 1.f / zHi;
-  float cx0, cx1, cy0, cy1;
-  productRange(lc.lensAx, lc.lensAx, kLo, kHi, cx0, cx1);
-  productRange(lc.lensAy, lc.lensAy, kLo, kHi, cy0, cy1);
-  // With two bound times: the box at each end, for the per-sample lerp.
-  float e0[4] = {0, 0, 0, 0}, e1[4] = {0, 0, 0, 0}, lag = 0;
-  const bool lerp = lc.invLen > 0;
-  if (lerp) {
-    for (int end = 0; end < 2; ++end) {
-      float* e = end ? e1 : e0;
-      e[0] = e[1] = INFINITY, e[2] = e[3] = -INFINITY;
-      for (int j = 0; j < nc; ++j) {
-        const size_t k = (lc.cullBase + size_t(end)) * lc.nV + (c[j] - lc.vBase);
-        e[0] = std::min(e[0], cullX[k]), e[1] = std::min(e[1], cullY[k]), e[2] = std::max(e[2], cullX[k]), e[3] = std::max(e[3], cullY[k]);
-      }
-    }
-    for (int j = 0; j < nc; ++j) {
-      const size_t k = lc.cullBase * lc.nV + (c[j] - lc.vBase);
-      lag = std::max(lag, perspectiveLag(cullZ[k], cullZ[k + lc.nV]));
+    if (setup.lerp) {
+      d.box.mx0 = out.mx0[i], d.box.mx1 = out.mx1[i], d.box.my0 = out.my0[i], d.box.my1 = out.my1[i];
+      d.box.thetaA = lc.thetaA, d.box.invLen = lc.invLen;
     }
   }
-  // What the lerped boxes are widened by (perspective lag, the rounding of the sample's time),
-  // and the rounding margin of the projections and of any displacement the lens gives (|lens
-  // point| <= 1).
-  const float lagX = (lag + lc.uErr + 1e-5f) * (bx1 - bx0), lagY = (lag + lc.uErr + 1e-5f) * (by1 - by0);
-  const float mag = std::max({std::abs(bx0), std::abs(bx1), std::abs(by0), std::abs(by1), std::abs(cx0), std::abs(cx1), std::abs(cy0), std::abs(cy1)});
-  const float margin = 2e-3f + 4e-6f * (mag + lc.kMag);
-  kernels::LensBox& box = d.box;
-  box = kernels::LensBox{bx0 - margin, bx1 + margin, by0 - margin, by1 + margin, cx0, cx1, cy0, cy1};
-  if (lerp) {
-    box.x0 = e0[0] - (margin + lagX), box.y0 = e0[1] - (margin + lagY), box.x1 = e0[2] + (margin + lagX), box.y1 = e0[3] + (margin + lagY);
-    box.mx0 = e1[0] - e0[0], box.my0 = e1[1] - e0[1], box.mx1 = e1[2] - e0[2], box.my1 = e1[3] - e0[3];
-    box.thetaA = lc.thetaA, box.invLen = lc.invLen;
-  }
-  // The layer: from the micropolygon's depths at its knots, which every bucket sees alike (the
-  // bound times above are the region's), so that the draw order - and with it which of two
-  // surfaces at exactly one depth a sample keeps - does not depend on the bucketing; every knot
-  // segment's draw of it takes the same layer.
-  float zkLo = zLo, zkHi = zHi;
-  if (lc.moving) {
-    float lo = INFINITY, hi = -INFINITY;
-    for (uint32_t k = 0; k < part.numKnots; ++k)
-      for (int j = 0; j < nc; ++j) lo = std::min(lo, part.position(k, c[j]).z), hi = std::max(hi, part.position(k, c[j]).z);
-    if (lo >= view.nearClip) {
-      zkLo = lo, zkHi = hi;
-    } else {  // a knot before the near plane: the depths at the region's bound times
-      zkLo = INFINITY, zkHi = -INFINITY;
-      for (size_t ci = 0; ci < lc.cullTimes; ++ci)
-        for (int j = 0; j < nc; ++j) zkLo = std::min(zkLo, cullZ[ci * lc.nV + (c[j] - lc.vBase)]), zkHi = std::max(zkHi, cullZ[ci * lc.nV + (c[j] - lc.vBase)]);
-    }
-  }
-  float q[4];
-  const LensPlace p = placeInLayer(box, zkLo, zkHi, lc.invD, lc.lensAx, lc.lensAy, mag, lc.kMag, q);
-  d.layer = p.layer, d.kl = p.kl, d.ex = p.ex, d.ey = p.ey, d.qm = p.qm;
-  // A search box beyond every sample's sheared position admits none: nothing to draw here.
-  if (!searchReaches(q, lc.lensAx * p.kl, lc.lensAy * p.kl, x0, y0, w, h)) {
-    ++stats.lensCulledMicropolygons;
-    return;
-  }
-  lensDraws.push_back(d);
 }
 
 // Sorts the bucket's samples into pixel cells of their positions sheared by displacement

@@ -628,7 +628,7 @@ void cellsOfAvx2(const CellGrid& g, const float* t, const float* x, const float*
 
 }  // namespace
 
-const IsaKernels kAvx2Kernels = {gatherInBoxAvx2, gatherStrataAvx2,           filterCandidatesAvx2,     cellsOfAvx2, avx2::projectLerped, avx2::stillAreas, avx2::stillLensDraws, avx2::cornerRange, avx2::nearestDepth, linearEdgesAvx2,
+const IsaKernels kAvx2Kernels = {gatherInBoxAvx2, gatherStrataAvx2,           filterCandidatesAvx2,     cellsOfAvx2, avx2::projectLerped, avx2::stillAreas, avx2::lensDraws, avx2::cornerRange, avx2::nearestDepth, linearEdgesAvx2,
                                  fixedEdgesAvx2,  testLinearEdgesAvx2<kMovingEdges>, testLinearEdgesAvx2<kFixedEdges>, testLinearEdgesAvx2<kLensEdges>,
                                  gatherLensCellsAvx2, testMovingLensAvx2, lensLayerCellsAvx2};
 

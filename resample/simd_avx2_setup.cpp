@@ -182,12 +182,12 @@ void avx2::stillAreas(const StillAreaSetup& s, size_t count, const StillAreas& o
   }
 }
 
-void avx2::stillLensDraws(const StillLensSetup& s, size_t count, const StillLensDraws& out) {
+void avx2::lensDraws(const LensQueueSetup& s, size_t count, const LensDraws& out) {
   const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), noCorner = _mm256_set1_epi32(-1), vBase = _mm256_set1_epi32(int(s.vBase));
   const __m256 inf = _mm256_set1_ps(INFINITY), ninf = _mm256_set1_ps(-INFINITY), absMask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
-  const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.f), half = _mm256_set1_ps(0.5f);
+  const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.f), half = _mm256_set1_ps(0.5f), allOnes = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
   const __m256 invD = _mm256_set1_ps(s.invD), ax = _mm256_set1_ps(s.lensAx), ay = _mm256_set1_ps(s.lensAy), kMag = _mm256_set1_ps(s.kMag);
-  const __m256 layerScale = _mm256_set1_ps(s.layerScale);
+  const __m256 layerScale = _mm256_set1_ps(s.layerScale), slack = _mm256_set1_ps(s.uErr);
   const __m256 rx0 = _mm256_set1_ps(float(s.x0)), ry0 = _mm256_set1_ps(float(s.y0)), rx1 = _mm256_set1_ps(float(s.x0 + s.w)), ry1 = _mm256_set1_ps(float(s.y0 + s.h));
   auto abs = [&](__m256 v) { return _mm256_and_ps(v, absMask); };
   // std::min(a, b) is b < a ? b : a, std::max(a, b) is a < b ? b : a: min_ps(b, a) and
@@ -197,33 +197,76 @@ void avx2::stillLensDraws(const StillLensSetup& s, size_t count, const StillLens
     ((r = _mm256_max_ps(rest, r)), ...);
     return r;
   };
+  const int times = s.lerp ? 2 : s.times;
   for (size_t i = 0; i < count; i += 8) {
     const int live = count - i >= 8 ? 8 : int(count - i);
     const __m256i liveMask = _mm256_cmpgt_epi32(_mm256_set1_epi32(live), lane);
-    // Corner j of each micropolygon (lanes past the count: vertex vBase, harmless).
-    __m256i v[4];
+    // Corner j of each micropolygon as a chunk vertex (lanes past the count: vertex 0, harmless);
+    // a triangle's fourth is its third again, which no min or max minds.
+    __m256i k[4];
     const int* corners = reinterpret_cast<const int*>(s.corners + 4 * i);
     for (int j = 0; j < 4; ++j)
-      v[j] = _mm256_mask_i32gather_epi32(vBase, corners, _mm256_add_epi32(_mm256_slli_epi32(lane, 2), _mm256_set1_epi32(j)), liveMask, 4);
-    v[3] = _mm256_blendv_epi8(v[3], v[2], _mm256_cmpeq_epi32(v[3], noCorner));  // a triangle: corner 2 again (min and max ignore it)
-    __m256 bx0 = inf, by0 = inf, bx1 = ninf, by1 = ninf, zLo = inf, zHi = ninf, unbounded = zero;
-    for (int j = 0; j < 4; ++j) {
-      const __m256i k = _mm256_sub_epi32(v[j], vBase);
-      const __m256 x = _mm256_i32gather_ps(s.projX, k, 4), y = _mm256_i32gather_ps(s.projY, k, 4), z = _mm256_i32gather_ps(s.depth, k, 4);
-      unbounded = _mm256_or_ps(unbounded, _mm256_cmp_ps(x, x, _CMP_UNORD_Q));
-      bx0 = _mm256_min_ps(x, bx0), by0 = _mm256_min_ps(y, by0), bx1 = _mm256_max_ps(x, bx1), by1 = _mm256_max_ps(y, by1);
-      zLo = _mm256_min_ps(z, zLo), zHi = _mm256_max_ps(z, zHi);
+      k[j] = _mm256_mask_i32gather_epi32(vBase, corners, _mm256_add_epi32(_mm256_slli_epi32(lane, 2), _mm256_set1_epi32(j)), liveMask, 4);
+    k[3] = _mm256_blendv_epi8(k[3], k[2], _mm256_cmpeq_epi32(k[3], noCorner));
+    for (int j = 0; j < 4; ++j) k[j] = _mm256_sub_epi32(k[j], vBase);
+    // Each bound time's corner box (e[t]) and the whole draw's, with its depths.
+    __m256 e[2][4], zLo = inf, zHi = ninf, unbounded = zero, z0[4], z1[4];
+    for (int t = 0; t < times; ++t) {
+      const float *xs = s.projX + size_t(t) * s.nV, *ys = s.projY + size_t(t) * s.nV, *zs = s.depth + size_t(t) * s.nV;
+      __m256 lx = inf, ly = inf, hx = ninf, hy = ninf;
+      for (int j = 0; j < 4; ++j) {
+        const __m256 x = _mm256_i32gather_ps(xs, k[j], 4), y = _mm256_i32gather_ps(ys, k[j], 4), z = _mm256_i32gather_ps(zs, k[j], 4);
+        unbounded = _mm256_or_ps(unbounded, _mm256_cmp_ps(x, x, _CMP_UNORD_Q));
+        lx = _mm256_min_ps(x, lx), ly = _mm256_min_ps(y, ly), hx = _mm256_max_ps(x, hx), hy = _mm256_max_ps(y, hy);
+        zLo = _mm256_min_ps(z, zLo), zHi = _mm256_max_ps(z, zHi);
+        (t == 0 ? z0 : z1)[j] = z;
+      }
+      e[t][0] = lx, e[t][1] = ly, e[t][2] = hx, e[t][3] = hy;
     }
+    // The fold over both times is the fold of each time's box (min and max are exact).
+    __m256 bx0 = e[0][0], by0 = e[0][1], bx1 = e[0][2], by1 = e[0][3];
+    if (times == 2) bx0 = _mm256_min_ps(e[1][0], bx0), by0 = _mm256_min_ps(e[1][1], by0), bx1 = _mm256_max_ps(e[1][2], bx1), by1 = _mm256_max_ps(e[1][3], by1);
     const __m256 zCull = s.occlusionCulling ? _mm256_sub_ps(zLo, _mm256_mul_ps(_mm256_set1_ps(1e-5f), abs(zLo))) : ninf;
     // productRange() with l0 = l1: the extremes of l kLo and l kHi.
     const __m256 kLo = _mm256_sub_ps(invD, _mm256_div_ps(one, zLo)), kHi = _mm256_sub_ps(invD, _mm256_div_ps(one, zHi));
     const __m256 ax0 = _mm256_mul_ps(ax, kLo), ax1 = _mm256_mul_ps(ax, kHi), ay0 = _mm256_mul_ps(ay, kLo), ay1 = _mm256_mul_ps(ay, kHi);
     const __m256 cx0 = _mm256_min_ps(ax1, ax0), cx1 = _mm256_max_ps(ax1, ax0), cy0 = _mm256_min_ps(ay1, ay0), cy1 = _mm256_max_ps(ay1, ay0);
+    __m256 lag = zero;
+    if (s.lerp)
+      for (int j = 0; j < 4; ++j) {
+        // perspectiveLag(za, zb) = |zb - za| / (4 min(za, zb)) 1.001
+        const __m256 pl = _mm256_mul_ps(_mm256_div_ps(abs(_mm256_sub_ps(z1[j], z0[j])), _mm256_mul_ps(_mm256_set1_ps(4.f), _mm256_min_ps(z1[j], z0[j]))),
+                                        _mm256_set1_ps(1.001f));
+        lag = _mm256_max_ps(pl, lag);
+      }
+    const __m256 lagScale = _mm256_add_ps(_mm256_add_ps(lag, slack), _mm256_set1_ps(1e-5f));
+    const __m256 lagX = _mm256_mul_ps(lagScale, _mm256_sub_ps(bx1, bx0)), lagY = _mm256_mul_ps(lagScale, _mm256_sub_ps(by1, by0));
     const __m256 mag = maxOf(abs(bx0), abs(bx1), abs(by0), abs(by1), abs(cx0), abs(cx1), abs(cy0), abs(cy1));
     const __m256 margin = _mm256_add_ps(_mm256_set1_ps(2e-3f), _mm256_mul_ps(_mm256_set1_ps(4e-6f), _mm256_add_ps(mag, kMag)));
-    const __m256 x0 = _mm256_sub_ps(bx0, margin), x1 = _mm256_add_ps(bx1, margin), y0 = _mm256_sub_ps(by0, margin), y1 = _mm256_add_ps(by1, margin);
+    __m256 x0, x1, y0, y1, mx0 = zero, mx1 = zero, my0 = zero, my1 = zero;
+    if (s.lerp) {
+      const __m256 wx = _mm256_add_ps(margin, lagX), wy = _mm256_add_ps(margin, lagY);
+      x0 = _mm256_sub_ps(e[0][0], wx), y0 = _mm256_sub_ps(e[0][1], wy), x1 = _mm256_add_ps(e[0][2], wx), y1 = _mm256_add_ps(e[0][3], wy);
+      mx0 = _mm256_sub_ps(e[1][0], e[0][0]), my0 = _mm256_sub_ps(e[1][1], e[0][1]), mx1 = _mm256_sub_ps(e[1][2], e[0][2]), my1 = _mm256_sub_ps(e[1][3], e[0][3]);
+    } else {
+      x0 = _mm256_sub_ps(bx0, margin), x1 = _mm256_add_ps(bx1, margin), y0 = _mm256_sub_ps(by0, margin), y1 = _mm256_add_ps(by1, margin);
+    }
+    // The layer's depths: the knots' (a lane with one before the near plane: lensDraw()'s).
+    __m256 zkLo = zLo, zkHi = zHi, fallback = zero;
+    if (s.moving) {
+      __m256 lo = inf, hi = ninf;
+      for (uint32_t kn = 0; kn < s.numKnots; ++kn)
+        for (int j = 0; j < 4; ++j) {
+          const __m256i at = _mm256_add_epi32(_mm256_add_epi32(k[j], _mm256_add_epi32(k[j], k[j])), _mm256_set1_epi32(2));  // 3 v + 2
+          const __m256 z = _mm256_i32gather_ps(s.knotXyz[kn], at, 4);
+          lo = _mm256_min_ps(z, lo), hi = _mm256_max_ps(z, hi);
+        }
+      zkLo = lo, zkHi = hi;
+      fallback = _mm256_andnot_ps(_mm256_cmp_ps(lo, _mm256_set1_ps(s.nearClip), _CMP_GE_OQ), allOnes);
+    }
     // placeInLayer(): the layer, clamped (v < lo ? lo : hi < v ? hi : v), 0 when not finite.
-    const __m256 layerF = _mm256_floor_ps(_mm256_mul_ps(_mm256_mul_ps(half, _mm256_add_ps(kLo, kHi)), layerScale));
+    const __m256 kMid = _mm256_mul_ps(half, _mm256_add_ps(_mm256_sub_ps(invD, _mm256_div_ps(one, zkLo)), _mm256_sub_ps(invD, _mm256_div_ps(one, zkHi))));
+    const __m256 layerF = _mm256_floor_ps(_mm256_mul_ps(kMid, layerScale));
     const __m256 lo = _mm256_set1_ps(-1e9f), hi = _mm256_set1_ps(1e9f);
     const __m256 clamped = _mm256_blendv_ps(_mm256_blendv_ps(layerF, hi, _mm256_cmp_ps(hi, layerF, _CMP_LT_OQ)), lo, _mm256_cmp_ps(layerF, lo, _CMP_LT_OQ));
     const __m256i layer = _mm256_and_si256(_mm256_cvttps_epi32(clamped), _mm256_castps_si256(_mm256_cmp_ps(abs(layerF), inf, _CMP_LT_OQ)));
@@ -231,9 +274,11 @@ void avx2::stillLensDraws(const StillLensSetup& s, size_t count, const StillLens
     const __m256 cxl = _mm256_mul_ps(ax, kl), cyl = _mm256_mul_ps(ay, kl);
     const __m256 ex = _mm256_max_ps(abs(_mm256_sub_ps(cx1, cxl)), abs(_mm256_sub_ps(cx0, cxl)));
     const __m256 ey = _mm256_max_ps(abs(_mm256_sub_ps(cy1, cyl)), abs(_mm256_sub_ps(cy0, cyl)));
-    // The search box over the (absent) motion: the box plus min or max of 0 and 0, widened.
-    __m256 q0 = _mm256_sub_ps(_mm256_add_ps(x0, zero), ex), q1 = _mm256_add_ps(_mm256_add_ps(x1, zero), ex);
-    __m256 q2 = _mm256_sub_ps(_mm256_add_ps(y0, zero), ey), q3 = _mm256_add_ps(_mm256_add_ps(y1, zero), ey);
+    // The search box over the whole motion, f in [0, 1]: box + min(0 m, 1 m) or + max(0 m, 1 m).
+    auto lowEnd = [&](__m256 m) { return _mm256_min_ps(m, _mm256_mul_ps(zero, m)); };
+    auto highEnd = [&](__m256 m) { return _mm256_max_ps(m, _mm256_mul_ps(zero, m)); };
+    __m256 q0 = _mm256_sub_ps(_mm256_add_ps(x0, lowEnd(mx0)), ex), q1 = _mm256_add_ps(_mm256_add_ps(x1, highEnd(mx1)), ex);
+    __m256 q2 = _mm256_sub_ps(_mm256_add_ps(y0, lowEnd(my0)), ey), q3 = _mm256_add_ps(_mm256_add_ps(y1, highEnd(my1)), ey);
     const __m256 qm = _mm256_add_ps(_mm256_set1_ps(2e-3f),
                                     _mm256_mul_ps(_mm256_set1_ps(1e-5f), maxOf(abs(q0), abs(q1), abs(q2), abs(q3), abs(cxl), abs(cyl), _mm256_add_ps(mag, kMag))));
     q0 = _mm256_sub_ps(q0, qm), q1 = _mm256_add_ps(q1, qm), q2 = _mm256_sub_ps(q2, qm), q3 = _mm256_add_ps(q3, qm);
@@ -241,14 +286,16 @@ void avx2::stillLensDraws(const StillLensSetup& s, size_t count, const StillLens
     const __m256 reachX = _mm256_add_ps(abs(cxl), one), reachY = _mm256_add_ps(abs(cyl), one);
     const __m256 misses = _mm256_or_ps(_mm256_or_ps(_mm256_cmp_ps(q1, _mm256_sub_ps(rx0, reachX), _CMP_LT_OQ), _mm256_cmp_ps(q0, _mm256_add_ps(rx1, reachX), _CMP_GT_OQ)),
                                        _mm256_or_ps(_mm256_cmp_ps(q3, _mm256_sub_ps(ry0, reachY), _CMP_LT_OQ), _mm256_cmp_ps(q2, _mm256_add_ps(ry1, reachY), _CMP_GT_OQ)));
-    // An unbounded lane keeps only zCull (the rest 0, as stillLensDraw() leaves them).
-    const __m256 keep = _mm256_andnot_ps(unbounded, _mm256_castsi256_ps(_mm256_set1_epi32(-1)));
+    // An unbounded lane keeps only zCull (the rest 0, as lensDraw() leaves them).
+    const __m256 keep = _mm256_andnot_ps(unbounded, allOnes);
     auto put = [&](float* to, __m256 value) { _mm256_storeu_ps(to + i, _mm256_and_ps(value, keep)); };
     _mm256_storeu_ps(out.zCull + i, zCull);
     put(out.kl, kl), put(out.x0, x0), put(out.x1, x1), put(out.y0, y0), put(out.y1, y1), put(out.cx0, cx0), put(out.cx1, cx1), put(out.cy0, cy0);
-    put(out.cy1, cy1), put(out.ex, ex), put(out.ey, ey), put(out.qm, qm);
+    put(out.cy1, cy1), put(out.ex, ex), put(out.ey, ey), put(out.qm, qm), put(out.mx0, mx0), put(out.mx1, mx1), put(out.my0, my0), put(out.my1, my1);
     _mm256_storeu_si256(reinterpret_cast<__m256i*>(out.layer + i), _mm256_and_si256(layer, _mm256_castps_si256(keep)));
-    const __m256i state = _mm256_blendv_epi8(_mm256_andnot_si256(_mm256_castps_si256(misses), _mm256_set1_epi32(1)), _mm256_set1_epi32(2), _mm256_castps_si256(unbounded));
+    __m256i state = _mm256_andnot_si256(_mm256_castps_si256(misses), _mm256_set1_epi32(1));
+    state = _mm256_blendv_epi8(state, _mm256_set1_epi32(3), _mm256_castps_si256(fallback));
+    state = _mm256_blendv_epi8(state, _mm256_set1_epi32(2), _mm256_castps_si256(unbounded));
     const __m128i s16 = _mm_packs_epi32(_mm256_castsi256_si128(state), _mm256_extracti128_si256(state, 1));
     _mm_storel_epi64(reinterpret_cast<__m128i*>(out.state + i), _mm_packus_epi16(s16, s16));
   }

@@ -87,7 +87,7 @@ void cornerRange(Isa isa, const uint32_t* corners, size_t count, uint32_t& lo, u
 float nearestDepth(Isa isa, const float* xyz, size_t n, float nearest) { return kernelsFor(isa).nearestDepth(xyz, n, nearest); }
 
 void stillAreas(Isa isa, const StillAreaSetup& setup, size_t count, const StillAreas& out) { kernelsFor(isa).stillAreas(setup, count, out); }
-void stillLensDraws(Isa isa, const StillLensSetup& setup, size_t count, const StillLensDraws& out) { kernelsFor(isa).stillLensDraws(setup, count, out); }
+void lensDraws(Isa isa, const LensQueueSetup& setup, size_t count, const LensDraws& out) { kernelsFor(isa).lensDraws(setup, count, out); }
 
 void linearEdges(Isa isa, const float* const at[4], const float* const to[4], const RasterScale& scale, LinearEdges& out) {
   kernelsFor(isa).linearEdges(at, to, scale, out);

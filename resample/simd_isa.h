@@ -31,7 +31,7 @@ struct IsaKernels {
   void (*cellsOf)(const CellGrid& grid, const float* t, const float* x, const float* y, size_t n, uint16_t* cellOf);
   bool (*projectLerped)(const float* a, const float* b, float f, size_t n, const ProjectionScale& scale, float* x, float* y, float* z, float box[4]);
   void (*stillAreas)(const StillAreaSetup& setup, size_t count, const StillAreas& out);
-  void (*stillLensDraws)(const StillLensSetup& setup, size_t count, const StillLensDraws& out);
+  void (*lensDraws)(const LensQueueSetup& setup, size_t count, const LensDraws& out);
   void (*cornerRange)(const uint32_t* corners, size_t count, uint32_t& lo, uint32_t& hi);
   float (*nearestDepth)(const float* xyz, size_t n, float nearest);
   void (*linearEdges)(const float* const at[4], const float* const to[4], const RasterScale& scale, LinearEdges& out);
@@ -53,7 +53,7 @@ extern const IsaKernels kAvx512Kernels;
 namespace avx2 {
 bool projectLerped(const float* a, const float* b, float f, size_t n, const ProjectionScale& scale, float* x, float* y, float* z, float box[4]);
 void stillAreas(const StillAreaSetup& setup, size_t count, const StillAreas& out);
-void stillLensDraws(const StillLensSetup& setup, size_t count, const StillLensDraws& out);
+void lensDraws(const LensQueueSetup& setup, size_t count, const LensDraws& out);
 void cornerRange(const uint32_t* corners, size_t count, uint32_t& lo, uint32_t& hi);
 float nearestDepth(const float* xyz, size_t n, float nearest);
 }  // namespace avx2

@@ -1,5 +1,5 @@
 // The rasterizer's vector kernels against their definitions, restated in each test (or, for the
-// lens path's still set-up, the scalar definition the rasterizer runs): the box gathers, the
+// lens path's set-up, the scalar definition the rasterizer runs): the box gathers, the
 // projection, the static path's test areas, a chunk's vertex range and nearest depth, and the
 // edge test's three outcomes. (The renders that hold the kernels' images to the scalar loops'
 // are in resample_hard_test.cpp.)
@@ -230,27 +230,38 @@ TEST(ResampleHard, StillAreaKernelIsTheScalarTestArea) {
   EXPECT_GT(missed, 1000u);
 }
 
-// The lens path's still set-up kernel (kernels::stillLensDraws) against its definition, the
-// scalar kernels::stillLensDraw() that the rasterizer runs without vector kernels: every field
-// bit for bit, for quads and triangles at depths on both sides of the focal plane (k of either
-// sign, and k = 0 exactly at the focal distance), corners before the near plane (NaN x) or with
-// a NaN y, raster y flipped (a negative lensAy), huge coordinates, regions the search misses,
-// and counts with tails past the eight-wide loop.
-TEST(ResampleHard, StillLensSetUpKernelIsItsDefinition) {
+// The lens path's set-up kernel (kernels::lensDraws) against its definition, the scalar
+// kernels::lensDraw() that the rasterizer runs without vector kernels: every field bit for bit,
+// for still micropolygons, moving ones at one bound time (an instant) and a knot segment's draw
+// between two (the box lerped, its perspective lag), with two or three knots; quads and
+// triangles at depths on both sides of the focal plane (k of either sign, and k = 0 exactly at
+// the focal distance), corners before the near plane (NaN x) or with a NaN y, knots before the
+// near plane (the kernel leaves those to the definition: state 3), raster y flipped (a negative
+// lensAy), huge coordinates, regions the search misses, and counts with tails past the
+// eight-wide loop.
+TEST(ResampleHard, LensSetUpKernelIsItsDefinition) {
   if (!kernels::available()) GTEST_SKIP() << "this CPU has no AVX2";
   Rng rng(29);
-  size_t drawn = 0, unbounded = 0, missed = 0, nearFocus = 0;
-  for (int trial = 0; trial < 400; ++trial) {
-    const uint32_t nV = 20 + rng.below(60), count = 1 + rng.below(64), vBase = 1000 + rng.below(1000);
-    const float focus = float(rng.uniform(1, 20)), scale = rng.below(10) == 0 ? 1e6f : 1.f;
+  size_t drawn = 0, unbounded = 0, missed = 0, nearFocus = 0, behindKnots = 0, lerped = 0;
+  for (int trial = 0; trial < 600; ++trial) {
+    const int kind = trial % 3;  // 0 still, 1 an instant of a moving chunk, 2 a knot segment's draw
+    const uint32_t nV = 20 + rng.below(60), count = 1 + rng.below(64), vBase = 1000 + rng.below(1000), times = kind == 2 ? 2 : 1;
+    const uint32_t knots = kind == 0 ? 1 : 2 + rng.below(2), allTimes = times + rng.below(3);
+    const float focus = float(rng.uniform(1, 20)), scale = rng.below(10) == 0 ? 1e6f : 1.f, nearClip = 0.1f;
     const int rx0 = int(rng.below(400)) - 200, ry0 = int(rng.below(400)) - 200, rw = 8 + int(rng.below(120)), rh = 8 + int(rng.below(120));
-    std::vector<float> px(nV), py(nV), depth(nV);
-    for (uint32_t v = 0; v < nV; ++v) {
+    // Bound positions at every time of the chunk (the draw's are its first `times`).
+    std::vector<float> px(allTimes * nV), py(allTimes * nV), depth(allTimes * nV);
+    for (uint32_t v = 0; v < allTimes * nV; ++v) {
       px[v] = float(rx0 + rng.uniform(-150, 250)) * scale, py[v] = float(ry0 + rng.uniform(-150, 250)) * scale;
       if (rng.below(40) == 0) px[v] = NAN;
       if (rng.below(60) == 0) py[v] = NAN;
       depth[v] = rng.below(8) == 0 ? focus : float(rng.uniform(0.2, 60));
     }
+    std::vector<std::vector<float>> xyz(knots, std::vector<float>(3 * size_t(nV)));
+    for (auto& k : xyz)
+      for (uint32_t v = 0; v < nV; ++v) k[3 * v + 2] = rng.below(50) == 0 ? -1.f : float(rng.uniform(0.2, 60));
+    std::vector<const float*> knotXyz;
+    for (auto& k : xyz) knotXyz.push_back(k.data());
     std::vector<uint32_t> corners(4 * size_t(count));
     for (uint32_t m = 0; m < count; ++m) {
       const uint32_t first = rng.below(nV - 4), spread = rng.below(8) == 0 ? nV : 4;
@@ -260,35 +271,51 @@ TEST(ResampleHard, StillLensSetUpKernelIsItsDefinition) {
     const float lensAx = float(rng.uniform(1, 400)), lensAy = float(rng.uniform(1, 400)) * (rng.below(2) ? -1.f : 1.f);
     const float kMag = std::max(lensAx, std::abs(lensAy)) * float(1 / focus + 1 / 0.2);
     for (bool occlusion : {true, false}) {
-      const kernels::StillLensSetup setup{corners.data(), vBase, px.data(), py.data(), depth.data(),
-                                          lensAx,         lensAy, 1.f / focus, kMag, std::max(lensAx, std::abs(lensAy)) / 2.f,
-                                          rx0,            ry0,    rw,          rh,   occlusion};
+      kernels::LensQueueSetup setup{};
+      setup.corners = corners.data(), setup.vBase = vBase, setup.nV = nV, setup.projX = px.data(), setup.projY = py.data(), setup.depth = depth.data();
+      setup.times = int(times), setup.lerp = kind == 2, setup.uErr = kind == 2 ? float(rng.uniform(0, 1e-4)) : 0.f;
+      setup.moving = kind != 0, setup.knotXyz = knotXyz.data(), setup.numKnots = knots, setup.nearClip = nearClip;
+      setup.allDepth = depth.data(), setup.allTimes = allTimes;
+      setup.lensAx = lensAx, setup.lensAy = lensAy, setup.invD = 1.f / focus, setup.kMag = kMag, setup.layerScale = std::max(lensAx, std::abs(lensAy)) / 2.f;
+      setup.x0 = rx0, setup.y0 = ry0, setup.w = rw, setup.h = rh, setup.occlusionCulling = occlusion;
       struct Fields {
-        std::vector<float> f = std::vector<float>(13 * 64, -1.f);
+        std::vector<float> f = std::vector<float>(kernels::LensDraws::kFloatFields * 64, -1.f);
         std::vector<int32_t> layer = std::vector<int32_t>(64, -1);
         std::vector<uint8_t> state = std::vector<uint8_t>(64, 9);
-        kernels::StillLensDraws out() {
+        kernels::LensDraws out() {
           float* p = f.data();
-          return {p, p + 64, p + 128, p + 192, p + 256, p + 320, p + 384, p + 448, p + 512, p + 576, p + 640, p + 704, p + 768, layer.data(), state.data()};
+          return {p,       p + 64,  p + 128, p + 192, p + 256, p + 320, p + 384,      p + 448,      p + 512,
+                  p + 576, p + 640, p + 704, p + 768, p + 832, p + 896, p + 960, p + 1024, layer.data(), state.data()};
         }
       };
       Fields want;
-      for (uint32_t m = 0; m < count; ++m) kernels::stillLensDraw(setup, m, want.out());
+      for (uint32_t m = 0; m < count; ++m) kernels::lensDraw(setup, m, want.out());
       for (kernels::Isa isa : {kernels::Isa::Avx2, kernels::Isa::Avx512}) {
         if (!kernels::available(isa)) continue;
         SCOPED_TRACE(std::string(isa == kernels::Isa::Avx512 ? "avx512" : "avx2") + " trial " + std::to_string(trial));
         Fields got;
-        kernels::stillLensDraws(isa, setup, count, got.out());
+        kernels::lensDraws(isa, setup, count, got.out());
         for (uint32_t m = 0; m < count; ++m) {
+          if (got.state[m] == 3) {
+            // A knot before the near plane: the definition's, which the rasterizer runs for it.
+            const uint32_t* c = &corners[4 * m];
+            bool behind = false;
+            for (const auto& k : xyz)
+              for (int j = 0; j < (c[3] == store::kNoCorner ? 3 : 4); ++j) behind |= !(k[3 * (c[j] - vBase) + 2] >= nearClip);
+            EXPECT_TRUE(behind && want.state[m] != 2) << m;
+            behindKnots += isa == kernels::Isa::Avx2;
+            continue;
+          }
           ASSERT_EQ(int(got.state[m]), int(want.state[m])) << m;
           ASSERT_EQ(got.layer[m], want.layer[m]) << m;
-          for (int k = 0; k < 13; ++k)
+          for (int k = 0; k < kernels::LensDraws::kFloatFields; ++k)
             ASSERT_EQ(std::bit_cast<uint32_t>(got.f[64 * size_t(k) + m]), std::bit_cast<uint32_t>(want.f[64 * size_t(k) + m])) << "field " << k << " of " << m;
         }
       }
       for (uint32_t m = 0; m < count; ++m) {
         drawn += want.state[m] == 1, unbounded += want.state[m] == 2, missed += want.state[m] == 0;
         nearFocus += want.state[m] == 1 && want.layer[m] == 0;
+        lerped += want.state[m] == 1 && want.f[64 * 13 + m] != 0.f;  // mx0: the box moves
       }
     }
   }
@@ -297,6 +324,8 @@ TEST(ResampleHard, StillLensSetUpKernelIsItsDefinition) {
   EXPECT_GT(unbounded, 100u);
   EXPECT_GT(missed, 1000u);
   EXPECT_GT(nearFocus, 100u);
+  EXPECT_GT(behindKnots, 50u);
+  EXPECT_GT(lerped, 500u);
 }
 
 // A chunk's vertex range and nearest depth (kernels::cornerRange, nearestDepth) against the
