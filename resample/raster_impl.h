@@ -12,6 +12,7 @@
 #pragma once
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstdint>
 #include <memory>
@@ -317,6 +318,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   std::vector<int32_t> lensDrawLayer;
   std::vector<uint8_t> lensDrawState;
   std::vector<const float*> knotXyz;
+  std::vector<std::array<float, 6>> timeRange;  // rasterizeLens(): per bound time, x0 y0 x1 y1 of its positions and their depth range
   std::vector<uint32_t> lensOrder;        // lensDraws by layer
   std::vector<uint32_t> lensLayerStart;   // the counting sort's [layer]: its first place in lensOrder
   std::vector<float> lensBlockF;    // the lerping chunks' time blocks' spans of their lerp parameter

@@ -46,6 +46,26 @@ void productRange(float l0, float l1, float k0, float k1, float& lo, float& hi) 
 // of field", chose it: 4 px while the sorts were scalar, 2 px since they are vector kernels).
 constexpr float kLayerWidth = 2.f;
 
+// The smallest and largest of n floats (n > 0), none NaN: exact in any order, so four lanes at a
+// time where the CPU has them.
+void rangeOf(const float* v, size_t n, float& lo, float& hi) {
+  lo = INFINITY, hi = -INFINITY;
+  size_t i = 0;
+#if defined(__SSE2__)
+  if (n >= 4) {
+    __m128 l = _mm_loadu_ps(v), h = l;
+    for (i = 4; i + 4 <= n; i += 4) {
+      const __m128 x = _mm_loadu_ps(v + i);
+      l = _mm_min_ps(l, x), h = _mm_max_ps(h, x);
+    }
+    alignas(16) float ls[4], hs[4];
+    _mm_store_ps(ls, l), _mm_store_ps(hs, h);
+    for (int k = 0; k < 4; ++k) lo = std::min(lo, ls[k]), hi = std::max(hi, hs[k]);
+  }
+#endif
+  for (; i < n; ++i) lo = std::min(lo, v[i]), hi = std::max(hi, v[i]);
+}
+
 // A queued micropolygon's place among the layers (queueLens() and stillLensDraw() alike): its
 // layer from its k over its knots' depths zkLo..zkHi, the layer's middle kl, how far its own
 // displacement per unit of lens, box.cx0..cy1, strays from the layer's (ex, ey), and the rounding
@@ -193,25 +213,32 @@ void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileE
   const size_t C = lensTimes.size();
   cullX.resize(C * nV), cullY.resize(C * nV), cullZ.resize(C * nV);
   segmentBounded.assign(C, 1);
+  // Per bound time, its positions' box and depth range (read only where all are bounded: then
+  // none is NaN, and min and max are exact in any order).
+  timeRange.resize(C);
   if (vectorKernels) {
-    // project(positionAt()) eight vertices at a time.
+    // project(positionAt()) eight vertices at a time, with their box.
     for (size_t ci = 0; ci < C; ++ci) {
       uint32_t ka = 0, kb = 0;
       float f = 0.f;
       if (moving) knotsAt(part, knots, lensTimes[ci], ka, kb, f);
-      float box[4];
+      float* r = timeRange[ci].data();
       if (kernels::projectLerped(isa, &part.position(ka, vBase).x, &part.position(kb, vBase).x, f, nV, projectionScale, cullX.data() + ci * nV,
-                                 cullY.data() + ci * nV, cullZ.data() + ci * nV, box))
+                                 cullY.data() + ci * nV, cullZ.data() + ci * nV, r))
         segmentBounded[ci] = 0;
+      rangeOf(cullZ.data() + ci * nV, nV, r[4], r[5]);
     }
   } else {
-    for (size_t ci = 0; ci < C; ++ci)
+    for (size_t ci = 0; ci < C; ++ci) {
       for (uint32_t i = 0; i < nV; ++i) {
         const glm::vec3 p = moving ? positionAt(part, knots, vBase + i, lensTimes[ci]) : part.position(0, vBase + i);
         float x = 0, y = 0;
         if (!project(p, x, y)) x = NAN, segmentBounded[ci] = 0;
         cullX[ci * nV + i] = x, cullY[ci * nV + i] = y, cullZ[ci * nV + i] = p.z;
       }
+      float* r = timeRange[ci].data();
+      rangeOf(cullX.data() + ci * nV, nV, r[0], r[2]), rangeOf(cullY.data() + ci * nV, nV, r[1], r[3]), rangeOf(cullZ.data() + ci * nV, nV, r[4], r[5]);
+    }
   }
   const float lensAx = float(view.ax * view.lensRadius), lensAy = float(view.ay * view.lensRadius);
   const float invD = float(1.0 / view.focalDistance);
@@ -219,19 +246,17 @@ void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileE
   // to a straight one), widened by the largest displacement the whole aperture gives its depths;
   // false if it misses the region.
   auto touchesRegion = [&](size_t b0, size_t b1) {
-    for (size_t ci = b0; ci <= b1; ++ci)
+    float bx0 = INFINITY, by0 = INFINITY, bx1 = -INFINITY, by1 = -INFINITY, zLo = INFINITY, zHi = -INFINITY;
+    for (size_t ci = b0; ci <= b1; ++ci) {
       if (!segmentBounded[ci]) return true;
-    const float* xs = cullX.data() + b0 * nV;
-    const float* ys = cullY.data() + b0 * nV;
-    const float* zs = cullZ.data() + b0 * nV;
-    const size_t n = (b1 - b0 + 1) * nV;
-    const float zLo = *std::min_element(zs, zs + n), zHi = *std::max_element(zs, zs + n);
+      const auto& r = timeRange[ci];
+      bx0 = std::min(bx0, r[0]), by0 = std::min(by0, r[1]), bx1 = std::max(bx1, r[2]), by1 = std::max(by1, r[3]);
+      zLo = std::min(zLo, r[4]), zHi = std::max(zHi, r[5]);
+    }
     float sxLo, sxHi, syLo, syHi;
     const float kLo = invD - 1.f / zLo, kHi = invD - 1.f / zHi;
     productRange(-lensAx, lensAx, kLo, kHi, sxLo, sxHi);
     productRange(-lensAy, lensAy, kLo, kHi, syLo, syHi);
-    const float bx0 = *std::min_element(xs, xs + n), bx1 = *std::max_element(xs, xs + n);
-    const float by0 = *std::min_element(ys, ys + n), by1 = *std::max_element(ys, ys + n);
     return !boxMissesRegion(bx0 + sxLo, by0 + syLo, bx1 + sxHi, by1 + syHi, 2.f);
   };
   // Which knot segments' boxes reach the region (a still chunk or an instant: its one
