@@ -177,6 +177,33 @@ struct LinearEdges {
   double c[9][8];
 };
 
+/// A still micropolygon's edges through a thin lens of focal distance 1 / invD, as functions of
+/// the lens point (perspective only). With corners P_j sheared to S_j = P_j + L q_j (L = (Lx, Ly,
+/// 0), q_j = P_j.z invD - 1), an edge's cross product is S_a × S_b = P_a × P_b + L × D with
+/// D = q_a P_b - q_b P_a, affine in L: E0 + Lx (0, -Dz, Dy) + Ly (Dz, 0, -Dx). c[0..2][e] is E0's
+/// raster form, c[3..5][e] its Lx coefficient's, c[6..8][e] its Ly coefficient's (edges 01 12 23
+/// 30 02; a triangle, corner 3 = corner 2, has edges 23 and 30 zero). A shared edge seen from the
+/// other side has every term exactly negated, so the test stays watertight. This is the
+/// definition; stillLensEdges(isa, ...) computes it bit for bit.
+inline void stillLensEdges(const glm::vec3* const p[4], bool triangle, double invD, const RasterScale& s, LinearEdges& out) {
+  glm::dvec3 P[4];
+  double q[4];
+  for (int j = 0; j < 4; ++j) P[j] = glm::dvec3(*p[triangle && j == 3 ? 2 : j]), q[j] = P[j].z * invD - 1.0;
+  for (int k = 0; k < 5; ++k) {
+    glm::dvec3 E[3]{glm::dvec3(0.0), glm::dvec3(0.0), glm::dvec3(0.0)};  // E0, its Lx and its Ly coefficients
+    if (!triangle || (k != 2 && k != 3)) {
+      const int a = kEdgeVerts[k][0], b = kEdgeVerts[k][1];
+      const glm::dvec3 D = q[a] * P[b] - q[b] * P[a];
+      E[0] = toRaster(cross(P[a], P[b]), s);
+      E[1] = toRaster(glm::dvec3(0.0, -D.z, D.y), s);
+      E[2] = toRaster(glm::dvec3(D.z, 0.0, -D.x), s);
+    }
+    for (int i = 0; i < 3; ++i)
+      for (int axis = 0; axis < 3; ++axis) out.c[3 * i + axis][k] = E[i][axis];
+  }
+}
+void stillLensEdges(Isa isa, const float* const at[4], bool triangle, double invD, const RasterScale& scale, LinearEdges& out);
+
 /// The edges of the micropolygon with corners at[j] at a knot segment's start and to[j] at its end
 /// (camera-space xyz; a triangle passes corner 2 as corner 3, and edges 23 and 30 are then
 /// meaningless): E = A_a × A_b + f (A_a × D_b + D_a × A_b) + f² D_a × D_b with D = to - at, in

@@ -665,31 +665,19 @@ void BucketRasterizer::Impl::drawMovingLens(const LensChunk& lc, const HitContex
                  [&](uint32_t idx) { testLens(lc, hc, d.m, c, tri, flags, LensSample{idx, st[idx], sx[idx], sy[idx], lx[idx], ly[idx]}); });
 }
 
-// A still micropolygon's edges as functions of the lens point. With corners P_j sheared to
-// S_j = P_j + L q_j (L = (Lx, Ly, 0), q_j = z_j / d - 1), an edge's cross product is
-// S_a × S_b = P_a × P_b + L × D with D = q_a P_b - q_b P_a, which is affine in L:
-// E(L) = E0 + Lx (0, -Dz, Dy) + Ly (Dz, 0, -Dx), and so is its raster form. A shared edge seen
-// from the other side has every term exactly negated, so the test stays watertight.
+// A still micropolygon's edges as functions of the lens point (kernels::stillLensEdges(), its
+// definition or the vector kernel that matches it), and its corner depths.
 void BucketRasterizer::Impl::lensEdges(const TilePart& part, const uint32_t* c, bool tri) {
-  glm::dvec3 P[4];
-  double q[4];
-  const int nc = tri ? 3 : 4;
+  const glm::vec3* p[4];
+  for (int j = 0; j < 4; ++j) p[j] = &part.position(0, c[tri && j == 3 ? 2 : j]);
   const double invD = 1.0 / view.focalDistance;
-  for (int j = 0; j < nc; ++j) P[j] = glm::dvec3(part.position(0, c[j])), q[j] = P[j].z * invD - 1.0;
-  if (tri) P[3] = P[2], q[3] = q[2];
-  for (int k = 0; k < 5; ++k) {
-    glm::dvec3 E[3]{glm::dvec3(0.0), glm::dvec3(0.0), glm::dvec3(0.0)};  // E0, its Lx and its Ly coefficients
-    if (!tri || (k != 2 && k != 3)) {
-      const int a = kEdgeVerts[k][0], b = kEdgeVerts[k][1];
-      const glm::dvec3 D = q[a] * P[b] - q[b] * P[a];
-      E[0] = toRaster(cross(P[a], P[b]), rasterScale);
-      E[1] = toRaster(glm::dvec3(0.0, -D.z, D.y), rasterScale);
-      E[2] = toRaster(glm::dvec3(D.z, 0.0, -D.x), rasterScale);
-    }
-    for (int i = 0; i < 3; ++i)
-      for (int axis = 0; axis < 3; ++axis) stillLens.edges.c[3 * i + axis][k] = E[i][axis];
+  if (vectorKernels) {
+    const float* at[4] = {&p[0]->x, &p[1]->x, &p[2]->x, &p[3]->x};
+    kernels::stillLensEdges(isa, at, tri, invD, rasterScale, stillLens.edges);
+  } else {
+    kernels::stillLensEdges(p, tri, invD, rasterScale, stillLens.edges);
   }
-  for (int j = 0; j < 4; ++j) stillLens.z[j] = float(P[j].z);
+  for (int j = 0; j < 4; ++j) stillLens.z[j] = p[j]->z;
 }
 
 // Exact coverage of a still micropolygon (lensEdges() made for it) for one sample: its edges at

@@ -399,6 +399,36 @@ void fixedEdgesAvx2(const float* const at[4], const RasterScale& m, LinearEdges&
   edgeLanes<true>(A, A, rotateLanes<0x4E>(A), A, m, out, 4);
 }
 
+}  // namespace
+
+void avx2::stillLensEdges(const float* const at[4], bool triangle, double invD, const RasterScale& m, LinearEdges& out) {
+  // Lane j = corner j (a triangle passes corner 2 as corner 3): P and q = P.z invD - 1.
+  const Lanes3 P{cornerColumn(at, 0), cornerColumn(at, 1), cornerColumn(at, 2)};
+  const __m256d q = _mm256_sub_pd(_mm256_mul_pd(P.z, _mm256_set1_pd(invD)), _mm256_set1_pd(1.0));
+  const __m256d invAx = _mm256_set1_pd(m.invAx), invAy = _mm256_set1_pd(m.invAy), bx = _mm256_set1_pd(m.bx), by = _mm256_set1_pd(m.by);
+  const __m256d zero = _mm256_setzero_pd(), sign = _mm256_set1_pd(-0.0);
+  // Edges (a, b) of four lanes, b's corners Pb and qb: E0 = P_a × P_b and the lens
+  // coefficients from D = q_a P_b - q_b P_a, each through toRaster(), to lanes [lane0, lane0 + 4).
+  auto edges = [&](const Lanes3& Pb, __m256d qb, int lane0) {
+    const Lanes3 D{_mm256_sub_pd(_mm256_mul_pd(q, Pb.x), _mm256_mul_pd(qb, P.x)), _mm256_sub_pd(_mm256_mul_pd(q, Pb.y), _mm256_mul_pd(qb, P.y)),
+                   _mm256_sub_pd(_mm256_mul_pd(q, Pb.z), _mm256_mul_pd(qb, P.z))};
+    const Lanes3 terms[3] = {crossLanes(P, Pb), {zero, _mm256_xor_pd(D.z, sign), D.y}, {D.z, zero, _mm256_xor_pd(D.x, sign)}};
+    for (int i = 0; i < 3; ++i) {
+      const __m256d ex = _mm256_mul_pd(terms[i].x, invAx), ey = _mm256_mul_pd(terms[i].y, invAy);
+      _mm256_storeu_pd(&out.c[3 * i][lane0], ex);
+      _mm256_storeu_pd(&out.c[3 * i + 1][lane0], ey);
+      _mm256_storeu_pd(&out.c[3 * i + 2][lane0], _mm256_sub_pd(_mm256_sub_pd(terms[i].z, _mm256_mul_pd(ex, bx)), _mm256_mul_pd(ey, by)));
+    }
+  };
+  // Edges 01 12 23 30: corner j with corner j + 1; edge 02 in lane 4 (lanes 5-7 are padding).
+  edges(rotateLanes<0x39>(P), _mm256_permute4x64_pd(q, 0x39), 0);
+  edges(rotateLanes<0x4E>(P), _mm256_permute4x64_pd(q, 0x4E), 4);
+  if (triangle)
+    for (auto& row : out.c) row[2] = row[3] = 0.0;
+}
+
+namespace {
+
 // Coverage of one triangle from its oriented edge values, as triangleCovers() decides it:
 // `hit` where every edge is strictly on the inner side, `tie` where the triangle counts (non-zero,
 // not culled) and an edge value is exactly zero, so the scalar tie rule must decide. Also the
@@ -629,7 +659,7 @@ void cellsOfAvx2(const CellGrid& g, const float* t, const float* x, const float*
 }  // namespace
 
 const IsaKernels kAvx2Kernels = {gatherInBoxAvx2, gatherStrataAvx2,           filterCandidatesAvx2,     cellsOfAvx2, avx2::projectLerped, avx2::stillAreas, avx2::lensDraws, avx2::cornerRange, avx2::nearestDepth, linearEdgesAvx2,
-                                 fixedEdgesAvx2,  testLinearEdgesAvx2<kMovingEdges>, testLinearEdgesAvx2<kFixedEdges>, testLinearEdgesAvx2<kLensEdges>,
+                                 fixedEdgesAvx2,  avx2::stillLensEdges, testLinearEdgesAvx2<kMovingEdges>, testLinearEdgesAvx2<kFixedEdges>, testLinearEdgesAvx2<kLensEdges>,
                                  gatherLensCellsAvx2, testMovingLensAvx2, lensLayerCellsAvx2};
 
 }  // namespace reshutter::resample::kernels

@@ -615,7 +615,7 @@ bool projectLerpedAvx512(const float* a, const float* b, float f, size_t n, cons
 
 const IsaKernels kAvx512Kernels = {gatherInBoxAvx512, gatherStrataAvx512,           filterCandidatesAvx512,
                                    cellsOfAvx512,     projectLerpedAvx512,          avx2::stillAreas,  avx2::lensDraws, avx2::cornerRange, avx2::nearestDepth,          edgesAvx512<false>,
-                                   fixedEdgesAvx512,  testLinearEdgesAvx512<kMovingEdges>, testLinearEdgesAvx512<kFixedEdges>,
+                                   fixedEdgesAvx512,  avx2::stillLensEdges, testLinearEdgesAvx512<kMovingEdges>, testLinearEdgesAvx512<kFixedEdges>,
                                    testLinearEdgesAvx512<kLensEdges>, gatherLensCellsAvx512, testMovingLensAvx512, lensLayerCellsAvx512};
 
 }  // namespace reshutter::resample::kernels

@@ -94,6 +94,9 @@ void linearEdges(Isa isa, const float* const at[4], const float* const to[4], co
 }
 
 void fixedEdges(Isa isa, const float* const at[4], const RasterScale& scale, LinearEdges& out) { kernelsFor(isa).fixedEdges(at, scale, out); }
+void stillLensEdges(Isa isa, const float* const at[4], bool triangle, double invD, const RasterScale& scale, LinearEdges& out) {
+  kernelsFor(isa).stillLensEdges(at, triangle, invD, scale, out);
+}
 
 size_t testLinearEdges(Isa isa, const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits) {
   const IsaKernels& k = kernelsFor(isa);

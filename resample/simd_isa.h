@@ -36,6 +36,7 @@ struct IsaKernels {
   float (*nearestDepth)(const float* xyz, size_t n, float nearest);
   void (*linearEdges)(const float* const at[4], const float* const to[4], const RasterScale& scale, LinearEdges& out);
   void (*fixedEdges)(const float* const at[4], const RasterScale& scale, LinearEdges& out);
+  void (*stillLensEdges)(const float* const at[4], bool triangle, double invD, const RasterScale& scale, LinearEdges& out);
   size_t (*testMovingEdges)(const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits);  // setup.fixed false
   size_t (*testFixedEdges)(const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits);   // setup.fixed true
   size_t (*testLensEdges)(const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits);    // setup.su set
@@ -56,6 +57,7 @@ void stillAreas(const StillAreaSetup& setup, size_t count, const StillAreas& out
 void lensDraws(const LensQueueSetup& setup, size_t count, const LensDraws& out);
 void cornerRange(const uint32_t* corners, size_t count, uint32_t& lo, uint32_t& hi);
 float nearestDepth(const float* xyz, size_t n, float nearest);
+void stillLensEdges(const float* const at[4], bool triangle, double invD, const RasterScale& scale, LinearEdges& out);
 }  // namespace avx2
 #endif
 

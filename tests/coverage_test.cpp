@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <bit>
 #include <cmath>
 #include <random>
 #include <vector>
@@ -227,8 +228,9 @@ TEST(Coverage, BackFacesAreKnockedOutOnlyWhenAsked) {
   EXPECT_FALSE(fixedHit(back, kOrtho, true, 1.0, 2.0, tri, b));
 }
 
-// The vector kernels give the scalar reference's edges bit for bit, and its decisions,
-// barycentrics and depths for every candidate they decide (the rest are exact ties they hand to it).
+// The vector kernels give the scalar reference's edges bit for bit (and the lens path's still
+// edges), and its decisions, barycentrics and depths for every candidate they decide (the rest
+// are exact ties they hand to it).
 TEST(Coverage, VectorKernelsMatchTheScalarReference) {
   const std::vector<kernels::Isa> isas = vectorIsas();
   if (isas.empty()) GTEST_SKIP() << "this CPU runs no vector kernels";
@@ -237,7 +239,7 @@ TEST(Coverage, VectorKernelsMatchTheScalarReference) {
   const size_t n = 61;  // not a multiple of any lane count
   std::vector<float> st(n + 16), sx(n + 16), sy(n + 16);
   std::vector<kernels::EdgeHit> hits(n + 16);
-  size_t decided = 0, hitsFound = 0;
+  size_t decided = 0, hitsFound = 0, lensEdgeTerms = 0;
   for (int trial = 0; trial < 300; ++trial) {
     for (const kernels::RasterScale& scale : {kPersp, kOrtho}) {
       const bool fixed = trial % 3 == 0, triangle = trial % 5 == 0, cullBack = trial % 7 == 0;
@@ -278,6 +280,19 @@ TEST(Coverage, VectorKernelsMatchTheScalarReference) {
           for (int p = 0; p < (fixed ? 1 : 3); ++p)
             for (int k = 0; k < 3; ++k) EXPECT_EQ(edges.c[3 * p + k][e], powers[p][k]) << "edge " << e << " power " << p;
         }
+        if (scale.perspective) {
+          // The still lens edges (the lens path's) against their definition, for a focal
+          // distance on either side of the corners' depths or exactly at one of them (q = 0).
+          const double invD = trial % 11 == 0 ? 1.0 / double(a.p[1].z) : 1.0 / (1.0 + 7.0 * double(trial % 13) / 12.0);
+          kernels::LinearEdges want{}, got{};
+          kernels::stillLensEdges(atv, triangle, invD, scale, want);
+          kernels::stillLensEdges(isa, at, triangle, invD, scale, got);
+          for (int e = 0; e < 5; ++e)
+            for (int r = 0; r < 9; ++r) {
+              ASSERT_EQ(std::bit_cast<uint64_t>(got.c[r][e]), std::bit_cast<uint64_t>(want.c[r][e])) << "lens edge " << e << " row " << r;
+              lensEdgeTerms += r >= 3 && want.c[r][e] != 0.0;
+            }
+        }
         const size_t count = kernels::testLinearEdges(isa, setup, edges, n, hits.data());
         std::vector<const kernels::EdgeHit*> byCandidate(n, nullptr);
         for (size_t h = 0; h < count; ++h) byCandidate[hits[h].candidate] = &hits[h];
@@ -302,6 +317,7 @@ TEST(Coverage, VectorKernelsMatchTheScalarReference) {
   }
   EXPECT_GT(decided, 10000u);
   EXPECT_GT(hitsFound, 2000u);  // both outcomes were compared many times
+  EXPECT_GT(lensEdgeTerms, 10000u);
 }
 
 // The moving lens kernel (testMovingLens) against raster_lens.cpp's scalar testLens(), restated
