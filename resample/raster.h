@@ -119,6 +119,11 @@ struct RasterOptions {
   /// strata (SamplePattern::lensPlanes; 1 = lens strata alone), and the lens path sorts each time
   /// block's samples apart. render() chooses it (lensTimeBlocks() in resampler.h).
   int lensTimeBlocks = 1;
+  /// With a lens: the depth layers' width, raster pixels of circle-of-confusion radius (a layer's
+  /// micropolygons search up to half of it more each way; a bucket sorts its samples once per
+  /// layer). The same in every bucket, so that the draw order is. 0: render() chooses it
+  /// (lensLayerWidth() in resampler.h; a rasterizer made directly takes 2).
+  float lensLayerWidth = 0.f;
   /// Skip drawing the samples' times where they are one per group (an instant) or nothing in the
   /// render reads them (a motion-free render): each sample then takes its row's time at the middle
   /// of the interval and planes follow the sample order. A sample's hits do not depend on its

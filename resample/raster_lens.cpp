@@ -11,7 +11,7 @@
 // holds x - a u k: for a micropolygon at one depth, the samples to test are those whose sheared
 // position x - a u k lies in its pinhole box - a box as small as the pinhole's, whatever the
 // circle of confusion. So the bucket's micropolygons are queued, grouped into layers of nearly
-// equal k (kLayerWidth pixels of displacement per unit of lens), and for each layer the
+// equal k (RasterOptions::lensLayerWidth pixels of displacement per unit of lens), and for each layer the
 // bucket's samples are sorted into pixel cells of their position sheared by the layer's middle
 // k: a micropolygon then searches the cells of its pinhole box widened by what its own k range
 // strays from the layer's (at most half a layer, for a small one) and by its motion, and each
@@ -39,12 +39,6 @@ void productRange(float l0, float l1, float k0, float k1, float& lo, float& hi) 
   lo = std::min(std::min(a, b), std::min(c, d));
   hi = std::max(std::max(a, b), std::max(c, d));
 }
-
-// The layers' width, in raster pixels of displacement per unit of lens (a circle of confusion's
-// radius): a micropolygon searches up to half of it more each way than its pinhole box, and a
-// bucket sorts its samples once per layer that holds micropolygons (bench/RESULTS.md, "Depth
-// of field", chose it: 4 px while the sorts were scalar, 2 px since they are vector kernels).
-constexpr float kLayerWidth = 2.f;
 
 // The smallest and largest of n floats (n > 0), none NaN: exact in any order, so four lanes at a
 // time where the CPU has them.
@@ -75,10 +69,10 @@ struct LensPlace {
   int32_t layer;
   float kl, ex, ey, qm;
 };
-LensPlace placeInLayer(const kernels::LensBox& box, float zkLo, float zkHi, float invD, float lensAx, float lensAy, float mag, float kMag, float q[4]) {
+LensPlace placeInLayer(const kernels::LensBox& box, float zkLo, float zkHi, float invD, float lensAx, float lensAy, float layerScale, float mag, float kMag,
+                       float q[4]) {
   LensPlace p;
   const float kMid = 0.5f * ((invD - 1.f / zkLo) + (invD - 1.f / zkHi));
-  const float layerScale = std::max(std::abs(lensAx), std::abs(lensAy)) / kLayerWidth;
   const float layerF = std::floor(kMid * layerScale);
   p.layer = std::isfinite(layerF) ? int32_t(std::clamp(layerF, -1e9f, 1e9f)) : 0;
   // The sheared positions a sample must have: x - cxl u lies in the box (over its motion)
@@ -182,7 +176,7 @@ void lensDraw(const LensQueueSetup& s, size_t m, const LensDraws& out) {
     }
   }
   float q[4];
-  const LensPlace p = placeInLayer(box, zkLo, zkHi, s.invD, s.lensAx, s.lensAy, mag, s.kMag, q);
+  const LensPlace p = placeInLayer(box, zkLo, zkHi, s.invD, s.lensAx, s.lensAy, s.layerScale, mag, s.kMag, q);
   // A search box beyond every sample's sheared position admits none: nothing to draw here.
   out.state[m] = searchReaches(q, s.lensAx * p.kl, s.lensAy * p.kl, s.x0, s.y0, s.w, s.h) ? 1 : 0;
   out.layer[m] = p.layer, out.kl[m] = p.kl, out.ex[m] = p.ex, out.ey[m] = p.ey, out.qm[m] = p.qm;
@@ -341,7 +335,7 @@ void BucketRasterizer::Impl::queueLensDraws(const LensChunk& lc, uint32_t chunk,
   setup.moving = lc.moving, setup.knotXyz = knotXyz.data(), setup.numKnots = part.numKnots, setup.nearClip = view.nearClip;
   setup.allDepth = cullZ.data(), setup.allTimes = lc.cullTimes;
   setup.lensAx = lc.lensAx, setup.lensAy = lc.lensAy, setup.invD = lc.invD, setup.kMag = lc.kMag;
-  setup.layerScale = std::max(std::abs(lc.lensAx), std::abs(lc.lensAy)) / kLayerWidth;
+  setup.layerScale = std::max(std::abs(lc.lensAx), std::abs(lc.lensAy)) / (opt.lensLayerWidth > 0.f ? opt.lensLayerWidth : 2.f);
   setup.x0 = x0, setup.y0 = y0, setup.w = w, setup.h = h, setup.occlusionCulling = opt.occlusionCulling;
   if (vectorKernels) kernels::lensDraws(isa, setup, count, out);
   else

@@ -231,12 +231,11 @@ bool drawsSampleTimes(const std::vector<Source>& sources, const ShutterModel& sh
   return false;
 }
 
-/// The bucket size kAutoBucketSize picks (resampler.h): through a lens, from the circle of
-/// confusion a micropolygon typically takes (ViewBounds::typicalCircle() over the sources, raster
-/// pixels of radius); else by the samples' layout.
-int chosenBucketSize(const std::vector<Source>& sources, const std::vector<std::unique_ptr<const CarriedStore>>& carried, const View& view,
-                     const store::Lens& lens, bool sampleTimes) {
-  if (!view.lens()) return BucketSamples::pixelMajorFor(sampleTimes, false) ? kStillBucketSize : kBucketSize;
+/// The circle of confusion a micropolygon typically takes through the view's lens
+/// (ViewBounds::typicalCircle() over the sources), raster pixels of radius; 0 without a lens.
+double typicalCircle(const std::vector<Source>& sources, const std::vector<std::unique_ptr<const CarriedStore>>& carried, const View& view,
+                     const store::Lens& lens) {
+  if (!view.lens()) return 0.0;
   double sum = 0, weight = 0;
   for (size_t i = 0; i < sources.size(); ++i) {
     const store::ViewBounds& bounds = carried[i] ? carried[i]->bounds() : sources[i].store->primaryBounds();
@@ -244,8 +243,7 @@ int chosenBucketSize(const std::vector<Source>& sources, const std::vector<std::
     for (const store::TileEntry& e : sources[i].store->entries()) n += double(e.numMicropolygons);
     sum += n * bounds.typicalCircle(lens), weight += n;
   }
-  const double radius = (weight > 0 ? sum / weight : 0.0) * std::max(std::abs(view.ax), std::abs(view.ay));
-  return lensBucketSize(radius, sampleTimes);
+  return (weight > 0 ? sum / weight : 0.0) * std::max(std::abs(view.ax), std::abs(view.ay));
 }
 
 /// Everything the buckets read and none writes: the validated window and shutter, the camera's
@@ -299,7 +297,14 @@ struct Plan {
     }
     rasterOptions.sampleTimes = !rasterOptions.skipUnreadTimes || drawsSampleTimes(sources, shutter, carried, volumes != nullptr);
     // What the samples' layout and the lens gain from (kAutoBucketSize's comment), known only now.
-    bucketSize = spec.bucketSize != kAutoBucketSize ? spec.bucketSize : chosenBucketSize(sources, carried, view, lens, rasterOptions.sampleTimes);
+    // Through a lens: the bucket size and the depth layers' width from the typical circle of
+    // confusion; else the bucket size by the samples' layout.
+    const double circle = typicalCircle(sources, carried, view, lens);
+    if (view.lens() && !(rasterOptions.lensLayerWidth > 0.f)) rasterOptions.lensLayerWidth = lensLayerWidth(circle);
+    bucketSize = spec.bucketSize != kAutoBucketSize                              ? spec.bucketSize
+                 : view.lens()                                                   ? lensBucketSize(circle, rasterOptions.sampleTimes)
+                 : BucketSamples::pixelMajorFor(rasterOptions.sampleTimes, false) ? kStillBucketSize
+                                                                                 : kBucketSize;
     buckets = planBuckets(win, bucketSize);
     if (volumes) {
       volumeCamera.ax = view.ax, volumeCamera.bx = view.bx, volumeCamera.ay = view.ay, volumeCamera.by = view.by;

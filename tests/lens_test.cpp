@@ -7,6 +7,7 @@
 #include <cstring>
 #include <fstream>
 #include <numeric>
+#include <optional>
 
 #include <gtest/gtest.h>
 #include <tbb/global_control.h>
@@ -385,6 +386,48 @@ TEST(LensLayers, CullingIsExactAndTheSearchDoesNotGrowWithTheCircle) {
     }
     EXPECT_LT(examined[1], 2.0 * examined[0]) << "motion " << motion << ": " << examined[0] << " then " << examined[1] << " samples per micropolygon";
   }
+}
+
+// The depth layers' width (RasterOptions::lensLayerWidth, chosen per render from the typical
+// circle of confusion) trades sorts for search: narrower layers sort the bucket's samples more
+// often and search less around each micropolygon. The image does not depend on it (only which of
+// two surfaces at exactly one depth a sample keeps could, and random depths have no such ties),
+// flat or deep, still or moving; the layers sorted must follow the width.
+TEST(LensLayers, AnyWidthGivesTheSameImage) {
+  ScratchDir dir;
+  for (const char* motion : {"0 --knots 1", "12 --knots 2"}) {
+    const std::string path = dir.path(std::string("gen") + motion[0] + ".mps");
+    const CommandResult gen = runReshutter(std::string("generate -n 20000 --width 96 --height 72 --transparent 0.3 --motion ") + motion + " -o " + path);
+    ASSERT_EQ(gen.exitCode, 0) << gen.err;
+    auto reader = std::make_shared<const store::StoreReader>(path);
+    std::optional<RenderResult> chosen;
+    uint64_t lastLayers = UINT64_MAX;
+    for (float width : {0.f, 0.5f, 1.f, 2.f, 4.f}) {
+      RenderSpec spec = specFor(reader, 0.1, 0.9, 4, 4, 7);
+      spec.lens.fstop = 0.25, spec.lens.focalLength = 1, spec.lens.focalDistance = 20;  // circles up to ~25 px
+      spec.aovs = {AovRequest::parse("z", "test"), AovRequest::parse("id", "test")};
+      spec.deep = true;
+      spec.raster.lensLayerWidth = width;
+      const RenderResult r = render(spec);
+      const std::string what = std::string("motion ") + motion + " width " + std::to_string(width);
+      ASSERT_GT(r.stats.raster.lensMicropolygons, 0u) << what;
+      if (!chosen) {
+        chosen = r;
+        continue;
+      }
+      expectSameOutputs(r, *chosen, what);
+      EXPECT_LT(r.stats.raster.lensLayers, lastLayers) << what;
+      lastLayers = r.stats.raster.lensLayers;
+    }
+  }
+  // The rule: 1 to 2 px, never narrower for a larger circle.
+  float last = 0.f;
+  for (double radius = 0; radius <= 200; radius += 0.5) {
+    const float w = lensLayerWidth(radius);
+    EXPECT_TRUE(w >= 1.f && w <= 2.f && w >= last) << radius;
+    last = w;
+  }
+  EXPECT_EQ(lensLayerWidth(INFINITY), 2.f);
 }
 
 TEST(LensDeterminism, BitIdenticalForAnyThreadCountBucketSizeAndInstructionSet) {
