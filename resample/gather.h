@@ -109,7 +109,8 @@ size_t gatherLensCells(Isa isa, const LensCells& cells, size_t stride, int c0, i
 
 /// A depth layer's sort keys (raster_lens.cpp, sortLensLayer()): a sample's cell is that of its
 /// position sheared by the layer's displacement, col = int(clamp(x - cx u - x0, 0, maxCol)) and
-/// so for the row (each clamp `v >= 0 ? (v <= hi ? v : hi) : 0`, so a NaN takes cell 0), keyed
+/// row = int(clamp((y - cy v - y0) rowScale, 0, maxRow)) (cells rowScale⁻¹ pixels tall; each clamp
+/// `v >= 0 ? (v <= hi ? v : hi) : 0`, so a NaN takes cell 0), keyed
 /// key + row * cols + col. A sample is kept when its nearest surface so far lies beyond zMin and,
 /// where tileUsed is set, its tile of 8 × 8 cells is marked there (tileUsed[(row >> 3) tileCols +
 /// (col >> 3)], read 32 bits at a time: 3 bytes of room past its end).
@@ -118,6 +119,7 @@ struct LensShear {
   uint32_t cols, tileCols;
   const uint8_t* tileUsed;
   float zMin;
+  float rowScale = 1.f;  // cell rows per pixel
 };
 
 /// Appends the kept samples among slots [first, first + count) (x, y, u, v and depth indexed by

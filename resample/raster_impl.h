@@ -318,6 +318,10 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   std::vector<int32_t> lensDrawLayer;
   std::vector<uint8_t> lensDrawState;
   std::vector<const float*> knotXyz;
+  // The lens cells' height in pixels: with time blocks a cell holds N / blocks samples of each
+  // pixel, and cells two pixels tall halve the rows a search reads - what the gather's time goes
+  // to - for a few more samples examined (bench/RESULTS.md, "Depth of field", thirty-ninth session).
+  int lensRowSpan() const { return lensTimeBlocks > 1 ? 2 : 1; }
   std::vector<std::array<float, 6>> timeRange;  // rasterizeLens(): per bound time, x0 y0 x1 y1 of its positions and their depth range
   std::vector<uint32_t> lensOrder;        // lensDraws by layer
   std::vector<uint32_t> lensLayerStart;   // the counting sort's [layer]: its first place in lensOrder

@@ -377,7 +377,9 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
   const float maxPad = float(std::max(w, h));
   const int padX = int(std::ceil(std::min(std::abs(cxl), maxPad))) + 2, padY = int(std::ceil(std::min(std::abs(cyl), maxPad))) + 2;
   LensGrid& g = lensGrid;
-  g.x0 = x0 - padX, g.y0 = y0 - padY, g.cols = w + 2 * padX, g.rows = h + 2 * padY;
+  const int rowSpan = lensRowSpan();  // pixels per cell row
+  const float rowScale = 1.f / float(rowSpan);
+  g.x0 = x0 - padX, g.y0 = y0 - padY, g.cols = w + 2 * padX, g.rows = (h + 2 * padY + rowSpan - 1) / rowSpan;
   const size_t cells = size_t(g.cols) * size_t(g.rows), blocks = size_t(lensTimeBlocks), perBlock = size_t(N) / blocks;
   g.cells = cells;
   float zMin = INFINITY;
@@ -396,7 +398,7 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
     float q[4];
     e.searchBox(0.f, 1.f, q);
     const int tx0 = tileAt(q[0] - float(g.x0), g.cols), tx1 = tileAt(q[1] - float(g.x0), g.cols);
-    const int ty0 = tileAt(q[2] - float(g.y0), g.rows), ty1 = tileAt(q[3] - float(g.y0), g.rows);
+    const int ty0 = tileAt((q[2] - float(g.y0)) * rowScale, g.rows), ty1 = tileAt((q[3] - float(g.y0)) * rowScale, g.rows);
     for (int ty = ty0; ty <= ty1; ++ty) std::fill_n(&lensTileUsed[size_t(ty) * size_t(tileCols) + size_t(tx0)], tx1 - tx0 + 1, uint8_t(1));
     usedX0 = std::min(usedX0, tx0), usedX1 = std::max(usedX1, tx1), usedY0 = std::min(usedY0, ty0), usedY1 = std::max(usedY1, ty1);
   }
@@ -412,8 +414,8 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
     const int reachX = int(std::ceil(std::min(std::abs(cxl), 1e6f))) + 1, reachY = int(std::ceil(std::min(std::abs(cyl), 1e6f))) + 1;
     if (usedX0 > 0) px0 = std::max(px0, g.x0 + usedX0 * 8 - reachX);
     if ((usedX1 + 1) * 8 < g.cols) px1 = std::min(px1, g.x0 + (usedX1 + 1) * 8 + reachX);
-    if (usedY0 > 0) py0 = std::max(py0, g.y0 + usedY0 * 8 - reachY);
-    if ((usedY1 + 1) * 8 < g.rows) py1 = std::min(py1, g.y0 + (usedY1 + 1) * 8 + reachY);
+    if (usedY0 > 0) py0 = std::max(py0, g.y0 + usedY0 * 8 * rowSpan - reachY);
+    if ((usedY1 + 1) * 8 < g.rows) py1 = std::min(py1, g.y0 + (usedY1 + 1) * 8 * rowSpan + reachY);
   }
   const bool wholeRows = px0 == x0 && px1 == x0 + w - 1;
   // Keyed by time block, then cell: block b's cells are [b cells, (b + 1) cells).
@@ -439,7 +441,8 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
   const size_t planeStride = PS, planes = size_t(N);
   // Clamped into the grid (a NaN goes to its first cell): every sample has a cell, and a search
   // that reaches the grid's edge (or lies beyond it) finds it there.
-  const kernels::LensShear shear{cxl, cyl, float(g.x0), float(g.y0), float(g.cols - 1), float(g.rows - 1), uint32_t(g.cols), uint32_t(tileCols), used, zMin};
+  const kernels::LensShear shear{cxl, cyl, float(g.x0), float(g.y0), float(g.cols - 1), float(g.rows - 1), uint32_t(g.cols), uint32_t(tileCols), used, zMin,
+                                 rowScale};
   // The kept samples, in slot order, each with its cell.
   size_t kept = 0;
   // Slots [begin, begin + n) of one plane, in order.
@@ -451,7 +454,7 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
     auto clampTo = [](float v, float hi) { return v >= 0.f ? (v <= hi ? v : hi) : 0.f; };
     for (size_t j = begin; j < begin + n; ++j) {
       const uint32_t col = uint32_t(clampTo(xs[j] - shear.cx * us[j] - shear.x0, shear.maxCol));
-      const uint32_t row = uint32_t(clampTo(ys[j] - shear.cy * vs[j] - shear.y0, shear.maxRow));
+      const uint32_t row = uint32_t(clampTo((ys[j] - shear.cy * vs[j] - shear.y0) * shear.rowScale, shear.maxRow));
       keptSlot[kept] = uint32_t(j), keptCell[kept] = key + row * shear.cols + col;
       kept += depth[j] > zMin && (!used || used[(row >> 3) * shear.tileCols + (col >> 3)]);
     }
@@ -546,7 +549,8 @@ void BucketRasterizer::Impl::drawLensQueued() {
         float q[4];
         d.searchBox(f0, f1, q);
         const int c0 = cellAt(q[0] - float(g.x0), g.cols), c1 = cellAt(q[1] - float(g.x0), g.cols);
-        const int r0 = cellAt(q[2] - float(g.y0), g.rows), r1 = cellAt(q[3] - float(g.y0), g.rows);
+        const float rowScale = 1.f / float(lensRowSpan());
+        const int r0 = cellAt((q[2] - float(g.y0)) * rowScale, g.rows), r1 = cellAt((q[3] - float(g.y0)) * rowScale, g.rows);
         const uint32_t* start = lensCellStart.data() + size_t(b) * g.cells;
         if (vectorKernels) {
           const kernels::LensCells cells{lensSortedT.data(), lensSortedX.data(), lensSortedY.data(), lensSortedU.data(), lensSortedV.data(),

@@ -605,6 +605,7 @@ size_t lensLayerCellsAvx2T(const LensShear& s, const float* xs, const float* ys,
                            size_t count, uint32_t key, uint32_t* slot, uint32_t* cell, size_t n) {
   const __m256 cx = _mm256_set1_ps(s.cx), cy = _mm256_set1_ps(s.cy), gx = _mm256_set1_ps(s.x0), gy = _mm256_set1_ps(s.y0);
   const __m256 maxCol = _mm256_set1_ps(s.maxCol), maxRow = _mm256_set1_ps(s.maxRow), zero = _mm256_setzero_ps(), zMin = _mm256_set1_ps(s.zMin);
+  const __m256 rowScale = _mm256_set1_ps(s.rowScale);
   const __m256i cols = _mm256_set1_epi32(int(s.cols)), tileCols = _mm256_set1_epi32(int(s.tileCols)), keys = _mm256_set1_epi32(int(key));
   const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), lowByte = _mm256_set1_epi32(0xFF);
   for (size_t i = 0; i < count; i += 8) {
@@ -614,7 +615,7 @@ size_t lensLayerCellsAvx2T(const LensShear& s, const float* xs, const float* ys,
     auto load = [&](const float* a) { return whole ? _mm256_loadu_ps(a + j) : _mm256_maskload_ps(a + j, in); };
     const __m256 x = load(xs), y = load(ys), u = load(us), v = load(vs), z = load(depth);
     const __m256i col = _mm256_cvttps_epi32(_mm256_min_ps(_mm256_max_ps(_mm256_sub_ps(_mm256_sub_ps(x, _mm256_mul_ps(cx, u)), gx), zero), maxCol));
-    const __m256i row = _mm256_cvttps_epi32(_mm256_min_ps(_mm256_max_ps(_mm256_sub_ps(_mm256_sub_ps(y, _mm256_mul_ps(cy, v)), gy), zero), maxRow));
+    const __m256i row = _mm256_cvttps_epi32(_mm256_min_ps(_mm256_max_ps(_mm256_mul_ps(_mm256_sub_ps(_mm256_sub_ps(y, _mm256_mul_ps(cy, v)), gy), rowScale), zero), maxRow));
     __m256i keep = _mm256_and_si256(in, _mm256_castps_si256(_mm256_cmp_ps(z, zMin, _CMP_GT_OQ)));
     if constexpr (kTiles) {
       const __m256i tile = _mm256_add_epi32(_mm256_mullo_epi32(_mm256_srli_epi32(row, 3), tileCols), _mm256_srli_epi32(col, 3));

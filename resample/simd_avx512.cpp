@@ -526,6 +526,7 @@ size_t lensLayerCellsAvx512T(const LensShear& s, const float* xs, const float* y
                              size_t count, uint32_t key, uint32_t* slot, uint32_t* cell, size_t n) {
   const __m512 cx = _mm512_set1_ps(s.cx), cy = _mm512_set1_ps(s.cy), gx = _mm512_set1_ps(s.x0), gy = _mm512_set1_ps(s.y0);
   const __m512 maxCol = _mm512_set1_ps(s.maxCol), maxRow = _mm512_set1_ps(s.maxRow), zero = _mm512_setzero_ps(), zMin = _mm512_set1_ps(s.zMin);
+  const __m512 rowScale = _mm512_set1_ps(s.rowScale);
   const __m512i cols = _mm512_set1_epi32(int(s.cols)), tileCols = _mm512_set1_epi32(int(s.tileCols)), keys = _mm512_set1_epi32(int(key));
   const __m512i lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15), lowByte = _mm512_set1_epi32(0xFF);
   for (size_t i = 0; i < count; i += 16) {
@@ -534,7 +535,7 @@ size_t lensLayerCellsAvx512T(const LensShear& s, const float* xs, const float* y
     const __m512 x = _mm512_maskz_loadu_ps(in, xs + j), y = _mm512_maskz_loadu_ps(in, ys + j), u = _mm512_maskz_loadu_ps(in, us + j);
     const __m512 v = _mm512_maskz_loadu_ps(in, vs + j), z = _mm512_maskz_loadu_ps(in, depth + j);
     const __m512i col = _mm512_cvttps_epi32(_mm512_min_ps(_mm512_max_ps(_mm512_sub_ps(_mm512_sub_ps(x, _mm512_mul_ps(cx, u)), gx), zero), maxCol));
-    const __m512i row = _mm512_cvttps_epi32(_mm512_min_ps(_mm512_max_ps(_mm512_sub_ps(_mm512_sub_ps(y, _mm512_mul_ps(cy, v)), gy), zero), maxRow));
+    const __m512i row = _mm512_cvttps_epi32(_mm512_min_ps(_mm512_max_ps(_mm512_mul_ps(_mm512_sub_ps(_mm512_sub_ps(y, _mm512_mul_ps(cy, v)), gy), rowScale), zero), maxRow));
     __mmask16 keep = _mm512_mask_cmp_ps_mask(in, z, zMin, _CMP_GT_OQ);
     if constexpr (kTiles) {
       const __m512i tile = _mm512_add_epi32(_mm512_mullo_epi32(_mm512_srli_epi32(row, 3), tileCols), _mm512_srli_epi32(col, 3));
