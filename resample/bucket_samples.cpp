@@ -9,6 +9,24 @@
 
 namespace reshutter::resample {
 
+void floatRange(const float* v, size_t n, float& lo, float& hi) {
+  lo = INFINITY, hi = -INFINITY;
+  size_t i = 0;
+#if defined(__SSE2__)
+  if (n >= 4) {
+    __m128 l = _mm_loadu_ps(v), h = l;
+    for (i = 4; i + 4 <= n; i += 4) {
+      const __m128 x = _mm_loadu_ps(v + i);
+      l = _mm_min_ps(l, x), h = _mm_max_ps(h, x);
+    }
+    alignas(16) float ls[4], hs[4];
+    _mm_store_ps(ls, l), _mm_store_ps(hs, h);
+    for (int k = 0; k < 4; ++k) lo = std::min(lo, ls[k]), hi = std::max(hi, hs[k]);
+  }
+#endif
+  for (; i < n; ++i) lo = std::min(lo, v[i]), hi = std::max(hi, v[i]);
+}
+
 BucketSamples::BucketSamples(const SamplePattern& p, const ShutterModel& s, int lensTimeBlocks, bool drawTimes)
     : pattern(p),
       shutter(s),
@@ -156,21 +174,8 @@ void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
   for (int s = 0; s < N; ++s)
     for (int py = 0; py < h; ++py) {
       const float* row = &st[size_t(s) * PS + size_t(py) * w];
-      float lo = row[0], hi = row[0];
-      int px = 1;
-#if defined(__SSE2__)
-      // Four at a time (the compiler will not vectorise a float min without -ffast-math);
-      // times are finite and not -0, so the order of the comparisons does not matter.
-      __m128 lo4 = _mm_set1_ps(lo), hi4 = lo4;
-      for (; px + 4 <= w; px += 4) {
-        const __m128 v = _mm_loadu_ps(row + px);
-        lo4 = _mm_min_ps(v, lo4), hi4 = _mm_max_ps(v, hi4);
-      }
-      alignas(16) float l4[4], h4[4];
-      _mm_store_ps(l4, lo4), _mm_store_ps(h4, hi4);
-      for (int k = 0; k < 4; ++k) lo = std::min(lo, l4[k]), hi = std::max(hi, h4[k]);
-#endif
-      for (; px < w; ++px) lo = row[px] < lo ? row[px] : lo, hi = row[px] > hi ? row[px] : hi;
+      float lo, hi;
+      floatRange(row, size_t(w), lo, hi);  // times are finite and not -0
       const double tcLo = tBase + double(lo), tcHi = tBase + double(hi);
       const size_t gs = size_t(rowGroup[size_t(py)]) * N + size_t(s);
       stratumLo[gs] = std::min(stratumLo[gs], tcLo), stratumHi[gs] = std::max(stratumHi[gs], tcHi);

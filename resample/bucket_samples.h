@@ -53,6 +53,10 @@ class SkewedArray {
 /// count: every per-sample array has this much room past its end.
 inline constexpr size_t kPad = 16;
 
+/// The smallest and largest of n > 0 floats, none NaN: exact in any order, so four lanes at a
+/// time where the CPU has them (the compiler will not vectorise a float min without -ffast-math).
+void floatRange(const float* v, size_t n, float& lo, float& hi);
+
 struct BucketSamples {
   /// With a lens (lensTimeBlocks >= 1), each sample also has a lens position, and the planes pair
   /// lens and time strata (SamplePattern::lensPlanes) rather than being time strata.

@@ -40,26 +40,6 @@ void productRange(float l0, float l1, float k0, float k1, float& lo, float& hi) 
   hi = std::max(std::max(a, b), std::max(c, d));
 }
 
-// The smallest and largest of n floats (n > 0), none NaN: exact in any order, so four lanes at a
-// time where the CPU has them.
-void rangeOf(const float* v, size_t n, float& lo, float& hi) {
-  lo = INFINITY, hi = -INFINITY;
-  size_t i = 0;
-#if defined(__SSE2__)
-  if (n >= 4) {
-    __m128 l = _mm_loadu_ps(v), h = l;
-    for (i = 4; i + 4 <= n; i += 4) {
-      const __m128 x = _mm_loadu_ps(v + i);
-      l = _mm_min_ps(l, x), h = _mm_max_ps(h, x);
-    }
-    alignas(16) float ls[4], hs[4];
-    _mm_store_ps(ls, l), _mm_store_ps(hs, h);
-    for (int k = 0; k < 4; ++k) lo = std::min(lo, ls[k]), hi = std::max(hi, hs[k]);
-  }
-#endif
-  for (; i < n; ++i) lo = std::min(lo, v[i]), hi = std::max(hi, v[i]);
-}
-
 // A queued micropolygon's place among the layers (queueLens() and stillLensDraw() alike): its
 // layer from its k over its knots' depths zkLo..zkHi, the layer's middle kl, how far its own
 // displacement per unit of lens, box.cx0..cy1, strays from the layer's (ex, ey), and the rounding
@@ -220,7 +200,7 @@ void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileE
       if (kernels::projectLerped(isa, &part.position(ka, vBase).x, &part.position(kb, vBase).x, f, nV, projectionScale, cullX.data() + ci * nV,
                                  cullY.data() + ci * nV, cullZ.data() + ci * nV, r))
         segmentBounded[ci] = 0;
-      rangeOf(cullZ.data() + ci * nV, nV, r[4], r[5]);
+      floatRange(cullZ.data() + ci * nV, nV, r[4], r[5]);
     }
   } else {
     for (size_t ci = 0; ci < C; ++ci) {
@@ -231,7 +211,7 @@ void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileE
         cullX[ci * nV + i] = x, cullY[ci * nV + i] = y, cullZ[ci * nV + i] = p.z;
       }
       float* r = timeRange[ci].data();
-      rangeOf(cullX.data() + ci * nV, nV, r[0], r[2]), rangeOf(cullY.data() + ci * nV, nV, r[1], r[3]), rangeOf(cullZ.data() + ci * nV, nV, r[4], r[5]);
+      floatRange(cullX.data() + ci * nV, nV, r[0], r[2]), floatRange(cullY.data() + ci * nV, nV, r[1], r[3]), floatRange(cullZ.data() + ci * nV, nV, r[4], r[5]);
     }
   }
   const float lensAx = float(view.ax * view.lensRadius), lensAy = float(view.ay * view.lensRadius);

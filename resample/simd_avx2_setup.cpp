@@ -21,6 +21,18 @@ inline void pointsOf8(const float* p, __m256& x, __m256& y, __m256& z) {
   z = _mm256_permutevar8x32_ps(_mm256_blend_ps(_mm256_blend_ps(m0, m1, 0x49), m2, 0x92), _mm256_setr_epi32(2, 5, 0, 3, 6, 1, 4, 7));
 }
 
+// Corner j of micropolygons i .. i + 7 (four corners each from `corners`; `left` of them there)
+// as chunk vertices (corner - vBase): a triangle's missing fourth is its third again, and lanes
+// past the count take vertex 0.
+inline void chunkCornersOf8(const uint32_t* corners, size_t left, uint32_t vBase, __m256i k[4]) {
+  const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), base = _mm256_set1_epi32(int(vBase));
+  const __m256i liveMask = _mm256_cmpgt_epi32(_mm256_set1_epi32(left >= 8 ? 8 : int(left)), lane);
+  const int* c = reinterpret_cast<const int*>(corners);
+  for (int j = 0; j < 4; ++j) k[j] = _mm256_mask_i32gather_epi32(base, c, _mm256_add_epi32(_mm256_slli_epi32(lane, 2), _mm256_set1_epi32(j)), liveMask, 4);
+  k[3] = _mm256_blendv_epi8(k[3], k[2], _mm256_cmpeq_epi32(k[3], _mm256_set1_epi32(-1)));
+  for (int j = 0; j < 4; ++j) k[j] = _mm256_sub_epi32(k[j], base);
+}
+
 }  // namespace
 
 bool avx2::projectLerped(const float* a, const float* b, float f, size_t n, const ProjectionScale& s, float* xo, float* yo, float* zo, float box[4]) {
@@ -130,7 +142,6 @@ float avx2::nearestDepth(const float* xyz, size_t n, float nearest) {
 }
 
 void avx2::stillAreas(const StillAreaSetup& s, size_t count, const StillAreas& out) {
-  const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), noCorner = _mm256_set1_epi32(-1), vBase = _mm256_set1_epi32(int(s.vBase));
   const __m256 inf = _mm256_set1_ps(INFINITY), ninf = _mm256_set1_ps(-INFINITY), absMask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
   const __m256 rx0 = _mm256_set1_ps(float(s.x0)), ry0 = _mm256_set1_ps(float(s.y0)), rx1 = _mm256_set1_ps(float(s.x0 + s.w)), ry1 = _mm256_set1_ps(float(s.y0 + s.h));
   const __m256 rxm = _mm256_set1_ps(float(s.x0 - 1)), rym = _mm256_set1_ps(float(s.y0 - 1));
@@ -145,17 +156,11 @@ void avx2::stillAreas(const StillAreaSetup& s, size_t count, const StillAreas& o
     return _mm256_add_epi32(i, _mm256_castps_si256(_mm256_cmp_ps(_mm256_cvtepi32_ps(i), v, _CMP_GT_OQ)));  // -1 where it rounded up
   };
   for (size_t i = 0; i < count; i += 8) {
-    const int live = count - i >= 8 ? 8 : int(count - i);
-    const __m256i liveMask = _mm256_cmpgt_epi32(_mm256_set1_epi32(live), lane);
-    // Corner j of each micropolygon (lanes past the count: vertex vBase, harmless).
     __m256i v[4];
-    const int* corners = reinterpret_cast<const int*>(s.corners + 4 * i);
-    for (int j = 0; j < 4; ++j)
-      v[j] = _mm256_mask_i32gather_epi32(vBase, corners, _mm256_add_epi32(_mm256_slli_epi32(lane, 2), _mm256_set1_epi32(j)), liveMask, 4);
-    v[3] = _mm256_blendv_epi8(v[3], v[2], _mm256_cmpeq_epi32(v[3], noCorner));  // a triangle: corner 2 again
+    chunkCornersOf8(s.corners + 4 * i, count - i, s.vBase, v);
     __m256 bx0 = inf, by0 = inf, bx1 = ninf, by1 = ninf, zNear = _mm256_setzero_ps(), unbounded = _mm256_setzero_ps();
     for (int j = 0; j < 4; ++j) {
-      const __m256i k = _mm256_sub_epi32(v[j], vBase);
+      const __m256i k = v[j];
       const __m256 x = _mm256_i32gather_ps(s.projX, k, 4), y = _mm256_i32gather_ps(s.projY, k, 4);
       const __m256 z = _mm256_i32gather_ps(s.depth, k, 4);
       unbounded = _mm256_or_ps(unbounded, _mm256_cmp_ps(x, x, _CMP_UNORD_Q));
@@ -183,7 +188,6 @@ void avx2::stillAreas(const StillAreaSetup& s, size_t count, const StillAreas& o
 }
 
 void avx2::lensDraws(const LensQueueSetup& s, size_t count, const LensDraws& out) {
-  const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), noCorner = _mm256_set1_epi32(-1), vBase = _mm256_set1_epi32(int(s.vBase));
   const __m256 inf = _mm256_set1_ps(INFINITY), ninf = _mm256_set1_ps(-INFINITY), absMask = _mm256_castsi256_ps(_mm256_set1_epi32(0x7FFFFFFF));
   const __m256 zero = _mm256_setzero_ps(), one = _mm256_set1_ps(1.f), half = _mm256_set1_ps(0.5f), allOnes = _mm256_castsi256_ps(_mm256_set1_epi32(-1));
   const __m256 invD = _mm256_set1_ps(s.invD), ax = _mm256_set1_ps(s.lensAx), ay = _mm256_set1_ps(s.lensAy), kMag = _mm256_set1_ps(s.kMag);
@@ -199,16 +203,8 @@ void avx2::lensDraws(const LensQueueSetup& s, size_t count, const LensDraws& out
   };
   const int times = s.lerp ? 2 : s.times;
   for (size_t i = 0; i < count; i += 8) {
-    const int live = count - i >= 8 ? 8 : int(count - i);
-    const __m256i liveMask = _mm256_cmpgt_epi32(_mm256_set1_epi32(live), lane);
-    // Corner j of each micropolygon as a chunk vertex (lanes past the count: vertex 0, harmless);
-    // a triangle's fourth is its third again, which no min or max minds.
     __m256i k[4];
-    const int* corners = reinterpret_cast<const int*>(s.corners + 4 * i);
-    for (int j = 0; j < 4; ++j)
-      k[j] = _mm256_mask_i32gather_epi32(vBase, corners, _mm256_add_epi32(_mm256_slli_epi32(lane, 2), _mm256_set1_epi32(j)), liveMask, 4);
-    k[3] = _mm256_blendv_epi8(k[3], k[2], _mm256_cmpeq_epi32(k[3], noCorner));
-    for (int j = 0; j < 4; ++j) k[j] = _mm256_sub_epi32(k[j], vBase);
+    chunkCornersOf8(s.corners + 4 * i, count - i, s.vBase, k);  // a triangle's fourth is its third, which no min or max minds
     // Each bound time's corner box (e[t]) and the whole draw's, with its depths.
     __m256 e[2][4], zLo = inf, zHi = ninf, unbounded = zero, z0[4], z1[4];
     for (int t = 0; t < times; ++t) {
