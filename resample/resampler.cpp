@@ -782,6 +782,7 @@ RenderResult render(const RenderSpec& spec) {
 
   addThreadStats(threads, result.stats);
   result.stats.bucketSize = plan.bucketSize;
+  if (plan.view.lens()) result.stats.lensLayerWidth = plan.rasterOptions.lensLayerWidth;
   if (plan.volumeLighting) result.stats.volumes.shadowSteps += plan.volumeLighting->buildSteps();
   result.stats.wallSeconds = secondsBetween(wallStart, Clock::now());
   addCacheStats(cacheBefore, result.stats);

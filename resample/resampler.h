@@ -125,6 +125,7 @@ struct RenderStats {
   RasterStats raster;
   int buckets = 0;
   int bucketSize = 0;  // the size the render used (RenderSpec::bucketSize, or the one it chose)
+  float lensLayerWidth = 0.f;  // through a lens: the depth layers' width it used, px of circle radius
   // Summed over threads. setup: the bucket's samples and its part list; parts: fetching parts,
   // which is decoding them, or waiting while another thread decodes one both buckets need.
   double setupSeconds = 0, partsSeconds = 0, rasterSeconds = 0, resolveSeconds = 0, filterSeconds = 0;

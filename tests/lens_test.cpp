@@ -411,6 +411,8 @@ TEST(LensLayers, AnyWidthGivesTheSameImage) {
       const RenderResult r = render(spec);
       const std::string what = std::string("motion ") + motion + " width " + std::to_string(width);
       ASSERT_GT(r.stats.raster.lensMicropolygons, 0u) << what;
+      if (width > 0.f) EXPECT_EQ(r.stats.lensLayerWidth, width) << what;
+      else EXPECT_TRUE(r.stats.lensLayerWidth >= 1.f && r.stats.lensLayerWidth <= 2.f) << what;
       if (!chosen) {
         chosen = r;
         continue;
