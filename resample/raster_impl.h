@@ -399,9 +399,6 @@ inline glm::vec3 positionAt(const store::TilePart& part, const store::Schedule& 
   return a + f * (part.position(k + 1, v) - a);
 }
 
-// positionAt() of vertices first .. first + count - 1, into out: every vertex shares the time's
-// knot segment and parameter, so they are found once and the lerp runs over the coordinates as
-// one array (the same a + f (b - a) per coordinate, four at a time).
 // Where positionAt() takes a vertex at local time tau from: knot ka lerped to knot kb by f, or
 // knot ka itself (kb == ka: before the first knot, after the last, or a still part).
 inline void knotsAt(const store::TilePart& part, const store::Schedule& knots, double tau, uint32_t& ka, uint32_t& kb, float& f) {
@@ -418,6 +415,9 @@ inline void knotsAt(const store::TilePart& part, const store::Schedule& knots, d
   ka = k, kb = k + 1;
 }
 
+// positionAt() of vertices first .. first + count - 1, into out: every vertex shares the time's
+// knot segment and parameter, so they are found once and the lerp runs over the coordinates as
+// one array (the same a + f (b - a) per coordinate, four at a time).
 inline void positionsAt(const store::TilePart& part, const store::Schedule& knots, uint32_t first, uint32_t count, double tau, glm::vec3* out) {
   uint32_t ka, kb;
   float f;

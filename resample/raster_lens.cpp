@@ -40,7 +40,8 @@ void productRange(float l0, float l1, float k0, float k1, float& lo, float& hi) 
   hi = std::max(std::max(a, b), std::max(c, d));
 }
 
-// A queued micropolygon's place among the layers (queueLens() and stillLensDraw() alike): its
+// A queued micropolygon's place among the layers (kernels::lensDraw()'s, which the vector kernel
+// matches): its
 // layer from its k over its knots' depths zkLo..zkHi, the layer's middle kl, how far its own
 // displacement per unit of lens, box.cx0..cy1, strays from the layer's (ex, ey), and the rounding
 // margin qm of the sheared positions, scaled by the search box over its whole motion (mag: its
@@ -96,10 +97,9 @@ void lensDraw(const LensQueueSetup& s, size_t m, const LensDraws& out) {
       zLo = std::min(zLo, s.depth[k]), zHi = std::max(zHi, s.depth[k]);
     }
   out.zCull[m] = s.occlusionCulling ? zLo - 1e-5f * std::abs(zLo) : -INFINITY;
-  out.layer[m] = 0;
-  for (float* f : {out.kl, out.x0, out.x1, out.y0, out.y1, out.cx0, out.cx1, out.cy0, out.cy1, out.ex, out.ey, out.qm, out.mx0, out.mx1, out.my0, out.my1}) f[m] = 0.f;
   if (!bounded) {
-    out.state[m] = 2;
+    out.state[m] = 2, out.layer[m] = 0;
+    for (float* f : {out.kl, out.x0, out.x1, out.y0, out.y1, out.cx0, out.cx1, out.cy0, out.cy1, out.ex, out.ey, out.qm, out.mx0, out.mx1, out.my0, out.my1}) f[m] = 0.f;
     return;
   }
   // Per lens unit the raster displacement lies in [cx0, cx1] (x) and [cy0, cy1] (y) for every
@@ -187,8 +187,8 @@ void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileE
   const size_t C = lensTimes.size();
   cullX.resize(C * nV), cullY.resize(C * nV), cullZ.resize(C * nV);
   segmentBounded.assign(C, 1);
-  // Per bound time, its positions' box and depth range (read only where all are bounded: then
-  // none is NaN, and min and max are exact in any order).
+  // Per bound time whose positions are all bounded (then none is NaN, and min and max are exact in
+  // any order): their box and depth range.
   timeRange.resize(C);
   if (vectorKernels) {
     // project(positionAt()) eight vertices at a time, with their box.
@@ -200,7 +200,8 @@ void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileE
       if (kernels::projectLerped(isa, &part.position(ka, vBase).x, &part.position(kb, vBase).x, f, nV, projectionScale, cullX.data() + ci * nV,
                                  cullY.data() + ci * nV, cullZ.data() + ci * nV, r))
         segmentBounded[ci] = 0;
-      floatRange(cullZ.data() + ci * nV, nV, r[4], r[5]);
+      else
+        floatRange(cullZ.data() + ci * nV, nV, r[4], r[5]);
     }
   } else {
     for (size_t ci = 0; ci < C; ++ci) {
@@ -211,7 +212,8 @@ void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileE
         cullX[ci * nV + i] = x, cullY[ci * nV + i] = y, cullZ[ci * nV + i] = p.z;
       }
       float* r = timeRange[ci].data();
-      floatRange(cullX.data() + ci * nV, nV, r[0], r[2]), floatRange(cullY.data() + ci * nV, nV, r[1], r[3]), floatRange(cullZ.data() + ci * nV, nV, r[4], r[5]);
+      if (segmentBounded[ci])
+        floatRange(cullX.data() + ci * nV, nV, r[0], r[2]), floatRange(cullY.data() + ci * nV, nV, r[1], r[3]), floatRange(cullZ.data() + ci * nV, nV, r[4], r[5]);
     }
   }
   const float lensAx = float(view.ax * view.lensRadius), lensAy = float(view.ay * view.lensRadius);
@@ -484,6 +486,7 @@ void BucketRasterizer::Impl::drawLensQueued() {
     std::iota(lensOrder.begin(), lensOrder.end(), 0u);
     std::stable_sort(lensOrder.begin(), lensOrder.end(), [&](uint32_t a, uint32_t b) { return lensDraws[a].layer < lensDraws[b].layer; });
   }
+  const float rowScale = 1.f / float(lensRowSpan());  // the lens cells' rows per pixel
   uint32_t currentChunk = ~0u;
   HitContext hc{};
   int32_t sortedLayer = INT32_MIN;
@@ -529,7 +532,6 @@ void BucketRasterizer::Impl::drawLensQueued() {
         float q[4];
         d.searchBox(f0, f1, q);
         const int c0 = cellAt(q[0] - float(g.x0), g.cols), c1 = cellAt(q[1] - float(g.x0), g.cols);
-        const float rowScale = 1.f / float(lensRowSpan());
         const int r0 = cellAt((q[2] - float(g.y0)) * rowScale, g.rows), r1 = cellAt((q[3] - float(g.y0)) * rowScale, g.rows);
         const uint32_t* start = lensCellStart.data() + size_t(b) * g.cells;
         if (vectorKernels) {

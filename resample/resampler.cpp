@@ -231,19 +231,18 @@ bool drawsSampleTimes(const std::vector<Source>& sources, const ShutterModel& sh
   return false;
 }
 
-/// The circle of confusion a micropolygon typically takes through the view's lens
-/// (ViewBounds::typicalCircle() over the sources), raster pixels of radius; 0 without a lens.
+/// The circle of confusion a micropolygon typically takes through the view's lens, over every
+/// source's parts (ViewBounds::circleTotals()), raster pixels of radius; 0 without a lens.
 double typicalCircle(const std::vector<Source>& sources, const std::vector<std::unique_ptr<const CarriedStore>>& carried, const View& view,
                      const store::Lens& lens) {
   if (!view.lens()) return 0.0;
-  double sum = 0, weight = 0;
+  store::ViewBounds::CircleTotals all;
   for (size_t i = 0; i < sources.size(); ++i) {
     const store::ViewBounds& bounds = carried[i] ? carried[i]->bounds() : sources[i].store->primaryBounds();
-    double n = 0;
-    for (const store::TileEntry& e : sources[i].store->entries()) n += double(e.numMicropolygons);
-    sum += n * bounds.typicalCircle(lens), weight += n;
+    const store::ViewBounds::CircleTotals t = bounds.circleTotals(lens);
+    all.weighted += t.weighted, all.micropolygons += t.micropolygons;
   }
-  return (weight > 0 ? sum / weight : 0.0) * std::max(std::abs(view.ax), std::abs(view.ay));
+  return (all.micropolygons > 0 ? all.weighted / all.micropolygons : 0.0) * std::max(std::abs(view.ax), std::abs(view.ay));
 }
 
 /// Everything the buckets read and none writes: the validated window and shutter, the camera's

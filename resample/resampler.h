@@ -49,18 +49,18 @@ inline constexpr int kAutoBucketSize = 0;
 /// without sample times the best of 32-128 was 48 px at a 5 px circle, 48-80 at 10, 64 at 20, 80
 /// at 35, 96 at 50; with motion (its own blur widens each footprint) 96-128 at 5, 96 at 20, 128
 /// at 50.
+inline int lensBucketSize(double circleRadius, bool sampleTimes) {
+  const double fitted = std::round((45.0 + 1.15 * std::min(circleRadius, 1e3)) / 16.0) * 16.0;
+  const int still = int(std::clamp(std::isfinite(fitted) ? fitted : 128.0, 48.0, 128.0));
+  return sampleTimes ? std::clamp(still + 32, kBucketSize, 128) : still;
+}
+
 /// Through a lens, the depth layers' width (RasterOptions::lensLayerWidth) from the same typical
 /// circle: narrower layers search less around each micropolygon and sort the bucket's samples
 /// more often. On the bench frames 1 px was 2-5 % faster than 2 px at 5-20 px circles (moving 20
 /// px: 6.33 against 6.65-6.91 rasterize thread-s) and 4 % slower at 50 px, where 2 px was best
 /// and 3 px no better.
 inline float lensLayerWidth(double circleRadius) { return float(std::clamp(std::isfinite(circleRadius) ? circleRadius / 25.0 : 2.0, 1.0, 2.0)); }
-
-inline int lensBucketSize(double circleRadius, bool sampleTimes) {
-  const double fitted = std::round((45.0 + 1.15 * std::min(circleRadius, 1e3)) / 16.0) * 16.0;
-  const int still = int(std::clamp(std::isfinite(fitted) ? fitted : 128.0, 48.0, 128.0));
-  return sampleTimes ? std::clamp(still + 32, kBucketSize, 128) : still;
-}
 
 struct RenderSpec {
   std::vector<Source> sources;  // stores in time order; sources[0] sets camera and schema

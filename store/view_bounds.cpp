@@ -35,14 +35,14 @@ std::pair<float, float> ViewBounds::depths() const {
   return d;
 }
 
-double ViewBounds::typicalCircle(const Lens& lens) const {
-  if (!lens.active()) return 0.0;
-  double sum = 0, weight = 0;
+ViewBounds::CircleTotals ViewBounds::circleTotals(const Lens& lens) const {
+  CircleTotals t;
+  if (!lens.active()) return t;
   for (size_t i = 0; i < depthRange_.size(); ++i) {
     const double coc = circleOfConfusion(lens, depthRange_[i].first, depthRange_[i].second), n = double((*entries_)[i].numMicropolygons);
-    if (std::isfinite(coc)) sum += n * coc, weight += n;
+    if (std::isfinite(coc)) t.weighted += n * coc, t.micropolygons += n;
   }
-  return weight > 0 ? sum / weight : 0.0;
+  return t;
 }
 
 void ViewBounds::visit(const RasterRect& rect, double t0, double t1, const std::function<void(size_t)>& fn, const Lens& lens) const {

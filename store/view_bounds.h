@@ -33,10 +33,14 @@ class ViewBounds {
   RasterRect extent() const;
   /// The nearest and farthest camera depth a part reaches at any knot (infinities when empty).
   std::pair<float, float> depths() const;
-  /// The circle of confusion a micropolygon typically takes through `lens`: each part's largest
-  /// (circleOfConfusion() over its depths, in units of the projection's scale) weighted by its
-  /// micropolygons; parts that reach the eye plane are left out. 0 without a lens or parts.
-  double typicalCircle(const Lens& lens) const;
+  /// Each part's largest circle of confusion through `lens` (circleOfConfusion() over its depths,
+  /// in units of the projection's scale) times its micropolygons, summed, and those micropolygons:
+  /// their ratio is the circle a micropolygon typically takes. Parts that reach the eye plane are
+  /// left out; without a lens both are 0.
+  struct CircleTotals {
+    double weighted = 0, micropolygons = 0;
+  };
+  CircleTotals circleTotals(const Lens& lens) const;
 
  private:
   const std::vector<TileEntry>* entries_ = nullptr;

@@ -20,6 +20,23 @@
 using namespace reshutter;
 using namespace reshutter::resample;
 
+namespace {
+
+// Four corners for each of `count` micropolygons of a chunk's nV vertices from vBase: mostly a
+// small quad of neighbouring vertices, sometimes scattered ones (large boxes), a quarter of them
+// triangles (the fourth corner kNoCorner).
+std::vector<uint32_t> randomCorners(Rng& rng, uint32_t count, uint32_t nV, uint32_t vBase) {
+  std::vector<uint32_t> corners(4 * size_t(count));
+  for (uint32_t m = 0; m < count; ++m) {
+    const uint32_t first = rng.below(nV - 4), spread = rng.below(8) == 0 ? nV : 4;
+    for (int j = 0; j < 4; ++j) corners[4 * m + j] = vBase + (spread == 4 ? first + uint32_t(j) : rng.below(nV));
+    if (rng.below(4) == 0) corners[4 * m + 3] = store::kNoCorner;
+  }
+  return corners;
+}
+
+}  // namespace
+
 // The box gather (kernels::gatherInBox) against its definition, restated here: every sample of
 // the rows whose position lies in the box at its own time and whose depth lies beyond zCull,
 // each once, with copies of its time and position. Row layouts as the rasterizer makes them:
@@ -177,13 +194,7 @@ TEST(ResampleHard, StillAreaKernelIsTheScalarTestArea) {
       if (rng.below(60) == 0) py[v] = NAN;
       depth[v] = float(rng.uniform(0.5, 50));
     }
-    std::vector<uint32_t> corners(4 * size_t(count));
-    for (uint32_t m = 0; m < count; ++m) {
-      // Mostly a small quad of neighbouring vertices, sometimes scattered ones (large boxes).
-      const uint32_t first = rng.below(nV - 4), spread = rng.below(8) == 0 ? nV : 4;
-      for (int j = 0; j < 4; ++j) corners[4 * m + j] = vBase + (spread == 4 ? first + uint32_t(j) : rng.below(nV));
-      if (rng.below(4) == 0) corners[4 * m + 3] = store::kNoCorner;
-    }
+    const std::vector<uint32_t> corners = randomCorners(rng, count, nV, vBase);
     for (bool occlusion : {true, false}) {
       const kernels::StillAreaSetup setup{corners.data(), vBase, px.data(), py.data(), depth.data(), region.x0, region.y0, region.w, region.h, occlusion};
       for (kernels::Isa isa : {kernels::Isa::Avx2, kernels::Isa::Avx512}) {
@@ -262,12 +273,7 @@ TEST(ResampleHard, LensSetUpKernelIsItsDefinition) {
       for (uint32_t v = 0; v < nV; ++v) k[3 * v + 2] = rng.below(50) == 0 ? -1.f : float(rng.uniform(0.2, 60));
     std::vector<const float*> knotXyz;
     for (auto& k : xyz) knotXyz.push_back(k.data());
-    std::vector<uint32_t> corners(4 * size_t(count));
-    for (uint32_t m = 0; m < count; ++m) {
-      const uint32_t first = rng.below(nV - 4), spread = rng.below(8) == 0 ? nV : 4;
-      for (int j = 0; j < 4; ++j) corners[4 * m + j] = vBase + (spread == 4 ? first + uint32_t(j) : rng.below(nV));
-      if (rng.below(4) == 0) corners[4 * m + 3] = store::kNoCorner;
-    }
+    const std::vector<uint32_t> corners = randomCorners(rng, count, nV, vBase);
     const float lensAx = float(rng.uniform(1, 400)), lensAy = float(rng.uniform(1, 400)) * (rng.below(2) ? -1.f : 1.f);
     const float kMag = std::max(lensAx, std::abs(lensAy)) * float(1 / focus + 1 / 0.2);
     for (bool occlusion : {true, false}) {
