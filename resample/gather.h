@@ -84,12 +84,11 @@ struct LensBox {
 };
 
 /// A layer's samples sorted into cells by their sheared positions (raster_lens.cpp): cell c's
-/// samples are [start[c], start[c + 1]) of the sorted arrays - each one's time, position, lens
-/// point and slot - cells row-major, `stride` to a row. The arrays have kPad entries of room past
-/// their last sample.
+/// samples are [start[c], start[c + 1]) of the sorted arrays - each one's time, position and lens
+/// point - cells row-major, `stride` to a row. The arrays have kPad entries of room past their
+/// last sample.
 struct LensCells {
   const float *t, *x, *y, *u, *v;
-  const uint32_t* index;
   const uint32_t* start;
   uint64_t* examined;  // += the samples in the cells searched (--stats)
 };
@@ -101,11 +100,12 @@ struct LensCandidates {
   float *t, *x, *y, *u, *v;
 };
 
-/// Appends to `out` from position n the samples in cells [c0, c1] × [r0, r1] that the lens box
-/// admits at their lens points, in sorted order; returns the new count. Reads up to 15 entries
-/// past a row's last sample (the arrays' room) and writes up to 15 entries past the returned count.
-size_t gatherLensCells(Isa isa, const LensCells& cells, size_t stride, int c0, int r0, int c1, int r1, const LensBox& box, const LensCandidates& out,
-                       size_t n);
+/// Appends to positions[] from n the places in the sorted arrays of the samples in cells
+/// [c0, c1] × [r0, r1] that the lens box admits at their lens points, in sorted order; returns
+/// the new count. Reads up to 15 entries past a row's last sample (the arrays' room) and writes up
+/// to 15 entries past the returned count. Only places: few samples pass, and one stream per
+/// vector of samples costs a sixth of copying all six (the caller copies what passed).
+size_t gatherLensCells(Isa isa, const LensCells& cells, size_t stride, int c0, int r0, int c1, int r1, const LensBox& box, uint32_t* positions, size_t n);
 
 /// A depth layer's sort keys (raster_lens.cpp, sortLensLayer()): a sample's cell is that of its
 /// position sheared by the layer's displacement, col = int(clamp(x - cx u - x0, 0, maxCol)) and

@@ -333,6 +333,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   SkewedArray<uint32_t> lensSortedIndex{4};         // the sorted samples' slots, times, positions and lens points
   SkewedArray<float> lensSortedT{12}, lensSortedX{20}, lensSortedY{28}, lensSortedU{36}, lensSortedV{44};
   SkewedArray<float> candU{60}, candV{2}, candF{10};  // the lens path's candidates' lens points and, for a moving micropolygon's vector test, segment parameters (candidates, candT, candX, candY hold the rest)
+  SkewedArray<uint32_t> lensCandPos{18};                // the lens gather's admitted samples: their places in the sorted arrays
 
   // ------------------------------------------------------------------------------------------
   // The linear path and chunk gathers (raster_linear.cpp)

@@ -523,6 +523,7 @@ void BucketRasterizer::Impl::drawLensQueued() {
       // cells, which hold every sample sheared beyond it.
       auto cellAt = [](float v, int count) { return v >= 0.f ? (v < float(count) ? int(v) : count - 1) : 0; };
       const kernels::LensBox& box = d.box;
+      uint32_t* __restrict at = lensCandPos.data();
       for (int b = 0; b < lensTimeBlocks; ++b) {
         float f0 = 0.f, f1 = 1.f;
         if (lc.blockF != ~0u) {
@@ -535,20 +536,25 @@ void BucketRasterizer::Impl::drawLensQueued() {
         const int r0 = cellAt((q[2] - float(g.y0)) * rowScale, g.rows), r1 = cellAt((q[3] - float(g.y0)) * rowScale, g.rows);
         const uint32_t* start = lensCellStart.data() + size_t(b) * g.cells;
         if (vectorKernels) {
-          const kernels::LensCells cells{lensSortedT.data(), lensSortedX.data(), lensSortedY.data(), lensSortedU.data(), lensSortedV.data(),
-                                         lensSortedIndex.data(), start, &stats.lensScanned};
-          n = kernels::gatherLensCells(isa, cells, size_t(g.cols), c0, r0, c1, r1, box, cand, n);
+          const kernels::LensCells cells{lensSortedT.data(), lensSortedX.data(), lensSortedY.data(), lensSortedU.data(), lensSortedV.data(), start,
+                                         &stats.lensScanned};
+          n = kernels::gatherLensCells(isa, cells, size_t(g.cols), c0, r0, c1, r1, box, at, n);
         } else {
           for (int r = r0; r <= r1; ++r) {
             const size_t row = size_t(r) * size_t(g.cols);
             stats.lensScanned += start[row + size_t(c1) + 1] - start[row + size_t(c0)];
             for (uint32_t i = start[row + size_t(c0)], e = start[row + size_t(c1) + 1]; i < e; ++i) {
-              cand.index[n] = lensSortedIndex[i];
-              cand.t[n] = lensSortedT[i], cand.x[n] = lensSortedX[i], cand.y[n] = lensSortedY[i], cand.u[n] = lensSortedU[i], cand.v[n] = lensSortedV[i];
+              at[n] = i;
               n += box.admits(lensSortedT[i], lensSortedX[i], lensSortedY[i], lensSortedU[i], lensSortedV[i]);
             }
           }
         }
+      }
+      // The admitted samples' slots, times, positions and lens points, in order for the tests.
+      for (size_t i = 0; i < n; ++i) {
+        const uint32_t p = at[i];
+        cand.index[i] = lensSortedIndex[p];
+        cand.t[i] = lensSortedT[p], cand.x[i] = lensSortedX[p], cand.y[i] = lensSortedY[p], cand.u[i] = lensSortedU[p], cand.v[i] = lensSortedV[p];
       }
     }
     const TilePart& part = *lc.part;

@@ -557,12 +557,13 @@ size_t testMovingLensAvx2(const MovingLensSetup& s, size_t n, EdgeHit* hits) {
 
 namespace {
 
-size_t gatherLensCellsAvx2(const LensCells& cells, size_t stride, int c0, int r0, int c1, int r1, const LensBox& box, const LensCandidates& out, size_t n) {
+size_t gatherLensCellsAvx2(const LensCells& cells, size_t stride, int c0, int r0, int c1, int r1, const LensBox& box, uint32_t* positions, size_t n) {
   // LensBox::admits() eight sorted samples at a time (min / max as its conditionals: b < a ? b : a).
   const __m256 x0 = _mm256_set1_ps(box.x0), x1 = _mm256_set1_ps(box.x1), y0 = _mm256_set1_ps(box.y0), y1 = _mm256_set1_ps(box.y1);
   const __m256 cx0 = _mm256_set1_ps(box.cx0), cx1 = _mm256_set1_ps(box.cx1), cy0 = _mm256_set1_ps(box.cy0), cy1 = _mm256_set1_ps(box.cy1);
   const __m256 thetaA = _mm256_set1_ps(box.thetaA), invLen = _mm256_set1_ps(box.invLen), one = _mm256_set1_ps(1.f), zero = _mm256_setzero_ps();
   const __m256 mx0 = _mm256_set1_ps(box.mx0), mx1 = _mm256_set1_ps(box.mx1), my0 = _mm256_set1_ps(box.my0), my1 = _mm256_set1_ps(box.my1);
+  const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
   uint64_t examined = 0;
   for (int r = r0; r <= r1; ++r) {
     const size_t row = size_t(r) * stride;
@@ -585,12 +586,9 @@ size_t gatherLensCellsAvx2(const LensCells& cells, size_t stride, int c0, int r0
       __m256 in = _mm256_and_ps(_mm256_cmp_ps(x, xLo, _CMP_GE_OQ), _mm256_cmp_ps(x, xHi, _CMP_LE_OQ));
       in = _mm256_and_ps(in, _mm256_and_ps(_mm256_cmp_ps(y, yLo, _CMP_GE_OQ), _mm256_cmp_ps(y, yHi, _CMP_LE_OQ)));
       const unsigned mask = unsigned(_mm256_movemask_ps(in)) & live;
-      if (!mask) continue;
-      // The lens points beside what appendMasked() stores.
       const __m256i perm = _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompress.perm[mask]));
-      _mm256_storeu_ps(out.u + n, _mm256_permutevar8x32_ps(u, perm));
-      _mm256_storeu_ps(out.v + n, _mm256_permutevar8x32_ps(v, perm));
-      n = appendMasked(mask, _mm256_loadu_si256(reinterpret_cast<const __m256i*>(cells.index + at)), t, x, y, {out.index, out.t, out.x, out.y}, n);
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(positions + n), _mm256_permutevar8x32_epi32(_mm256_add_epi32(_mm256_set1_epi32(int(at)), lane), perm));
+      n += size_t(__builtin_popcount(mask));
     }
   }
   *cells.examined += examined;

@@ -479,7 +479,7 @@ void cellsOfAvx512(const CellGrid& g, const float* t, const float* x, const floa
 // LensBox::admits() sixteen sorted samples at a time, one masked load per run segment (no read
 // past a run's end), the AVX2 kernel's operations lane for lane, and the admitted ones appended
 // by compresses.
-size_t gatherLensCellsAvx512(const LensCells& cells, size_t stride, int c0, int r0, int c1, int r1, const LensBox& box, const LensCandidates& out, size_t n) {
+size_t gatherLensCellsAvx512(const LensCells& cells, size_t stride, int c0, int r0, int c1, int r1, const LensBox& box, uint32_t* positions, size_t n) {
   const __m512 x0 = _mm512_set1_ps(box.x0), x1 = _mm512_set1_ps(box.x1), y0 = _mm512_set1_ps(box.y0), y1 = _mm512_set1_ps(box.y1);
   const __m512 cx0 = _mm512_set1_ps(box.cx0), cx1 = _mm512_set1_ps(box.cx1), cy0 = _mm512_set1_ps(box.cy0), cy1 = _mm512_set1_ps(box.cy1);
   const __m512 thetaA = _mm512_set1_ps(box.thetaA), invLen = _mm512_set1_ps(box.invLen), one = _mm512_set1_ps(1.f), zero = _mm512_setzero_ps();
@@ -487,6 +487,7 @@ size_t gatherLensCellsAvx512(const LensCells& cells, size_t stride, int c0, int 
   // A box that does not lerp (invLen 0) has f = +0 for every sample, as the AVX2 kernel computes
   // it.
   const bool timed = box.invLen != 0.f;
+  const __m512i lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
   uint64_t examined = 0;
   for (int r = r0; r <= r1; ++r) {
     const size_t row = size_t(r) * stride;
@@ -508,9 +509,8 @@ size_t gatherLensCellsAvx512(const LensCells& cells, size_t stride, int c0, int 
       in = _mm512_mask_cmp_ps_mask(in, x, xHi, _CMP_LE_OQ);
       in = _mm512_mask_cmp_ps_mask(in, y, yLo, _CMP_GE_OQ);
       in = _mm512_mask_cmp_ps_mask(in, y, yHi, _CMP_LE_OQ);
-      _mm512_storeu_ps(out.u + n, _mm512_maskz_compress_ps(in, u));
-      _mm512_storeu_ps(out.v + n, _mm512_maskz_compress_ps(in, v));
-      n = appendCompressed512({out.index, out.t, out.x, out.y}, n, in, _mm512_maskz_loadu_epi32(in, cells.index + at), t, x, y);
+      _mm512_storeu_si512(positions + n, _mm512_maskz_compress_epi32(in, _mm512_add_epi32(_mm512_set1_epi32(int(at)), lane)));
+      n += size_t(__builtin_popcount(unsigned(in)));
     }
   }
   *cells.examined += examined;
