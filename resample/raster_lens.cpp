@@ -501,14 +501,26 @@ void BucketRasterizer::Impl::drawLensQueued() {
     }
     size_t n = 0;
     const kernels::LensCandidates cand{candidates.data(), candT.data(), candX.data(), candY.data(), candU.data(), candV.data()};
+    // A sample the box admits becomes a candidate when it passes the early depth test, lies in
+    // the store's times (the coverage) and in this draw's knot segment: copied to the candidates
+    // (slot, time, position, lens point) for the exact test. No sample is admitted twice (blocks
+    // and cells partition the samples), so testing them all before any is drawn is the same as
+    // testing each as it is drawn.
+    auto addCandidate = [&](uint32_t idx, float t, float x, float y, float u, float v) {
+      if (!(zbuf[idx] > d.zCull)) return;  // the early depth test
+      if (lc.cover.check && !Source::covers(double(t), lc.cover.lo, lc.cover.hi, lc.cover.openEnd)) return;
+      if (!(t >= lc.segLo && t < lc.segHi)) return;  // another knot segment's sample
+      cand.index[n] = idx, cand.t[n] = t, cand.x[n] = x, cand.y[n] = y, cand.u[n] = u, cand.v[n] = v;
+      ++n;
+    };
     if (d.layer == INT32_MIN) {
       // Unbounded: every sample of the region.
       for (int s = 0; s < N; ++s)
-        for (size_t p = 0; p < size_t(P); ++p, ++n) {
+        for (size_t p = 0; p < size_t(P); ++p) {
           const size_t j = size_t(s) * PS + p;
-          cand.index[n] = uint32_t(j), cand.t[n] = st[j], cand.x[n] = sx[j], cand.y[n] = sy[j], cand.u[n] = lx[j], cand.v[n] = ly[j];
+          addCandidate(uint32_t(j), st[j], sx[j], sy[j], lx[j], ly[j]);
         }
-      stats.lensScanned += n;
+      stats.lensScanned += size_t(N) * size_t(P);
     } else {
       if (d.layer != sortedLayer) {
         size_t last = oi + 1;
@@ -524,6 +536,7 @@ void BucketRasterizer::Impl::drawLensQueued() {
       auto cellAt = [](float v, int count) { return v >= 0.f ? (v < float(count) ? int(v) : count - 1) : 0; };
       const kernels::LensBox& box = d.box;
       uint32_t* __restrict at = lensCandPos.data();
+      size_t admitted = 0;
       for (int b = 0; b < lensTimeBlocks; ++b) {
         float f0 = 0.f, f1 = 1.f;
         if (lc.blockF != ~0u) {
@@ -538,25 +551,25 @@ void BucketRasterizer::Impl::drawLensQueued() {
         if (vectorKernels) {
           const kernels::LensCells cells{lensSortedT.data(), lensSortedX.data(), lensSortedY.data(), lensSortedU.data(), lensSortedV.data(), start,
                                          &stats.lensScanned};
-          n = kernels::gatherLensCells(isa, cells, size_t(g.cols), c0, r0, c1, r1, box, at, n);
+          admitted = kernels::gatherLensCells(isa, cells, size_t(g.cols), c0, r0, c1, r1, box, at, admitted);
         } else {
           for (int r = r0; r <= r1; ++r) {
             const size_t row = size_t(r) * size_t(g.cols);
             stats.lensScanned += start[row + size_t(c1) + 1] - start[row + size_t(c0)];
             for (uint32_t i = start[row + size_t(c0)], e = start[row + size_t(c1) + 1]; i < e; ++i) {
-              at[n] = i;
-              n += box.admits(lensSortedT[i], lensSortedX[i], lensSortedY[i], lensSortedU[i], lensSortedV[i]);
+              at[admitted] = i;
+              admitted += box.admits(lensSortedT[i], lensSortedX[i], lensSortedY[i], lensSortedU[i], lensSortedV[i]);
             }
           }
         }
       }
-      // The admitted samples' slots, times, positions and lens points, in order for the tests.
-      for (size_t i = 0; i < n; ++i) {
+      for (size_t i = 0; i < admitted; ++i) {
         const uint32_t p = at[i];
-        cand.index[i] = lensSortedIndex[p];
-        cand.t[i] = lensSortedT[p], cand.x[i] = lensSortedX[p], cand.y[i] = lensSortedY[p], cand.u[i] = lensSortedU[p], cand.v[i] = lensSortedV[p];
+        addCandidate(lensSortedIndex[p], lensSortedT[p], lensSortedX[p], lensSortedY[p], lensSortedU[p], lensSortedV[p]);
       }
     }
+    if (!n) continue;
+    stats.sampleTests += n;
     const TilePart& part = *lc.part;
     const uint32_t* c = &part.corners[size_t(d.m) * 4];
     const bool tri = c[3] == kNoCorner;
@@ -566,50 +579,30 @@ void BucketRasterizer::Impl::drawLensQueued() {
       continue;
     }
     if (lc.moving || !vectorKernels) {
-      bool edgesReady = false;
+      if (!lc.moving) lensEdges(part, c, tri);
       for (size_t i = 0; i < n; ++i) {
-        const uint32_t idx = cand.index[i];
-        if (!(zbuf[idx] > d.zCull)) continue;  // the early depth test
-        if (lc.cover.check && !Source::covers(double(cand.t[i]), lc.cover.lo, lc.cover.hi, lc.cover.openEnd)) continue;
-        if (!(cand.t[i] >= lc.segLo && cand.t[i] < lc.segHi)) continue;  // another knot segment's sample
-        ++stats.sampleTests;
-        const LensSample ls{idx, cand.t[i], cand.x[i], cand.y[i], cand.u[i], cand.v[i]};
-        if (lc.moving) {
-          testLens(lc, hc, d.m, c, tri, flags, ls);
-          continue;
-        }
-        if (!edgesReady) lensEdges(part, c, tri), edgesReady = true;
-        testStillLens(hc, d.m, c, tri, flags, ls);
+        const LensSample ls{cand.index[i], cand.t[i], cand.x[i], cand.y[i], cand.u[i], cand.v[i]};
+        if (lc.moving) testLens(lc, hc, d.m, c, tri, flags, ls);
+        else testStillLens(hc, d.m, c, tri, flags, ls);
       }
       continue;
     }
-    // A still micropolygon with the vector kernels: the candidates that pass the early depth
-    // test (and the coverage) moved to the front, then the edge test eight at a time, exact ties
+    // A still micropolygon with the vector kernels: the edge test eight at a time, exact ties
     // (undecided) in the scalar test - the same hits, in the same order, as the loop above.
-    size_t kept = 0;
-    for (size_t i = 0; i < n; ++i) {
-      const uint32_t idx = cand.index[i];
-      if (!(zbuf[idx] > d.zCull)) continue;
-      if (lc.cover.check && !Source::covers(double(cand.t[i]), lc.cover.lo, lc.cover.hi, lc.cover.openEnd)) continue;
-      cand.index[kept] = idx, cand.t[kept] = cand.t[i], cand.x[kept] = cand.x[i], cand.y[kept] = cand.y[i], cand.u[kept] = cand.u[i], cand.v[kept] = cand.v[i];
-      ++kept;
-    }
-    if (!kept) continue;
-    stats.sampleTests += kept;
     lensEdges(part, c, tri);
     kernels::EdgeTestSetup setup{cand.t, cand.x, cand.y, 0.f, 0.f, tri, opt.backfaceCull && !(flags & store::kTwoSided), true};
     for (int j = 0; j < 4; ++j) setup.za[j] = setup.zb[j] = stillLens.z[j];
     setup.su = cand.u, setup.sv = cand.v, setup.lensRadius = view.lensRadius;
-    recordKernelHits(hc, d.m, c, setup, stillLens.edges, kept,
+    recordKernelHits(hc, d.m, c, setup, stillLens.edges, n,
                      [&](uint32_t idx) { testStillLens(hc, d.m, c, tri, flags, LensSample{idx, st[idx], sx[idx], sy[idx], lx[idx], ly[idx]}); });
   }
   lensDraws.clear(), lensChunks.clear(), lensBlockF.clear();
 }
 
-// A moving micropolygon's n candidates with the vector kernels: those that pass the early depth
-// test, the coverage and the draw's time range, moved to the front with their segment
-// parameters, then testMovingLens() on them - testLens()' hits. A candidate whose time falls in
-// another knot segment than the first one's (a time on a knot, rounded) takes testLens() itself.
+// A moving micropolygon's n candidates with the vector kernels (each past the early depth test,
+// the coverage and the draw's time range): their segment parameters, then testMovingLens() on
+// them - testLens()' hits. A candidate whose time falls in another knot segment than the first
+// one's (a time on a knot, rounded) takes testLens() itself.
 void BucketRasterizer::Impl::drawMovingLens(const LensChunk& lc, const HitContext& hc, const LensDraw& d, const uint32_t* c, bool tri, uint8_t flags,
                                             size_t n) {
   uint32_t* __restrict index = candidates.data();
@@ -623,10 +616,6 @@ void BucketRasterizer::Impl::drawMovingLens(const LensChunk& lc, const HitContex
   uint32_t segment = ~0u;
   for (size_t i = 0; i < n; ++i) {
     const uint32_t idx = index[i];
-    if (!(zbuf[idx] > d.zCull)) continue;  // the early depth test
-    if (lc.cover.check && !Source::covers(double(t[i]), lc.cover.lo, lc.cover.hi, lc.cover.openEnd)) continue;
-    if (!(t[i] >= lc.segLo && t[i] < lc.segHi)) continue;  // another knot segment's sample
-    ++stats.sampleTests;
     uint32_t k;
     float f;
     segmentAt(*lc.knots, double(t[i]) + lc.toLocal, k, f);
@@ -640,8 +629,11 @@ void BucketRasterizer::Impl::drawMovingLens(const LensChunk& lc, const HitContex
   }
   if (!kept) return;
   const TilePart& part = *lc.part;
-  kernels::MovingLensSetup setup{fs, u, v, x, y, {}, {}, view.lensRadius, 1.0 / view.focalDistance, rasterScale, tri,
-                                 opt.backfaceCull && !(flags & store::kTwoSided)};
+  // Every field set (a value-initialised set-up would clear its corner arrays first, per draw).
+  kernels::MovingLensSetup setup;
+  setup.f = fs, setup.su = u, setup.sv = v, setup.sx = x, setup.sy = y;
+  setup.lensRadius = view.lensRadius, setup.invD = 1.0 / view.focalDistance, setup.scale = rasterScale, setup.triangle = tri;
+  setup.cullBackFaces = opt.backfaceCull && !(flags & store::kTwoSided);
   for (int j = 0; j < 4; ++j) {
     const uint32_t corner = c[tri && j == 3 ? 2 : j];
     const glm::dvec3 a(part.position(segment, corner)), b(part.position(segment + 1, corner)), delta = b - a;
