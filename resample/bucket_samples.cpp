@@ -162,6 +162,13 @@ void BucketSamples::prepare(int rx0, int ry0, int rw, int rh) {
       else boxTimes ? writeSamples(no, yes) : writeSamples(no, no);
     }
   }
+  if (lensPlanes) {
+    lensRange.resize(size_t(N));
+    for (int s = 0; s < N && P > 0; ++s) {
+      auto& r = lensRange[size_t(s)];
+      floatRange(&lx[size_t(s) * PS], size_t(P), r[0], r[1]), floatRange(&ly[size_t(s) * PS], size_t(P), r[2], r[3]);
+    }
+  }
   if (!drawTimes) {
     // Nothing reads the times: the region's range is its strata's, unwidened.
     for (int g = 0; g < G; ++g)

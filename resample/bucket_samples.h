@@ -11,6 +11,7 @@
 #pragma once
 
 #include <algorithm>
+#include <array>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -95,6 +96,7 @@ struct BucketSamples {
   SkewedArray<float> sx{0}, sy{8}, st{16};  // [slot(s, p)]
   std::vector<uint32_t> idxOf;              // [p * N + i] → slot(s, p) (sample i of pixel p lies in stratum s)
   SkewedArray<float> lx{40}, ly{48};        // lensPlanes: the sample's point on the unit disk, [s * PS + p]
+  std::vector<std::array<float, 4>> lensRange;  // lensPlanes: [s] the range u0 u1 v0 v1 of plane s's lens points
   std::vector<uint8_t> rowGroup;            // per region row
   std::vector<uint8_t> groupPresent;
   bool multiGroup = false;                   // more than one shutter group (fields): rows differ

@@ -122,11 +122,18 @@ struct LensShear {
   float rowScale = 1.f;  // cell rows per pixel
 };
 
-/// Appends the kept samples among slots [first, first + count) (x, y, u, v and depth indexed by
-/// slot) to slot[] and their cells to cell[] from position n, in slot order; returns the new
-/// count. Writes up to 15 entries past the count.
-size_t lensLayerCells(Isa isa, const LensShear& shear, const float* x, const float* y, const float* u, const float* v, const float* depth, size_t first,
-                      size_t count, uint32_t key, uint32_t* slot, uint32_t* cell, size_t n);
+/// Runs of slots: [first[r], first[r] + count[r]) for r < n, in increasing order.
+struct LensRuns {
+  const uint32_t* first;
+  const uint32_t* count;
+  size_t n;
+};
+
+/// Appends the kept samples among the runs' slots (x, y, u, v and depth indexed by slot) to slot[]
+/// and their cells to cell[] from position n, in slot order; returns the new count. Writes up to
+/// 15 entries past the count.
+size_t lensLayerCells(Isa isa, const LensShear& shear, const float* x, const float* y, const float* u, const float* v, const float* depth, const LensRuns& runs,
+                      uint32_t key, uint32_t* slot, uint32_t* cell, size_t n);
 
 /// The strata of one moving box: stratum s covers box times u in [u0[s], u1[s]] and its
 /// samples are plane s of `rows` (whose first/cols/rows describe the whole region).

@@ -29,6 +29,7 @@ void RasterStats::add(const RasterStats& o) {
   lensScanned += o.lensScanned;
   lensLayers += o.lensLayers;
   lensSparseLayers += o.lensSparseLayers;
+  lensSortVisited += o.lensSortVisited;
   lensCulledMicropolygons += o.lensCulledMicropolygons;
   lensSegmentDraws += o.lensSegmentDraws;
   midIntervalSamples += o.midIntervalSamples;

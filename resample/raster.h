@@ -124,6 +124,11 @@ struct RasterOptions {
   /// layer). The same in every bucket, so that the draw order is. 0: render() chooses it
   /// (lensLayerWidth() in resampler.h; a rasterizer made directly takes 2).
   float lensLayerWidth = 0.f;
+  /// With a lens: each layer's sort visits the samples that can be sheared into a cell some search
+  /// of the layer reads (tile marks, and per plane the pixels its lens points can displace there).
+  /// Off, it sorts every sample of the region: the same searches find the same samples, and the
+  /// image is the same; off only to measure what it saves and to test that.
+  bool lensSortReached = true;
   /// Skip drawing the samples' times where they are one per group (an instant) or nothing in the
   /// render reads them (a motion-free render): each sample then takes its row's time at the middle
   /// of the interval and planes follow the sample order. A sample's hits do not depend on its
@@ -148,6 +153,7 @@ struct RasterStats {
   uint64_t lensScanned = 0;                 // samples the lens path's gathers examined (in the cells of their search boxes)
   uint64_t lensLayers = 0;                  // times the lens path sorted a bucket's samples for a layer of depths
   uint64_t lensSparseLayers = 0;            // of those, sorts that left out samples in tiles of cells no search of the layer reaches
+  uint64_t lensSortVisited = 0;             // samples the lens path's sorts visited (every sample of the region, or those that can reach a searched tile)
   uint64_t lensCulledMicropolygons = 0;     // lens micropolygons whose search box misses every sample of the bucket
   uint64_t lensSegmentDraws = 0;            // lens draws of moving micropolygons cut at their knots (one per knot segment of a bucket's times)
   uint64_t midIntervalSamples = 0;          // samples laid out at their row's middle time, none drawn (RasterOptions::sampleTimes)

@@ -296,6 +296,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   void rasterizeLens(const Source& src, const store::TileEntry& entry, const store::TilePart& part, const HitContext& hc, const Chunk& ch);
   void queueLensDraws(const LensChunk& lc, uint32_t chunk, uint32_t m0, uint32_t m1);
   void sortLensLayer(size_t first, size_t last, float cxl, float cyl);
+  void lensPlaneRuns(size_t s, float cxl, float cyl, const LensGrid& g, float rowScale);
   void drawLensQueued();
   struct LensSample {  // a candidate: its slot and its copies of the sample's time, position and lens point
     uint32_t slot;
@@ -330,6 +331,8 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   std::vector<uint32_t> lensCellStart, lensCursor;  // [cell]: the cell's first sorted sample; the scatter's cursors
   std::vector<uint32_t> lensKeptSlot, lensKeptCell;  // the samples a layer's sort keeps, in slot order, and their cells
   std::vector<uint8_t> lensTileUsed;                // [tile of 8 × 8 cells]: some search of the layer reaches it
+  std::vector<std::array<int, 2>> lensTileRowSpan;  // [tile row]: its first and last marked tile column
+  std::vector<uint32_t> lensRunFirst, lensRunCount;  // a plane's runs of slots that a layer's sort visits
   SkewedArray<uint32_t> lensSortedIndex{4};         // the sorted samples' slots, times, positions and lens points
   SkewedArray<float> lensSortedT{12}, lensSortedX{20}, lensSortedY{28}, lensSortedU{36}, lensSortedV{44};
   SkewedArray<float> candU{60}, candV{2}, candF{10};  // the lens path's candidates' lens points and, for a moving micropolygon's vector test, segment parameters (candidates, candT, candX, candY hold the rest)

@@ -371,7 +371,6 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
   const size_t tiles = size_t(tileCols) * size_t(tileRows);
   lensTileUsed.assign(tiles + 3, 0);  // the vector kernels read the marks 32 bits at a time
   auto tileAt = [](float v, int count) { return v >= 0.f ? (v < float(count) ? int(v) / 8 : (count - 1) / 8) : 0; };
-  int usedX0 = tileCols, usedX1 = -1, usedY0 = tileRows, usedY1 = -1;  // the marked tiles' bounds
   for (size_t i = first; i < last; ++i) {
     const LensDraw& e = lensDraws[lensOrder[i]];
     const LensChunk& ec = lensChunks[e.chunk];
@@ -382,24 +381,23 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
     const int tx0 = tileAt(q[0] - float(g.x0), g.cols), tx1 = tileAt(q[1] - float(g.x0), g.cols);
     const int ty0 = tileAt((q[2] - float(g.y0)) * rowScale, g.rows), ty1 = tileAt((q[3] - float(g.y0)) * rowScale, g.rows);
     for (int ty = ty0; ty <= ty1; ++ty) std::fill_n(&lensTileUsed[size_t(ty) * size_t(tileCols) + size_t(tx0)], tx1 - tx0 + 1, uint8_t(1));
-    usedX0 = std::min(usedX0, tx0), usedX1 = std::max(usedX1, tx1), usedY0 = std::min(usedY0, ty0), usedY1 = std::max(usedY1, ty1);
   }
-  // No marks to read when the layer searches every tile (a dense layer).
-  const bool everyTile = std::all_of(lensTileUsed.begin(), lensTileUsed.begin() + ptrdiff_t(tiles), [](uint8_t m) { return m != 0; });
+  // No marks to read when the layer searches every tile (a dense layer), or when asked to sort
+  // every sample.
+  const bool everyTile =
+      !opt.lensSortReached || std::all_of(lensTileUsed.begin(), lensTileUsed.begin() + ptrdiff_t(tiles), [](uint8_t m) { return m != 0; });
   const uint8_t* used = everyTile ? nullptr : lensTileUsed.data();
   stats.lensSparseLayers += !everyTile;
-  // The pixels whose samples can shear into a marked tile: the tiles' cells widened by the shear
-  // (|lens point| <= 1) and a pixel for rounding; a tile on the grid's edge also takes whatever is
-  // sheared beyond it. A sparse layer visits only those.
-  int px0 = x0, px1 = x0 + w - 1, py0 = y0, py1 = y0 + h - 1;
-  if (!everyTile) {
-    const int reachX = int(std::ceil(std::min(std::abs(cxl), 1e6f))) + 1, reachY = int(std::ceil(std::min(std::abs(cyl), 1e6f))) + 1;
-    if (usedX0 > 0) px0 = std::max(px0, g.x0 + usedX0 * 8 - reachX);
-    if ((usedX1 + 1) * 8 < g.cols) px1 = std::min(px1, g.x0 + (usedX1 + 1) * 8 + reachX);
-    if (usedY0 > 0) py0 = std::max(py0, g.y0 + usedY0 * 8 * rowSpan - reachY);
-    if ((usedY1 + 1) * 8 < g.rows) py1 = std::min(py1, g.y0 + (usedY1 + 1) * 8 * rowSpan + reachY);
-  }
-  const bool wholeRows = px0 == x0 && px1 == x0 + w - 1;
+  // Per tile row, its first and last marked tile column (first > last: none).
+  lensTileRowSpan.resize(size_t(tileRows));
+  if (used)
+    for (int ty = 0; ty < tileRows; ++ty) {
+      const uint8_t* m = used + size_t(ty) * size_t(tileCols);
+      int first = 0, last = tileCols - 1;
+      while (first < tileCols && !m[first]) ++first;
+      while (last >= first && !m[last]) --last;
+      lensTileRowSpan[size_t(ty)] = {first, last};
+    }
   // Keyed by time block, then cell: block b's cells are [b cells, (b + 1) cells).
   lensCellStart.assign(blocks * cells + 1, 0);
   lensCursor.resize(blocks * cells);
@@ -427,28 +425,33 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
                                  rowScale};
   // The kept samples, in slot order, each with its cell.
   size_t kept = 0;
-  // Slots [begin, begin + n) of one plane, in order.
-  auto visit = [&](size_t begin, size_t n, uint32_t key) {
+  // Runs of slots of one plane, in order.
+  auto visit = [&](const kernels::LensRuns& runs, uint32_t key) {
     if (vectorKernels) {
-      kept = kernels::lensLayerCells(isa, shear, xs, ys, us, vs, depth, begin, n, key, keptSlot, keptCell, kept);
+      kept = kernels::lensLayerCells(isa, shear, xs, ys, us, vs, depth, runs, key, keptSlot, keptCell, kept);
       return;
     }
     auto clampTo = [](float v, float hi) { return v >= 0.f ? (v <= hi ? v : hi) : 0.f; };
-    for (size_t j = begin; j < begin + n; ++j) {
+    for (size_t r = 0; r < runs.n; ++r)
+    for (size_t j = runs.first[r]; j < size_t(runs.first[r]) + runs.count[r]; ++j) {
       const uint32_t col = uint32_t(clampTo(xs[j] - shear.cx * us[j] - shear.x0, shear.maxCol));
       const uint32_t row = uint32_t(clampTo((ys[j] - shear.cy * vs[j] - shear.y0) * shear.rowScale, shear.maxRow));
       keptSlot[kept] = uint32_t(j), keptCell[kept] = key + row * shear.cols + col;
       kept += depth[j] > zMin && (!used || used[(row >> 3) * shear.tileCols + (col >> 3)]);
     }
   };
-  if (px0 <= px1 && py0 <= py1)
-    for (size_t s = 0; s < planes; ++s) {
-      const uint32_t key = uint32_t(s / perBlock * cells);
-      const size_t plane = s * planeStride;
-      if (wholeRows) visit(plane + size_t(py0 - y0) * size_t(w), size_t(py1 - py0 + 1) * size_t(w), key);
-      else
-        for (int py = py0; py <= py1; ++py) visit(plane + size_t(py - y0) * size_t(w) + size_t(px0 - x0), size_t(px1 - px0 + 1), key);
+  for (size_t s = 0; s < planes; ++s) {
+    const uint32_t key = uint32_t(s / perBlock * cells);
+    const size_t plane = s * planeStride;
+    lensRunFirst.clear(), lensRunCount.clear();
+    if (!used) {
+      lensRunFirst.push_back(uint32_t(plane)), lensRunCount.push_back(uint32_t(P));
+    } else {
+      lensPlaneRuns(s, cxl, cyl, g, rowScale);
     }
+    for (uint32_t c : lensRunCount) stats.lensSortVisited += c;
+    visit(kernels::LensRuns{lensRunFirst.data(), lensRunCount.data(), lensRunFirst.size()}, key);
+  }
   for (size_t i = 0; i < kept; ++i) ++start[keptCell[i] + 1];
   std::partial_sum(start, start + blocks * cells + 1, start);
   // Scatter: each cell's samples in slot order, with the copies the gather reads.
@@ -463,6 +466,45 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
   };
   if (times) scatter(std::true_type{});
   else scatter(std::false_type{});
+}
+
+// The runs of plane s's slots (lensRunFirst, lensRunCount) whose samples a layer's sort with
+// shear (cxl, cyl) can keep: in each pixel row, the pixels from which a sample - anywhere in its
+// pixel, its lens point within the plane's range (BucketSamples::lensRange) - can be sheared into
+// a marked tile (lensTileRowSpan, the marked columns' span over the tile rows it can reach; the
+// grid's clamp takes a sample sheared beyond the grid into its edge tiles). A cell of margin on
+// each side for the rounding of the sheared positions. Whole runs that meet are merged.
+void BucketRasterizer::Impl::lensPlaneRuns(size_t s, float cxl, float cyl, const LensGrid& g, float rowScale) {
+  const auto& r = lensRange[s];  // u0 u1 v0 v1
+  const float dxLo = std::min(-cxl * r[0], -cxl * r[1]) - 1.f, dxHi = std::max(-cxl * r[0], -cxl * r[1]) + 1.f;
+  const float dyLo = std::min(-cyl * r[2], -cyl * r[3]) - 1.f, dyHi = std::max(-cyl * r[2], -cyl * r[3]) + 1.f;
+  // Cell coordinates clamped into the grid as the sort's are (a float beyond int range first).
+  auto clampCell = [](float v, int count) { return v >= 0.f ? (v < float(count - 1) ? int(v) : count - 1) : 0; };
+  const float gx = float(g.x0), gy = float(g.y0);
+  const size_t plane = s * PS;
+  // Rows reach the same tile rows for eight or so pixel rows: their pixel span is kept.
+  int tr0Was = -1, tr1Was = -1, lo = 0, hi = -1;
+  for (int py = 0; py < h; ++py) {
+    const float fy = float(y0 + py);
+    const int tr0 = clampCell((fy + dyLo - gy) * rowScale, g.rows) / 8, tr1 = clampCell((fy + 1.f + dyHi - gy) * rowScale, g.rows) / 8;
+    if (tr0 != tr0Was || tr1 != tr1Was) {
+      tr0Was = tr0, tr1Was = tr1;
+      int first = INT32_MAX, last = -1;
+      for (int tr = tr0; tr <= tr1; ++tr) {
+        const auto& span = lensTileRowSpan[size_t(tr)];
+        if (span[0] <= span[1]) first = std::min(first, span[0]), last = std::max(last, span[1]);
+      }
+      // A pixel px reaches the marked columns [8 first, 8 last + 7] when its sheared cells
+      // [px + dxLo - gx, px + 1 + dxHi - gx] (clamped) meet them.
+      lo = x0, hi = last < 0 ? x0 - 1 : x0 + w - 1;
+      if (last >= 0 && first > 0) lo = std::max(lo, int(std::floor(std::max(float(8 * first) - 1.f - dxHi + gx, float(x0 - 1)))));
+      if (last >= 0 && 8 * last + 7 < g.cols - 1) hi = std::min(hi, int(std::ceil(std::min(float(8 * last + 8) - dxLo + gx, float(x0 + w)))));
+    }
+    if (lo > hi) continue;
+    const uint32_t begin = uint32_t(plane + size_t(py) * size_t(w) + size_t(lo - x0)), count = uint32_t(hi - lo + 1);
+    if (!lensRunFirst.empty() && lensRunFirst.back() + lensRunCount.back() == begin) lensRunCount.back() += count;
+    else lensRunFirst.push_back(begin), lensRunCount.push_back(count);
+  }
 }
 
 // Draws the queued micropolygons layer by layer (nearest first; queue order - chunks nearest

@@ -39,7 +39,7 @@ std::string RenderStats::report() const {
   if (raster.lensMicropolygons)
     s << "  lens               " << raster.lensMicropolygons << " micropolygons through the lens (depth of field; " << raster.lensCulledMicropolygons << " of them beyond the bucket's reach), " << raster.lensLayers
       << " bucket samplings sorted by depth layer (layers of " << std::setprecision(2) << lensLayerWidth << std::setprecision(3) << " px, "
-      << raster.lensSparseLayers << " sparse), " << raster.lensScanned
+      << raster.lensSparseLayers << " sparse; " << raster.lensSortVisited << " samples visited), " << raster.lensScanned
       << " samples in their search boxes (" << std::setprecision(1) << double(raster.lensScanned) / double(raster.lensMicropolygons) << std::setprecision(3)
       << " each), " << raster.lensSegmentDraws << " draws of a knot segment of a curved path\n";
   s << "  fragments          " << raster.fragments << " transparent\n";

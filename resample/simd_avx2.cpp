@@ -599,14 +599,15 @@ size_t gatherLensCellsAvx2(const LensCells& cells, size_t stride, int c0, int r0
 // NaN, as the scalar `v >= 0` does; min(a, hi) is a < hi ? a : hi), the tile marks gathered as
 // 32-bit words whose low byte is the mark. Lanes past the count load nothing and are dropped.
 template <bool kTiles>
-size_t lensLayerCellsAvx2T(const LensShear& s, const float* xs, const float* ys, const float* us, const float* vs, const float* depth, size_t first,
-                           size_t count, uint32_t key, uint32_t* slot, uint32_t* cell, size_t n) {
+size_t lensLayerCellsAvx2T(const LensShear& s, const float* xs, const float* ys, const float* us, const float* vs, const float* depth, const LensRuns& runs,
+                             uint32_t key, uint32_t* slot, uint32_t* cell, size_t n) {
   const __m256 cx = _mm256_set1_ps(s.cx), cy = _mm256_set1_ps(s.cy), gx = _mm256_set1_ps(s.x0), gy = _mm256_set1_ps(s.y0);
   const __m256 maxCol = _mm256_set1_ps(s.maxCol), maxRow = _mm256_set1_ps(s.maxRow), zero = _mm256_setzero_ps(), zMin = _mm256_set1_ps(s.zMin);
   const __m256 rowScale = _mm256_set1_ps(s.rowScale);
   const __m256i cols = _mm256_set1_epi32(int(s.cols)), tileCols = _mm256_set1_epi32(int(s.tileCols)), keys = _mm256_set1_epi32(int(key));
   const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), lowByte = _mm256_set1_epi32(0xFF);
-  for (size_t i = 0; i < count; i += 8) {
+  for (size_t r = 0; r < runs.n; ++r)
+  for (size_t first = runs.first[r], count = runs.count[r], i = 0; i < count; i += 8) {
     const size_t j = first + i;
     const bool whole = count - i >= 8;
     const __m256i in = _mm256_cmpgt_epi32(_mm256_set1_epi32(int(whole ? 8 : count - i)), lane);
@@ -630,10 +631,10 @@ size_t lensLayerCellsAvx2T(const LensShear& s, const float* xs, const float* ys,
   }
   return n;
 }
-size_t lensLayerCellsAvx2(const LensShear& s, const float* x, const float* y, const float* u, const float* v, const float* depth, size_t first, size_t count,
+size_t lensLayerCellsAvx2(const LensShear& s, const float* x, const float* y, const float* u, const float* v, const float* depth, const LensRuns& runs,
                           uint32_t key, uint32_t* slot, uint32_t* cell, size_t n) {
-  return s.tileUsed ? lensLayerCellsAvx2T<true>(s, x, y, u, v, depth, first, count, key, slot, cell, n)
-                    : lensLayerCellsAvx2T<false>(s, x, y, u, v, depth, first, count, key, slot, cell, n);
+  return s.tileUsed ? lensLayerCellsAvx2T<true>(s, x, y, u, v, depth, runs, key, slot, cell, n)
+                    : lensLayerCellsAvx2T<false>(s, x, y, u, v, depth, runs, key, slot, cell, n);
 }
 
 // sortByCell()'s cell of every candidate: MovingBox's u (insideAtOwnTime()'s operations), then

@@ -522,14 +522,15 @@ void fixedEdgesAvx512(const float* const at[4], const RasterScale& m, LinearEdge
 // lensLayerCells() sixteen slots at a time, the AVX2 kernel's operations lane for lane; the
 // kept lanes compressed in registers, then stored whole.
 template <bool kTiles>
-size_t lensLayerCellsAvx512T(const LensShear& s, const float* xs, const float* ys, const float* us, const float* vs, const float* depth, size_t first,
-                             size_t count, uint32_t key, uint32_t* slot, uint32_t* cell, size_t n) {
+size_t lensLayerCellsAvx512T(const LensShear& s, const float* xs, const float* ys, const float* us, const float* vs, const float* depth, const LensRuns& runs,
+                             uint32_t key, uint32_t* slot, uint32_t* cell, size_t n) {
   const __m512 cx = _mm512_set1_ps(s.cx), cy = _mm512_set1_ps(s.cy), gx = _mm512_set1_ps(s.x0), gy = _mm512_set1_ps(s.y0);
   const __m512 maxCol = _mm512_set1_ps(s.maxCol), maxRow = _mm512_set1_ps(s.maxRow), zero = _mm512_setzero_ps(), zMin = _mm512_set1_ps(s.zMin);
   const __m512 rowScale = _mm512_set1_ps(s.rowScale);
   const __m512i cols = _mm512_set1_epi32(int(s.cols)), tileCols = _mm512_set1_epi32(int(s.tileCols)), keys = _mm512_set1_epi32(int(key));
   const __m512i lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15), lowByte = _mm512_set1_epi32(0xFF);
-  for (size_t i = 0; i < count; i += 16) {
+  for (size_t r = 0; r < runs.n; ++r)
+  for (size_t first = runs.first[r], count = runs.count[r], i = 0; i < count; i += 16) {
     const size_t j = first + i;
     const __mmask16 in = count - i >= 16 ? __mmask16(0xFFFF) : __mmask16((1u << (count - i)) - 1);
     const __m512 x = _mm512_maskz_loadu_ps(in, xs + j), y = _mm512_maskz_loadu_ps(in, ys + j), u = _mm512_maskz_loadu_ps(in, us + j);
@@ -550,10 +551,10 @@ size_t lensLayerCellsAvx512T(const LensShear& s, const float* xs, const float* y
   }
   return n;
 }
-size_t lensLayerCellsAvx512(const LensShear& s, const float* x, const float* y, const float* u, const float* v, const float* depth, size_t first,
-                            size_t count, uint32_t key, uint32_t* slot, uint32_t* cell, size_t n) {
-  return s.tileUsed ? lensLayerCellsAvx512T<true>(s, x, y, u, v, depth, first, count, key, slot, cell, n)
-                    : lensLayerCellsAvx512T<false>(s, x, y, u, v, depth, first, count, key, slot, cell, n);
+size_t lensLayerCellsAvx512(const LensShear& s, const float* x, const float* y, const float* u, const float* v, const float* depth, const LensRuns& runs,
+                          uint32_t key, uint32_t* slot, uint32_t* cell, size_t n) {
+  return s.tileUsed ? lensLayerCellsAvx512T<true>(s, x, y, u, v, depth, runs, key, slot, cell, n)
+                    : lensLayerCellsAvx512T<false>(s, x, y, u, v, depth, runs, key, slot, cell, n);
 }
 
 // projectLerped() eight points at a time: the points read with two permutes of three vector

@@ -49,9 +49,9 @@ size_t gatherLensCells(Isa isa, const LensCells& cells, size_t stride, int c0, i
 
 size_t testMovingLens(Isa isa, const MovingLensSetup& setup, size_t n, EdgeHit* hits) { return kernelsFor(isa).testMovingLens(setup, n, hits); }
 
-size_t lensLayerCells(Isa isa, const LensShear& shear, const float* x, const float* y, const float* u, const float* v, const float* depth, size_t first,
-                      size_t count, uint32_t key, uint32_t* slot, uint32_t* cell, size_t n) {
-  return kernelsFor(isa).lensLayerCells(shear, x, y, u, v, depth, first, count, key, slot, cell, n);
+size_t lensLayerCells(Isa isa, const LensShear& shear, const float* x, const float* y, const float* u, const float* v, const float* depth, const LensRuns& runs,
+                      uint32_t key, uint32_t* slot, uint32_t* cell, size_t n) {
+  return kernelsFor(isa).lensLayerCells(shear, x, y, u, v, depth, runs, key, slot, cell, n);
 }
 
 size_t gatherStrata(Isa isa, const SampleRows& region, const StrataSpans& spans, const MovingBox& box, const Candidates& out) {
