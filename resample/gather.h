@@ -89,8 +89,14 @@ struct LensBox {
 /// last sample.
 struct LensCells {
   const float *t, *x, *y, *u, *v;
-  const uint32_t* start;
   uint64_t* examined;  // += the samples in the cells searched (--stats)
+};
+
+/// One time block's search: cells [c0, c1] × [r0, r1] of the block's cells, whose samples are
+/// [start[c], start[c + 1]) of the sorted arrays.
+struct LensSearch {
+  const uint32_t* start;
+  int c0, r0, c1, r1;
 };
 
 /// The lens path's candidates: each one's slot, time, position and lens point (copies, so that
@@ -100,12 +106,13 @@ struct LensCandidates {
   float *t, *x, *y, *u, *v;
 };
 
-/// Appends to positions[] from n the places in the sorted arrays of the samples in cells
-/// [c0, c1] × [r0, r1] that the lens box admits at their lens points, in sorted order; returns
-/// the new count. Reads up to 15 entries past a row's last sample (the arrays' room) and writes up
+/// Appends to positions[] from n the places in the sorted arrays of the samples in the cells of
+/// searches[0..count) (one per time block) that the lens box admits at their lens points, in
+/// search and sorted order; returns the new count. Reads up to 15 entries past a row's last sample (the arrays' room) and writes up
 /// to 15 entries past the returned count. Only places: few samples pass, and one stream per
 /// vector of samples costs a sixth of copying all six (the caller copies what passed).
-size_t gatherLensCells(Isa isa, const LensCells& cells, size_t stride, int c0, int r0, int c1, int r1, const LensBox& box, uint32_t* positions, size_t n);
+size_t gatherLensCells(Isa isa, const LensCells& cells, size_t stride, const LensSearch* searches, size_t count, const LensBox& box, uint32_t* positions,
+                       size_t n);
 
 /// A depth layer's sort keys (raster_lens.cpp, sortLensLayer()): a sample's cell is that of its
 /// position sheared by the layer's displacement, col = int(clamp(x - cx u - x0, 0, maxCol)) and

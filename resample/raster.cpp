@@ -60,6 +60,7 @@ void BucketRasterizer::Impl::begin(int rx0, int ry0, int rw, int rh) {
   if (lensPlanes) {
     lensKeptSlot.resize(slots + kPad), lensKeptCell.resize(slots + kPad);
     lensSortedIndex.resize(slots + kPad), lensCandPos.resize(slots + kPad);
+    lensSearches.resize(size_t(lensTimeBlocks));
     for (auto* a : {&lensSortedT, &lensSortedX, &lensSortedY, &lensSortedU, &lensSortedV, &candU, &candV, &candF}) a->resize(slots + kPad);
     lensDraws.clear(), lensChunks.clear();
   }

@@ -333,6 +333,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   std::vector<uint8_t> lensTileUsed;                // [tile of 8 × 8 cells]: some search of the layer reaches it
   std::vector<std::array<int, 2>> lensTileRowSpan;  // [tile row]: its first and last marked tile column
   std::vector<uint32_t> lensRunFirst, lensRunCount;  // a plane's runs of slots that a layer's sort visits
+  std::vector<kernels::LensSearch> lensSearches;     // a draw's searches, one per time block
   SkewedArray<uint32_t> lensSortedIndex{4};         // the sorted samples' slots, times, positions and lens points
   SkewedArray<float> lensSortedT{12}, lensSortedX{20}, lensSortedY{28}, lensSortedU{36}, lensSortedV{44};
   SkewedArray<float> candU{60}, candV{2}, candF{10};  // the lens path's candidates' lens points and, for a moving micropolygon's vector test, segment parameters (candidates, candT, candX, candY hold the rest)

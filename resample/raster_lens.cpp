@@ -578,7 +578,7 @@ void BucketRasterizer::Impl::drawLensQueued() {
       auto cellAt = [](float v, int count) { return v >= 0.f ? (v < float(count) ? int(v) : count - 1) : 0; };
       const kernels::LensBox& box = d.box;
       uint32_t* __restrict at = lensCandPos.data();
-      size_t admitted = 0;
+      size_t admitted = 0, searches = 0;
       for (int b = 0; b < lensTimeBlocks; ++b) {
         float f0 = 0.f, f1 = 1.f;
         if (lc.blockF != ~0u) {
@@ -591,9 +591,7 @@ void BucketRasterizer::Impl::drawLensQueued() {
         const int r0 = cellAt((q[2] - float(g.y0)) * rowScale, g.rows), r1 = cellAt((q[3] - float(g.y0)) * rowScale, g.rows);
         const uint32_t* start = lensCellStart.data() + size_t(b) * g.cells;
         if (vectorKernels) {
-          const kernels::LensCells cells{lensSortedT.data(), lensSortedX.data(), lensSortedY.data(), lensSortedU.data(), lensSortedV.data(), start,
-                                         &stats.lensScanned};
-          admitted = kernels::gatherLensCells(isa, cells, size_t(g.cols), c0, r0, c1, r1, box, at, admitted);
+          lensSearches[searches++] = kernels::LensSearch{start, c0, r0, c1, r1};  // every block's in one kernel call, below
         } else {
           for (int r = r0; r <= r1; ++r) {
             const size_t row = size_t(r) * size_t(g.cols);
@@ -604,6 +602,10 @@ void BucketRasterizer::Impl::drawLensQueued() {
             }
           }
         }
+      }
+      if (searches) {
+        const kernels::LensCells cells{lensSortedT.data(), lensSortedX.data(), lensSortedY.data(), lensSortedU.data(), lensSortedV.data(), &stats.lensScanned};
+        admitted = kernels::gatherLensCells(isa, cells, size_t(g.cols), lensSearches.data(), searches, box, at, admitted);
       }
       for (size_t i = 0; i < admitted; ++i) {
         const uint32_t p = at[i];

@@ -557,7 +557,7 @@ size_t testMovingLensAvx2(const MovingLensSetup& s, size_t n, EdgeHit* hits) {
 
 namespace {
 
-size_t gatherLensCellsAvx2(const LensCells& cells, size_t stride, int c0, int r0, int c1, int r1, const LensBox& box, uint32_t* positions, size_t n) {
+size_t gatherLensCellsAvx2(const LensCells& cells, size_t stride, const LensSearch* searches, size_t count, const LensBox& box, uint32_t* positions, size_t n) {
   // LensBox::admits() eight sorted samples at a time (min / max as its conditionals: b < a ? b : a).
   const __m256 x0 = _mm256_set1_ps(box.x0), x1 = _mm256_set1_ps(box.x1), y0 = _mm256_set1_ps(box.y0), y1 = _mm256_set1_ps(box.y1);
   const __m256 cx0 = _mm256_set1_ps(box.cx0), cx1 = _mm256_set1_ps(box.cx1), cy0 = _mm256_set1_ps(box.cy0), cy1 = _mm256_set1_ps(box.cy1);
@@ -565,11 +565,13 @@ size_t gatherLensCellsAvx2(const LensCells& cells, size_t stride, int c0, int r0
   const __m256 mx0 = _mm256_set1_ps(box.mx0), mx1 = _mm256_set1_ps(box.mx1), my0 = _mm256_set1_ps(box.my0), my1 = _mm256_set1_ps(box.my1);
   const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
   uint64_t examined = 0;
-  for (int r = r0; r <= r1; ++r) {
+  for (size_t k = 0; k < count; ++k)
+  for (int r = searches[k].r0, c0 = searches[k].c0, c1 = searches[k].c1; r <= searches[k].r1; ++r) {
+    const uint32_t* start = searches[k].start;
     const size_t row = size_t(r) * stride;
-    const uint32_t last = cells.start[row + size_t(c1) + 1];
-    examined += last - cells.start[row + size_t(c0)];
-    for (uint32_t at = cells.start[row + size_t(c0)]; at < last; at += 8) {
+    const uint32_t last = start[row + size_t(c1) + 1];
+    examined += last - start[row + size_t(c0)];
+    for (uint32_t at = start[row + size_t(c0)]; at < last; at += 8) {
       // Lanes past the run read the next cells' samples (or the arrays' room) and are masked off.
       const unsigned live = last - at >= 8 ? 0xFFu : (1u << (last - at)) - 1;
       const __m256 u = _mm256_loadu_ps(cells.u + at), v = _mm256_loadu_ps(cells.v + at);

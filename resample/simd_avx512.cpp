@@ -479,7 +479,7 @@ void cellsOfAvx512(const CellGrid& g, const float* t, const float* x, const floa
 // LensBox::admits() sixteen sorted samples at a time, one masked load per run segment (no read
 // past a run's end), the AVX2 kernel's operations lane for lane, and the admitted ones appended
 // by compresses.
-size_t gatherLensCellsAvx512(const LensCells& cells, size_t stride, int c0, int r0, int c1, int r1, const LensBox& box, uint32_t* positions, size_t n) {
+size_t gatherLensCellsAvx512(const LensCells& cells, size_t stride, const LensSearch* searches, size_t count, const LensBox& box, uint32_t* positions, size_t n) {
   const __m512 x0 = _mm512_set1_ps(box.x0), x1 = _mm512_set1_ps(box.x1), y0 = _mm512_set1_ps(box.y0), y1 = _mm512_set1_ps(box.y1);
   const __m512 cx0 = _mm512_set1_ps(box.cx0), cx1 = _mm512_set1_ps(box.cx1), cy0 = _mm512_set1_ps(box.cy0), cy1 = _mm512_set1_ps(box.cy1);
   const __m512 thetaA = _mm512_set1_ps(box.thetaA), invLen = _mm512_set1_ps(box.invLen), one = _mm512_set1_ps(1.f), zero = _mm512_setzero_ps();
@@ -489,11 +489,13 @@ size_t gatherLensCellsAvx512(const LensCells& cells, size_t stride, int c0, int 
   const bool timed = box.invLen != 0.f;
   const __m512i lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
   uint64_t examined = 0;
-  for (int r = r0; r <= r1; ++r) {
+  for (size_t k = 0; k < count; ++k)
+  for (int r = searches[k].r0, c0 = searches[k].c0, c1 = searches[k].c1; r <= searches[k].r1; ++r) {
+    const uint32_t* start = searches[k].start;
     const size_t row = size_t(r) * stride;
-    const uint32_t last = cells.start[row + size_t(c1) + 1];
-    examined += last - cells.start[row + size_t(c0)];
-    for (uint32_t at = cells.start[row + size_t(c0)]; at < last; at += 16) {
+    const uint32_t last = start[row + size_t(c1) + 1];
+    examined += last - start[row + size_t(c0)];
+    for (uint32_t at = start[row + size_t(c0)]; at < last; at += 16) {
       const __mmask16 live = last - at >= 16 ? __mmask16(0xFFFF) : __mmask16((1u << (last - at)) - 1);
       const __m512 x = _mm512_maskz_loadu_ps(live, cells.x + at), y = _mm512_maskz_loadu_ps(live, cells.y + at);
       const __m512 u = _mm512_maskz_loadu_ps(live, cells.u + at), v = _mm512_maskz_loadu_ps(live, cells.v + at);

@@ -43,8 +43,9 @@ size_t gatherInBox(Isa isa, const SampleRows& rows, const MovingBox& box, const 
   return kernelsFor(isa).gatherInBox(rows, box, out, n);
 }
 
-size_t gatherLensCells(Isa isa, const LensCells& cells, size_t stride, int c0, int r0, int c1, int r1, const LensBox& box, uint32_t* positions, size_t n) {
-  return kernelsFor(isa).gatherLensCells(cells, stride, c0, r0, c1, r1, box, positions, n);
+size_t gatherLensCells(Isa isa, const LensCells& cells, size_t stride, const LensSearch* searches, size_t count, const LensBox& box, uint32_t* positions,
+                       size_t n) {
+  return kernelsFor(isa).gatherLensCells(cells, stride, searches, count, box, positions, n);
 }
 
 size_t testMovingLens(Isa isa, const MovingLensSetup& setup, size_t n, EdgeHit* hits) { return kernelsFor(isa).testMovingLens(setup, n, hits); }

@@ -40,7 +40,7 @@ struct IsaKernels {
   size_t (*testMovingEdges)(const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits);  // setup.fixed false
   size_t (*testFixedEdges)(const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits);   // setup.fixed true
   size_t (*testLensEdges)(const EdgeTestSetup& setup, const LinearEdges& edges, size_t n, EdgeHit* hits);    // setup.su set
-  size_t (*gatherLensCells)(const LensCells& cells, size_t stride, int c0, int r0, int c1, int r1, const LensBox& box, uint32_t* positions, size_t n);
+  size_t (*gatherLensCells)(const LensCells& cells, size_t stride, const LensSearch* searches, size_t count, const LensBox& box, uint32_t* positions, size_t n);
   size_t (*testMovingLens)(const MovingLensSetup& setup, size_t n, EdgeHit* hits);
   size_t (*lensLayerCells)(const LensShear& shear, const float* x, const float* y, const float* u, const float* v, const float* depth, const LensRuns& runs,
                           uint32_t key, uint32_t* slot, uint32_t* cell, size_t n);
