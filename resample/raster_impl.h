@@ -328,7 +328,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   std::vector<uint32_t> lensLayerStart;   // the counting sort's [layer]: its first place in lensOrder
   std::vector<float> lensBlockF;    // the lerping chunks' time blocks' spans of their lerp parameter
   LensGrid lensGrid;
-  std::vector<uint32_t> lensCellStart, lensCursor;  // [cell]: the cell's first sorted sample; the scatter's cursors
+  std::vector<uint32_t> lensCellStart;  // [cell]: the cell's first sorted sample (sortLensLayer(): the scatter's cursors too)
   std::vector<uint32_t> lensKeptSlot, lensKeptCell;  // the samples a layer's sort keeps, in slot order, and their cells
   std::vector<uint8_t> lensTileUsed;                // [tile of 8 × 8 cells]: some search of the layer reaches it
   std::vector<std::array<int, 2>> lensTileRowSpan;  // [tile row]: its first and last marked tile column

@@ -399,11 +399,13 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
       lensTileRowSpan[size_t(ty)] = {first, last};
     }
   // Keyed by time block, then cell: block b's cells are [b cells, (b + 1) cells).
-  lensCellStart.assign(blocks * cells + 1, 0);
-  lensCursor.resize(blocks * cells);
+  // One array is counts, cursors and starts: cell c's count goes to start[c + 2], whose running
+  // sum makes start[c + 1] cell c's first place; the scatter advances start[c + 1] to its end,
+  // which is cell c + 1's first place - so afterwards start[c] is cell c's first place and
+  // start[c + 1] its end, with no cursors to copy or keep in cache beside the starts.
+  lensCellStart.assign(blocks * cells + 2, 0);
   // Locals the compiler knows do not alias the arrays written.
   uint32_t* __restrict start = lensCellStart.data();
-  uint32_t* __restrict cursor = lensCursor.data();
   uint32_t* __restrict keptSlot = lensKeptSlot.data();
   uint32_t* __restrict keptCell = lensKeptCell.data();
   const float* __restrict xs = sx.data();
@@ -452,10 +454,10 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
     for (uint32_t c : lensRunCount) stats.lensSortVisited += c;
     visit(kernels::LensRuns{lensRunFirst.data(), lensRunCount.data(), lensRunFirst.size()}, key);
   }
-  for (size_t i = 0; i < kept; ++i) ++start[keptCell[i] + 1];
-  std::partial_sum(start, start + blocks * cells + 1, start);
+  for (size_t i = 0; i < kept; ++i) ++start[keptCell[i] + 2];
+  std::partial_sum(start + 2, start + blocks * cells + 2, start + 2);
   // Scatter: each cell's samples in slot order, with the copies the gather reads.
-  std::copy(start, start + blocks * cells, cursor);
+  uint32_t* __restrict cursor = start + 1;
   auto scatter = [&](auto withTimes) {
     for (size_t i = 0; i < kept; ++i) {
       const uint32_t j = keptSlot[i], at = cursor[keptCell[i]]++;
