@@ -435,12 +435,12 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
     }
     auto clampTo = [](float v, float hi) { return v >= 0.f ? (v <= hi ? v : hi) : 0.f; };
     for (size_t r = 0; r < runs.n; ++r)
-    for (size_t j = runs.first[r]; j < size_t(runs.first[r]) + runs.count[r]; ++j) {
-      const uint32_t col = uint32_t(clampTo(xs[j] - shear.cx * us[j] - shear.x0, shear.maxCol));
-      const uint32_t row = uint32_t(clampTo((ys[j] - shear.cy * vs[j] - shear.y0) * shear.rowScale, shear.maxRow));
-      keptSlot[kept] = uint32_t(j), keptCell[kept] = key + row * shear.cols + col;
-      kept += depth[j] > zMin && (!used || used[(row >> 3) * shear.tileCols + (col >> 3)]);
-    }
+      for (size_t j = runs.first[r]; j < size_t(runs.first[r]) + runs.count[r]; ++j) {
+        const uint32_t col = uint32_t(clampTo(xs[j] - shear.cx * us[j] - shear.x0, shear.maxCol));
+        const uint32_t row = uint32_t(clampTo((ys[j] - shear.cy * vs[j] - shear.y0) * shear.rowScale, shear.maxRow));
+        keptSlot[kept] = uint32_t(j), keptCell[kept] = key + row * shear.cols + col;
+        kept += depth[j] > zMin && (!used || used[(row >> 3) * shear.tileCols + (col >> 3)]);
+      }
   };
   for (size_t s = 0; s < planes; ++s) {
     const uint32_t key = uint32_t(s / perBlock * cells);
@@ -480,10 +480,14 @@ void BucketRasterizer::Impl::lensPlaneRuns(size_t s, float cxl, float cyl, const
   const auto& r = lensRange[s];  // u0 u1 v0 v1
   const float dxLo = std::min(-cxl * r[0], -cxl * r[1]) - 1.f, dxHi = std::max(-cxl * r[0], -cxl * r[1]) + 1.f;
   const float dyLo = std::min(-cyl * r[2], -cyl * r[3]) - 1.f, dyHi = std::max(-cyl * r[2], -cyl * r[3]) + 1.f;
+  const size_t plane = s * PS;
+  if (!(std::isfinite(dxLo) && std::isfinite(dxHi) && std::isfinite(dyLo) && std::isfinite(dyHi))) {  // a shear beyond float: every slot
+    lensRunFirst.push_back(uint32_t(plane)), lensRunCount.push_back(uint32_t(P));
+    return;
+  }
   // Cell coordinates clamped into the grid as the sort's are (a float beyond int range first).
   auto clampCell = [](float v, int count) { return v >= 0.f ? (v < float(count - 1) ? int(v) : count - 1) : 0; };
   const float gx = float(g.x0), gy = float(g.y0);
-  const size_t plane = s * PS;
   // Rows reach the same tile rows for eight or so pixel rows: their pixel span is kept.
   int tr0Was = -1, tr1Was = -1, lo = 0, hi = -1;
   for (int py = 0; py < h; ++py) {

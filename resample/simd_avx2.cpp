@@ -565,7 +565,7 @@ size_t gatherLensCellsAvx2(const LensCells& cells, size_t stride, const LensSear
   const __m256 mx0 = _mm256_set1_ps(box.mx0), mx1 = _mm256_set1_ps(box.mx1), my0 = _mm256_set1_ps(box.my0), my1 = _mm256_set1_ps(box.my1);
   const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
   uint64_t examined = 0;
-  for (size_t k = 0; k < count; ++k)
+  for (size_t k = 0; k < count; ++k)  // each search, a row at a time
   for (int r = searches[k].r0, c0 = searches[k].c0, c1 = searches[k].c1; r <= searches[k].r1; ++r) {
     const uint32_t* start = searches[k].start;
     const size_t row = size_t(r) * stride;
@@ -608,7 +608,7 @@ size_t lensLayerCellsAvx2T(const LensShear& s, const float* xs, const float* ys,
   const __m256 rowScale = _mm256_set1_ps(s.rowScale);
   const __m256i cols = _mm256_set1_epi32(int(s.cols)), tileCols = _mm256_set1_epi32(int(s.tileCols)), keys = _mm256_set1_epi32(int(key));
   const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7), lowByte = _mm256_set1_epi32(0xFF);
-  for (size_t r = 0; r < runs.n; ++r)
+  for (size_t r = 0; r < runs.n; ++r)  // each run, a vector at a time
   for (size_t first = runs.first[r], count = runs.count[r], i = 0; i < count; i += 8) {
     const size_t j = first + i;
     const bool whole = count - i >= 8;

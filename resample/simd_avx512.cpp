@@ -489,7 +489,7 @@ size_t gatherLensCellsAvx512(const LensCells& cells, size_t stride, const LensSe
   const bool timed = box.invLen != 0.f;
   const __m512i lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
   uint64_t examined = 0;
-  for (size_t k = 0; k < count; ++k)
+  for (size_t k = 0; k < count; ++k)  // each search, a row at a time
   for (int r = searches[k].r0, c0 = searches[k].c0, c1 = searches[k].c1; r <= searches[k].r1; ++r) {
     const uint32_t* start = searches[k].start;
     const size_t row = size_t(r) * stride;
@@ -531,7 +531,7 @@ size_t lensLayerCellsAvx512T(const LensShear& s, const float* xs, const float* y
   const __m512 rowScale = _mm512_set1_ps(s.rowScale);
   const __m512i cols = _mm512_set1_epi32(int(s.cols)), tileCols = _mm512_set1_epi32(int(s.tileCols)), keys = _mm512_set1_epi32(int(key));
   const __m512i lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15), lowByte = _mm512_set1_epi32(0xFF);
-  for (size_t r = 0; r < runs.n; ++r)
+  for (size_t r = 0; r < runs.n; ++r)  // each run, a vector at a time
   for (size_t first = runs.first[r], count = runs.count[r], i = 0; i < count; i += 16) {
     const size_t j = first + i;
     const __mmask16 in = count - i >= 16 ? __mmask16(0xFFFF) : __mmask16((1u << (count - i)) - 1);
