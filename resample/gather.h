@@ -114,6 +114,25 @@ struct LensCandidates {
 size_t gatherLensCells(Isa isa, const LensCells& cells, size_t stride, const LensSearch* searches, size_t count, const LensBox& box, uint32_t* positions,
                        size_t n);
 
+/// The gather kernels' walk: rowRun(first, last) for the sorted samples [first, last) of each row
+/// of each search, in order; returns how many samples those hold (--stats' examined). A search's
+/// fields are read once: the kernels' stores may alias them.
+template <class RowRun>
+inline uint64_t forEachLensRow(const LensSearch* searches, size_t count, size_t stride, RowRun&& rowRun) {
+  uint64_t examined = 0;
+  for (size_t k = 0; k < count; ++k) {
+    const uint32_t* start = searches[k].start;
+    const int r0 = searches[k].r0, r1 = searches[k].r1, c0 = searches[k].c0, c1 = searches[k].c1;
+    for (int r = r0; r <= r1; ++r) {
+      const size_t row = size_t(r) * stride;
+      const uint32_t first = start[row + size_t(c0)], last = start[row + size_t(c1) + 1];
+      examined += last - first;
+      rowRun(first, last);
+    }
+  }
+  return examined;
+}
+
 /// A depth layer's sort keys (raster_lens.cpp, sortLensLayer()): a sample's cell is that of its
 /// position sheared by the layer's displacement, col = int(clamp(x - cx u - x0, 0, maxCol)) and
 /// row = int(clamp((y - cy v - y0) rowScale, 0, maxRow)) (cells rowScale⁻¹ pixels tall; each clamp

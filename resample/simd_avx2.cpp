@@ -564,39 +564,29 @@ size_t gatherLensCellsAvx2(const LensCells& cells, size_t stride, const LensSear
   const __m256 thetaA = _mm256_set1_ps(box.thetaA), invLen = _mm256_set1_ps(box.invLen), one = _mm256_set1_ps(1.f), zero = _mm256_setzero_ps();
   const __m256 mx0 = _mm256_set1_ps(box.mx0), mx1 = _mm256_set1_ps(box.mx1), my0 = _mm256_set1_ps(box.my0), my1 = _mm256_set1_ps(box.my1);
   const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
-  uint64_t examined = 0;
-  for (size_t k = 0; k < count; ++k) {
-    // The search's fields in locals: the stores below may alias them.
-    const uint32_t* start = searches[k].start;
-    const int r0 = searches[k].r0, r1 = searches[k].r1, c0 = searches[k].c0, c1 = searches[k].c1;
-    for (int r = r0; r <= r1; ++r) {
-      const size_t row = size_t(r) * stride;
-      const uint32_t last = start[row + size_t(c1) + 1];
-      examined += last - start[row + size_t(c0)];
-      for (uint32_t at = start[row + size_t(c0)]; at < last; at += 8) {
-        // Lanes past the run read the next cells' samples (or the arrays' room) and are masked off.
-        const unsigned live = last - at >= 8 ? 0xFFu : (1u << (last - at)) - 1;
-        const __m256 u = _mm256_loadu_ps(cells.u + at), v = _mm256_loadu_ps(cells.v + at);
-        const __m256 t = _mm256_loadu_ps(cells.t + at), x = _mm256_loadu_ps(cells.x + at), y = _mm256_loadu_ps(cells.y + at);
-        // f = a < 1 ? (a > 0 ? a : 0) : 1: min(max(a, 0), 1) in _mm256 operand order (min/max
-        // return the second operand unless the comparison holds).
-        const __m256 f = _mm256_min_ps(_mm256_max_ps(_mm256_mul_ps(_mm256_sub_ps(t, thetaA), invLen), zero), one);
-        const __m256 dx0 = _mm256_mul_ps(u, cx0), dx1 = _mm256_mul_ps(u, cx1), dy0 = _mm256_mul_ps(v, cy0), dy1 = _mm256_mul_ps(v, cy1);
-        // _mm256_min_ps(a, b) is a < b ? a : b: operands swapped to give admits()' b < a ? b : a.
-        const __m256 xLo = _mm256_add_ps(_mm256_add_ps(x0, _mm256_mul_ps(f, mx0)), _mm256_min_ps(dx1, dx0));
-        const __m256 xHi = _mm256_add_ps(_mm256_add_ps(x1, _mm256_mul_ps(f, mx1)), _mm256_max_ps(dx1, dx0));
-        const __m256 yLo = _mm256_add_ps(_mm256_add_ps(y0, _mm256_mul_ps(f, my0)), _mm256_min_ps(dy1, dy0));
-        const __m256 yHi = _mm256_add_ps(_mm256_add_ps(y1, _mm256_mul_ps(f, my1)), _mm256_max_ps(dy1, dy0));
-        __m256 in = _mm256_and_ps(_mm256_cmp_ps(x, xLo, _CMP_GE_OQ), _mm256_cmp_ps(x, xHi, _CMP_LE_OQ));
-        in = _mm256_and_ps(in, _mm256_and_ps(_mm256_cmp_ps(y, yLo, _CMP_GE_OQ), _mm256_cmp_ps(y, yHi, _CMP_LE_OQ)));
-        const unsigned mask = unsigned(_mm256_movemask_ps(in)) & live;
-        const __m256i perm = _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompress.perm[mask]));
-        _mm256_storeu_si256(reinterpret_cast<__m256i*>(positions + n), _mm256_permutevar8x32_epi32(_mm256_add_epi32(_mm256_set1_epi32(int(at)), lane), perm));
-        n += size_t(__builtin_popcount(mask));
-      }
+  *cells.examined += forEachLensRow(searches, count, stride, [&](uint32_t first, uint32_t last) {
+    for (uint32_t at = first; at < last; at += 8) {
+      // Lanes past the run read the next cells' samples (or the arrays' room) and are masked off.
+      const unsigned live = last - at >= 8 ? 0xFFu : (1u << (last - at)) - 1;
+      const __m256 u = _mm256_loadu_ps(cells.u + at), v = _mm256_loadu_ps(cells.v + at);
+      const __m256 t = _mm256_loadu_ps(cells.t + at), x = _mm256_loadu_ps(cells.x + at), y = _mm256_loadu_ps(cells.y + at);
+      // f = a < 1 ? (a > 0 ? a : 0) : 1: min(max(a, 0), 1) in _mm256 operand order (min/max
+      // return the second operand unless the comparison holds).
+      const __m256 f = _mm256_min_ps(_mm256_max_ps(_mm256_mul_ps(_mm256_sub_ps(t, thetaA), invLen), zero), one);
+      const __m256 dx0 = _mm256_mul_ps(u, cx0), dx1 = _mm256_mul_ps(u, cx1), dy0 = _mm256_mul_ps(v, cy0), dy1 = _mm256_mul_ps(v, cy1);
+      // _mm256_min_ps(a, b) is a < b ? a : b: operands swapped to give admits()' b < a ? b : a.
+      const __m256 xLo = _mm256_add_ps(_mm256_add_ps(x0, _mm256_mul_ps(f, mx0)), _mm256_min_ps(dx1, dx0));
+      const __m256 xHi = _mm256_add_ps(_mm256_add_ps(x1, _mm256_mul_ps(f, mx1)), _mm256_max_ps(dx1, dx0));
+      const __m256 yLo = _mm256_add_ps(_mm256_add_ps(y0, _mm256_mul_ps(f, my0)), _mm256_min_ps(dy1, dy0));
+      const __m256 yHi = _mm256_add_ps(_mm256_add_ps(y1, _mm256_mul_ps(f, my1)), _mm256_max_ps(dy1, dy0));
+      __m256 in = _mm256_and_ps(_mm256_cmp_ps(x, xLo, _CMP_GE_OQ), _mm256_cmp_ps(x, xHi, _CMP_LE_OQ));
+      in = _mm256_and_ps(in, _mm256_and_ps(_mm256_cmp_ps(y, yLo, _CMP_GE_OQ), _mm256_cmp_ps(y, yHi, _CMP_LE_OQ)));
+      const unsigned mask = unsigned(_mm256_movemask_ps(in)) & live;
+      const __m256i perm = _mm256_load_si256(reinterpret_cast<const __m256i*>(kCompress.perm[mask]));
+      _mm256_storeu_si256(reinterpret_cast<__m256i*>(positions + n), _mm256_permutevar8x32_epi32(_mm256_add_epi32(_mm256_set1_epi32(int(at)), lane), perm));
+      n += size_t(__builtin_popcount(mask));
     }
-  }
-  *cells.examined += examined;
+  });
   return n;
 }
 

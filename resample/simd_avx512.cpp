@@ -488,37 +488,27 @@ size_t gatherLensCellsAvx512(const LensCells& cells, size_t stride, const LensSe
   // it.
   const bool timed = box.invLen != 0.f;
   const __m512i lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
-  uint64_t examined = 0;
-  for (size_t k = 0; k < count; ++k) {
-    // The search's fields in locals: the stores below may alias them.
-    const uint32_t* start = searches[k].start;
-    const int r0 = searches[k].r0, r1 = searches[k].r1, c0 = searches[k].c0, c1 = searches[k].c1;
-    for (int r = r0; r <= r1; ++r) {
-      const size_t row = size_t(r) * stride;
-      const uint32_t last = start[row + size_t(c1) + 1];
-      examined += last - start[row + size_t(c0)];
-      for (uint32_t at = start[row + size_t(c0)]; at < last; at += 16) {
-        const __mmask16 live = last - at >= 16 ? __mmask16(0xFFFF) : __mmask16((1u << (last - at)) - 1);
-        const __m512 x = _mm512_maskz_loadu_ps(live, cells.x + at), y = _mm512_maskz_loadu_ps(live, cells.y + at);
-        const __m512 u = _mm512_maskz_loadu_ps(live, cells.u + at), v = _mm512_maskz_loadu_ps(live, cells.v + at);
-        const __m512 t = _mm512_maskz_loadu_ps(live, cells.t + at);
-        __m512 f = zero;
-        if (timed) f = _mm512_min_ps(_mm512_max_ps(_mm512_mul_ps(_mm512_sub_ps(t, thetaA), invLen), zero), one);
-        const __m512 dx0 = _mm512_mul_ps(u, cx0), dx1 = _mm512_mul_ps(u, cx1), dy0 = _mm512_mul_ps(v, cy0), dy1 = _mm512_mul_ps(v, cy1);
-        const __m512 xLo = _mm512_add_ps(_mm512_add_ps(x0, _mm512_mul_ps(f, mx0)), _mm512_min_ps(dx1, dx0));
-        const __m512 xHi = _mm512_add_ps(_mm512_add_ps(x1, _mm512_mul_ps(f, mx1)), _mm512_max_ps(dx1, dx0));
-        const __m512 yLo = _mm512_add_ps(_mm512_add_ps(y0, _mm512_mul_ps(f, my0)), _mm512_min_ps(dy1, dy0));
-        const __m512 yHi = _mm512_add_ps(_mm512_add_ps(y1, _mm512_mul_ps(f, my1)), _mm512_max_ps(dy1, dy0));
-        __mmask16 in = _mm512_mask_cmp_ps_mask(live, x, xLo, _CMP_GE_OQ);
-        in = _mm512_mask_cmp_ps_mask(in, x, xHi, _CMP_LE_OQ);
-        in = _mm512_mask_cmp_ps_mask(in, y, yLo, _CMP_GE_OQ);
-        in = _mm512_mask_cmp_ps_mask(in, y, yHi, _CMP_LE_OQ);
-        _mm512_storeu_si512(positions + n, _mm512_maskz_compress_epi32(in, _mm512_add_epi32(_mm512_set1_epi32(int(at)), lane)));
-        n += size_t(__builtin_popcount(unsigned(in)));
-      }
+  *cells.examined += forEachLensRow(searches, count, stride, [&](uint32_t first, uint32_t last) {
+    for (uint32_t at = first; at < last; at += 16) {
+      const __mmask16 live = last - at >= 16 ? __mmask16(0xFFFF) : __mmask16((1u << (last - at)) - 1);
+      const __m512 x = _mm512_maskz_loadu_ps(live, cells.x + at), y = _mm512_maskz_loadu_ps(live, cells.y + at);
+      const __m512 u = _mm512_maskz_loadu_ps(live, cells.u + at), v = _mm512_maskz_loadu_ps(live, cells.v + at);
+      const __m512 t = _mm512_maskz_loadu_ps(live, cells.t + at);
+      __m512 f = zero;
+      if (timed) f = _mm512_min_ps(_mm512_max_ps(_mm512_mul_ps(_mm512_sub_ps(t, thetaA), invLen), zero), one);
+      const __m512 dx0 = _mm512_mul_ps(u, cx0), dx1 = _mm512_mul_ps(u, cx1), dy0 = _mm512_mul_ps(v, cy0), dy1 = _mm512_mul_ps(v, cy1);
+      const __m512 xLo = _mm512_add_ps(_mm512_add_ps(x0, _mm512_mul_ps(f, mx0)), _mm512_min_ps(dx1, dx0));
+      const __m512 xHi = _mm512_add_ps(_mm512_add_ps(x1, _mm512_mul_ps(f, mx1)), _mm512_max_ps(dx1, dx0));
+      const __m512 yLo = _mm512_add_ps(_mm512_add_ps(y0, _mm512_mul_ps(f, my0)), _mm512_min_ps(dy1, dy0));
+      const __m512 yHi = _mm512_add_ps(_mm512_add_ps(y1, _mm512_mul_ps(f, my1)), _mm512_max_ps(dy1, dy0));
+      __mmask16 in = _mm512_mask_cmp_ps_mask(live, x, xLo, _CMP_GE_OQ);
+      in = _mm512_mask_cmp_ps_mask(in, x, xHi, _CMP_LE_OQ);
+      in = _mm512_mask_cmp_ps_mask(in, y, yLo, _CMP_GE_OQ);
+      in = _mm512_mask_cmp_ps_mask(in, y, yHi, _CMP_LE_OQ);
+      _mm512_storeu_si512(positions + n, _mm512_maskz_compress_epi32(in, _mm512_add_epi32(_mm512_set1_epi32(int(at)), lane)));
+      n += size_t(__builtin_popcount(unsigned(in)));
     }
-  }
-  *cells.examined += examined;
+  });
   return n;
 }
 
