@@ -1,7 +1,7 @@
 // The rasterizer's vector kernels against their definitions, restated in each test (or, for the
 // lens path's set-up, the scalar definition the rasterizer runs): the box gathers, the
-// projection, the static path's test areas, a chunk's vertex range and nearest depth, and the
-// edge test's three outcomes. (The renders that hold the kernels' images to the scalar loops'
+// projection, the static path's test areas, a chunk's vertex range and nearest depth, the edge
+// test's three outcomes, and the lens path's gather and layer cells. (The renders that hold the kernels' images to the scalar loops'
 // are in resample_hard_test.cpp.)
 #include <algorithm>
 #include <bit>
@@ -405,4 +405,114 @@ TEST(ResampleHard, VectorEdgeTestHitsMissesAndDefersTies) {
       EXPECT_NEAR(y, ry[hits[h].candidate], 1e-5);
     }
   }
+}
+
+// The lens path's two sort-and-search kernels against their definitions, restated: the gather
+// (kernels::gatherLensCells) appends, search by search and row by row in order, the place of
+// every sorted sample of the searched cells that LensBox::admits(); the layer's cell kernel
+// (kernels::lensLayerCells) appends, run by run in slot order, every slot whose depth lies
+// beyond zMin and, with tile marks, whose cell's tile is marked, each with its cell - the clamped
+// sheared position, a NaN in cell 0. Rows longer than a vector and empty ones, several searches
+// over blocks of one sorted array, boxes that lerp and boxes that do not; runs of every length.
+TEST(ResampleHard, LensGatherAndCellKernelsAreTheirDefinitions) {
+  if (!kernels::available()) GTEST_SKIP() << "this CPU has no AVX2";
+  Rng rng(404);
+  // Values on a grid of eighths, so that the boxes' sums are exact and samples land on their
+  // edges (and depths on zMin) often: the kernels' comparisons are held at equality too.
+  auto q = [&](double scale, double offset = 0) { return float(std::round((rng.uniform() * scale + offset) * 8) / 8); };
+  const int cols = 9, rows = 7, blocks = 3;
+  const size_t cells = size_t(cols) * size_t(rows);
+  size_t longRows = 0, emptyRows = 0, admittedAll = 0, keptAll = 0, nanCells = 0, onEdges = 0, onZMin = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    SCOPED_TRACE("trial " + std::to_string(trial));
+    // Sorted samples: cell counts 0-20 (rows of up to 180 samples, some empty).
+    std::vector<uint32_t> start(blocks * cells + 1, 0);
+    for (size_t c = 0; c < blocks * cells; ++c) start[c + 1] = start[c] + (rng.below(3) == 0 ? 0u : uint32_t(rng.below(21)));
+    const size_t S = start.back();
+    std::vector<float> t(S + 16), x(S + 16), y(S + 16), u(S + 16), v(S + 16);
+    for (size_t i = 0; i < S + 16; ++i) {
+      t[i] = q(1), x[i] = q(cols), y[i] = q(rows), u[i] = q(2, -1), v[i] = q(2, -1);
+    }
+    kernels::LensBox box{q(6), 0, q(5), 0, q(2, -1), 0, q(2, -1), 0};
+    box.x1 = box.x0 + q(3), box.y1 = box.y0 + q(3), box.cx1 = box.cx0 + q(1), box.cy1 = box.cy0 + q(1);
+    if (trial % 2) {
+      box.thetaA = 0.25f, box.invLen = 2.f;
+      box.mx0 = q(4, -2), box.mx1 = box.mx0 + q(1), box.my0 = q(4, -2), box.my1 = box.my0 + q(1);
+    }
+    std::vector<kernels::LensSearch> searches(1 + rng.below(4));
+    std::vector<uint32_t> expected;
+    uint64_t expectedExamined = 0;
+    for (kernels::LensSearch& s : searches) {
+      s.start = start.data() + rng.below(blocks) * cells;
+      s.c0 = int(rng.below(cols)), s.c1 = s.c0 + int(rng.below(uint32_t(cols - s.c0)));
+      s.r0 = int(rng.below(rows)), s.r1 = s.r0 + int(rng.below(uint32_t(rows - s.r0)));
+      for (int r = s.r0; r <= s.r1; ++r) {
+        const uint32_t first = s.start[size_t(r) * cols + size_t(s.c0)], last = s.start[size_t(r) * cols + size_t(s.c1) + 1];
+        expectedExamined += last - first, longRows += last - first > 16, emptyRows += last == first;
+        for (uint32_t i = first; i < last; ++i) {
+          if (box.admits(t[i], x[i], y[i], u[i], v[i])) expected.push_back(i);
+          onEdges += y[i] == box.y1 + (trial % 2 ? std::min(std::max((t[i] - box.thetaA) * box.invLen, 0.f), 1.f) * box.my1 : 0.f) + std::max(v[i] * box.cy0, v[i] * box.cy1);
+        }
+      }
+    }
+    admittedAll += expected.size();
+    std::vector<uint32_t> positions(S + 32);
+    for (kernels::Isa isa : {kernels::Isa::Avx2, kernels::Isa::Avx512}) {
+      if (!kernels::available(isa)) continue;
+      SCOPED_TRACE(isa == kernels::Isa::Avx512 ? "avx512" : "avx2");
+      uint64_t examined = 0;
+      const kernels::LensCells sorted{t.data(), x.data(), y.data(), u.data(), v.data(), &examined};
+      const size_t n = kernels::gatherLensCells(isa, sorted, size_t(cols), searches.data(), searches.size(), box, positions.data(), 3);
+      ASSERT_EQ(n, 3 + expected.size());
+      EXPECT_TRUE(std::equal(expected.begin(), expected.end(), positions.begin() + 3));
+      EXPECT_EQ(examined, expectedExamined);
+    }
+
+    // The cell kernel over runs of the same samples as slots (u NaN now and then).
+    if (rng.below(4) == 0) u[rng.below(uint32_t(S + 1))] = NAN;
+    std::vector<float> depth(S + 16);
+    for (float& d : depth) d = q(1);
+    std::vector<uint8_t> marks(size_t((cols + 7) / 8) * size_t((rows + 7) / 8) + 3);
+    for (uint8_t& m : marks) m = uint8_t(rng.below(2));
+    kernels::LensShear shear{float(rng.uniform() * 40 - 20), float(rng.uniform() * 40 - 20), float(rng.uniform() * 4 - 2), float(rng.uniform() * 4 - 2),
+                             float(cols - 1), float(rows - 1), uint32_t(cols), uint32_t((cols + 7) / 8), trial % 3 ? marks.data() : nullptr,
+                             q(0.5), trial % 4 < 2 ? 1.f : 0.5f};
+    std::vector<uint32_t> runFirst, runCount;
+    for (uint32_t at = uint32_t(rng.below(5)); at < S; at += uint32_t(rng.below(40))) {
+      runFirst.push_back(at), runCount.push_back(std::min(uint32_t(S) - at, uint32_t(rng.below(40))));
+      at += runCount.back();
+    }
+    const uint32_t key = uint32_t(rng.below(blocks) * cells);
+    std::vector<uint32_t> wantSlot, wantCell;
+    auto clampTo = [](float f, float hi) { return f >= 0.f ? (f <= hi ? f : hi) : 0.f; };
+    for (size_t r = 0; r < runFirst.size(); ++r)
+      for (size_t j = runFirst[r]; j < size_t(runFirst[r]) + runCount[r]; ++j) {
+        const uint32_t col = uint32_t(clampTo(x[j] - shear.cx * u[j] - shear.x0, shear.maxCol));
+        const uint32_t row = uint32_t(clampTo((y[j] - shear.cy * v[j] - shear.y0) * shear.rowScale, shear.maxRow));
+        onZMin += depth[j] == shear.zMin;
+        if (!(depth[j] > shear.zMin)) continue;
+        if (shear.tileUsed && !shear.tileUsed[(row >> 3) * shear.tileCols + (col >> 3)]) continue;
+        wantSlot.push_back(uint32_t(j)), wantCell.push_back(key + row * shear.cols + col);
+        nanCells += std::isnan(u[j]);
+      }
+    keptAll += wantSlot.size();
+    std::vector<uint32_t> slot(S + 32), cell(S + 32);
+    for (kernels::Isa isa : {kernels::Isa::Avx2, kernels::Isa::Avx512}) {
+      if (!kernels::available(isa)) continue;
+      SCOPED_TRACE(isa == kernels::Isa::Avx512 ? "avx512 cells" : "avx2 cells");
+      const size_t n = kernels::lensLayerCells(isa, shear, x.data(), y.data(), u.data(), v.data(), depth.data(),
+                                               kernels::LensRuns{runFirst.data(), runCount.data(), runFirst.size()}, key, slot.data(), cell.data(), 2);
+      ASSERT_EQ(n, 2 + wantSlot.size());
+      EXPECT_TRUE(std::equal(wantSlot.begin(), wantSlot.end(), slot.begin() + 2));
+      EXPECT_TRUE(std::equal(wantCell.begin(), wantCell.end(), cell.begin() + 2));
+    }
+  }
+  // The cases the test means to reach were reached.
+  EXPECT_GT(longRows, 100u);
+  EXPECT_GT(emptyRows, 100u);
+  EXPECT_GT(admittedAll, 1000u);
+  EXPECT_GT(keptAll, 1000u);
+  EXPECT_GT(nanCells, 0u);
+  EXPECT_GT(onEdges, 100u);
+  EXPECT_GT(onZMin, 100u);
 }
