@@ -108,9 +108,10 @@ struct LensCandidates {
 
 /// Appends to positions[] from n the places in the sorted arrays of the samples in the cells of
 /// searches[0..count) (one per time block) that the lens box admits at their lens points, in
-/// search and sorted order; returns the new count. Reads up to 15 entries past a row's last sample (the arrays' room) and writes up
-/// to 15 entries past the returned count. Only places: few samples pass, and one stream per
-/// vector of samples costs a sixth of copying all six (the caller copies what passed).
+/// search and sorted order; returns the new count. Reads up to 15 entries past a row's last
+/// sample (the arrays' room) and writes up to 15 entries past the returned count. Only places:
+/// few samples pass, and one stream per vector of samples costs a sixth of copying all six (the
+/// caller copies what passed).
 size_t gatherLensCells(Isa isa, const LensCells& cells, size_t stride, const LensSearch* searches, size_t count, const LensBox& box, uint32_t* positions,
                        size_t n);
 
