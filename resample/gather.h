@@ -7,6 +7,7 @@
 // resample/simd.h.
 #pragma once
 
+#include <algorithm>
 #include <cmath>
 #include <cstddef>
 #include <cstdint>
@@ -80,6 +81,13 @@ struct LensBox {
     const float xLo = (x0 + f * mx0) + (dx1 < dx0 ? dx1 : dx0), xHi = (x1 + f * mx1) + (dx0 < dx1 ? dx1 : dx0);
     const float yLo = (y0 + f * my0) + (dy1 < dy0 ? dy1 : dy0), yHi = (y1 + f * my1) + (dy0 < dy1 ? dy1 : dy0);
     return x >= xLo && x <= xHi && y >= yLo && y <= yHi;
+  }
+  /// The box (x0, x1, y0, y1) the sheared positions of its samples with lerp parameter in [f0, f1]
+  /// lie in: the lerped box over that span, widened by (ex, ey) - what a micropolygon's
+  /// displacement strays from its layer's - and by qm.
+  void searchBox(float f0, float f1, float ex, float ey, float qm, float q[4]) const {
+    q[0] = x0 + std::min(f0 * mx0, f1 * mx0) - ex - qm, q[1] = x1 + std::max(f0 * mx1, f1 * mx1) + ex + qm;
+    q[2] = y0 + std::min(f0 * my0, f1 * my0) - ey - qm, q[3] = y1 + std::max(f0 * my1, f1 * my1) + ey + qm;
   }
 };
 

@@ -280,12 +280,8 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
     float zCull, kl;
     kernels::LensBox box;
     float ex, ey, qm;
-    /// The box (x0, x1, y0, y1) the sheared positions of its samples with lerp parameter in
-    /// [f0, f1] lie in: the lerped box over that span, widened by ex, ey and qm.
-    void searchBox(float f0, float f1, float q[4]) const {
-      q[0] = box.x0 + std::min(f0 * box.mx0, f1 * box.mx0) - ex - qm, q[1] = box.x1 + std::max(f0 * box.mx1, f1 * box.mx1) + ex + qm;
-      q[2] = box.y0 + std::min(f0 * box.my0, f1 * box.my0) - ey - qm, q[3] = box.y1 + std::max(f0 * box.my1, f1 * box.my1) + ey + qm;
-    }
+    /// Its search box over lerp parameters [f0, f1] (LensBox::searchBox()).
+    void searchBox(float f0, float f1, float q[4]) const { box.searchBox(f0, f1, ex, ey, qm, q); }
   };
   // The cells a layer's samples are sorted into: pixels of the region widened by the shear, once
   // per time block (BucketSamples::lensTimeBlocks), block-major.
@@ -392,16 +388,21 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   std::vector<uint16_t> cellScratch;
 };
 
-// Position of vertex v at local time tau: linear between knots, constant outside them.
-inline glm::vec3 positionAt(const store::TilePart& part, const store::Schedule& knots, uint32_t v, double tau) {
-  const uint32_t K = part.numKnots;
-  if (K == 1 || tau <= knots[0]) return part.position(0, v);
-  if (tau >= knots[K - 1]) return part.position(K - 1, v);
-  uint32_t k = 0;
+// Knot segment and parameter for a local time (general schedules; two-knot schedules take a
+// precomputed linear map instead).
+inline void segmentAt(const store::Schedule& knots, double tau, uint32_t& k, float& f) {
+  const uint32_t K = uint32_t(knots.size());
+  k = 0;
+  if (tau <= knots[0]) {
+    f = 0.f;
+    return;
+  }
+  if (tau >= knots[K - 1]) {
+    k = K - 2, f = 1.f;
+    return;
+  }
   while (k + 2 < K && knots[k + 1] <= tau) ++k;
-  const float f = float((tau - knots[k]) / (knots[k + 1] - knots[k]));
-  const glm::vec3& a = part.position(k, v);
-  return a + f * (part.position(k + 1, v) - a);
+  f = float((tau - knots[k]) / (knots[k + 1] - knots[k]));
 }
 
 // Where positionAt() takes a vertex at local time tau from: knot ka lerped to knot kb by f, or
@@ -414,10 +415,17 @@ inline void knotsAt(const store::TilePart& part, const store::Schedule& knots, d
     ka = kb = before ? 0 : K - 1;
     return;
   }
-  uint32_t k = 0;
-  while (k + 2 < K && knots[k + 1] <= tau) ++k;
-  f = float((tau - knots[k]) / (knots[k + 1] - knots[k]));
-  ka = k, kb = k + 1;
+  segmentAt(knots, tau, ka, f);
+  kb = ka + 1;
+}
+
+// Position of vertex v at local time tau: linear between knots, constant outside them.
+inline glm::vec3 positionAt(const store::TilePart& part, const store::Schedule& knots, uint32_t v, double tau) {
+  uint32_t ka, kb;
+  float f;
+  knotsAt(part, knots, tau, ka, kb, f);
+  const glm::vec3& a = part.position(ka, v);
+  return ka == kb ? a : a + f * (part.position(kb, v) - a);
 }
 
 // positionAt() of vertices first .. first + count - 1, into out: every vertex shares the time's
@@ -494,23 +502,6 @@ inline size_t BucketRasterizer::Impl::gatherCandidates(int s0, int s1, int g, in
 // ------------------------------------------------------------------------------------------
 // The exact test of a moving micropolygon's candidates, shared by the moving and linear paths;
 // inline, as it runs per micropolygon (and, in the scalar loops, per candidate).
-
-// Knot segment and parameter for a local time (general schedules; two-knot schedules take a
-// precomputed linear map instead).
-inline void segmentAt(const store::Schedule& knots, double tau, uint32_t& k, float& f) {
-  const uint32_t K = uint32_t(knots.size());
-  k = 0;
-  if (tau <= knots[0]) {
-    f = 0.f;
-    return;
-  }
-  if (tau >= knots[K - 1]) {
-    k = K - 2, f = 1.f;
-    return;
-  }
-  while (k + 2 < K && knots[k + 1] <= tau) ++k;
-  f = float((tau - knots[k]) / (knots[k + 1] - knots[k]));
-}
 
 // Exact coverage test of micropolygon mi against the first n sample indices in `candidates`.
 inline void BucketRasterizer::Impl::testCandidates(const MovingPart& mp, uint32_t mi, const uint32_t* c, bool tri, uint8_t flags, size_t n) {

@@ -62,11 +62,8 @@ LensPlace placeInLayer(const kernels::LensBox& box, float zkLo, float zkHi, floa
   const float cxl = lensAx * p.kl, cyl = lensAy * p.kl;
   p.ex = std::max(std::abs(box.cx0 - cxl), std::abs(box.cx1 - cxl)), p.ey = std::max(std::abs(box.cy0 - cyl), std::abs(box.cy1 - cyl));
   // The rounding of the sheared positions and of the per-sample box, scaled by the search box
-  // over the whole motion (LensDraw::searchBox() at f in [0, 1] with no margin yet; a time
-  // block's search narrows it).
-  const float f0 = 0.f, f1 = 1.f, none = 0.f;
-  q[0] = box.x0 + std::min(f0 * box.mx0, f1 * box.mx0) - p.ex - none, q[1] = box.x1 + std::max(f0 * box.mx1, f1 * box.mx1) + p.ex + none;
-  q[2] = box.y0 + std::min(f0 * box.my0, f1 * box.my0) - p.ey - none, q[3] = box.y1 + std::max(f0 * box.my1, f1 * box.my1) + p.ey + none;
+  // over the whole motion (no margin yet; a time block's search narrows it).
+  box.searchBox(0.f, 1.f, p.ex, p.ey, 0.f, q);
   p.qm = 2e-3f + 1e-5f * std::max({std::abs(q[0]), std::abs(q[1]), std::abs(q[2]), std::abs(q[3]), std::abs(cxl), std::abs(cyl), mag + kMag});
   q[0] -= p.qm, q[1] += p.qm, q[2] -= p.qm, q[3] += p.qm;
   return p;
@@ -595,23 +592,19 @@ void BucketRasterizer::Impl::drawLensQueued() {
         d.searchBox(f0, f1, q);
         const int c0 = cellAt(q[0] - float(g.x0), g.cols), c1 = cellAt(q[1] - float(g.x0), g.cols);
         const int r0 = cellAt((q[2] - float(g.y0)) * rowScale, g.rows), r1 = cellAt((q[3] - float(g.y0)) * rowScale, g.rows);
-        const uint32_t* start = lensCellStart.data() + size_t(b) * g.cells;
-        if (vectorKernels) {
-          lensSearches[searches++] = kernels::LensSearch{start, c0, r0, c1, r1};  // every block's in one kernel call, below
-        } else {
-          for (int r = r0; r <= r1; ++r) {
-            const size_t row = size_t(r) * size_t(g.cols);
-            stats.lensScanned += start[row + size_t(c1) + 1] - start[row + size_t(c0)];
-            for (uint32_t i = start[row + size_t(c0)], e = start[row + size_t(c1) + 1]; i < e; ++i) {
-              at[admitted] = i;
-              admitted += box.admits(lensSortedT[i], lensSortedX[i], lensSortedY[i], lensSortedU[i], lensSortedV[i]);
-            }
-          }
-        }
+        lensSearches[searches++] = kernels::LensSearch{lensCellStart.data() + size_t(b) * g.cells, c0, r0, c1, r1};
       }
-      if (searches) {
+      // Every block's search in one kernel call, or the scalar walk of the same rows.
+      if (vectorKernels) {
         const kernels::LensCells cells{lensSortedT.data(), lensSortedX.data(), lensSortedY.data(), lensSortedU.data(), lensSortedV.data(), &stats.lensScanned};
         admitted = kernels::gatherLensCells(isa, cells, size_t(g.cols), lensSearches.data(), searches, box, at, admitted);
+      } else {
+        stats.lensScanned += kernels::forEachLensRow(lensSearches.data(), searches, size_t(g.cols), [&](uint32_t first, uint32_t last) {
+          for (uint32_t i = first; i < last; ++i) {
+            at[admitted] = i;
+            admitted += box.admits(lensSortedT[i], lensSortedX[i], lensSortedY[i], lensSortedU[i], lensSortedV[i]);
+          }
+        });
       }
       for (size_t i = 0; i < admitted; ++i) {
         const uint32_t p = at[i];

@@ -24,6 +24,13 @@ using namespace reshutter::test;
 
 namespace {
 
+// `reshutter generate ARGS` written to path and opened (null, with a failure, if it did not run).
+std::shared_ptr<const store::StoreReader> generatedStore(const std::string& args, const std::string& path) {
+  const CommandResult gen = runReshutter("generate " + args + " -o " + path);
+  EXPECT_EQ(gen.exitCode, 0) << gen.err;
+  return gen.exitCode == 0 ? std::make_shared<const store::StoreReader>(path) : nullptr;
+}
+
 // A static opaque surface at depth z covering raster x >= edge (and far beyond the frame).
 TestScene edgeScene(double edge, double z, int W = 64, int H = 24) {
   TestScene s = makeScene(W, H, {0.0});
@@ -364,10 +371,8 @@ TEST(LensReference, FieldsAndRollingShutterAgreeWithTheRayCaster) {
 TEST(LensLayers, CullingIsExactAndTheSearchDoesNotGrowWithTheCircle) {
   ScratchDir dir;
   for (const char* motion : {"0 --knots 1", "12 --knots 3"}) {
-    const std::string path = dir.path(std::string("gen") + motion[0] + ".mps");
-    const CommandResult gen = runReshutter(std::string("generate -n 20000 --width 96 --height 72 --transparent 0.3 --motion ") + motion + " -o " + path);
-    ASSERT_EQ(gen.exitCode, 0) << gen.err;
-    auto reader = std::make_shared<const store::StoreReader>(path);
+    auto reader = generatedStore(std::string("-n 20000 --width 96 --height 72 --transparent 0.3 --motion ") + motion, dir.path(std::string("gen") + motion[0] + ".mps"));
+    ASSERT_TRUE(reader);
     std::vector<double> examined;
     for (double fstop : {4.0, 0.25}) {  // depths 5 to 50 focused at 20: circles up to ~1.5 and ~25 px
       RenderSpec spec = specFor(reader, 0.1, 0.9, 4, 4, 7);
@@ -396,10 +401,8 @@ TEST(LensLayers, CullingIsExactAndTheSearchDoesNotGrowWithTheCircle) {
 TEST(LensLayers, AnyWidthGivesTheSameImage) {
   ScratchDir dir;
   for (const char* motion : {"0 --knots 1", "12 --knots 2"}) {
-    const std::string path = dir.path(std::string("gen") + motion[0] + ".mps");
-    const CommandResult gen = runReshutter(std::string("generate -n 20000 --width 96 --height 72 --transparent 0.3 --motion ") + motion + " -o " + path);
-    ASSERT_EQ(gen.exitCode, 0) << gen.err;
-    auto reader = std::make_shared<const store::StoreReader>(path);
+    auto reader = generatedStore(std::string("-n 20000 --width 96 --height 72 --transparent 0.3 --motion ") + motion, dir.path(std::string("gen") + motion[0] + ".mps"));
+    ASSERT_TRUE(reader);
     std::optional<RenderResult> chosen;
     uint64_t lastLayers = UINT64_MAX;
     for (float width : {0.f, 0.5f, 1.f, 2.f, 4.f}) {
@@ -438,10 +441,8 @@ TEST(LensLayers, SortsVisitOnlyTheSamplesTheirSearchesCanReach) {
   // still, a dense store and a sparse one, every kernel set, circles up to ~6 and ~25 px.
   ScratchDir dir;
   for (const char* args : {"-n 20000 --transparent 0.3 --motion 12 --knots 2", "-n 20000 --motion 0 --knots 1", "-n 700 --motion 0 --knots 1"}) {
-    const std::string path = dir.path("gen" + std::to_string(std::hash<std::string>{}(args)) + ".mps");
-    const CommandResult gen = runReshutter(std::string("generate --width 96 --height 72 ") + args + " -o " + path);
-    ASSERT_EQ(gen.exitCode, 0) << gen.err;
-    auto reader = std::make_shared<const store::StoreReader>(path);
+    auto reader = generatedStore(std::string("--width 96 --height 72 ") + args, dir.path("gen" + std::to_string(std::hash<std::string>{}(args)) + ".mps"));
+    ASSERT_TRUE(reader);
     for (const double fstop : {1.0, 0.25})
       for (const int kernels : {0, 1, 2}) {
         RenderResult r[2];
@@ -478,10 +479,8 @@ TEST(LensDeterminism, BitIdenticalForAnyThreadCountBucketSizeAndInstructionSet) 
   for (const Store& st : {Store{"moving", "-n 40000 --transparent 0.3 --motion 12 --knots 3", true, false},
                           Store{"still", "-n 40000 --transparent 0.3 --motion 0 --knots 1", false, false},
                           Store{"sparse", "-n 700 --motion 0 --knots 1", false, true}}) {
-    const std::string path = dir.path(std::string(st.name) + ".mps");
-    const CommandResult gen = runReshutter("generate --width 128 --height 96 " + st.args + " -o " + path);
-    ASSERT_EQ(gen.exitCode, 0) << gen.err;
-    auto reader = std::make_shared<const store::StoreReader>(path);
+    auto reader = generatedStore("--width 128 --height 96 " + st.args, dir.path(std::string(st.name) + ".mps"));
+    ASSERT_TRUE(reader);
     struct Variant {
       int threads, bucket;
       bool vector, avx512;
