@@ -321,7 +321,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   int lensRowSpan() const { return lensTimeBlocks > 1 ? 2 : 1; }
   std::vector<std::array<float, 6>> timeRange;  // rasterizeLens(): per bound time, x0 y0 x1 y1 of its positions and their depth range
   std::vector<uint32_t> lensOrder;        // lensDraws by layer
-  std::vector<uint32_t> lensLayerStart;   // the counting sort's [layer]: its first place in lensOrder
+  std::vector<uint32_t> lensLayerStart;   // the counting sort's [layer slot]: its first place in lensOrder, its end once the order is made
   std::vector<float> lensBlockF;    // the lerping chunks' time blocks' spans of their lerp parameter
   LensGrid lensGrid;
   std::vector<uint32_t> lensCellStart;  // [cell]: the cell's first sorted sample (sortLensLayer(): the scatter's cursors too)

@@ -69,6 +69,11 @@ LensPlace placeInLayer(const kernels::LensBox& box, float zkLo, float zkHi, floa
   return p;
 }
 
+// The cell of coordinate v among `count` cells, clamped into them (a NaN takes cell 0): as
+// v >= 0 ? (v < count ? int(v) : count - 1) : 0, by a max and a min instead of branches, which
+// searches near the grid's edge made unpredictable.
+int clampedCell(float v, int count) { return int(std::min(std::max(0.f, v), float(count - 1))); }
+
 // Whether search box q (placeInLayer()'s) admits any sample's sheared position: x - cxl u within
 // the region widened by |cxl| (|u| <= 1), and a pixel more for their rounding.
 bool searchReaches(const float q[4], float cxl, float cyl, int x0, int y0, int w, int h) {
@@ -367,7 +372,7 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
   const int tileCols = (g.cols + 7) / 8, tileRows = (g.rows + 7) / 8;
   const size_t tiles = size_t(tileCols) * size_t(tileRows);
   lensTileUsed.assign(tiles + 3, 0);  // the vector kernels read the marks 32 bits at a time
-  auto tileAt = [](float v, int count) { return v >= 0.f ? (v < float(count) ? int(v) / 8 : (count - 1) / 8) : 0; };
+  auto tileAt = [](float v, int count) { return clampedCell(v, count) / 8; };
   for (size_t i = first; i < last; ++i) {
     const LensDraw& e = lensDraws[lensOrder[i]];
     const LensChunk& ec = lensChunks[e.chunk];
@@ -482,14 +487,12 @@ void BucketRasterizer::Impl::lensPlaneRuns(size_t s, float cxl, float cyl, const
     lensRunFirst.push_back(uint32_t(plane)), lensRunCount.push_back(uint32_t(P));
     return;
   }
-  // Cell coordinates clamped into the grid as the sort's are (a float beyond int range first).
-  auto clampCell = [](float v, int count) { return v >= 0.f ? (v < float(count - 1) ? int(v) : count - 1) : 0; };
   const float gx = float(g.x0), gy = float(g.y0);
   // Rows reach the same tile rows for eight or so pixel rows: their pixel span is kept.
   int tr0Was = -1, tr1Was = -1, lo = 0, hi = -1;
   for (int py = 0; py < h; ++py) {
     const float fy = float(y0 + py);
-    const int tr0 = clampCell((fy + dyLo - gy) * rowScale, g.rows) / 8, tr1 = clampCell((fy + 1.f + dyHi - gy) * rowScale, g.rows) / 8;
+    const int tr0 = clampedCell((fy + dyLo - gy) * rowScale, g.rows) / 8, tr1 = clampedCell((fy + 1.f + dyHi - gy) * rowScale, g.rows) / 8;
     if (tr0 != tr0Was || tr1 != tr1Was) {
       tr0Was = tr0, tr1Was = tr1;
       int first = INT32_MAX, last = -1;
@@ -521,7 +524,8 @@ void BucketRasterizer::Impl::drawLensQueued() {
   for (const LensDraw& d : lensDraws)
     if (d.layer != INT32_MIN) lo = std::min(lo, d.layer), hi = std::max(hi, d.layer);
   if (lo > hi) lo = hi = 0;
-  if (int64_t(hi) - int64_t(lo) < (int64_t(1) << 16)) {
+  const bool counted = int64_t(hi) - int64_t(lo) < (int64_t(1) << 16);
+  if (counted) {
     auto slotOf = [lo](int32_t layer) { return layer == INT32_MIN ? size_t(0) : size_t(int64_t(layer) - lo) + 1; };
     lensLayerStart.assign(size_t(hi - lo) + 3, 0);
     for (const LensDraw& d : lensDraws) ++lensLayerStart[slotOf(d.layer) + 1];
@@ -568,8 +572,12 @@ void BucketRasterizer::Impl::drawLensQueued() {
       stats.lensScanned += size_t(N) * size_t(P);
     } else {
       if (d.layer != sortedLayer) {
+        // The layer's end: where the counting sort's scatter left the layer's slot (the next
+        // slot's start), else found along the order (each step a random read of a draw).
         size_t last = oi + 1;
-        while (last < lensOrder.size() && lensDraws[lensOrder[last]].layer == d.layer) ++last;
+        if (counted) last = lensLayerStart[size_t(int64_t(d.layer) - lo) + 1];
+        else
+          while (last < lensOrder.size() && lensDraws[lensOrder[last]].layer == d.layer) ++last;
         sortLensLayer(oi, last, lc.lensAx * d.kl, lc.lensAy * d.kl);
         sortedLayer = d.layer;
         ++stats.lensLayers;
@@ -578,7 +586,6 @@ void BucketRasterizer::Impl::drawLensQueued() {
       // The cells the sheared box touches, time block by time block (for a micropolygon that
       // lerps, over that block's part of its path); a box beyond the grid's edge takes the edge
       // cells, which hold every sample sheared beyond it.
-      auto cellAt = [](float v, int count) { return v >= 0.f ? (v < float(count) ? int(v) : count - 1) : 0; };
       const kernels::LensBox& box = d.box;
       uint32_t* __restrict at = lensCandPos.data();
       size_t admitted = 0, searches = 0;
@@ -590,8 +597,8 @@ void BucketRasterizer::Impl::drawLensQueued() {
         }
         float q[4];
         d.searchBox(f0, f1, q);
-        const int c0 = cellAt(q[0] - float(g.x0), g.cols), c1 = cellAt(q[1] - float(g.x0), g.cols);
-        const int r0 = cellAt((q[2] - float(g.y0)) * rowScale, g.rows), r1 = cellAt((q[3] - float(g.y0)) * rowScale, g.rows);
+        const int c0 = clampedCell(q[0] - float(g.x0), g.cols), c1 = clampedCell(q[1] - float(g.x0), g.cols);
+        const int r0 = clampedCell((q[2] - float(g.y0)) * rowScale, g.rows), r1 = clampedCell((q[3] - float(g.y0)) * rowScale, g.rows);
         lensSearches[searches++] = kernels::LensSearch{lensCellStart.data() + size_t(b) * g.cells, c0, r0, c1, r1};
       }
       // Every block's search in one kernel call, or the scalar walk of the same rows.
