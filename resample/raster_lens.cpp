@@ -548,6 +548,9 @@ void BucketRasterizer::Impl::drawLensQueued() {
       // may have replaced it since this one was queued.
       hc = lc.hc.timedAov ? hitContext(lc.src->store->meta(), *lc.entry, *lc.part, st.data(), lc.hc.toLocal) : lc.hc;
     }
+    // Draws go by layer, so parts interleave and a draw's corners are rarely in cache: fetched
+    // now, read after the search.
+    __builtin_prefetch(&lc.part->corners[size_t(d.m) * 4], 0, 3);
     size_t n = 0;
     const kernels::LensCandidates cand{candidates.data(), candT.data(), candX.data(), candY.data(), candU.data(), candV.data()};
     // A sample the box admits becomes a candidate when it passes the early depth test, lies in
@@ -557,6 +560,9 @@ void BucketRasterizer::Impl::drawLensQueued() {
     // testing each as it is drawn.
     auto addCandidate = [&](uint32_t idx, float t, float x, float y, float u, float v) {
       if (!(zbuf[idx] > d.zCull)) return;  // the early depth test
+      // The sample's colour record, which a hit writes after the exact test: a line of a random
+      // plane, fetched now while the exact test runs.
+      __builtin_prefetch(&colour[idx], 1, 3);
       if (lc.cover.check && !Source::covers(double(t), lc.cover.lo, lc.cover.hi, lc.cover.openEnd)) return;
       if (!(t >= lc.segLo && t < lc.segHi)) return;  // another knot segment's sample
       cand.index[n] = idx, cand.t[n] = t, cand.x[n] = x, cand.y[n] = y, cand.u[n] = u, cand.v[n] = v;
@@ -624,6 +630,9 @@ void BucketRasterizer::Impl::drawLensQueued() {
     const uint32_t* c = &part.corners[size_t(d.m) * 4];
     const bool tri = c[3] == kNoCorner;
     const uint8_t flags = part.flags[d.m];
+    // The corners' colours, which each hit interpolates: fetched while the exact test runs.
+    if (hc.colour)
+      for (int j = 0; j < (tri ? 3 : 4); ++j) __builtin_prefetch(hc.colour + size_t(c[j]) * 3, 0, 3);
     if (lc.moving && vectorKernels) {
       drawMovingLens(lc, hc, d, c, tri, flags, n);
       continue;
