@@ -142,13 +142,17 @@ inline uint64_t forEachLensRow(const LensSearch* searches, size_t count, size_t 
   return examined;
 }
 
+/// The lens sort's tiles, which its draws mark where they search: squares of kLensTile cells a
+/// side (4 × 4 marked a layer's moving streaks more closely than 8 × 8 did, for more marks to read).
+inline constexpr int kLensTileShift = 2, kLensTile = 1 << kLensTileShift;
+
 /// A depth layer's sort keys (raster_lens.cpp, sortLensLayer()): a sample's cell is that of its
 /// position sheared by the layer's displacement, col = int(clamp(x - cx u - x0, 0, maxCol)) and
 /// row = int(clamp((y - cy v - y0) rowScale, 0, maxRow)) (cells rowScale⁻¹ pixels tall; each clamp
 /// `v >= 0 ? (v <= hi ? v : hi) : 0`, so a NaN takes cell 0), keyed
 /// key + row * cols + col. A sample is kept when its nearest surface so far lies beyond zMin and,
-/// where tileUsed is set, its tile of 8 × 8 cells is marked there (tileUsed[(row >> 3) tileCols +
-/// (col >> 3)], read 32 bits at a time: 3 bytes of room past its end).
+/// where tileUsed is set, its tile is marked there (tileUsed[(row >> kLensTileShift) tileCols +
+/// (col >> kLensTileShift)], read 32 bits at a time: 3 bytes of room past its end).
 struct LensShear {
   float cx, cy, x0, y0, maxCol, maxRow;
   uint32_t cols, tileCols;

@@ -292,7 +292,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   void rasterizeLens(const Source& src, const store::TileEntry& entry, const store::TilePart& part, const HitContext& hc, const Chunk& ch);
   void queueLensDraws(const LensChunk& lc, uint32_t chunk, uint32_t m0, uint32_t m1);
   void sortLensLayer(size_t first, size_t last, float cxl, float cyl);
-  void lensPlaneRuns(size_t s, float cxl, float cyl, const LensGrid& g, float rowScale);
+  void lensPlaneRuns(size_t s, float cxl, float cyl, const LensGrid& g, float rowScale, const std::array<int, 2>* rowSpan);
   void drawLensQueued();
   struct LensSample {  // a candidate: its slot and its copies of the sample's time, position and lens point
     uint32_t slot;
@@ -326,8 +326,13 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   LensGrid lensGrid;
   std::vector<uint32_t> lensCellStart;  // [cell]: the cell's first sorted sample (sortLensLayer(): the scatter's cursors too)
   std::vector<uint32_t> lensKeptSlot, lensKeptCell;  // the samples a layer's sort keeps, in slot order, and their cells
-  std::vector<uint8_t> lensTileUsed;                // [tile of 8 × 8 cells]: some search of the layer reaches it
-  std::vector<std::array<int, 2>> lensTileRowSpan;  // [tile row]: its first and last marked tile column
+  std::vector<uint8_t> lensTileUsed;                // [block][tile of kLensTile² cells]: some search of the layer's block reaches it
+  std::vector<std::array<int, 2>> lensTileRowSpan;  // [block][tile row]: its first and last marked tile column
+  // A draw's search in one time block: cells [c0, c1] × [r0, r1] of the layer's grid (r1 < r0: none).
+  struct LensCellRect {
+    int c0, r0, c1, r1;
+  };
+  std::vector<LensCellRect> lensDrawCells;  // [place in the sorted layer][block]: sortLensLayer()'s, for drawLensQueued()
   std::vector<uint32_t> lensRunFirst, lensRunCount;  // a plane's runs of slots that a layer's sort visits
   std::vector<kernels::LensSearch> lensSearches;     // a draw's searches, one per time block
   SkewedArray<uint32_t> lensSortedIndex{4};         // the sorted samples' slots, times, positions and lens points

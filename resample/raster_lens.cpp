@@ -368,37 +368,60 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
   g.cells = cells;
   float zMin = INFINITY;
   bool times = false;
-  // Tiles of 8 × 8 cells that some micropolygon's search box (over its whole motion) touches.
-  const int tileCols = (g.cols + 7) / 8, tileRows = (g.rows + 7) / 8;
+  // Each draw's search, block by block: the cells of its search box over the block's part of its
+  // path (drawLensQueued() reads them back; r1 < r0 for a block it does not search). The tiles of
+  // kLensTile × kLensTile cells those searches touch are marked per block, so that a block's
+  // samples are kept only where that block's searches read - a moving micropolygon's streaks,
+  // not its whole path's box.
+  const int tileCols = (g.cols + kernels::kLensTile - 1) / kernels::kLensTile, tileRows = (g.rows + kernels::kLensTile - 1) / kernels::kLensTile;
   const size_t tiles = size_t(tileCols) * size_t(tileRows);
-  lensTileUsed.assign(tiles + 3, 0);  // the vector kernels read the marks 32 bits at a time
-  auto tileAt = [](float v, int count) { return clampedCell(v, count) / 8; };
+  lensTileUsed.assign(blocks * tiles + 3, 0);  // the vector kernels read the marks 32 bits at a time
+  lensDrawCells.resize((last - first) * blocks);
   for (size_t i = first; i < last; ++i) {
     const LensDraw& e = lensDraws[lensOrder[i]];
     const LensChunk& ec = lensChunks[e.chunk];
     zMin = std::min(zMin, e.zCull);
     times = times || ec.moving || ec.cover.check;
-    float q[4];
-    e.searchBox(0.f, 1.f, q);
-    const int tx0 = tileAt(q[0] - float(g.x0), g.cols), tx1 = tileAt(q[1] - float(g.x0), g.cols);
-    const int ty0 = tileAt((q[2] - float(g.y0)) * rowScale, g.rows), ty1 = tileAt((q[3] - float(g.y0)) * rowScale, g.rows);
-    for (int ty = ty0; ty <= ty1; ++ty) std::fill_n(&lensTileUsed[size_t(ty) * size_t(tileCols) + size_t(tx0)], tx1 - tx0 + 1, uint8_t(1));
+    LensCellRect* rect = &lensDrawCells[(i - first) * blocks];
+    for (size_t b = 0; b < blocks; ++b) {
+      float f0 = 0.f, f1 = 1.f;
+      if (ec.blockF != ~0u) {
+        f0 = lensBlockF[ec.blockF + 2 * b], f1 = lensBlockF[ec.blockF + 2 * b + 1];
+        if (f0 > f1) {  // no sample of this block in the region's groups
+          rect[b] = {0, 0, 0, -1};
+          continue;
+        }
+      }
+      if (b == 0 || ec.blockF != ~0u) {
+        float q[4];
+        e.searchBox(f0, f1, q);
+        rect[b] = {clampedCell(q[0] - float(g.x0), g.cols), clampedCell((q[2] - float(g.y0)) * rowScale, g.rows), clampedCell(q[1] - float(g.x0), g.cols),
+                   clampedCell((q[3] - float(g.y0)) * rowScale, g.rows)};
+      } else {
+        rect[b] = rect[0];  // no lerp: every block the same box
+      }
+      const LensCellRect& r = rect[b];
+      uint8_t* m = lensTileUsed.data() + b * tiles;
+      const int tx0 = r.c0 >> kernels::kLensTileShift, tx1 = r.c1 >> kernels::kLensTileShift;
+      for (int ty = r.r0 >> kernels::kLensTileShift; ty <= r.r1 >> kernels::kLensTileShift; ++ty)
+        for (int tx = tx0; tx <= tx1; ++tx) m[size_t(ty) * size_t(tileCols) + size_t(tx)] = 1;
+    }
   }
   // No marks to read when the layer searches every tile (a dense layer), or when asked to sort
   // every sample.
-  const bool everyTile =
-      !opt.lensSortReached || std::all_of(lensTileUsed.begin(), lensTileUsed.begin() + ptrdiff_t(tiles), [](uint8_t m) { return m != 0; });
+  const bool everyTile = !opt.lensSortReached ||
+                         std::all_of(lensTileUsed.begin(), lensTileUsed.begin() + ptrdiff_t(blocks * tiles), [](uint8_t m) { return m != 0; });
   const uint8_t* used = everyTile ? nullptr : lensTileUsed.data();
   stats.lensSparseLayers += !everyTile;
-  // Per tile row, its first and last marked tile column (first > last: none).
-  lensTileRowSpan.resize(size_t(tileRows));
+  // Per block and tile row, its first and last marked tile column (first > last: none).
+  lensTileRowSpan.resize(blocks * size_t(tileRows));
   if (used)
-    for (int ty = 0; ty < tileRows; ++ty) {
-      const uint8_t* m = used + size_t(ty) * size_t(tileCols);
+    for (size_t r = 0; r < blocks * size_t(tileRows); ++r) {
+      const uint8_t* m = used + r * size_t(tileCols);
       int first = 0, last = tileCols - 1;
       while (first < tileCols && !m[first]) ++first;
       while (last >= first && !m[last]) --last;
-      lensTileRowSpan[size_t(ty)] = {first, last};
+      lensTileRowSpan[r] = {first, last};
     }
   // Keyed by time block, then cell: block b's cells are [b cells, (b + 1) cells).
   // One array is counts, cursors and starts: cell c's count goes to start[c + 2], whose running
@@ -425,8 +448,8 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
   const size_t planeStride = PS, planes = size_t(N);
   // Clamped into the grid (a NaN goes to its first cell): every sample has a cell, and a search
   // that reaches the grid's edge (or lies beyond it) finds it there.
-  const kernels::LensShear shear{cxl, cyl, float(g.x0), float(g.y0), float(g.cols - 1), float(g.rows - 1), uint32_t(g.cols), uint32_t(tileCols), used, zMin,
-                                 rowScale};
+  kernels::LensShear shear{cxl, cyl, float(g.x0), float(g.y0), float(g.cols - 1), float(g.rows - 1), uint32_t(g.cols), uint32_t(tileCols), used, zMin,
+                           rowScale};
   // The kept samples, in slot order, each with its cell.
   size_t kept = 0;
   // Runs of slots of one plane, in order.
@@ -441,17 +464,19 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
         const uint32_t col = uint32_t(clampTo(xs[j] - shear.cx * us[j] - shear.x0, shear.maxCol));
         const uint32_t row = uint32_t(clampTo((ys[j] - shear.cy * vs[j] - shear.y0) * shear.rowScale, shear.maxRow));
         keptSlot[kept] = uint32_t(j), keptCell[kept] = key + row * shear.cols + col;
-        kept += depth[j] > zMin && (!used || used[(row >> 3) * shear.tileCols + (col >> 3)]);
+        kept += depth[j] > zMin && (!shear.tileUsed || shear.tileUsed[(row >> kernels::kLensTileShift) * shear.tileCols + (col >> kernels::kLensTileShift)]);
       }
   };
   for (size_t s = 0; s < planes; ++s) {
-    const uint32_t key = uint32_t(s / perBlock * cells);
+    const size_t block = s / perBlock;
+    const uint32_t key = uint32_t(block * cells);
     const size_t plane = s * planeStride;
     lensRunFirst.clear(), lensRunCount.clear();
     if (!used) {
       lensRunFirst.push_back(uint32_t(plane)), lensRunCount.push_back(uint32_t(P));
     } else {
-      lensPlaneRuns(s, cxl, cyl, g, rowScale);
+      shear.tileUsed = used + block * tiles;
+      lensPlaneRuns(s, cxl, cyl, g, rowScale, &lensTileRowSpan[block * size_t(tileRows)]);
     }
     for (uint32_t c : lensRunCount) stats.lensSortVisited += c;
     visit(kernels::LensRuns{lensRunFirst.data(), lensRunCount.data(), lensRunFirst.size()}, key);
@@ -478,7 +503,7 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
 // a marked tile (lensTileRowSpan, the marked columns' span over the tile rows it can reach; the
 // grid's clamp takes a sample sheared beyond the grid into its edge tiles). A cell of margin on
 // each side for the rounding of the sheared positions. Whole runs that meet are merged.
-void BucketRasterizer::Impl::lensPlaneRuns(size_t s, float cxl, float cyl, const LensGrid& g, float rowScale) {
+void BucketRasterizer::Impl::lensPlaneRuns(size_t s, float cxl, float cyl, const LensGrid& g, float rowScale, const std::array<int, 2>* rowSpan) {
   const auto& r = lensRange[s];  // u0 u1 v0 v1
   const float dxLo = std::min(-cxl * r[0], -cxl * r[1]) - 1.f, dxHi = std::max(-cxl * r[0], -cxl * r[1]) + 1.f;
   const float dyLo = std::min(-cyl * r[2], -cyl * r[3]) - 1.f, dyHi = std::max(-cyl * r[2], -cyl * r[3]) + 1.f;
@@ -492,19 +517,21 @@ void BucketRasterizer::Impl::lensPlaneRuns(size_t s, float cxl, float cyl, const
   int tr0Was = -1, tr1Was = -1, lo = 0, hi = -1;
   for (int py = 0; py < h; ++py) {
     const float fy = float(y0 + py);
-    const int tr0 = clampedCell((fy + dyLo - gy) * rowScale, g.rows) / 8, tr1 = clampedCell((fy + 1.f + dyHi - gy) * rowScale, g.rows) / 8;
+    const int tr0 = clampedCell((fy + dyLo - gy) * rowScale, g.rows) >> kernels::kLensTileShift;
+    const int tr1 = clampedCell((fy + 1.f + dyHi - gy) * rowScale, g.rows) >> kernels::kLensTileShift;
     if (tr0 != tr0Was || tr1 != tr1Was) {
       tr0Was = tr0, tr1Was = tr1;
       int first = INT32_MAX, last = -1;
       for (int tr = tr0; tr <= tr1; ++tr) {
-        const auto& span = lensTileRowSpan[size_t(tr)];
+        const auto& span = rowSpan[tr];
         if (span[0] <= span[1]) first = std::min(first, span[0]), last = std::max(last, span[1]);
       }
       // A pixel px reaches the marked columns [8 first, 8 last + 7] when its sheared cells
       // [px + dxLo - gx, px + 1 + dxHi - gx] (clamped) meet them.
       lo = x0, hi = last < 0 ? x0 - 1 : x0 + w - 1;
-      if (last >= 0 && first > 0) lo = std::max(lo, int(std::floor(std::max(float(8 * first) - 1.f - dxHi + gx, float(x0 - 1)))));
-      if (last >= 0 && 8 * last + 7 < g.cols - 1) hi = std::min(hi, int(std::ceil(std::min(float(8 * last + 8) - dxLo + gx, float(x0 + w)))));
+      constexpr int T = kernels::kLensTile;
+      if (last >= 0 && first > 0) lo = std::max(lo, int(std::floor(std::max(float(T * first) - 1.f - dxHi + gx, float(x0 - 1)))));
+      if (last >= 0 && T * (last + 1) - 1 < g.cols - 1) hi = std::min(hi, int(std::ceil(std::min(float(T * (last + 1)) - dxLo + gx, float(x0 + w)))));
     }
     if (lo > hi) continue;
     const uint32_t begin = uint32_t(plane + size_t(py) * size_t(w) + size_t(lo - x0)), count = uint32_t(hi - lo + 1);
@@ -535,10 +562,10 @@ void BucketRasterizer::Impl::drawLensQueued() {
     std::iota(lensOrder.begin(), lensOrder.end(), 0u);
     std::stable_sort(lensOrder.begin(), lensOrder.end(), [&](uint32_t a, uint32_t b) { return lensDraws[a].layer < lensDraws[b].layer; });
   }
-  const float rowScale = 1.f / float(lensRowSpan());  // the lens cells' rows per pixel
   uint32_t currentChunk = ~0u;
   HitContext hc{};
   int32_t sortedLayer = INT32_MIN;
+  size_t sortedFirst = 0;  // the sorted layer's first place in lensOrder
   for (size_t oi = 0; oi < lensOrder.size(); ++oi) {
     const LensDraw& d = lensDraws[lensOrder[oi]];
     const LensChunk& lc = lensChunks[d.chunk];
@@ -585,28 +612,20 @@ void BucketRasterizer::Impl::drawLensQueued() {
         else
           while (last < lensOrder.size() && lensDraws[lensOrder[last]].layer == d.layer) ++last;
         sortLensLayer(oi, last, lc.lensAx * d.kl, lc.lensAy * d.kl);
-        sortedLayer = d.layer;
+        sortedLayer = d.layer, sortedFirst = oi;
         ++stats.lensLayers;
       }
       const LensGrid& g = lensGrid;
       // The cells the sheared box touches, time block by time block (for a micropolygon that
-      // lerps, over that block's part of its path); a box beyond the grid's edge takes the edge
-      // cells, which hold every sample sheared beyond it.
+      // lerps, over that block's part of its path; a box beyond the grid's edge takes the edge
+      // cells, which hold every sample sheared beyond it): made by the layer's sort.
       const kernels::LensBox& box = d.box;
       uint32_t* __restrict at = lensCandPos.data();
       size_t admitted = 0, searches = 0;
-      for (int b = 0; b < lensTimeBlocks; ++b) {
-        float f0 = 0.f, f1 = 1.f;
-        if (lc.blockF != ~0u) {
-          f0 = lensBlockF[lc.blockF + 2 * size_t(b)], f1 = lensBlockF[lc.blockF + 2 * size_t(b) + 1];
-          if (f0 > f1) continue;  // no sample of this block in the region's groups
-        }
-        float q[4];
-        d.searchBox(f0, f1, q);
-        const int c0 = clampedCell(q[0] - float(g.x0), g.cols), c1 = clampedCell(q[1] - float(g.x0), g.cols);
-        const int r0 = clampedCell((q[2] - float(g.y0)) * rowScale, g.rows), r1 = clampedCell((q[3] - float(g.y0)) * rowScale, g.rows);
-        lensSearches[searches++] = kernels::LensSearch{lensCellStart.data() + size_t(b) * g.cells, c0, r0, c1, r1};
-      }
+      const LensCellRect* rect = &lensDrawCells[(oi - sortedFirst) * size_t(lensTimeBlocks)];
+      for (int b = 0; b < lensTimeBlocks; ++b)
+        if (rect[b].r0 <= rect[b].r1)
+          lensSearches[searches++] = kernels::LensSearch{lensCellStart.data() + size_t(b) * g.cells, rect[b].c0, rect[b].r0, rect[b].c1, rect[b].r1};
       // Every block's search in one kernel call, or the scalar walk of the same rows.
       if (vectorKernels) {
         const kernels::LensCells cells{lensSortedT.data(), lensSortedX.data(), lensSortedY.data(), lensSortedU.data(), lensSortedV.data(), &stats.lensScanned};

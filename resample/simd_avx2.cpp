@@ -612,7 +612,7 @@ size_t lensLayerCellsAvx2T(const LensShear& s, const float* xs, const float* ys,
     const __m256i row = _mm256_cvttps_epi32(_mm256_min_ps(_mm256_max_ps(_mm256_mul_ps(_mm256_sub_ps(_mm256_sub_ps(y, _mm256_mul_ps(cy, v)), gy), rowScale), zero), maxRow));
     __m256i keep = _mm256_and_si256(in, _mm256_castps_si256(_mm256_cmp_ps(z, zMin, _CMP_GT_OQ)));
     if constexpr (kTiles) {
-      const __m256i tile = _mm256_add_epi32(_mm256_mullo_epi32(_mm256_srli_epi32(row, 3), tileCols), _mm256_srli_epi32(col, 3));
+      const __m256i tile = _mm256_add_epi32(_mm256_mullo_epi32(_mm256_srli_epi32(row, kLensTileShift), tileCols), _mm256_srli_epi32(col, kLensTileShift));
       const __m256i mark = _mm256_and_si256(_mm256_i32gather_epi32(reinterpret_cast<const int*>(s.tileUsed), tile, 1), lowByte);
       keep = _mm256_andnot_si256(_mm256_cmpeq_epi32(mark, _mm256_setzero_si256()), keep);
     }

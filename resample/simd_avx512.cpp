@@ -534,7 +534,7 @@ size_t lensLayerCellsAvx512T(const LensShear& s, const float* xs, const float* y
     const __m512i row = _mm512_cvttps_epi32(_mm512_min_ps(_mm512_max_ps(_mm512_mul_ps(_mm512_sub_ps(_mm512_sub_ps(y, _mm512_mul_ps(cy, v)), gy), rowScale), zero), maxRow));
     __mmask16 keep = _mm512_mask_cmp_ps_mask(in, z, zMin, _CMP_GT_OQ);
     if constexpr (kTiles) {
-      const __m512i tile = _mm512_add_epi32(_mm512_mullo_epi32(_mm512_srli_epi32(row, 3), tileCols), _mm512_srli_epi32(col, 3));
+      const __m512i tile = _mm512_add_epi32(_mm512_mullo_epi32(_mm512_srli_epi32(row, kLensTileShift), tileCols), _mm512_srli_epi32(col, kLensTileShift));
       const __m512i mark = _mm512_mask_i32gather_epi32(_mm512_setzero_si512(), keep, tile, s.tileUsed, 1);
       keep = _mm512_mask_test_epi32_mask(keep, mark, lowByte);
     }

@@ -472,10 +472,11 @@ TEST(ResampleHard, LensGatherAndCellKernelsAreTheirDefinitions) {
     if (rng.below(4) == 0) u[rng.below(uint32_t(S + 1))] = NAN;
     std::vector<float> depth(S + 16);
     for (float& d : depth) d = q(1);
-    std::vector<uint8_t> marks(size_t((cols + 7) / 8) * size_t((rows + 7) / 8) + 3);
+    const int tileCols = (cols + kernels::kLensTile - 1) / kernels::kLensTile, tileRows = (rows + kernels::kLensTile - 1) / kernels::kLensTile;
+    std::vector<uint8_t> marks(size_t(tileCols) * size_t(tileRows) + 3);
     for (uint8_t& m : marks) m = uint8_t(rng.below(2));
     kernels::LensShear shear{float(rng.uniform() * 40 - 20), float(rng.uniform() * 40 - 20), float(rng.uniform() * 4 - 2), float(rng.uniform() * 4 - 2),
-                             float(cols - 1), float(rows - 1), uint32_t(cols), uint32_t((cols + 7) / 8), trial % 3 ? marks.data() : nullptr,
+                             float(cols - 1), float(rows - 1), uint32_t(cols), uint32_t(tileCols), trial % 3 ? marks.data() : nullptr,
                              q(0.5), trial % 4 < 2 ? 1.f : 0.5f};
     std::vector<uint32_t> runFirst, runCount;
     for (uint32_t at = uint32_t(rng.below(5)); at < S; at += uint32_t(rng.below(40))) {
@@ -491,7 +492,7 @@ TEST(ResampleHard, LensGatherAndCellKernelsAreTheirDefinitions) {
         const uint32_t row = uint32_t(clampTo((y[j] - shear.cy * v[j] - shear.y0) * shear.rowScale, shear.maxRow));
         onZMin += depth[j] == shear.zMin;
         if (!(depth[j] > shear.zMin)) continue;
-        if (shear.tileUsed && !shear.tileUsed[(row >> 3) * shear.tileCols + (col >> 3)]) continue;
+        if (shear.tileUsed && !shear.tileUsed[(row >> kernels::kLensTileShift) * shear.tileCols + (col >> kernels::kLensTileShift)]) continue;
         wantSlot.push_back(uint32_t(j)), wantCell.push_back(key + row * shear.cols + col);
         nanCells += std::isnan(u[j]);
       }
