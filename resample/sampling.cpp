@@ -135,11 +135,16 @@ void SamplePattern::lensPlanes(int px, int py, const uint16_t* timeStratumOf, in
   uint16_t blockOf[64][4], cellOf[4][64];  // per time block: lens block by time sub-stratum; per lens block: its stratum by time block
   for (int a = 0; a < A; ++a) r = permutation(r, blockOf[a], B);
   for (int b = 0; b < B; ++b) r = permutation(r, cellOf[b], A);
+  // Lens block b's stratum k is point (b % 2) halfX + k % halfX, (b / 2) halfY + k / halfX of the
+  // nx × ny pattern: its offset within the block per k, and each block's first point, made once
+  // per call (the divisions by halfX, per sample, were most of this function).
+  int cellAt[64], blockAt[4];
+  for (int k = 0; k < A; ++k) cellAt[k] = (k / halfX) * nx_ + k % halfX;
+  for (int b = 0; b < B; ++b) blockAt[b] = (b / 2) * halfY * nx_ + (b % 2) * halfX;
   for (int i = 0; i < spp_; ++i) {
     const int ts = timeStratumOf[i], a = ts / B, b = blockOf[a][ts % B], k = cellOf[b][a];
-    const int cx = (b % 2) * halfX + k % halfX, cy = (b / 2) * halfY + k / halfX;
     planeOf[i] = uint16_t(a * B + b);
-    disk[i] = points[cy * nx_ + cx];
+    disk[i] = points[blockAt[b] + cellAt[k]];
   }
 }
 
