@@ -1,5 +1,7 @@
 #include "resample/hit_buffer.h"
 
+#include <bit>
+
 #if defined(__SSE2__)
 #include <emmintrin.h>
 #endif
@@ -274,17 +276,20 @@ const ResolvedSamples& HitBuffer::resolve(const BucketSamples& samples) {
       }
     }
 #endif
+    // Without branches: whether a sample was hit, and by a matte surface, is a coin toss that
+    // the predictor loses; a hidden channel is +0 (all bits clear) either way.
+    auto masked = [](float v, uint32_t mask) { return std::bit_cast<float>(std::bit_cast<uint32_t>(v) & mask); };
     for (; slot < slots; ++slot) {
       prefetchSample(idxOf, slot + kPrefetchAhead, slots);
       const size_t k = idxOf[slot];
       const float zo = zbuf[k];
       const SurfaceColour& nh = colour[k];
-      const bool hit = zo < INFINITY, visible = hit && !nh.matte;
-      out.r[slot] = visible ? nh.r : 0.f;
-      out.g[slot] = visible ? nh.g : 0.f;
-      out.b[slot] = visible ? nh.b : 0.f;
-      out.a[slot] = visible ? 1.f : 0.f;
-      out.z[slot] = hit ? zo : far;
+      const uint32_t hit = 0u - uint32_t(zo < INFINITY), visible = hit & (0u - uint32_t(nh.matte == 0));
+      out.r[slot] = masked(nh.r, visible);
+      out.g[slot] = masked(nh.g, visible);
+      out.b[slot] = masked(nh.b, visible);
+      out.a[slot] = masked(1.f, visible);
+      out.z[slot] = std::bit_cast<float>((std::bit_cast<uint32_t>(zo) & hit) | (std::bit_cast<uint32_t>(far) & ~hit));
     }
     return out;
   }
