@@ -145,6 +145,8 @@ inline uint64_t forEachLensRow(const LensSearch* searches, size_t count, size_t 
 /// The lens sort's tiles, which its draws mark where they search: squares of kLensTile cells a
 /// side (4 × 4 marked a layer's moving streaks more closely than 8 × 8 did, for more marks to read).
 inline constexpr int kLensTileShift = 2, kLensTile = 1 << kLensTileShift;
+/// The tiles that cover `cells` cells along one side.
+inline constexpr int lensTiles(int cells) { return (cells + kLensTile - 1) >> kLensTileShift; }
 
 /// A depth layer's sort keys (raster_lens.cpp, sortLensLayer()): a sample's cell is that of its
 /// position sheared by the layer's displacement, col = int(clamp(x - cx u - x0, 0, maxCol)) and

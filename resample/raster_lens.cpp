@@ -373,7 +373,7 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
   // kLensTile × kLensTile cells those searches touch are marked per block, so that a block's
   // samples are kept only where that block's searches read - a moving micropolygon's streaks,
   // not its whole path's box.
-  const int tileCols = (g.cols + kernels::kLensTile - 1) / kernels::kLensTile, tileRows = (g.rows + kernels::kLensTile - 1) / kernels::kLensTile;
+  const int tileCols = kernels::lensTiles(g.cols), tileRows = kernels::lensTiles(g.rows);
   const size_t tiles = size_t(tileCols) * size_t(tileRows);
   lensTileUsed.assign(blocks * tiles + 3, 0);  // the vector kernels read the marks 32 bits at a time
   lensDrawCells.resize((last - first) * blocks);
@@ -513,7 +513,7 @@ void BucketRasterizer::Impl::lensPlaneRuns(size_t s, float cxl, float cyl, const
     return;
   }
   const float gx = float(g.x0), gy = float(g.y0);
-  // Rows reach the same tile rows for eight or so pixel rows: their pixel span is kept.
+  // Consecutive pixel rows mostly reach the same tile rows: their pixel span is kept.
   int tr0Was = -1, tr1Was = -1, lo = 0, hi = -1;
   for (int py = 0; py < h; ++py) {
     const float fy = float(y0 + py);
@@ -526,8 +526,8 @@ void BucketRasterizer::Impl::lensPlaneRuns(size_t s, float cxl, float cyl, const
         const auto& span = rowSpan[tr];
         if (span[0] <= span[1]) first = std::min(first, span[0]), last = std::max(last, span[1]);
       }
-      // A pixel px reaches the marked columns [8 first, 8 last + 7] when its sheared cells
-      // [px + dxLo - gx, px + 1 + dxHi - gx] (clamped) meet them.
+      // A pixel px reaches the marked columns [T first, T (last + 1) - 1] (T = kLensTile) when
+      // its sheared cells [px + dxLo - gx, px + 1 + dxHi - gx] (clamped) meet them.
       lo = x0, hi = last < 0 ? x0 - 1 : x0 + w - 1;
       constexpr int T = kernels::kLensTile;
       if (last >= 0 && first > 0) lo = std::max(lo, int(std::floor(std::max(float(T * first) - 1.f - dxHi + gx, float(x0 - 1)))));

@@ -317,7 +317,7 @@ TEST(Coverage, VectorKernelsMatchTheScalarReference) {
   }
   EXPECT_GT(decided, 10000u);
   EXPECT_GT(hitsFound, 2000u);  // both outcomes were compared many times
-  EXPECT_GT(nonZeroLensCoefficients, 10000u);  // coefficients compared (a count of cases, not a time)
+  EXPECT_GT(nonZeroLensCoefficients, 10000u);  // how many non-zero coefficients were compared
 }
 
 // The moving lens kernel (testMovingLens) against raster_lens.cpp's scalar testLens(), restated

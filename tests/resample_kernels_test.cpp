@@ -472,7 +472,7 @@ TEST(ResampleHard, LensGatherAndCellKernelsAreTheirDefinitions) {
     if (rng.below(4) == 0) u[rng.below(uint32_t(S + 1))] = NAN;
     std::vector<float> depth(S + 16);
     for (float& d : depth) d = q(1);
-    const int tileCols = (cols + kernels::kLensTile - 1) / kernels::kLensTile, tileRows = (rows + kernels::kLensTile - 1) / kernels::kLensTile;
+    const int tileCols = kernels::lensTiles(cols), tileRows = kernels::lensTiles(rows);
     std::vector<uint8_t> marks(size_t(tileCols) * size_t(tileRows) + 3);
     for (uint8_t& m : marks) m = uint8_t(rng.below(2));
     kernels::LensShear shear{float(rng.uniform() * 40 - 20), float(rng.uniform() * 40 - 20), float(rng.uniform() * 4 - 2), float(rng.uniform() * 4 - 2),
