@@ -458,11 +458,10 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
       kept = kernels::lensLayerCells(isa, shear, xs, ys, us, vs, depth, runs, key, keptSlot, keptCell, kept);
       return;
     }
-    auto clampTo = [](float v, float hi) { return v >= 0.f ? (v <= hi ? v : hi) : 0.f; };
     for (size_t r = 0; r < runs.n; ++r)
       for (size_t j = runs.first[r]; j < size_t(runs.first[r]) + runs.count[r]; ++j) {
-        const uint32_t col = uint32_t(clampTo(xs[j] - shear.cx * us[j] - shear.x0, shear.maxCol));
-        const uint32_t row = uint32_t(clampTo((ys[j] - shear.cy * vs[j] - shear.y0) * shear.rowScale, shear.maxRow));
+        const uint32_t col = uint32_t(clampedCell(xs[j] - shear.cx * us[j] - shear.x0, g.cols));
+        const uint32_t row = uint32_t(clampedCell((ys[j] - shear.cy * vs[j] - shear.y0) * shear.rowScale, g.rows));
         keptSlot[kept] = uint32_t(j), keptCell[kept] = key + row * shear.cols + col;
         kept += depth[j] > zMin && (!shear.tileUsed || shear.tileUsed[(row >> kernels::kLensTileShift) * shear.tileCols + (col >> kernels::kLensTileShift)]);
       }
