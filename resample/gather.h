@@ -14,6 +14,10 @@
 
 #include "resample/simd.h"
 
+#if defined(__SSE2__)
+#include <emmintrin.h>
+#endif
+
 namespace reshutter::resample::kernels {
 
 /// An axis-aligned box moving linearly over a time span: [x0 + u dx0, x1 + u dx1] ×
@@ -147,6 +151,27 @@ inline uint64_t forEachLensRow(const LensSearch* searches, size_t count, size_t 
 inline constexpr int kLensTileShift = 2, kLensTile = 1 << kLensTileShift;
 /// The tiles that cover `cells` cells along one side.
 inline constexpr int lensTiles(int cells) { return (cells + kLensTile - 1) >> kLensTileShift; }
+
+/// A layer's grid of cells as its searches see it: a coordinate's column is
+/// clampedCell(x - x0, cols), its row clampedCell((y - y0) rowScale, rows), where clampedCell(v, n)
+/// is int(min(max(0, v), n - 1)) (a NaN takes cell 0).
+struct LensCellGrid {
+  float x0, y0, rowScale;
+  int cols, rows;
+};
+/// A draw's search over lerp parameters [f0, f1] in the grid's cells: out = c0 r0 c1 r1, the cells
+/// of box.searchBox(f0, f1, ex, ey, qm) (raster_lens.cpp).
+void lensSearchCells(const LensBox& box, float ex, float ey, float qm, float f0, float f1, const LensCellGrid& g, int out[4]);
+#if defined(__SSE2__)
+/// lensSearchCells() in four lanes of x86-64's baseline vectors, one edge a lane: the same cells
+/// (tested), for the layer sort's 4 searches a draw. Compiled only where the caller is (the
+/// baseline build, raster_lens.cpp): the vector-kernel files, built for other CPUs, do not define it.
+struct LensCellLanes {
+  explicit LensCellLanes(const LensCellGrid& g);
+  void operator()(const LensBox& box, float ex, float ey, float qm, float f0, float f1, int out[4]) const;
+  __m128 origin, scale, maxCell, lowLanes, lowSign;
+};
+#endif
 
 /// A depth layer's sort keys (raster_lens.cpp, sortLensLayer()): a sample's cell is that of its
 /// position sheared by the layer's displacement, col = int(clamp(x - cx u - x0, 0, maxCol)) and

@@ -327,6 +327,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   std::vector<uint32_t> lensCellStart;  // [cell]: the cell's first sorted sample (sortLensLayer(): the scatter's cursors too)
   std::vector<uint32_t> lensKeptSlot, lensKeptCell;  // the samples a layer's sort keeps, in slot order, and their cells
   std::vector<uint8_t> lensTileUsed;                // [block][tile of kLensTile² cells]: some search of the layer's block reaches it
+  std::vector<int32_t> lensTileDiff;                // [block][tile row + 1][tile column + 1]: the marks as a difference array (sortLensLayer())
   std::vector<std::array<int, 2>> lensTileRowSpan;  // [block][tile row]: its first and last marked tile column
   // A draw's search in one time block: cells [c0, c1] × [r0, r1] of the layer's grid (r1 < r0: none).
   struct LensCellRect {

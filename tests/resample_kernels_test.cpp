@@ -517,3 +517,52 @@ TEST(ResampleHard, LensGatherAndCellKernelsAreTheirDefinitions) {
   EXPECT_GT(onEdges, 100u);
   EXPECT_GT(onZMin, 100u);
 }
+
+// A draw's search cells in the layer sort (kernels::lensSearchCells) against their definition,
+// restated - the search box LensBox::searchBox() gives, each edge's cell clamped into the grid
+// (a NaN in cell 0) - and the four-lane version (kernels::LensCellLanes, what the sort runs on
+// x86-64) against it: the same cells, edges exactly on cell borders, beyond the grid on either
+// side, NaN and infinite boxes included.
+TEST(ResampleHard, LensSearchCellsAreTheirDefinition) {
+  Rng rng(26);
+  auto q = [&](double scale, double offset = 0) { return float(std::round((rng.uniform() * scale + offset) * 8) / 8); };
+  auto clampedCell = [](float v, int count) { return v >= 0.f ? (v < float(count) ? int(v) : count - 1) : 0; };
+  size_t onBorder = 0, clampedLow = 0, clampedHigh = 0, nanEdges = 0;
+  const float odd[] = {NAN, INFINITY, -INFINITY, 1e30f, -1e30f, 0.f, -0.f};
+  for (int trial = 0; trial < 20000; ++trial) {
+    SCOPED_TRACE("trial " + std::to_string(trial));
+    const kernels::LensCellGrid g{q(8, -4), q(8, -4), trial % 2 ? 1.f : 0.5f, 1 + int(rng.below(40)), 1 + int(rng.below(30))};
+    kernels::LensBox box{q(60, -10), 0, q(50, -10), 0, q(2, -1), 0, q(2, -1), 0};
+    box.x1 = box.x0 + q(6), box.y1 = box.y0 + q(6), box.cx1 = box.cx0 + q(1), box.cy1 = box.cy0 + q(1);
+    box.mx0 = q(30, -15), box.mx1 = box.mx0 + q(2), box.my0 = q(30, -15), box.my1 = box.my0 + q(2);
+    float ex = q(2), ey = q(2), qm = trial % 3 ? q(0.25) : 0.f;
+    float f0 = q(1), f1 = std::min(1.f, f0 + q(1));
+    if (trial % 50 == 0) {  // something odd in one field
+      float* fields[] = {&box.x0, &box.x1, &box.y0, &box.y1, &box.mx0, &box.mx1, &box.my0, &box.my1, &ex, &ey, &qm, &f0};
+      *fields[rng.below(12)] = odd[rng.below(7)];
+    }
+    float sb[4];
+    box.searchBox(f0, f1, ex, ey, qm, sb);
+    const int want[4] = {clampedCell(sb[0] - g.x0, g.cols), clampedCell((sb[2] - g.y0) * g.rowScale, g.rows), clampedCell(sb[1] - g.x0, g.cols),
+                         clampedCell((sb[3] - g.y0) * g.rowScale, g.rows)};
+    for (int k = 0; k < 4; ++k) {
+      const float v = k % 2 ? (sb[k == 1 ? 2 : 3] - g.y0) * g.rowScale : sb[k == 0 ? 0 : 1] - g.x0;
+      onBorder += v == std::floor(v) && v > 0.f && v < float(k % 2 ? g.rows : g.cols);
+      clampedLow += v < 0.f, clampedHigh += v >= float(k % 2 ? g.rows : g.cols), nanEdges += std::isnan(v);
+    }
+    int got[4];
+    kernels::lensSearchCells(box, ex, ey, qm, f0, f1, g, got);
+    EXPECT_TRUE(std::equal(want, want + 4, got)) << got[0] << " " << got[1] << " " << got[2] << " " << got[3];
+#if defined(__SSE2__)
+    int lanes[4];
+    const kernels::LensCellLanes inLanes(g);
+    inLanes(box, ex, ey, qm, f0, f1, lanes);
+    EXPECT_TRUE(std::equal(want, want + 4, lanes)) << lanes[0] << " " << lanes[1] << " " << lanes[2] << " " << lanes[3];
+#endif
+  }
+  // The cases the test means to reach were reached.
+  EXPECT_GT(onBorder, 1000u);
+  EXPECT_GT(clampedLow, 1000u);
+  EXPECT_GT(clampedHigh, 1000u);
+  EXPECT_GT(nanEdges, 10u);
+}
