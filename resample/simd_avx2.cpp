@@ -604,6 +604,7 @@ size_t lensLayerCellsAvx2T(const LensShear& s, const float* xs, const float* ys,
   for (size_t r = 0; r < runs.n; ++r)  // each run, a vector at a time
   for (size_t first = runs.first[r], count = runs.count[r], i = 0; i < count; i += 8) {
     const size_t j = first + i;
+    if (!(i & 8)) prefetchLensRuns(runs, r, i, count, xs, ys, us, vs, depth);  // a line a stream for every two vectors
     const bool whole = count - i >= 8;
     const __m256i in = _mm256_cmpgt_epi32(_mm256_set1_epi32(int(whole ? 8 : count - i)), lane);
     auto load = [&](const float* a) { return whole ? _mm256_loadu_ps(a + j) : _mm256_maskload_ps(a + j, in); };

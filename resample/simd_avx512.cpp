@@ -527,6 +527,7 @@ size_t lensLayerCellsAvx512T(const LensShear& s, const float* xs, const float* y
   for (size_t r = 0; r < runs.n; ++r)  // each run, a vector at a time
   for (size_t first = runs.first[r], count = runs.count[r], i = 0; i < count; i += 16) {
     const size_t j = first + i;
+    prefetchLensRuns(runs, r, i, count, xs, ys, us, vs, depth);
     const __mmask16 in = count - i >= 16 ? __mmask16(0xFFFF) : __mmask16((1u << (count - i)) - 1);
     const __m512 x = _mm512_maskz_loadu_ps(in, xs + j), y = _mm512_maskz_loadu_ps(in, ys + j), u = _mm512_maskz_loadu_ps(in, us + j);
     const __m512 v = _mm512_maskz_loadu_ps(in, vs + j), z = _mm512_maskz_loadu_ps(in, depth + j);
