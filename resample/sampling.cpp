@@ -1,6 +1,7 @@
 #include "resample/sampling.h"
 
 #include <cmath>
+#include <cstring>
 #include <vector>
 
 #include "common/random.h"
@@ -99,6 +100,27 @@ const uint64_t* permutation(const uint64_t* r, uint16_t* v, int n) {
   return r;
 }
 
+// permutation() of 0..3 from 3 draws, by a table of the 24 outcomes (indexed by the three swap
+// targets): the same permutation without the three dependent swaps through memory.
+struct Permutations4 {
+  uint16_t v[24][4];
+  Permutations4() {
+    for (int j3 = 0; j3 < 4; ++j3)
+      for (int j2 = 0; j2 < 3; ++j2)
+        for (int j1 = 0; j1 < 2; ++j1) {
+          uint16_t* p = v[j3 * 6 + j2 * 2 + j1];
+          for (int i = 0; i < 4; ++i) p[i] = uint16_t(i);
+          std::swap(p[3], p[j3]), std::swap(p[2], p[j2]), std::swap(p[1], p[j1]);
+        }
+  }
+};
+const Permutations4 kPermutations4;
+const uint64_t* permutation4(const uint64_t* r, uint16_t* v) {
+  auto target = [](uint64_t draw, uint32_t n) { return int(uint32_t((draw >> 32) * uint64_t(n) >> 32)); };
+  std::memcpy(v, kPermutations4.v[target(r[0], 4) * 6 + target(r[1], 3) * 2 + target(r[2], 2)], 4 * sizeof(uint16_t));
+  return r + 3;
+}
+
 }  // namespace
 
 void SamplePattern::times(int px, int py, uint16_t* stratumOf, float* u) const {
@@ -133,8 +155,8 @@ void SamplePattern::lensPlanes(int px, int py, const uint16_t* timeStratumOf, in
   const glm::vec2* points = &lensPoints_[size_t(draws.data()[0] % kPatterns) * spp_];
   const uint64_t* r = draws.data() + 1;
   uint16_t blockOf[64][4], cellOf[4][64];  // per time block: lens block by time sub-stratum; per lens block: its stratum by time block
-  for (int a = 0; a < A; ++a) r = permutation(r, blockOf[a], B);
-  for (int b = 0; b < B; ++b) r = permutation(r, cellOf[b], A);
+  for (int a = 0; a < A; ++a) r = permutation4(r, blockOf[a]);  // B = 4
+  for (int b = 0; b < B; ++b) r = A == 4 ? permutation4(r, cellOf[b]) : permutation(r, cellOf[b], A);
   // Lens block b's stratum k is point (b % 2) halfX + k % halfX, (b / 2) halfY + k / halfX of the
   // nx × ny pattern: its offset within the block per k, and each block's first point, made once
   // per call (the divisions by halfX, per sample, were most of this function).
