@@ -160,12 +160,12 @@ struct LensCellGrid {
   int cols, rows;
 };
 /// A draw's search over lerp parameters [f0, f1] in the grid's cells: out = c0 r0 c1 r1, the cells
-/// of box.searchBox(f0, f1, ex, ey, qm) (raster_lens.cpp).
+/// of box.searchBox(f0, f1, ex, ey, qm) (raster_lens_sort.cpp).
 void lensSearchCells(const LensBox& box, float ex, float ey, float qm, float f0, float f1, const LensCellGrid& g, int out[4]);
 #if defined(__SSE2__)
 /// lensSearchCells() in four lanes of x86-64's baseline vectors, one edge a lane: the same cells
 /// (tested), for the layer sort's 4 searches a draw. Compiled only where the caller is (the
-/// baseline build, raster_lens.cpp): the vector-kernel files, built for other CPUs, do not define it.
+/// baseline build, raster_lens_sort.cpp): the vector-kernel files, built for other CPUs, do not define it.
 struct LensCellLanes {
   explicit LensCellLanes(const LensCellGrid& g);
   void operator()(const LensBox& box, float ex, float ey, float qm, float f0, float f1, int out[4]) const;

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <cstring>
+#include <utility>
 #include <vector>
 
 #include "common/random.h"
@@ -103,8 +104,8 @@ const uint64_t* permutation(const uint64_t* r, uint16_t* v, int n) {
 // permutation() of 0..3 from 3 draws, by a table of the 24 outcomes (indexed by the three swap
 // targets): the same permutation without the three dependent swaps through memory.
 struct Permutations4 {
-  uint16_t v[24][4];
-  Permutations4() {
+  uint16_t v[24][4] = {};
+  constexpr Permutations4() {
     for (int j3 = 0; j3 < 4; ++j3)
       for (int j2 = 0; j2 < 3; ++j2)
         for (int j1 = 0; j1 < 2; ++j1) {
@@ -114,7 +115,7 @@ struct Permutations4 {
         }
   }
 };
-const Permutations4 kPermutations4;
+constexpr Permutations4 kPermutations4;
 const uint64_t* permutation4(const uint64_t* r, uint16_t* v) {
   auto target = [](uint64_t draw, uint32_t n) { return int(uint32_t((draw >> 32) * uint64_t(n) >> 32)); };
   std::memcpy(v, kPermutations4.v[target(r[0], 4) * 6 + target(r[1], 3) * 2 + target(r[2], 2)], 4 * sizeof(uint16_t));

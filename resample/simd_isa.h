@@ -102,7 +102,7 @@ inline int minInt(int a, int b) { return b < a ? b : a; }
 // lensLayerCells()' loads, a line of each stream kLensRunsAhead samples ahead of sample i of run
 // r (past the run's end, into the next run): a layer's sort reads the bucket's sample planes in
 // runs of about a hundred slots, which a hardware prefetcher does not follow far enough ahead
-// (measured, bench/RESULTS.md: 64 ahead, -3 % of the 20 px lens crop; 32 and 128 less).
+// (measured, bench/RESULTS.md: 64 ahead, -1 to -3 % of the 20 px lens crop; 32 and 128 no better).
 inline constexpr size_t kLensRunsAhead = 64;
 inline void prefetchLensRuns(const LensRuns& runs, size_t r, size_t i, size_t count, const float* xs, const float* ys, const float* us, const float* vs,
                              const float* depth) {
