@@ -125,6 +125,10 @@ void BucketRasterizer::Impl::rasterizeQueued() {
 }
 
 void BucketRasterizer::Impl::rasterizeChunk(const Source& src, const TileEntry& entry, const TilePart& part, const Chunk& ch) {
+  // The chunk's corners, which every path reads first after projecting the chunk's vertices:
+  // fetched now, so that the projection runs while they arrive (chunks go by depth, so parts
+  // interleave and a chunk's corners are rarely in cache).
+  for (const uint32_t *c = &part.corners[size_t(ch.m0) * 4], *end = &part.corners[size_t(ch.m1) * 4]; c < end; c += 16) __builtin_prefetch(c);
   const auto& meta = src.store->meta();
   const auto& knots = src.knots(entry.schedule);
   const HitContext hc = hitContext(meta, entry, part, st.data(), tBase - double(src.frame));

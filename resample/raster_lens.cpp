@@ -181,9 +181,6 @@ void BucketRasterizer::Impl::rasterizeLens(const Source& src, const store::TileE
     lensTimes.push_back(moving ? tMin - F : 0.0);  // an instant, or no motion
   }
   const size_t C = lensTimes.size();
-  // The chunk's corners, which the queue kernel reads first after the projections below: fetched
-  // now, so that the projections run while they arrive.
-  for (const uint32_t *c = &part.corners[size_t(ch.m0) * 4], *end = &part.corners[size_t(ch.m1) * 4]; c < end; c += 16) __builtin_prefetch(c);
   cullX.resize(C * nV), cullY.resize(C * nV), cullZ.resize(C * nV);
   segmentBounded.assign(C, 1);
   // Per bound time whose positions are all bounded (then none is NaN, and min and max are exact in

@@ -24,9 +24,6 @@ void BucketRasterizer::Impl::rasterizeStatic(const Source& src, const TilePart& 
   // its box and margin bound every micropolygon's, so testArea() would reject each.
   bool missesRegion;
   if (vectorKernels) {
-    // The chunk's corners, which the area kernel reads first after the projection: fetched now,
-    // so that the projection runs while they arrive.
-    for (const uint32_t *c = &part.corners[size_t(ch.m0) * 4], *end = &part.corners[size_t(ch.m1) * 4]; c < end; c += 16) __builtin_prefetch(c);
     // project()'s values eight at a time, with the chunk's box (pointsMissRegion()'s, over
     // the same points).
     projZ.resize(nV);
