@@ -162,16 +162,19 @@ struct LensCellGrid {
 /// A draw's search over lerp parameters [f0, f1] in the grid's cells: out = c0 r0 c1 r1, the cells
 /// of box.searchBox(f0, f1, ex, ey, qm) (raster_lens_sort.cpp).
 void lensSearchCells(const LensBox& box, float ex, float ey, float qm, float f0, float f1, const LensCellGrid& g, int out[4]);
-#if defined(__SSE2__)
-/// lensSearchCells() in four lanes of x86-64's baseline vectors, one edge a lane: the same cells
-/// (tested), for the layer sort's 4 searches a draw. Compiled only where the caller is (the
-/// baseline build, raster_lens_sort.cpp): the vector-kernel files, built for other CPUs, do not define it.
+/// lensSearchCells() for one grid, what the layer sort calls for its searches: in four lanes of
+/// x86-64's baseline vectors, one edge a lane, the same cells (tested); without SSE2,
+/// lensSearchCells() itself. Defined where the caller is (the baseline build,
+/// raster_lens_sort.cpp): the vector-kernel files, built for other CPUs, do not define it.
 struct LensCellLanes {
   explicit LensCellLanes(const LensCellGrid& g);
   void operator()(const LensBox& box, float ex, float ey, float qm, float f0, float f1, int out[4]) const;
+#if defined(__SSE2__)
   __m128 origin, scale, maxCell, lowLanes, lowSign;
-};
+#else
+  LensCellGrid grid;
 #endif
+};
 
 /// A depth layer's sort keys (raster_lens.cpp, sortLensLayer()): a sample's cell is that of its
 /// position sheared by the layer's displacement, col = int(clamp(x - cx u - x0, 0, maxCol)) and

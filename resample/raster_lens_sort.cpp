@@ -51,6 +51,11 @@ void LensCellLanes::operator()(const LensBox& box, float ex, float ey, float qm,
   const __m128 v = _mm_mul_ps(_mm_sub_ps(q, origin), scale);
   _mm_storeu_si128(reinterpret_cast<__m128i*>(out), _mm_cvttps_epi32(_mm_min_ps(_mm_max_ps(v, _mm_setzero_ps()), maxCell)));
 }
+#else
+LensCellLanes::LensCellLanes(const LensCellGrid& g) : grid(g) {}
+void LensCellLanes::operator()(const LensBox& box, float ex, float ey, float qm, float f0, float f1, int out[4]) const {
+  lensSearchCells(box, ex, ey, qm, f0, f1, grid, out);
+}
 #endif
 
 }  // namespace kernels
@@ -90,10 +95,7 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
   // the branch predictor guessed wrong.
   const size_t diffCols = size_t(tileCols) + 1, diffTiles = diffCols * (size_t(tileRows) + 1);
   lensTileDiff.assign(blocks * diffTiles, 0);
-  const kernels::LensCellGrid cellGrid{float(g.x0), float(g.y0), rowScale, g.cols, g.rows};
-#if defined(__SSE2__)
-  const kernels::LensCellLanes searchCells(cellGrid);
-#endif
+  const kernels::LensCellLanes searchCells(kernels::LensCellGrid{float(g.x0), float(g.y0), rowScale, g.cols, g.rows});
   for (size_t i = first; i < last; ++i) {
     const LensDraw& e = lensDraws[lensOrder[i]];
     const LensChunk& ec = lensChunks[e.chunk];
@@ -110,15 +112,8 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
         }
       }
       static_assert(sizeof(LensCellRect) == 4 * sizeof(int), "a rect is c0 r0 c1 r1");
-      if (b == 0 || ec.blockF != ~0u) {
-#if defined(__SSE2__)
-        searchCells(e.box, e.ex, e.ey, e.qm, f0, f1, &rect[b].c0);
-#else
-        kernels::lensSearchCells(e.box, e.ex, e.ey, e.qm, f0, f1, cellGrid, &rect[b].c0);
-#endif
-      } else {
-        rect[b] = rect[0];  // no lerp: every block the same box
-      }
+      if (b == 0 || ec.blockF != ~0u) searchCells(e.box, e.ex, e.ey, e.qm, f0, f1, &rect[b].c0);
+      else rect[b] = rect[0];  // no lerp: every block the same box
       const LensCellRect& r = rect[b];
       const int tx0 = r.c0 >> kernels::kLensTileShift, tx1 = (r.c1 >> kernels::kLensTileShift) + 1;
       const int ty0 = r.r0 >> kernels::kLensTileShift, ty1 = (r.r1 >> kernels::kLensTileShift) + 1;
@@ -128,7 +123,11 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
       ++d[r0 + c0], --d[r0 + c1], --d[r1 + c0], ++d[r1 + c1];
     }
   }
-  // The running sums: a tile is marked where some box covers it.
+  // The running sums: a tile is marked where some box covers it. The same pass keeps, per block
+  // and tile row, its first and last marked tile column (first > last: none), and whether every
+  // tile is marked.
+  lensTileRowSpan.resize(blocks * size_t(tileRows));
+  bool allMarked = true;
   for (size_t b = 0; b < blocks; ++b) {
     int32_t* d = lensTileDiff.data() + b * diffTiles;
     uint8_t* m = lensTileUsed.data() + b * tiles;
@@ -136,29 +135,23 @@ void BucketRasterizer::Impl::sortLensLayer(size_t first, size_t last, float cxl,
       int32_t* row = d + ty * diffCols;
       int32_t* next = row + diffCols;
       int32_t across = 0;
+      int firstMarked = tileCols, lastMarked = -1, marks = 0;
       for (size_t tx = 0; tx < size_t(tileCols); ++tx) {
         across += row[tx];
         next[tx] += row[tx];  // what this row starts carries down to the next
-        m[ty * size_t(tileCols) + tx] = across > 0;
+        const bool marked = across > 0;
+        m[ty * size_t(tileCols) + tx] = marked;
+        if (marked) firstMarked = std::min(firstMarked, int(tx)), lastMarked = int(tx), ++marks;
       }
+      lensTileRowSpan[b * size_t(tileRows) + ty] = {firstMarked, lastMarked};
+      allMarked = allMarked && marks == tileCols;
     }
   }
   // No marks to read when the layer searches every tile (a dense layer), or when asked to sort
   // every sample.
-  const bool everyTile = !opt.lensSortReached ||
-                         std::all_of(lensTileUsed.begin(), lensTileUsed.begin() + ptrdiff_t(blocks * tiles), [](uint8_t m) { return m != 0; });
+  const bool everyTile = !opt.lensSortReached || allMarked;
   const uint8_t* used = everyTile ? nullptr : lensTileUsed.data();
   stats.lensSparseLayers += !everyTile;
-  // Per block and tile row, its first and last marked tile column (first > last: none).
-  lensTileRowSpan.resize(blocks * size_t(tileRows));
-  if (used)
-    for (size_t r = 0; r < blocks * size_t(tileRows); ++r) {
-      const uint8_t* m = used + r * size_t(tileCols);
-      int first = 0, last = tileCols - 1;
-      while (first < tileCols && !m[first]) ++first;
-      while (last >= first && !m[last]) --last;
-      lensTileRowSpan[r] = {first, last};
-    }
   // Keyed by time block, then cell: block b's cells are [b cells, (b + 1) cells).
   // One array is counts, cursors and starts: cell c's count goes to start[c + 2], whose running
   // sum makes start[c + 1] cell c's first place; the scatter advances start[c + 1] to its end,

@@ -93,16 +93,9 @@ class PixelDraws {
   const uint64_t* draws_;
 };
 
-// A permutation of 0..n-1 into v by Fisher-Yates from n - 1 draws (Rng::below's mapping); returns
-// the draws after those it used.
-const uint64_t* permutation(const uint64_t* r, uint16_t* v, int n) {
-  for (int i = 0; i < n; ++i) v[i] = uint16_t(i);
-  for (int i = n - 1; i > 0; --i, ++r) std::swap(v[i], v[int(uint32_t((*r >> 32) * uint64_t(uint32_t(i + 1)) >> 32))]);
-  return r;
-}
-
 // permutation() of 0..3 from 3 draws, by a table of the 24 outcomes (indexed by the three swap
-// targets): the same permutation without the three dependent swaps through memory.
+// targets): the same permutation without the three dependent swaps through memory (the lens
+// blocks' permutations, eight a pixel at 16 samples).
 struct Permutations4 {
   uint16_t v[24][4] = {};
   constexpr Permutations4() {
@@ -120,6 +113,15 @@ const uint64_t* permutation4(const uint64_t* r, uint16_t* v) {
   auto target = [](uint64_t draw, uint32_t n) { return int(uint32_t((draw >> 32) * uint64_t(n) >> 32)); };
   std::memcpy(v, kPermutations4.v[target(r[0], 4) * 6 + target(r[1], 3) * 2 + target(r[2], 2)], 4 * sizeof(uint16_t));
   return r + 3;
+}
+
+// A permutation of 0..n-1 into v by Fisher-Yates from n - 1 draws (Rng::below's mapping); returns
+// the draws after those it used.
+const uint64_t* permutation(const uint64_t* r, uint16_t* v, int n) {
+  if (n == 4) return permutation4(r, v);
+  for (int i = 0; i < n; ++i) v[i] = uint16_t(i);
+  for (int i = n - 1; i > 0; --i, ++r) std::swap(v[i], v[int(uint32_t((*r >> 32) * uint64_t(uint32_t(i + 1)) >> 32))]);
+  return r;
 }
 
 }  // namespace
@@ -156,8 +158,8 @@ void SamplePattern::lensPlanes(int px, int py, const uint16_t* timeStratumOf, in
   const glm::vec2* points = &lensPoints_[size_t(draws.data()[0] % kPatterns) * spp_];
   const uint64_t* r = draws.data() + 1;
   uint16_t blockOf[64][4], cellOf[4][64];  // per time block: lens block by time sub-stratum; per lens block: its stratum by time block
-  for (int a = 0; a < A; ++a) r = permutation4(r, blockOf[a]);  // B = 4
-  for (int b = 0; b < B; ++b) r = A == 4 ? permutation4(r, cellOf[b]) : permutation(r, cellOf[b], A);
+  for (int a = 0; a < A; ++a) r = permutation(r, blockOf[a], B);
+  for (int b = 0; b < B; ++b) r = permutation(r, cellOf[b], A);
   // Lens block b's stratum k is point (b % 2) halfX + k % halfX, (b / 2) halfY + k / halfX of the
   // nx × ny pattern: its offset within the block per k, and each block's first point, made once
   // per call (the divisions by halfX, per sample, were most of this function).
