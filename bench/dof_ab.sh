@@ -17,17 +17,14 @@ radii=("$@")
 work=$(mktemp -d /tmp/reshutter-dofab.XXXXXX)
 trap 'rm -rf "$work"' EXIT
 source "$(dirname "$0")/host.sh"
+source "$(dirname "$0")/lens.sh"
 host_line
-# As bench/dof_frame.sh: fov 40 over 1080 rows, focus at the nearest depth (5), f-stop chosen so
-# that the farthest depth (50) has a circle of radius r.
-a=$(awk 'BEGIN { print 540 / (sin(20 * atan2(0, -1) / 180) / cos(20 * atan2(0, -1) / 180)) }')
 for ((round = 0; round < rounds; ++round)); do
   for r in "${radii[@]}"; do
     for which in old new; do
       bin=$old
       [[ $which == new ]] && bin=$new
-      lens=(--pinhole)
-      [[ $r != 0 ]] && lens=(--fstop "$(awk -v r="$r" -v a="$a" 'BEGIN { printf "%.6f", 1 / (2 * r / (a * 0.18)) }')" --focal-length 1 --focus-distance 5)
+      mapfile -t lens < <(lens_options "$r")
       /usr/bin/time -o "$work/time" -f "%e %U %S" "$bin" -q resample "$store" --spp 16 --filter gaussian:2x2 --stats -o "$work/out.exr" "${lens[@]}" > "$work/log" 2>&1
       raster=$(awk '/time \(thread-sum\)/ { for (i = 1; i <= NF; ++i) if ($i == "rasterize") print $(i + 1) }' "$work/log")
       echo "$which $r $(cat "$work/time") $raster"

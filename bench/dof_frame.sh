@@ -17,17 +17,11 @@ bin=$build/reshutter
 work=$(mktemp -d /tmp/reshutter-dof.XXXXXX)
 trap 'rm -rf "$work"' EXIT
 source "$(dirname "$0")/host.sh"
+source "$(dirname "$0")/lens.sh"
 host_line
-# The synthetic camera: fov 40 over 1080 rows, so raster x = a x/z + b with a = 540 / tan(20°).
-# A point at depth z moves by a R (1/d - 1/z) for a lens point at radius R: with d = 5 the far
-# end (z = 50) moves by a R 0.18, and f-stop = focal length / 2R with focal length 1.
 pinhole=""
 for r in "${radii[@]}"; do
-  lens=(--pinhole)
-  if [[ $r != 0 ]]; then
-    fstop=$(awk -v r="$r" 'BEGIN { a = 540 / (sin(20 * atan2(0, -1) / 180) / cos(20 * atan2(0, -1) / 180)); printf "%.6f", 1 / (2 * r / (a * 0.18)) }')
-    lens=(--fstop "$fstop" --focal-length 1 --focus-distance 5)
-  fi
+  mapfile -t lens < <(lens_options "$r")
   /usr/bin/time -o "$work/time" -f "%e %U %S %M" "$bin" -q resample "$store" --spp 16 --filter gaussian:2x2 --stats -o "$work/out.exr" "${lens[@]}" > "$work/log" 2>&1
   read -r wall user sys rss < "$work/time"
   raster=$(awk '/time \(thread-sum\)/ { for (i = 1; i <= NF; ++i) if ($i == "rasterize") print $(i + 1) }' "$work/log")

@@ -15,11 +15,9 @@ shift 3
 work=$(mktemp -d /tmp/reshutter-dofpairs.XXXXXX)
 trap 'rm -rf "$work"' EXIT
 source "$(dirname "$0")/host.sh"
+source "$(dirname "$0")/lens.sh"
 host_line
-# As bench/dof_frame.sh: fov 40 over 1080 rows, focus at the nearest depth (5), f-stop chosen so
-# that the farthest depth (50) has a circle of radius RADIUS.
-a=$(awk 'BEGIN { print 540 / (sin(20 * atan2(0, -1) / 180) / cos(20 * atan2(0, -1) / 180)) }')
-fstop=$(awk -v r="$radius" -v a="$a" 'BEGIN { printf "%.6f", 1 / (2 * r / (a * 0.18)) }')
+mapfile -t lens < <(lens_options "$radius")
 run() {  # binary, then lens options: "wall cpu"
   local bin=$1
   shift
@@ -29,7 +27,7 @@ run() {  # binary, then lens options: "wall cpu"
 for ((round = 0; round < rounds; ++round)); do
   for bin in "$@"; do
     read -r pw pc < <(run "$bin" --pinhole)
-    read -r lw lc < <(run "$bin" --fstop "$fstop" --focal-length 1 --focus-distance 5)
+    read -r lw lc < <(run "$bin" "${lens[@]}")
     echo "$bin $(awk -v a="$lw" -v b="$pw" 'BEGIN { printf "%.3f", a / b }') $(awk -v a="$lc" -v b="$pc" 'BEGIN { printf "%.3f", a / b }') $pw $lw"
   done
 done > "$work/pairs"
