@@ -356,7 +356,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
     LinearState state;
     LinearBox lb;
     uint32_t run;            // the run of the chunk's micropolygons of one grid it belongs to
-    int cx0, cy0, cx1, cy1;  // cells of its compensated box (when its run was gathered)
+    int cx0, cy0, cx1, cy1;  // cells of its compensated box (when its run was gathered); in this order, stored as one vector
   };
   struct ChunkRun {
     uint32_t begin, end;  // micropolygons [begin, end) of the chunk
@@ -386,6 +386,7 @@ struct BucketRasterizer::Impl : BucketSamples, HitBuffer {
   // gathered once and sorted by cell of compensated position (gatherRun()).
   std::vector<ChunkMicropolygon> chunkMps;
   std::vector<ChunkRun> chunkRuns;
+  std::vector<std::array<float, 4>> compensated;  // per chunk micropolygon, gatherRun()'s compensated box: x0 y0 x1 y1
   uint32_t gatheredRun = ~0u;  // the run whose candidates the sorted arrays hold
   kernels::CellGrid cellGrid{};
   SkewedArray<uint32_t> chunkIndex{20}, sortedIndex{60};

@@ -187,6 +187,7 @@ inline void BucketRasterizer::Impl::drawLinear(const MovingPart& mp, uint32_t mi
 inline void BucketRasterizer::Impl::prepareLinearChunk(const MovingPart& mp, const Chunk& ch) {
   const uint32_t count = ch.m1 - ch.m0;
   chunkMps.resize(count);
+  compensated.resize(count);
   chunkRuns.clear();
   gatheredRun = ~0u;
   for (uint32_t i = 0; i < count; ++i) {
@@ -200,6 +201,16 @@ inline void BucketRasterizer::Impl::prepareLinearChunk(const MovingPart& mp, con
   }
 }
 
+#if defined(__SSE2__)
+// A moving box's sides as vectors: ends = (x0 y0 x1 y1), moves = (dx0 dy0 dx1 dy1).
+inline void boxEnds(const MovingBox& b, __m128& ends, __m128& moves) {
+  const __m128 xs = _mm_loadu_ps(&b.x0), ys = _mm_loadu_ps(&b.y0);  // (x0 dx0 x1 dx1), (y0 dy0 y1 dy1)
+  const __m128 lo = _mm_unpacklo_ps(xs, ys), hi = _mm_unpackhi_ps(xs, ys);  // (x0 y0 dx0 dy0), (x1 y1 dx1 dy1)
+  ends = _mm_shuffle_ps(lo, hi, _MM_SHUFFLE(1, 0, 1, 0));
+  moves = _mm_shuffle_ps(lo, hi, _MM_SHUFFLE(3, 2, 3, 2));
+}
+#endif
+
 // Gathers run r's candidates, when its micropolygons move together enough to pay.
 inline void BucketRasterizer::Impl::gatherRun(const MovingPart& mp, uint32_t r) {
   ChunkRun& run = chunkRuns[r];
@@ -208,6 +219,28 @@ inline void BucketRasterizer::Impl::gatherRun(const MovingPart& mp, uint32_t r) 
   float x0a = INFINITY, x0b = INFINITY, x1a = -INFINITY, x1b = -INFINITY, y0a = INFINITY, y0b = INFINITY, y1a = -INFINITY, y1b = -INFINITY;
   float zCull = INFINITY, margin = 0.f, spread = 0.f;
   uint32_t drawn = 0;
+#if defined(__SSE2__)
+  {
+    // The run's box at the interval's ends, (x0 y0 x1 y1) at its start and its end, lane for
+    // lane the scalar loop's operations (the std::min / std::max operand order as below).
+    __m128 startLo = _mm_set1_ps(INFINITY), startHi = _mm_set1_ps(-INFINITY), endLo = startLo, endHi = startHi;
+    for (uint32_t i = run.begin; i < run.end; ++i) {
+      const ChunkMicropolygon& cm = chunkMps[i];
+      if (cm.state != LinearState::Draw) continue;
+      ++drawn;
+      __m128 ends, moves;
+      boxEnds(cm.lb.box, ends, moves);
+      const __m128 late = _mm_add_ps(ends, moves);
+      startLo = _mm_min_ps(ends, startLo), startHi = _mm_max_ps(ends, startHi), endLo = _mm_min_ps(late, endLo), endHi = _mm_max_ps(late, endHi);
+      zCull = std::min(zCull, cm.lb.zCull), margin = std::max(margin, cm.lb.rangeMargin);
+      const __m128 extent = _mm_add_ps(_mm_sub_ps(_mm_movehl_ps(ends, ends), ends), _mm_set1_ps(1.f));  // x1 - x0 + 1, y1 - y0 + 1
+      spread += _mm_cvtss_f32(extent) * _mm_cvtss_f32(_mm_shuffle_ps(extent, extent, _MM_SHUFFLE(1, 1, 1, 1)));
+    }
+    alignas(16) float sl[4], sh[4], el[4], eh[4];
+    _mm_store_ps(sl, startLo), _mm_store_ps(sh, startHi), _mm_store_ps(el, endLo), _mm_store_ps(eh, endHi);
+    x0a = sl[0], y0a = sl[1], x1a = sh[2], y1a = sh[3], x0b = el[0], y0b = el[1], x1b = eh[2], y1b = eh[3];
+  }
+#else
   for (uint32_t i = run.begin; i < run.end; ++i) {
     const ChunkMicropolygon& cm = chunkMps[i];
     if (cm.state != LinearState::Draw) continue;
@@ -218,6 +251,7 @@ inline void BucketRasterizer::Impl::gatherRun(const MovingPart& mp, uint32_t r) 
     zCull = std::min(zCull, cm.lb.zCull), margin = std::max(margin, cm.lb.rangeMargin);
     spread += (b.x1 - b.x0 + 1.f) * (b.y1 - b.y0 + 1.f);
   }
+#endif
   if (drawn < 4 || !vectorKernels || !opt.chunkGathers || mp.times.cover.check || N > 64) return;
   const float mag = std::max({std::abs(x0a), std::abs(x0b), std::abs(x1a), std::abs(x1b), std::abs(y0a), std::abs(y0b), std::abs(y1a), std::abs(y1b)});
   // Float rounding of the lerps: the run's box must hold every sample any of its
@@ -237,15 +271,44 @@ inline void BucketRasterizer::Impl::gatherRun(const MovingPart& mp, uint32_t r) 
   const float dx = 0.5f * (box.dx0 + box.dx1), dy = 0.5f * (box.dy0 + box.dy1);
   const float ec = 1e-5f + 4e-6f * (mag + std::abs(dx) + std::abs(dy));
   float gx0 = INFINITY, gy0 = INFINITY, gx1 = -INFINITY, gy1 = -INFINITY, size = 0.f;
+#if defined(__SSE2__)
+  // Each micropolygon's compensated box as one vector (x0, y0, x1, y1), kept for its cells
+  // below. Lane for lane the scalar operations: std::min(a, b) is _mm_min_ps(b, a), std::max(a,
+  // b) is _mm_max_ps(b, a), and x - ec is x + (-ec).
+  {
+    const __m128 zero = _mm_setzero_ps(), shift = _mm_setr_ps(dx, dy, dx, dy), slack = _mm_setr_ps(-ec, -ec, ec, ec);
+    const __m128 upper = _mm_castsi128_ps(_mm_setr_epi32(0, 0, -1, -1));  // lanes 2, 3: the box's far ends
+    __m128 lo = _mm_set1_ps(INFINITY), hi = _mm_set1_ps(-INFINITY), widest = zero;
+    for (uint32_t i = run.begin; i < run.end; ++i) {
+      const ChunkMicropolygon& cm = chunkMps[i];
+      if (cm.state != LinearState::Draw) continue;
+      __m128 ends, moves;
+      boxEnds(cm.lb.box, ends, moves);
+      const __m128 d = _mm_sub_ps(moves, shift);
+      const __m128 lag = _mm_or_ps(_mm_andnot_ps(upper, _mm_min_ps(d, zero)), _mm_and_ps(upper, _mm_max_ps(d, zero)));
+      const __m128 comp = _mm_add_ps(_mm_add_ps(ends, lag), slack);
+      _mm_storeu_ps(compensated[i].data(), comp);
+      lo = _mm_min_ps(comp, lo), hi = _mm_max_ps(comp, hi);
+      const __m128 extent = _mm_sub_ps(_mm_movehl_ps(comp, comp), comp);  // x1 - x0, y1 - y0
+      widest = _mm_max_ps(extent, widest);
+      widest = _mm_max_ps(_mm_shuffle_ps(extent, extent, _MM_SHUFFLE(1, 1, 1, 1)), widest);
+    }
+    alignas(16) float l[4], u[4];
+    _mm_store_ps(l, lo), _mm_store_ps(u, hi);
+    gx0 = l[0], gy0 = l[1], gx1 = u[2], gy1 = u[3], size = _mm_cvtss_f32(widest);
+  }
+#else
   for (uint32_t i = run.begin; i < run.end; ++i) {
     const ChunkMicropolygon& cm = chunkMps[i];
     if (cm.state != LinearState::Draw) continue;
     const MovingBox& b = cm.lb.box;
     const float bx0 = b.x0 + std::min(0.f, b.dx0 - dx) - ec, bx1 = b.x1 + std::max(0.f, b.dx1 - dx) + ec;
     const float by0 = b.y0 + std::min(0.f, b.dy0 - dy) - ec, by1 = b.y1 + std::max(0.f, b.dy1 - dy) + ec;
+    compensated[i] = {bx0, by0, bx1, by1};
     gx0 = std::min(gx0, bx0), gy0 = std::min(gy0, by0), gx1 = std::max(gx1, bx1), gy1 = std::max(gy1, by1);
     size = std::max({size, bx1 - bx0, by1 - by0});
   }
+#endif
   if (!(size > 0.f) || !std::isfinite(size) || size > 8.f) return;
   const float invSize = 1.f / size;
   const float colsF = std::floor((gx1 - gx0) * invSize) + 1.f, rowsF = std::floor((gy1 - gy0) * invSize) + 1.f;
@@ -253,15 +316,26 @@ inline void BucketRasterizer::Impl::gatherRun(const MovingPart& mp, uint32_t r) 
   cellGrid = kernels::CellGrid{gx0, gy0, invSize, int(colsF), int(rowsF), dx, dy, box.thetaA, box.invLen};
   // A micropolygon's cells: its compensated box's, computed as sortByCell() places a sample
   // (floor of the offset over the cell size, clamped), so that a sample inside the box lands
-  // inside its cell range.
-  auto cell = [&](float v, float origin, int cells) { return int(std::min(float(cells - 1), std::max(0.f, std::floor((v - origin) * invSize)))); };
+  // inside its cell range. Clamping before the floor gives the same cell (the bounds are whole
+  // numbers), and a clamped offset is never negative: its floor is its truncation.
+  const float lastCol = float(cellGrid.cols - 1), lastRow = float(cellGrid.rows - 1);
+#if defined(__SSE2__)
+  const __m128 origin = _mm_setr_ps(gx0, gy0, gx0, gy0), scale = _mm_set1_ps(invSize), last = _mm_setr_ps(lastCol, lastRow, lastCol, lastRow);
   for (uint32_t i = run.begin; i < run.end; ++i) {
     ChunkMicropolygon& cm = chunkMps[i];
     if (cm.state != LinearState::Draw) continue;
-    const MovingBox& b = cm.lb.box;
-    cm.cx0 = cell(b.x0 + std::min(0.f, b.dx0 - dx) - ec, gx0, cellGrid.cols), cm.cx1 = cell(b.x1 + std::max(0.f, b.dx1 - dx) + ec, gx0, cellGrid.cols);
-    cm.cy0 = cell(b.y0 + std::min(0.f, b.dy0 - dy) - ec, gy0, cellGrid.rows), cm.cy1 = cell(b.y1 + std::max(0.f, b.dy1 - dy) + ec, gy0, cellGrid.rows);
+    const __m128 offset = _mm_mul_ps(_mm_sub_ps(_mm_loadu_ps(compensated[i].data()), origin), scale);
+    _mm_storeu_si128(reinterpret_cast<__m128i*>(&cm.cx0), _mm_cvttps_epi32(_mm_min_ps(last, _mm_max_ps(_mm_setzero_ps(), offset))));
   }
+#else
+  auto cell = [&](float v, float origin, float last) { return int(std::min(last, std::max(0.f, (v - origin) * invSize))); };
+  for (uint32_t i = run.begin; i < run.end; ++i) {
+    ChunkMicropolygon& cm = chunkMps[i];
+    if (cm.state != LinearState::Draw) continue;
+    const auto& cb = compensated[i];
+    cm.cx0 = cell(cb[0], gx0, lastCol), cm.cy0 = cell(cb[1], gy0, lastRow), cm.cx1 = cell(cb[2], gx0, lastCol), cm.cy1 = cell(cb[3], gy0, lastRow);
+  }
+#endif
   const kernels::Candidates gathered{chunkIndex.data(), chunkT.data(), chunkX.data(), chunkY.data()};
   size_t n = 0;
   for (int k = 0; k < mt.groups; ++k) {
