@@ -83,6 +83,14 @@ inline size_t appendSegmentVector(const BoxLanes512& b, const SampleRows& r, __m
   return appendCompressed512(out, n, k, idx, t, x, y);
 }
 
+// Tests the sixteen consecutive samples from `at` and appends the survivors to `out` from n.
+inline size_t appendRun512(const BoxLanes512& b, const SampleRows& r, __m512 zCull, uint32_t at, const Candidates& out, size_t n) {
+  const __m512 t = _mm512_loadu_ps(r.st + at), x = _mm512_loadu_ps(r.sx + at), y = _mm512_loadu_ps(r.sy + at);
+  const __mmask16 visible = _mm512_cmp_ps_mask(_mm512_loadu_ps(r.depth + at), zCull, _CMP_GT_OQ);
+  const __m512i idx = _mm512_add_epi32(_mm512_set1_epi32(int(at)), _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15));
+  return appendCompressed512(out, n, insideAtOwnTime512(visible, b, t, x, y), idx, t, x, y);
+}
+
 // Tests every whole vector of waiting segments; keeps the (at most three) left over, or with
 // `all` pads them to a vector and tests them too.
 template <bool kFixed = false>
@@ -276,7 +284,11 @@ size_t gatherStrataAvx512(const SampleRows& region, const StrataSpans& sp, const
     for (int row = 0; row < rows[s]; ++row) {
       if (region.rowGroup && region.rowGroup[rowOffset[s] + row] != region.group) continue;
       const uint32_t rowStart = uint32_t(first[s]) + uint32_t(row) * uint32_t(region.stride);
-      for (int col = 0; col < cols[s]; col += 4) {
+      int col = 0;
+      // Rows of sixteen or more (a run's stratum box is often a grid's row of micropolygons
+      // wide): whole vectors of consecutive samples, the last few columns as segments.
+      for (; cols[s] - col >= 16; col += 16) n = appendRun512(lanes, rr, zCull, rowStart + uint32_t(col), list, n);
+      for (; col < cols[s]; col += 4) {
         if (seg.count >= Segments::kCap) n = flushSegments(lanes, rr, zCull, seg, false, list, n);
         seg.start[seg.count] = rowStart + uint32_t(col);
         seg.bits[seg.count] = uint8_t((1u << minInt(4, cols[s] - col)) - 1);

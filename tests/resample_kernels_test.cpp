@@ -102,6 +102,88 @@ TEST(ResampleHard, BoxGathersFindExactlyTheSamplesInTheBox) {
   EXPECT_GT(longRowGathers, 100u);  // the long rows' loads found samples
 }
 
+// The strata gather (kernels::gatherStrata) against its definition, restated here: for each
+// stratum s, the pixels its box's path over [u0[s], u1[s]] touches (the box's ends at both times,
+// widened by the margin, clamped to the region, floored), and of plane s in those pixels every
+// sample inside the box at its own time whose depth lies beyond zCull, each once, with copies of
+// its time and position. Small strata (the one-vector paths), wide ones (rows of sixteen and
+// more: a run's gather), alternating fields and other row groups, strata counts that are not
+// multiples of the vector width.
+TEST(ResampleHard, StrataGathersFindExactlyTheSamplesOfTheirStrata) {
+  if (!kernels::available()) GTEST_SKIP() << "this CPU has no AVX2";
+  Rng rng(29);
+  const int x0 = 100, y0 = 50, w = 56, h = 24;
+  const size_t PS = size_t(w) * h;
+  size_t wideStrata = 0, smallStrata = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    const int N = std::vector<int>{4, 9, 16, 23, 64}[rng.below(5)];
+    std::vector<float> st(PS * size_t(N) + 16), sx(st.size()), sy(st.size()), depth(st.size());
+    const float thetaA = 0.1f, invLen = 1.25f;
+    for (int s = 0; s < N; ++s)
+      for (int row = 0; row < h; ++row)
+        for (int col = 0; col < w; ++col) {
+          const size_t i = size_t(s) * PS + size_t(row) * size_t(w) + size_t(col);
+          st[i] = thetaA + float((s + rng.uniform()) / N) / invLen;
+          sx[i] = float(x0 + col + rng.uniform()), sy[i] = float(y0 + row + rng.uniform());
+          depth[i] = float(1 + rng.uniform());
+        }
+    std::vector<float> u0(static_cast<size_t>(N)), u1(static_cast<size_t>(N));
+    for (int s = 0; s < N; ++s) u0[size_t(s)] = float(s) / float(N), u1[size_t(s)] = float(s + 1) / float(N);
+    // A box of 1 - 30 pixels moving up to 40 pixels, partly outside the region at times.
+    const float bw = float(1 + rng.uniform() * 29), bh = float(1 + rng.uniform() * 6);
+    const float bx = float(x0 - 10 + rng.uniform() * (w + 20)), by = float(y0 - 4 + rng.uniform() * (h + 8));
+    const float mx = float(rng.uniform(-40, 40)), my = float(rng.uniform(-8, 8));
+    const kernels::MovingBox box{bx, mx, bx + bw, mx, by, my, by + bh, my, thetaA, invLen};
+    const int grouping = trial % 3;  // 0: none; 1: alternating fields; 2: rows in groups of their own
+    std::vector<uint8_t> groups(static_cast<size_t>(h));
+    const int parity = int(rng.below(2));
+    for (int row = 0; row < h; ++row) groups[size_t(row)] = uint8_t(grouping == 1 ? (row + parity) & 1 : rng.below(2));
+    kernels::SampleRows region{st.data(), sx.data(), sy.data(), 0, size_t(w), w, h, grouping ? groups.data() : nullptr, uint8_t(rng.below(2)), N, PS,
+                               depth.data(), float(1 + rng.uniform() * 0.5), grouping == 1 ? parity : -1};
+    const kernels::StrataSpans spans{u0.data(), u1.data(), N, x0, y0, w, h, 1e-3f};
+    // The definition, in the kernels' float operations.
+    std::vector<uint32_t> expected;
+    for (int s = 0; s < N; ++s) {
+      const float a = u0[size_t(s)], b = u1[size_t(s)];
+      const float ax0 = std::min(box.x0 + a * box.dx0, box.x0 + b * box.dx0), ax1 = std::max(box.x1 + a * box.dx1, box.x1 + b * box.dx1);
+      const float ay0 = std::min(box.y0 + a * box.dy0, box.y0 + b * box.dy0), ay1 = std::max(box.y1 + a * box.dy1, box.y1 + b * box.dy1);
+      const int px0 = int(std::floor(std::min(std::max(ax0 - spans.margin, float(x0)), float(x0 + w))));
+      const int py0 = int(std::floor(std::min(std::max(ay0 - spans.margin, float(y0)), float(y0 + h))));
+      const int px1 = int(std::floor(std::min(std::max(ax1 + spans.margin, float(x0) - 1.f), float(x0 + w) - 1.f)));
+      const int py1 = int(std::floor(std::min(std::max(ay1 + spans.margin, float(y0) - 1.f), float(y0 + h) - 1.f)));
+      if (px1 < px0 || py1 < py0) continue;
+      (px1 - px0 + 1 >= 16 ? wideStrata : smallStrata) += 1;
+      for (int py = py0; py <= py1; ++py) {
+        if (region.rowGroup && region.rowGroup[py - y0] != region.group) continue;
+        for (int px = px0; px <= px1; ++px) {
+          const size_t i = size_t(s) * PS + size_t(py - y0) * size_t(w) + size_t(px - x0);
+          const float u = std::min(std::max((st[i] - box.thetaA) * box.invLen, 0.f), 1.f);
+          const bool in = sx[i] >= box.x0 + u * box.dx0 && sx[i] <= box.x1 + u * box.dx1 && sy[i] >= box.y0 + u * box.dy0 && sy[i] <= box.y1 + u * box.dy1;
+          if (in && depth[i] > region.zCull) expected.push_back(uint32_t(i));
+        }
+      }
+    }
+    std::sort(expected.begin(), expected.end());
+    std::vector<uint32_t> index(st.size() + 16);
+    std::vector<float> ct(index.size()), cx(index.size()), cy(index.size());
+    for (kernels::Isa isa : {kernels::Isa::Avx2, kernels::Isa::Avx512}) {
+      if (!kernels::available(isa)) continue;
+      SCOPED_TRACE(std::string(isa == kernels::Isa::Avx512 ? "avx512" : "avx2") + " trial " + std::to_string(trial));
+      const size_t n = kernels::gatherStrata(isa, region, spans, box, kernels::Candidates{index.data(), ct.data(), cx.data(), cy.data()});
+      std::vector<uint32_t> got(index.begin(), index.begin() + std::ptrdiff_t(n));
+      for (size_t k = 0; k < n; ++k) {
+        EXPECT_EQ(ct[k], st[index[k]]);
+        EXPECT_EQ(cx[k], sx[index[k]]);
+        EXPECT_EQ(cy[k], sy[index[k]]);
+      }
+      std::sort(got.begin(), got.end());
+      ASSERT_EQ(got, expected);
+    }
+  }
+  EXPECT_GT(wideStrata, 500u);   // rows of sixteen and more were gathered
+  EXPECT_GT(smallStrata, 500u);
+}
+
 // The projection kernel (kernels::projectLerped) against the rasterizer's project(), restated:
 // p = a + f (b - a) (or a itself when b is a), then raster x = float(ax (x / z) + bx) in double,
 // NaN before the near plane or where x or y is not finite; the box over the others. Counts that
