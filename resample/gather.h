@@ -205,7 +205,8 @@ size_t lensLayerCells(Isa isa, const LensShear& shear, const float* x, const flo
                       uint32_t key, uint32_t* slot, uint32_t* cell, size_t n);
 
 /// The strata of one moving box: stratum s covers box times u in [u0[s], u1[s]] and its
-/// samples are plane s of `rows` (whose first/cols/rows describe the whole region).
+/// samples are plane s of `rows` (whose first/cols/rows describe the whole region). u0 and u1
+/// are read in whole vectors of eight: readable up to the next multiple of eight entries.
 struct StrataSpans {
   const float* u0;
   const float* u1;

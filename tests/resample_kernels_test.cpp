@@ -127,7 +127,7 @@ TEST(ResampleHard, StrataGathersFindExactlyTheSamplesOfTheirStrata) {
           sx[i] = float(x0 + col + rng.uniform()), sy[i] = float(y0 + row + rng.uniform());
           depth[i] = float(1 + rng.uniform());
         }
-    std::vector<float> u0(static_cast<size_t>(N)), u1(static_cast<size_t>(N));
+    std::vector<float> u0(static_cast<size_t>(N + 7) / 8 * 8), u1(u0.size());  // read in whole vectors of eight
     for (int s = 0; s < N; ++s) u0[size_t(s)] = float(s) / float(N), u1[size_t(s)] = float(s + 1) / float(N);
     // A box of 1 - 30 pixels moving up to 40 pixels, partly outside the region at times.
     const float bw = float(1 + rng.uniform() * 29), bh = float(1 + rng.uniform() * 6);
