@@ -35,6 +35,20 @@ std::vector<uint32_t> randomCorners(Rng& rng, uint32_t count, uint32_t nV, uint3
   return corners;
 }
 
+// Candidates [from, n) of a gather: each must carry its sample's time and position; returns
+// their sample indices, sorted (the gathers' orders are their own).
+std::vector<uint32_t> gatheredSamples(const kernels::Candidates& c, size_t from, size_t n, const std::vector<float>& st, const std::vector<float>& sx,
+                                      const std::vector<float>& sy) {
+  std::vector<uint32_t> got(c.index + from, c.index + n);
+  for (size_t k = from; k < n; ++k) {
+    EXPECT_EQ(c.t[k], st[c.index[k]]);
+    EXPECT_EQ(c.x[k], sx[c.index[k]]);
+    EXPECT_EQ(c.y[k], sy[c.index[k]]);
+  }
+  std::sort(got.begin(), got.end());
+  return got;
+}
+
 }  // namespace
 
 // The box gather (kernels::gatherInBox) against its definition, restated here: every sample of
@@ -88,14 +102,7 @@ TEST(ResampleHard, BoxGathersFindExactlyTheSamplesInTheBox) {
       SCOPED_TRACE(std::string(isa == kernels::Isa::Avx512 ? "avx512" : "avx2") + " trial " + std::to_string(trial));
       const size_t n = kernels::gatherInBox(isa, r, box, out, 3);  // appended after three entries
       ASSERT_GE(n, 3u);
-      std::vector<uint32_t> got(index.begin() + 3, index.begin() + std::ptrdiff_t(n));
-      for (size_t k = 3; k < n; ++k) {
-        EXPECT_EQ(ct[k], st[index[k]]);
-        EXPECT_EQ(cx[k], sx[index[k]]);
-        EXPECT_EQ(cy[k], sy[index[k]]);
-      }
-      std::sort(got.begin(), got.end());
-      EXPECT_EQ(got, expected);
+      EXPECT_EQ(gatheredSamples(out, 3, n, st, sx, sy), expected);
     }
     longRowGathers += pixelMajor && !expected.empty();
   }
@@ -169,15 +176,9 @@ TEST(ResampleHard, StrataGathersFindExactlyTheSamplesOfTheirStrata) {
     for (kernels::Isa isa : {kernels::Isa::Avx2, kernels::Isa::Avx512}) {
       if (!kernels::available(isa)) continue;
       SCOPED_TRACE(std::string(isa == kernels::Isa::Avx512 ? "avx512" : "avx2") + " trial " + std::to_string(trial));
-      const size_t n = kernels::gatherStrata(isa, region, spans, box, kernels::Candidates{index.data(), ct.data(), cx.data(), cy.data()});
-      std::vector<uint32_t> got(index.begin(), index.begin() + std::ptrdiff_t(n));
-      for (size_t k = 0; k < n; ++k) {
-        EXPECT_EQ(ct[k], st[index[k]]);
-        EXPECT_EQ(cx[k], sx[index[k]]);
-        EXPECT_EQ(cy[k], sy[index[k]]);
-      }
-      std::sort(got.begin(), got.end());
-      ASSERT_EQ(got, expected);
+      const kernels::Candidates out{index.data(), ct.data(), cx.data(), cy.data()};
+      const size_t n = kernels::gatherStrata(isa, region, spans, box, out);
+      ASSERT_EQ(gatheredSamples(out, 0, n, st, sx, sy), expected);
     }
   }
   EXPECT_GT(wideStrata, 500u);   // rows of sixteen and more were gathered
