@@ -83,12 +83,15 @@ inline size_t appendSegmentVector(const BoxLanes512& b, const SampleRows& r, __m
   return appendCompressed512(out, n, k, idx, t, x, y);
 }
 
-// Tests the sixteen consecutive samples from `at` and appends the survivors to `out` from n.
-inline size_t appendRun512(const BoxLanes512& b, const SampleRows& r, __m512 zCull, uint32_t at, const Candidates& out, size_t n) {
-  const __m512 t = _mm512_loadu_ps(r.st + at), x = _mm512_loadu_ps(r.sx + at), y = _mm512_loadu_ps(r.sy + at);
-  const __mmask16 visible = _mm512_cmp_ps_mask(_mm512_loadu_ps(r.depth + at), zCull, _CMP_GT_OQ);
-  const __m512i idx = _mm512_add_epi32(_mm512_set1_epi32(int(at)), _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15));
-  return appendCompressed512(out, n, insideAtOwnTime512(visible, b, t, x, y), idx, t, x, y);
+// Tests the consecutive samples at .. at + 15 among the lanes of `live` (kFixed: insideFixed())
+// and appends the survivors to `out` from n: a row run's vector, in either gather.
+template <bool kFixed = false>
+inline size_t appendRun512(const BoxLanes512& b, const SampleRows& r, __m512 zCull, size_t at, __mmask16 live, const Candidates& out, size_t n) {
+  const __m512 t = _mm512_maskz_loadu_ps(live, r.st + at), x = _mm512_maskz_loadu_ps(live, r.sx + at), y = _mm512_maskz_loadu_ps(live, r.sy + at);
+  const __mmask16 visible = _mm512_mask_cmp_ps_mask(live, _mm512_maskz_loadu_ps(live, r.depth + at), zCull, _CMP_GT_OQ);
+  const __mmask16 k = kFixed ? insideFixed512(visible, b, x, y) : insideAtOwnTime512(visible, b, t, x, y);
+  const __m512i idx = _mm512_add_epi32(_mm512_set1_epi32(int(uint32_t(at))), _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15));
+  return appendCompressed512(out, n, k, idx, t, x, y);
 }
 
 // Tests every whole vector of waiting segments; keeps the (at most three) left over, or with
@@ -157,17 +160,12 @@ size_t gatherRows512(const BoxLanes512& b, const SampleRows& r, const Candidates
   if (r.planes == 1 && r.cols >= 8) {
     // Long rows (pixel-major samples: a row of pixels is one run of their samples): sixteen
     // consecutive samples a vector, the row's end masked off.
-    const __m512i lane = _mm512_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12, 13, 14, 15);
     for (int row = 0; row < r.rows; ++row) {
       if (r.rowGroup && r.rowGroup[row] != r.group) continue;
       const size_t base = r.first + size_t(row) * r.stride;
       for (int c = 0; c < r.cols; c += 16) {
-        const size_t at = base + size_t(c);
         const __mmask16 live = r.cols - c >= 16 ? __mmask16(0xFFFF) : __mmask16((1u << (r.cols - c)) - 1);
-        const __m512 t = _mm512_maskz_loadu_ps(live, r.st + at), x = _mm512_maskz_loadu_ps(live, r.sx + at), y = _mm512_maskz_loadu_ps(live, r.sy + at);
-        const __mmask16 visible = _mm512_mask_cmp_ps_mask(live, _mm512_maskz_loadu_ps(live, r.depth + at), zCull, _CMP_GT_OQ);
-        const __mmask16 k = kFixed ? insideFixed512(visible, b, x, y) : insideAtOwnTime512(visible, b, t, x, y);
-        n = appendCompressed512(out, n, k, _mm512_add_epi32(_mm512_set1_epi32(int(uint32_t(at))), lane), t, x, y);
+        n = appendRun512<kFixed>(b, r, zCull, base + size_t(c), live, out, n);
       }
     }
     return n;
@@ -287,7 +285,7 @@ size_t gatherStrataAvx512(const SampleRows& region, const StrataSpans& sp, const
       int col = 0;
       // Rows of sixteen or more (a run's stratum box is often a grid's row of micropolygons
       // wide): whole vectors of consecutive samples, the last few columns as segments.
-      for (; cols[s] - col >= 16; col += 16) n = appendRun512(lanes, rr, zCull, rowStart + uint32_t(col), list, n);
+      for (; cols[s] - col >= 16; col += 16) n = appendRun512(lanes, rr, zCull, rowStart + uint32_t(col), __mmask16(0xFFFF), list, n);
       for (; col < cols[s]; col += 4) {
         if (seg.count >= Segments::kCap) n = flushSegments(lanes, rr, zCull, seg, false, list, n);
         seg.start[seg.count] = rowStart + uint32_t(col);
