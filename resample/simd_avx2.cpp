@@ -304,19 +304,15 @@ size_t gatherStrataAvx2(const SampleRows& region, const StrataSpans& sp, const M
   return n;
 }
 
-// filterCandidates() with eight lanes: the depths gathered by index, the survivors packed with
-// the permutation table.
-size_t filterCandidatesAvx2(const Candidates& in, size_t begin, size_t end, const MovingBox& box, const float* depth, float zCull, const Candidates& out,
-                            size_t n) {
+// filterCandidates() with eight lanes, the survivors packed with the permutation table.
+size_t filterCandidatesAvx2(const Candidates& in, size_t begin, size_t end, const MovingBox& box, const Candidates& out, size_t n) {
   const BoxLanes b = boxLanes(box);
-  const __m256 zc = _mm256_set1_ps(zCull);
   const __m256i lane = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
   for (size_t k = begin; k < end; k += 8) {
     const __m256i live = _mm256_cmpgt_epi32(_mm256_set1_epi32(int(end - k)), lane);
-    const __m256i idx = _mm256_and_si256(_mm256_loadu_si256(reinterpret_cast<const __m256i*>(in.index + k)), live);  // dead lanes read sample 0
+    const __m256i idx = _mm256_loadu_si256(reinterpret_cast<const __m256i*>(in.index + k));
     const __m256 t = _mm256_loadu_ps(in.t + k), x = _mm256_loadu_ps(in.x + k), y = _mm256_loadu_ps(in.y + k);
-    const __m256 visible = _mm256_cmp_ps(_mm256_i32gather_ps(depth, idx, 4), zc, _CMP_GT_OQ);
-    n = appendLanes(_mm256_and_ps(insideAtOwnTime(b, t, x, y), visible), live, idx, t, x, y, out, n);
+    n = appendLanes(insideAtOwnTime(b, t, x, y), live, idx, t, x, y, out, n);
   }
   return n;
 }

@@ -195,16 +195,13 @@ size_t gatherInBoxAvx512(const SampleRows& rows, const MovingBox& box, const Can
 }
 
 // filterCandidates() with sixteen lanes.
-size_t filterCandidatesAvx512(const Candidates& in, size_t begin, size_t end, const MovingBox& box, const float* depth, float zCull, const Candidates& out,
-                              size_t n) {
+size_t filterCandidatesAvx512(const Candidates& in, size_t begin, size_t end, const MovingBox& box, const Candidates& out, size_t n) {
   const BoxLanes512 b = boxLanes512(box);
-  const __m512 zc = _mm512_set1_ps(zCull);
   for (size_t k = begin; k < end; k += 16) {
     const __mmask16 live = end - k >= 16 ? __mmask16(0xFFFF) : __mmask16((1u << (end - k)) - 1);
     const __m512i idx = _mm512_maskz_loadu_epi32(live, in.index + k);
     const __m512 t = _mm512_loadu_ps(in.t + k), x = _mm512_loadu_ps(in.x + k), y = _mm512_loadu_ps(in.y + k);
-    const __mmask16 visible = _mm512_mask_cmp_ps_mask(live, _mm512_mask_i32gather_ps(zc, live, idx, depth, 4), zc, _CMP_GT_OQ);
-    const __mmask16 keep = insideAtOwnTime512(visible, b, t, x, y);
+    const __mmask16 keep = insideAtOwnTime512(live, b, t, x, y);
     n = appendCompressed512(out, n, keep, idx, t, x, y);
   }
   return n;

@@ -60,9 +60,8 @@ size_t gatherStrata(Isa isa, const SampleRows& region, const StrataSpans& spans,
   return kernelsFor(isa).gatherStrata(region, spans, box, out);
 }
 
-size_t filterCandidates(Isa isa, const Candidates& in, size_t begin, size_t end, const MovingBox& box, const float* depth, float zCull, const Candidates& out,
-                        size_t n) {
-  return kernelsFor(isa).filterCandidates(in, begin, end, box, depth, zCull, out, n);
+size_t filterCandidates(Isa isa, const Candidates& in, size_t begin, size_t end, const MovingBox& box, const Candidates& out, size_t n) {
+  return kernelsFor(isa).filterCandidates(in, begin, end, box, out, n);
 }
 
 void sortByCell(Isa isa, const CellGrid& g, const Candidates& in, size_t n, const Candidates& out, uint32_t* cellStart, uint16_t* cellOf) {

@@ -25,8 +25,7 @@ inline constexpr int kMovingEdges = 0, kFixedEdges = 1, kLensEdges = 2;
 struct IsaKernels {
   size_t (*gatherInBox)(const SampleRows& rows, const MovingBox& box, const Candidates& out, size_t n);
   size_t (*gatherStrata)(const SampleRows& region, const StrataSpans& spans, const MovingBox& box, const Candidates& out);
-  size_t (*filterCandidates)(const Candidates& in, size_t begin, size_t end, const MovingBox& box, const float* depth, float zCull, const Candidates& out,
-                             size_t n);
+  size_t (*filterCandidates)(const Candidates& in, size_t begin, size_t end, const MovingBox& box, const Candidates& out, size_t n);
   /// sortByCell()'s cell of each of n candidates (times t, positions x, y).
   void (*cellsOf)(const CellGrid& grid, const float* t, const float* x, const float* y, size_t n, uint16_t* cellOf);
   bool (*projectLerped)(const float* a, const float* b, float f, size_t n, const ProjectionScale& scale, float* x, float* y, float* z, float box[4]);

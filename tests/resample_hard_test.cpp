@@ -470,10 +470,13 @@ TEST(ResampleHard, VectorAndScalarKernelsAgreeOrthographic) {
 }
 
 // Chunk gathers (one gather for micropolygons that move together, sorted into cells of
-// compensated position) must find exactly the samples each micropolygon's own gather finds: the
-// same sample tests, the same hits, every channel and deep sample the same - for motion from
-// none to fast (one knot segment: the linear path), a sub-interval, interlaced fields, a rolling
-// read-out, with both instruction sets; and most micropolygons must take the chunk gathers.
+// compensated position) must find every sample each micropolygon's own gather finds, and more
+// only where its own early depth test would have dropped them (samples covered since the run's
+// gather by the run's earlier micropolygons, which the chunk filter leaves to the depth compare
+// of the hit): a few more sample tests and hidden hits, never fewer, and every channel and deep
+// sample the same - for motion from none to fast (one knot segment: the linear path), a
+// sub-interval, interlaced fields, a rolling read-out, with both instruction sets; and most
+// micropolygons must take the chunk gathers.
 // Which samples a micropolygon's own gather finds does not depend on the instruction set (the
 // kernels agree to the bit and in their counts), so each store and shutter renders that
 // reference once, with the widest set, and the chunk gathers of every set are held to it.
@@ -502,8 +505,11 @@ TEST(ResampleHard, ChunkGathersFindEveryMicropolygonsSamples) {
         const RenderResult chunked = render(spec);
         const std::string what = std::string(k.name) + " motion " + std::to_string(motion) + " shutter " + std::to_string(shutter);
         EXPECT_GT(chunked.stats.raster.chunkGatheredMicropolygons, chunked.stats.raster.linearMicropolygons / 2) << what;
-        EXPECT_EQ(chunked.stats.raster.sampleTests, alone->stats.raster.sampleTests) << what;
-        EXPECT_EQ(chunked.stats.raster.hits, alone->stats.raster.hits) << what;
+        const RasterStats &cs = chunked.stats.raster, &as = alone->stats.raster;
+        EXPECT_GE(cs.sampleTests, as.sampleTests) << what;
+        EXPECT_GE(cs.hits, as.hits) << what;
+        EXPECT_LE(cs.hits - as.hits, cs.sampleTests - as.sampleTests) << what;  // each extra hit is an extra test
+        EXPECT_LE(cs.sampleTests - as.sampleTests, as.sampleTests / 200) << what;
         expectSameOutputs(chunked, *alone, what);
       }
     }
