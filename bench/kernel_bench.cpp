@@ -97,7 +97,7 @@ int main(int argc, char** argv) {
     variants.push_back({"scalar", false, false, false, {}, {}});
 
     std::printf("# %s: %s; shutter [%g, %g], %d spp, one thread, %d rounds\n", path.c_str(), bench::machineLine().c_str(), open, close, spp, rounds);
-    std::vector<std::vector<float>> reference;
+    std::vector<resample::PixelVector<float>> reference;
     bool identical = true;
     // One untimed render first: the store's pages and its decoded-part cache then serve every
     // timed render alike (decoding is not what the variants differ in).
@@ -109,7 +109,7 @@ int main(int argc, char** argv) {
         const RenderResult result = render(spec);
         v.seconds.push_back(cpuSeconds() - t0);
         v.stats = result.stats.raster;
-        std::vector<std::vector<float>> channels;
+        std::vector<resample::PixelVector<float>> channels;
         for (const auto& c : result.image.channels) channels.push_back(c.f);
         if (reference.empty()) reference = channels;
         else if (channels != reference) {

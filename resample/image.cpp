@@ -5,6 +5,7 @@
 #include <csetjmp>
 #include <filesystem>
 #include <functional>
+#include <limits>
 
 #include <Imath/half.h>
 #include <OpenEXR/ImfChannelList.h>
@@ -39,12 +40,24 @@ const ImageChannel* FlatImage::find(const std::string& name) const {
     if (c.name == name) return &c;
   return nullptr;
 }
-ImageChannel& FlatImage::add(const std::string& name, bool isUInt) {
+ImageChannel& FlatImage::add(const std::string& name, bool isUInt, bool uninitialised) {
   ImageChannel c;
   c.name = name;
   c.isUInt = isUInt;
-  if (isUInt) c.u.assign(size_t(width) * height, 0u);
-  else c.f.assign(size_t(width) * height, 0.0f);
+  const size_t n = size_t(width) * size_t(height);
+  if (uninitialised) {
+#if defined(__SANITIZE_ADDRESS__)
+    // Under the sanitizers (every CI run) an uninitialised channel starts as NaN or 0xDEADBEEF, so
+    // that a pixel its caller fails to write shows in every test that reads the image.
+    isUInt ? c.u.assign(n, 0xDEADBEEFu) : c.f.assign(n, std::numeric_limits<float>::quiet_NaN());
+#else
+    isUInt ? c.u.resize(n) : c.f.resize(n);
+#endif
+  } else if (isUInt) {
+    c.u.assign(n, 0u);
+  } else {
+    c.f.assign(n, 0.0f);
+  }
   channels.push_back(std::move(c));
   return channels.back();
 }

@@ -6,6 +6,7 @@
 #pragma once
 
 #include <cstdint>
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -13,12 +14,36 @@
 
 namespace reshutter::resample {
 
+/// An allocator whose vectors leave new elements uninitialised unless given a value, so that an
+/// image every pixel of which its renderer writes is not first zero-filled (and its pages
+/// first touched) by one thread before the buckets start (FlatImage::add()).
+template <class T>
+struct UninitialisedAllocator : std::allocator<T> {
+  template <class U>
+  struct rebind {
+    using other = UninitialisedAllocator<U>;
+  };
+  UninitialisedAllocator() = default;
+  template <class U>
+  UninitialisedAllocator(const UninitialisedAllocator<U>&) noexcept {}
+  template <class U>
+  void construct(U* p) noexcept {
+    ::new (static_cast<void*>(p)) U;
+  }
+  template <class U, class... Args>
+  void construct(U* p, Args&&... args) {
+    ::new (static_cast<void*>(p)) U(std::forward<Args>(args)...);
+  }
+};
+template <class T>
+using PixelVector = std::vector<T, UninitialisedAllocator<T>>;
+
 struct ImageChannel {
   std::string name;  // "R", "A", "Z", "N.X", "id"
   bool isUInt = false;
   bool half = false;  // written as half (float channels only)
-  std::vector<float> f;
-  std::vector<uint32_t> u;
+  PixelVector<float> f;
+  PixelVector<uint32_t> u;
 };
 
 /// A flat image: the data window [x0, x0+width) × [y0, y0+height) of a fullWidth × fullHeight
@@ -29,7 +54,9 @@ struct FlatImage {
   std::vector<ImageChannel> channels;
   ImageChannel* find(const std::string& name);
   const ImageChannel* find(const std::string& name) const;
-  ImageChannel& add(const std::string& name, bool isUInt = false);
+  /// A channel of width × height pixels, zero unless `uninitialised`: then every pixel is the
+  /// caller's to write before anything reads it.
+  ImageChannel& add(const std::string& name, bool isUInt = false, bool uninitialised = false);
 };
 
 /// What the image header records about how it was made.

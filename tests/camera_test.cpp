@@ -478,7 +478,7 @@ TEST(CameraMoving, ATruckingCameraSweepsEachDepthByItsOwnParallax) {
   EXPECT_GT(r.stats.raster.linearMicropolygons, 0u) << "the parts did not move in the view";
   EXPECT_EQ(r.stats.raster.staticMicropolygons, 0u) << "a part stood still in the moving view";
   // Exact coverage, integrated over time in 4096 steps (the overlap is piecewise linear in t).
-  auto expectSwept = [](const std::vector<float>& R, const std::vector<float>& B, const std::string& what) {
+  auto expectSwept = [](const resample::PixelVector<float>& R, const resample::PixelVector<float>& B, const std::string& what) {
     auto overlap = [](double a0, double a1, double b0, double b1) { return std::max(0.0, std::min(a1, b1) - std::max(a0, b0)); };
     double worst = 0, redCentroid = 0, redArea = 0;
     for (int x = 0; x < 160; ++x) {

@@ -209,7 +209,7 @@ TEST(Cracks, TeapotShowsNoCrackPixelAtAnyShadingRate) {
       r = test::runReshutter("-q resample " + dir.path(name + ".mps") + " -o " + dir.path(name + ".exr") + " --samples 8x8 --filter box:1x1");
       ASSERT_EQ(r.exitCode, 0) << r.err;
       const resample::FlatImage img = test::readFlatExr(dir.path(name + ".exr"));
-      const std::vector<float>& A = img.find("A")->f;
+      const auto& A = img.find("A")->f;
       const int W = 320, H = 240;
       size_t inside = 0, cracks = 0;
       std::string where;

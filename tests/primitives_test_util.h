@@ -60,7 +60,7 @@ inline std::vector<glm::dvec3> randomPoints(size_t n, uint32_t seed) {
 
 struct Rendered {
   resample::FlatImage image;
-  const std::vector<float>& alpha() const { return image.find("A")->f; }
+  const resample::PixelVector<float>& alpha() const { return image.find("A")->f; }
 };
 
 inline Rendered render(const test::ScratchDir& dir, const std::string& name, const std::string& rib, const std::string& resampleArgs) {

@@ -250,7 +250,7 @@ TEST(ResampleHard, ExactDepthTiesResolveDeterministically) {
   TestMp red = cameraQuad({s.rect(0, 0, 32, 24, 10)}, {1, 0, 0}), blue = cameraQuad({s.rect(0, 0, 32, 24, 10)}, {0, 0, 1});
   s.mps = {red, blue};
   auto reader = writeScene(s, dir.path("ties.mps"));
-  std::vector<float> first;
+  resample::PixelVector<float> first;
   for (auto [threads, bucket] : {std::pair{1, 32}, std::pair{2, 8}, std::pair{2, 13}}) {
     tbb::global_control limit(tbb::global_control::max_allowed_parallelism, size_t(threads));
     RenderSpec spec = specFor(reader, 0, 0, 4, 4);
