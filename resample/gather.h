@@ -239,10 +239,10 @@ struct CellGrid {
 void sortByCell(Isa isa, const CellGrid& grid, const Candidates& in, size_t n, const Candidates& out, uint32_t* cellStart, uint16_t* scratch);
 
 /// Appends to `out` from position n the candidates [begin, end) of `in` that lie inside `box` at
-/// their own time (gatherInBox()'s test); returns the new count. The early depth test is left to
-/// the edge test (EdgeTestSetup::depth): it drops few of these, and there it reads one depth per
-/// kept candidate instead of one per candidate scanned. Reads up to 15 entries past `end`, writes
-/// up to 15 past the count.
+/// their own time (gatherInBox()'s test); returns the new count. No early depth test: of these it
+/// would drop only samples covered since the run's gather, whose hits the record's depth compare
+/// hides anyway, for a depth read per candidate scanned (raster_linear.cpp, prepareLinearChunk()).
+/// Reads up to 15 entries past `end`, writes up to 15 past the count.
 size_t filterCandidates(Isa isa, const Candidates& in, size_t begin, size_t end, const MovingBox& box, const Candidates& out, size_t n);
 
 /// The camera's map from camera space to raster, as the rasterizer's project() applies it:

@@ -93,6 +93,9 @@ class PixelDraws {
   const uint64_t* draws_;
 };
 
+// Fisher-Yates' swap target for position i from one draw: below i + 1 (Rng::below's mapping).
+constexpr int swapTarget(uint64_t draw, int i) { return int(uint32_t((draw >> 32) * uint64_t(uint32_t(i + 1)) >> 32)); }
+
 // permutation() of 0..3 from 3 draws, by a table of the 24 outcomes (indexed by the three swap
 // targets): the same permutation without the three dependent swaps through memory (the lens
 // blocks' permutations, eight a pixel at 16 samples).
@@ -110,8 +113,7 @@ struct Permutations4 {
 };
 constexpr Permutations4 kPermutations4;
 const uint64_t* permutation4(const uint64_t* r, uint16_t* v) {
-  auto target = [](uint64_t draw, uint32_t n) { return int(uint32_t((draw >> 32) * uint64_t(n) >> 32)); };
-  std::memcpy(v, kPermutations4.v[target(r[0], 4) * 6 + target(r[1], 3) * 2 + target(r[2], 2)], 4 * sizeof(uint16_t));
+  std::memcpy(v, kPermutations4.v[swapTarget(r[0], 3) * 6 + swapTarget(r[1], 2) * 2 + swapTarget(r[2], 1)], 4 * sizeof(uint16_t));
   return r + 3;
 }
 
@@ -120,7 +122,7 @@ const uint64_t* permutation4(const uint64_t* r, uint16_t* v) {
 const uint64_t* permutation(const uint64_t* r, uint16_t* v, int n) {
   if (n == 4) return permutation4(r, v);
   for (int i = 0; i < n; ++i) v[i] = uint16_t(i);
-  for (int i = n - 1; i > 0; --i, ++r) std::swap(v[i], v[int(uint32_t((*r >> 32) * uint64_t(uint32_t(i + 1)) >> 32))]);
+  for (int i = n - 1; i > 0; --i, ++r) std::swap(v[i], v[swapTarget(*r, i)]);
   return r;
 }
 

@@ -199,7 +199,7 @@ size_t filterCandidatesAvx512(const Candidates& in, size_t begin, size_t end, co
   const BoxLanes512 b = boxLanes512(box);
   for (size_t k = begin; k < end; k += 16) {
     const __mmask16 live = end - k >= 16 ? __mmask16(0xFFFF) : __mmask16((1u << (end - k)) - 1);
-    const __m512i idx = _mm512_maskz_loadu_epi32(live, in.index + k);
+    const __m512i idx = _mm512_loadu_si512(in.index + k);
     const __m512 t = _mm512_loadu_ps(in.t + k), x = _mm512_loadu_ps(in.x + k), y = _mm512_loadu_ps(in.y + k);
     const __mmask16 keep = insideAtOwnTime512(live, b, t, x, y);
     n = appendCompressed512(out, n, keep, idx, t, x, y);
